@@ -1,0 +1,539 @@
+//! Problem files: the system, the OCP data, the domain X, solver and sampler settings.
+//!
+//! A problem file is TOML (see `configs/*.toml`); it is deserialised into
+//! [`ProblemConfig`] and validated once by [`ProblemConfig::validate`], whose errors name
+//! the key at fault. Everything downstream trusts a validated config.
+//!
+//! Matrices (`q`, `r`, `p`) are written either as a diagonal (`q = [10.0, 1.0]`) or as a
+//! full row-major matrix (`q = [[10.0, 0.0], [0.0, 1.0]]`). Bounds may be `inf`/`-inf`.
+
+use crate::model::System;
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::Path;
+
+/// The paper's pendulum problem file, embedded so that the CLI runs without any file.
+pub const PENDULUM_TOML: &str = include_str!("../../configs/pendulum.toml");
+
+/// Errors from reading or validating a problem file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read problem file {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML did not parse or had wrong types/unknown keys.
+    #[error("problem file {path}: {message}")]
+    Parse {
+        /// The file (or `<embedded>`).
+        path: String,
+        /// The parser's message (it names the key and line).
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("invalid setting `{key}`: {reason}")]
+    Invalid {
+        /// The dotted key at fault, e.g. `ocp.q`.
+        key: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        key: key.into(),
+        reason: reason.into(),
+    }
+}
+
+/// A square matrix given as a diagonal or as full rows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum MatrixSpec {
+    /// Diagonal entries.
+    Diagonal(Vec<f64>),
+    /// Full matrix, row-major rows.
+    Full(Vec<Vec<f64>>),
+}
+
+impl MatrixSpec {
+    /// Dense matrix; `None` if the rows are ragged.
+    pub fn to_dmatrix(&self) -> Option<DMatrix<f64>> {
+        match self {
+            MatrixSpec::Diagonal(d) => Some(DMatrix::from_diagonal(
+                &nalgebra::DVector::from_column_slice(d),
+            )),
+            MatrixSpec::Full(rows) => {
+                let n = rows.len();
+                let m = rows.first().map_or(0, |r| r.len());
+                if rows.iter().any(|r| r.len() != m) {
+                    return None;
+                }
+                Some(DMatrix::from_fn(n, m, |i, j| rows[i][j]))
+            }
+        }
+    }
+}
+
+/// The optimal control problem's data (`[ocp]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OcpSettings {
+    /// Sampling time Ts in s (pendulum: 0.05).
+    pub ts: f64,
+    /// Horizon N ≥ 1 (pendulum: 20).
+    pub horizon: usize,
+    /// RK4 sub-steps per sample (default 1).
+    #[serde(default = "one")]
+    pub rk4_substeps: usize,
+    /// Stage state weight Q (symmetric PSD).
+    pub q: MatrixSpec,
+    /// Stage input weight R (symmetric positive definite).
+    pub r: MatrixSpec,
+    /// Terminal weight P (symmetric PSD).
+    pub p: MatrixSpec,
+    /// Lower state bounds on x₁..x_N (`-inf` for none).
+    pub x_lo: Vec<f64>,
+    /// Upper state bounds on x₁..x_N (`inf` for none).
+    pub x_hi: Vec<f64>,
+    /// Lower input bounds on u₀..u_{N−1}.
+    pub u_lo: Vec<f64>,
+    /// Upper input bounds on u₀..u_{N−1}.
+    pub u_hi: Vec<f64>,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// The state domain X (`[domain]`): the box that is sampled and certified.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Domain {
+    /// Lower corner (finite).
+    pub lo: Vec<f64>,
+    /// Upper corner (finite).
+    pub hi: Vec<f64>,
+}
+
+/// SQP settings (`[solver]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolverSettings {
+    /// Convergence tolerance on the scaled KKT residual (default 1e-8).
+    pub tol: f64,
+    /// Maximum SQP iterations (default 100).
+    pub max_iter: usize,
+    /// Label hard-infeasible states with the exact-penalty (soft) problem (default true).
+    pub soft_fallback: bool,
+    /// ℓ₁ weight of the state-bound slacks in the soft problem (default 1e4).
+    pub soft_l1: f64,
+    /// ℓ₂ weight of the state-bound slacks in the soft problem (default 1e2).
+    pub soft_l2: f64,
+    /// A constraint with slack ≤ this and multiplier ≤ this is weakly active (default 1e-7).
+    pub degeneracy_tol: f64,
+    /// Warm-start a sample from the nearest already-solved neighbour (default true).
+    pub warm_start: bool,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        SolverSettings {
+            tol: 1e-8,
+            max_iter: 100,
+            soft_fallback: true,
+            soft_l1: 1e4,
+            soft_l2: 1e2,
+            degeneracy_tol: 1e-7,
+            warm_start: true,
+        }
+    }
+}
+
+/// How dataset states are chosen in X.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SamplerKind {
+    /// Full tensor grid with per-axis counts, endpoints included.
+    Grid,
+    /// Uniform random states (seeded).
+    Random,
+    /// Halton low-discrepancy sequence (scrambled by the seed's offset).
+    Halton,
+}
+
+/// Sampler settings (`[sampling]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SamplingSettings {
+    /// Sampler (default grid).
+    pub sampler: SamplerKind,
+    /// Grid points per axis (grid only; default: the paper's 35 × 10).
+    pub counts: Vec<usize>,
+    /// Number of states (random / halton; default 350).
+    pub n: usize,
+    /// Seed (default 0).
+    pub seed: u64,
+}
+
+impl Default for SamplingSettings {
+    fn default() -> Self {
+        SamplingSettings {
+            sampler: SamplerKind::Grid,
+            counts: vec![35, 10],
+            n: 350,
+            seed: 0,
+        }
+    }
+}
+
+/// A whole problem file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProblemConfig {
+    /// Short name used for run directories.
+    pub name: String,
+    /// The plant.
+    pub system: System,
+    /// The OCP.
+    pub ocp: OcpSettings,
+    /// The certified/sampled domain X.
+    pub domain: Domain,
+    /// Solver settings.
+    #[serde(default)]
+    pub solver: SolverSettings,
+    /// Sampler settings.
+    #[serde(default)]
+    pub sampling: SamplingSettings,
+}
+
+impl Default for ProblemConfig {
+    /// The paper's pendulum (the embedded `configs/pendulum.toml`).
+    fn default() -> Self {
+        // The embedded file is validated by the unit test `shipped_configs_parse_and_validate`.
+        Self::from_toml_str(PENDULUM_TOML, "<embedded pendulum>")
+            .expect("the embedded configs/pendulum.toml is valid")
+    }
+}
+
+fn check_vec(key: &str, v: &[f64], n: usize, allow_inf: bool) -> Result<(), ConfigError> {
+    if v.len() != n {
+        return Err(invalid(
+            key,
+            format!("expected {n} entries, got {}", v.len()),
+        ));
+    }
+    for (i, x) in v.iter().enumerate() {
+        if x.is_nan() || (!allow_inf && x.is_infinite()) {
+            return Err(invalid(
+                format!("{key}[{i}]"),
+                format!("must be a finite number, got {x}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_bounds(
+    key_lo: &str,
+    key_hi: &str,
+    lo: &[f64],
+    hi: &[f64],
+    strict: bool,
+) -> Result<(), ConfigError> {
+    for (i, (l, h)) in lo.iter().zip(hi).enumerate() {
+        if l > h || (strict && l >= h) {
+            return Err(invalid(
+                format!("{key_lo}[{i}]"),
+                format!("lower bound {l} is not below {key_hi}[{i}] = {h}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_matrix(
+    key: &str,
+    m: &MatrixSpec,
+    n: usize,
+    definite: bool,
+) -> Result<DMatrix<f64>, ConfigError> {
+    let mat = m
+        .to_dmatrix()
+        .ok_or_else(|| invalid(key, "rows have different lengths"))?;
+    if mat.nrows() != n || mat.ncols() != n {
+        return Err(invalid(
+            key,
+            format!(
+                "expected a {n}×{n} matrix (or {n} diagonal entries), got {}×{}",
+                mat.nrows(),
+                mat.ncols()
+            ),
+        ));
+    }
+    if mat.iter().any(|x| !x.is_finite()) {
+        return Err(invalid(key, "entries must be finite numbers"));
+    }
+    let scale = mat.amax().max(1.0);
+    if (&mat - mat.transpose()).amax() > 1e-12 * scale {
+        return Err(invalid(key, "must be symmetric"));
+    }
+    let min_eig = mat.clone().symmetric_eigen().eigenvalues.min();
+    if definite && min_eig <= 1e-12 * scale {
+        return Err(invalid(
+            key,
+            format!("must be positive definite (smallest eigenvalue {min_eig:.3e})"),
+        ));
+    }
+    if !definite && min_eig < -1e-12 * scale {
+        return Err(invalid(
+            key,
+            format!("must be positive semidefinite (smallest eigenvalue {min_eig:.3e})"),
+        ));
+    }
+    Ok(mat)
+}
+
+impl ProblemConfig {
+    /// Parses and validates a problem file's text; `origin` names it in errors.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let cfg: ProblemConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Reads, parses and validates a problem file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Checks every setting once; the error names the key at fault.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.name.is_empty() || self.name.contains(['/', '\\']) {
+            return Err(invalid(
+                "name",
+                "must be a non-empty name without path separators",
+            ));
+        }
+        self.system.validate().map_err(|(k, r)| invalid(k, r))?;
+        let (nx, nu) = (self.system.nx(), self.system.nu());
+        let o = &self.ocp;
+        if !(o.ts.is_finite() && o.ts > 0.0) {
+            return Err(invalid(
+                "ocp.ts",
+                format!("must be finite and > 0, got {}", o.ts),
+            ));
+        }
+        if o.horizon == 0 {
+            return Err(invalid("ocp.horizon", "must be at least 1"));
+        }
+        if o.rk4_substeps == 0 {
+            return Err(invalid("ocp.rk4_substeps", "must be at least 1"));
+        }
+        check_matrix("ocp.q", &o.q, nx, false)?;
+        check_matrix("ocp.r", &o.r, nu, true)?;
+        check_matrix("ocp.p", &o.p, nx, false)?;
+        check_vec("ocp.x_lo", &o.x_lo, nx, true)?;
+        check_vec("ocp.x_hi", &o.x_hi, nx, true)?;
+        check_vec("ocp.u_lo", &o.u_lo, nu, true)?;
+        check_vec("ocp.u_hi", &o.u_hi, nu, true)?;
+        check_bounds("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi, false)?;
+        check_bounds("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi, false)?;
+        check_vec("domain.lo", &self.domain.lo, nx, false)?;
+        check_vec("domain.hi", &self.domain.hi, nx, false)?;
+        check_bounds(
+            "domain.lo",
+            "domain.hi",
+            &self.domain.lo,
+            &self.domain.hi,
+            true,
+        )?;
+        let s = &self.solver;
+        if !(s.tol.is_finite() && s.tol > 0.0 && s.tol < 1.0) {
+            return Err(invalid(
+                "solver.tol",
+                format!("must be in (0, 1), got {}", s.tol),
+            ));
+        }
+        if s.max_iter == 0 {
+            return Err(invalid("solver.max_iter", "must be at least 1"));
+        }
+        for (k, v) in [("solver.soft_l1", s.soft_l1), ("solver.soft_l2", s.soft_l2)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(k, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if s.soft_l1 <= 0.0 && s.soft_l2 <= 0.0 {
+            return Err(invalid(
+                "solver.soft_l1",
+                "soft_l1 and soft_l2 cannot both be 0",
+            ));
+        }
+        if !(s.degeneracy_tol.is_finite() && s.degeneracy_tol > 0.0) {
+            return Err(invalid("solver.degeneracy_tol", "must be finite and > 0"));
+        }
+        let sm = &self.sampling;
+        match sm.sampler {
+            SamplerKind::Grid => {
+                if sm.counts.len() != nx {
+                    return Err(invalid(
+                        "sampling.counts",
+                        format!("expected {nx} per-axis counts, got {}", sm.counts.len()),
+                    ));
+                }
+                if let Some(i) = sm.counts.iter().position(|&c| c == 0) {
+                    return Err(invalid(
+                        format!("sampling.counts[{i}]"),
+                        "must be at least 1",
+                    ));
+                }
+                let total = sm.counts.iter().try_fold(1usize, |a, &c| a.checked_mul(c));
+                if total.is_none_or(|t| t > 100_000_000) {
+                    return Err(invalid("sampling.counts", "grid has more than 1e8 points"));
+                }
+            }
+            SamplerKind::Random | SamplerKind::Halton => {
+                if sm.n == 0 || sm.n > 100_000_000 {
+                    return Err(invalid("sampling.n", "must be between 1 and 1e8"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Q as a dense matrix (valid after [`validate`](Self::validate)).
+    pub fn q(&self) -> DMatrix<f64> {
+        self.ocp
+            .q
+            .to_dmatrix()
+            .unwrap_or_else(|| DMatrix::zeros(0, 0))
+    }
+    /// R as a dense matrix.
+    pub fn r(&self) -> DMatrix<f64> {
+        self.ocp
+            .r
+            .to_dmatrix()
+            .unwrap_or_else(|| DMatrix::zeros(0, 0))
+    }
+    /// P as a dense matrix.
+    pub fn p(&self) -> DMatrix<f64> {
+        self.ocp
+            .p
+            .to_dmatrix()
+            .unwrap_or_else(|| DMatrix::zeros(0, 0))
+    }
+
+    /// Content hash (SHA-256, hex) of everything that determines a label: system, OCP and
+    /// solver settings. Sampler settings are not part of it.
+    pub fn problem_hash(&self) -> String {
+        let bytes =
+            postcard::to_allocvec(&(&self.system, &self.ocp, &self.solver)).unwrap_or_default();
+        hex(&Sha256::digest(&bytes))
+    }
+}
+
+/// Lower-case hex of a byte string.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
+
+    #[test]
+    fn shipped_configs_parse_and_validate() {
+        for f in ["pendulum.toml", "cartpole.toml", "double_integrator.toml"] {
+            let path = std::path::PathBuf::from(DIR).join(f);
+            ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{f}: {e}"));
+        }
+        let d = ProblemConfig::default();
+        assert_eq!(d.name, "pendulum");
+        assert_eq!(d, ProblemConfig::from_toml_str(PENDULUM_TOML, "x").unwrap());
+        assert_eq!(d.ocp.horizon, 20);
+        assert_eq!(d.sampling.counts, vec![35, 10]);
+    }
+
+    fn err_key(edit: impl Fn(&mut ProblemConfig)) -> String {
+        let mut c = ProblemConfig::default();
+        edit(&mut c);
+        match c.validate() {
+            Err(ConfigError::Invalid { key, .. }) => key,
+            other => panic!("expected Invalid, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn validation_names_the_key_at_fault() {
+        assert_eq!(err_key(|c| c.ocp.horizon = 0), "ocp.horizon");
+        assert_eq!(
+            err_key(|c| c.ocp.q = MatrixSpec::Diagonal(vec![1.0])),
+            "ocp.q"
+        );
+        assert_eq!(
+            err_key(|c| c.ocp.q = MatrixSpec::Diagonal(vec![1.0, -1.0])),
+            "ocp.q"
+        );
+        assert_eq!(
+            err_key(|c| c.ocp.p = MatrixSpec::Full(vec![vec![1.0, 2.0], vec![0.0, 1.0]])),
+            "ocp.p"
+        );
+        assert_eq!(
+            err_key(|c| c.ocp.r = MatrixSpec::Diagonal(vec![0.0])),
+            "ocp.r"
+        );
+        assert_eq!(err_key(|c| c.ocp.x_lo[1] = 2.0), "ocp.x_lo[1]");
+        assert_eq!(err_key(|c| c.ocp.u_hi[0] = f64::NAN), "ocp.u_hi[0]");
+        assert_eq!(err_key(|c| c.ocp.ts = f64::NAN), "ocp.ts");
+        assert_eq!(err_key(|c| c.domain.hi[0] = f64::INFINITY), "domain.hi[0]");
+        assert_eq!(err_key(|c| c.domain.lo = vec![0.0]), "domain.lo");
+        assert_eq!(err_key(|c| c.sampling.counts = vec![3]), "sampling.counts");
+        assert_eq!(err_key(|c| c.solver.tol = 0.0), "solver.tol");
+        assert_eq!(
+            err_key(|c| c.system = System::Pendulum(crate::model::Pendulum {
+                m: -1.0,
+                ..Default::default()
+            })),
+            "system.m"
+        );
+    }
+
+    #[test]
+    fn parse_errors_name_the_key() {
+        let bad = PENDULUM_TOML.replace("horizon = 20", "horizon = \"twenty\"");
+        let e = ProblemConfig::from_toml_str(&bad, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("horizon") && e.contains("f.toml"), "{e}");
+        let unknown = format!("{PENDULUM_TOML}\n[extra]\nfoo = 1\n");
+        let e = ProblemConfig::from_toml_str(&unknown, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("extra"), "{e}");
+    }
+
+    #[test]
+    fn problem_hash_tracks_labels_only() {
+        let a = ProblemConfig::default();
+        let mut b = a.clone();
+        b.sampling.seed = 7;
+        assert_eq!(a.problem_hash(), b.problem_hash());
+        b.ocp.horizon = 21;
+        assert_ne!(a.problem_hash(), b.problem_hash());
+    }
+}

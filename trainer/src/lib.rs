@@ -1,0 +1,16 @@
+//! `trainer`: from a control problem to a certified neural-network controller.
+//!
+//! Data flows one way: `config` → `model` → `ocp` → `sqp` (+ `qp`, `kkt`) → `sensitivity`
+//! → `mpc` (the labelled law κ, ∂κ/∂x) → `dataset` (sampling, labelling, files, shards).
+#![deny(missing_docs)]
+
+pub mod config;
+#[cfg(test)]
+mod fixtures;
+pub mod kkt;
+pub mod model;
+pub mod mpc;
+pub mod ocp;
+pub mod qp;
+pub mod sensitivity;
+pub mod sqp;

@@ -1,0 +1,407 @@
+//! Plant models: the continuous ODE ẋ = f(x, u) and its discretisation by explicit RK4.
+//!
+//! The discrete dynamics used everywhere in the OCP are
+//! `F(x, u) = Φ_h^M(x, u)`, `M` = `rk4_substeps` classical Runge–Kutta steps of size
+//! `h = Ts / M` with the input held constant (zero-order hold). Exact first derivatives
+//! (`A = ∂F/∂x`, `B = ∂F/∂u`) and exact second derivatives of `λᵀF` come from
+//! forward-mode automatic differentiation (`num-dual`) of the same generic RK4 code, so
+//! the solver never uses finite differences.
+//!
+//! | symbol | code |
+//! |---|---|
+//! | f(x, u) | [`Dynamics::rhs`] |
+//! | F(x, u) | [`Discrete::step`] |
+//! | ∂F/∂x, ∂F/∂u | [`Discrete::linearize`] |
+//! | ∇²_{(x,u)} λᵀF | [`Discrete::lagrangian_hessian`] |
+
+mod cartpole;
+mod double_integrator;
+mod pendulum;
+
+pub use cartpole::CartPole;
+pub use double_integrator::DoubleIntegrator;
+pub use pendulum::Pendulum;
+
+use num_dual::{Dual2SVec64, DualNum, DualSVec64};
+use serde::{Deserialize, Serialize};
+
+/// Largest state dimension of a built-in system (fixed-size scratch buffers use it).
+pub const MAX_NX: usize = 4;
+
+/// A continuous-time control system `ẋ = f(x, u)` written once, generically over the number
+/// type so that it can be evaluated in `f64` and differentiated by `num-dual`.
+pub trait Dynamics {
+    /// State dimension n_x.
+    const NX: usize;
+    /// Input dimension n_u.
+    const NU: usize;
+    /// Writes `f(x, u)` into `dx` (`x.len() == NX`, `u.len() == NU`, `dx.len() == NX`).
+    fn rhs<D: DualNum<Primitive = f64> + Copy>(&self, x: &[D], u: &[D], dx: &mut [D]);
+}
+
+/// One built-in system with its physical parameters (the `[system]` table of a problem file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum System {
+    /// The paper's inverted pendulum (2 states, 1 input).
+    Pendulum(Pendulum),
+    /// A cart-pole (4 states, 1 input).
+    CartPole(CartPole),
+    /// A linear double integrator (2 states, 1 input); its MPC is a QP.
+    DoubleIntegrator(DoubleIntegrator),
+}
+
+impl System {
+    /// State dimension.
+    pub fn nx(&self) -> usize {
+        match self {
+            System::Pendulum(_) => Pendulum::NX,
+            System::CartPole(_) => CartPole::NX,
+            System::DoubleIntegrator(_) => DoubleIntegrator::NX,
+        }
+    }
+    /// Input dimension.
+    pub fn nu(&self) -> usize {
+        match self {
+            System::Pendulum(_) => Pendulum::NU,
+            System::CartPole(_) => CartPole::NU,
+            System::DoubleIntegrator(_) => DoubleIntegrator::NU,
+        }
+    }
+    /// Name used in files and reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            System::Pendulum(_) => "pendulum",
+            System::CartPole(_) => "cart_pole",
+            System::DoubleIntegrator(_) => "double_integrator",
+        }
+    }
+    /// Checks the physical parameters; returns the offending key and reason.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let check = |name: &str, v: f64| -> Result<(), (String, String)> {
+            if !v.is_finite() || v <= 0.0 {
+                Err((
+                    format!("system.{name}"),
+                    format!("must be finite and > 0, got {v}"),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        match self {
+            System::Pendulum(p) => {
+                check("m", p.m)?;
+                check("l", p.l)?;
+                check("g", p.g)
+            }
+            System::CartPole(p) => {
+                check("m_cart", p.m_cart)?;
+                check("m_pole", p.m_pole)?;
+                check("l", p.l)?;
+                check("g", p.g)
+            }
+            System::DoubleIntegrator(p) => check("mass", p.mass),
+        }
+    }
+    /// Continuous right-hand side in f64 (used by tests and simulations).
+    pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        match self {
+            System::Pendulum(s) => s.rhs(x, u, dx),
+            System::CartPole(s) => s.rhs(x, u, dx),
+            System::DoubleIntegrator(s) => s.rhs(x, u, dx),
+        }
+    }
+}
+
+/// The discrete dynamics `F(x, u)`: `substeps` RK4 steps of the system over `ts`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Discrete {
+    /// The continuous system.
+    pub system: System,
+    /// Sampling time Ts in seconds.
+    pub ts: f64,
+    /// Number of RK4 sub-steps per sample (≥ 1).
+    pub substeps: usize,
+}
+
+/// Generic explicit RK4 over `ts` with `substeps` sub-steps; `x` is overwritten by `F(x, u)`.
+fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
+    sys: &S,
+    x: &mut [D],
+    u: &[D],
+    ts: f64,
+    substeps: usize,
+) {
+    let n = S::NX;
+    let h = ts / substeps as f64;
+    let zero = D::from(0.0);
+    let mut k1 = [zero; MAX_NX];
+    let mut k2 = [zero; MAX_NX];
+    let mut k3 = [zero; MAX_NX];
+    let mut k4 = [zero; MAX_NX];
+    let mut tmp = [zero; MAX_NX];
+    for _ in 0..substeps {
+        sys.rhs(&x[..n], u, &mut k1[..n]);
+        for i in 0..n {
+            tmp[i] = x[i] + k1[i] * (0.5 * h);
+        }
+        sys.rhs(&tmp[..n], u, &mut k2[..n]);
+        for i in 0..n {
+            tmp[i] = x[i] + k2[i] * (0.5 * h);
+        }
+        sys.rhs(&tmp[..n], u, &mut k3[..n]);
+        for i in 0..n {
+            tmp[i] = x[i] + k3[i] * h;
+        }
+        sys.rhs(&tmp[..n], u, &mut k4[..n]);
+        for i in 0..n {
+            x[i] += (k1[i] + k2[i] * 2.0 + k3[i] * 2.0 + k4[i]) * (h / 6.0);
+        }
+    }
+}
+
+/// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions.
+fn ad_linearize<S: Dynamics, const NZ: usize>(
+    sys: &S,
+    ts: f64,
+    substeps: usize,
+    x: &[f64],
+    u: &[f64],
+    f: &mut [f64],
+    jx: &mut [f64],
+    ju: &mut [f64],
+) {
+    let (nx, nu) = (S::NX, S::NU);
+    debug_assert_eq!(NZ, nx + nu);
+    let zero = DualSVec64::<NZ>::from(0.0);
+    let mut xd = [zero; MAX_NX];
+    let mut ud = [zero; MAX_NX];
+    for i in 0..nx {
+        xd[i] = DualSVec64::<NZ>::from(x[i]).derivative(i);
+    }
+    for j in 0..nu {
+        ud[j] = DualSVec64::<NZ>::from(u[j]).derivative(nx + j);
+    }
+    rk4(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    for i in 0..nx {
+        f[i] = xd[i].re;
+        let eps = xd[i]
+            .eps
+            .unwrap_generic(nalgebra::Const::<NZ>, nalgebra::Const::<1>);
+        for j in 0..nx {
+            jx[i * nx + j] = eps[j];
+        }
+        for j in 0..nu {
+            ju[i * nu + j] = eps[nx + j];
+        }
+    }
+}
+
+/// ∇²_{(x,u)} (λᵀF) by second-order forward-mode AD; row-major `NZ × NZ` into `hess`.
+fn ad_hessian<S: Dynamics, const NZ: usize>(
+    sys: &S,
+    ts: f64,
+    substeps: usize,
+    x: &[f64],
+    u: &[f64],
+    lam: &[f64],
+    hess: &mut [f64],
+) {
+    let (nx, nu) = (S::NX, S::NU);
+    let zero = Dual2SVec64::<NZ>::from(0.0);
+    let mut xd = [zero; MAX_NX];
+    let mut ud = [zero; MAX_NX];
+    for i in 0..nx {
+        xd[i] = Dual2SVec64::<NZ>::from(x[i]).derivative(i);
+    }
+    for j in 0..nu {
+        ud[j] = Dual2SVec64::<NZ>::from(u[j]).derivative(nx + j);
+    }
+    rk4(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    let mut acc = zero;
+    for i in 0..nx {
+        acc += xd[i] * lam[i];
+    }
+    let h = acc
+        .v2
+        .unwrap_generic(nalgebra::Const::<NZ>, nalgebra::Const::<NZ>);
+    for r in 0..NZ {
+        for c in 0..NZ {
+            hess[r * NZ + c] = h[(r, c)];
+        }
+    }
+}
+
+impl Discrete {
+    /// Builds the discrete dynamics; `substeps` must be ≥ 1 and `ts` > 0 (validated by the config).
+    pub fn new(system: System, ts: f64, substeps: usize) -> Self {
+        Discrete {
+            system,
+            ts,
+            substeps: substeps.max(1),
+        }
+    }
+    /// State dimension.
+    pub fn nx(&self) -> usize {
+        self.system.nx()
+    }
+    /// Input dimension.
+    pub fn nu(&self) -> usize {
+        self.system.nu()
+    }
+    /// `out = F(x, u)`.
+    pub fn step(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
+        let nx = self.nx();
+        out[..nx].copy_from_slice(&x[..nx]);
+        match &self.system {
+            System::Pendulum(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
+            System::CartPole(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
+            System::DoubleIntegrator(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
+        }
+    }
+    /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
+    pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
+        let (ts, m) = (self.ts, self.substeps);
+        match &self.system {
+            System::Pendulum(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
+            System::CartPole(s) => ad_linearize::<_, 5>(s, ts, m, x, u, f, jx, ju),
+            System::DoubleIntegrator(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
+        }
+    }
+    /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu).
+    pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
+        let (ts, m) = (self.ts, self.substeps);
+        match &self.system {
+            System::Pendulum(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
+            System::CartPole(s) => ad_hessian::<_, 5>(s, ts, m, x, u, lam, hess),
+            System::DoubleIntegrator(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn systems() -> Vec<Discrete> {
+        vec![
+            Discrete::new(System::Pendulum(Pendulum::default()), 0.05, 1),
+            Discrete::new(System::CartPole(CartPole::default()), 0.05, 2),
+            Discrete::new(
+                System::DoubleIntegrator(DoubleIntegrator::default()),
+                0.1,
+                1,
+            ),
+        ]
+    }
+
+    /// Central finite differences of `step` and of `λᵀ∂F/∂(x,u)` against the AD derivatives.
+    fn check_derivatives(sys: &Discrete, x: &[f64], u: &[f64], lam: &[f64]) {
+        let (nx, nu) = (sys.nx(), sys.nu());
+        let nz = nx + nu;
+        let mut f = vec![0.0; nx];
+        let mut jx = vec![0.0; nx * nx];
+        let mut ju = vec![0.0; nx * nu];
+        sys.linearize(x, u, &mut f, &mut jx, &mut ju);
+        let mut f2 = vec![0.0; nx];
+        sys.step(x, u, &mut f2);
+        for i in 0..nx {
+            assert!((f[i] - f2[i]).abs() <= 1e-12 * (1.0 + f[i].abs()));
+        }
+        let h = 1e-6;
+        let z: Vec<f64> = x.iter().chain(u.iter()).copied().collect();
+        let eval = |z: &[f64]| {
+            let mut o = vec![0.0; nx];
+            sys.step(&z[..nx], &z[nx..], &mut o);
+            o
+        };
+        for j in 0..nz {
+            let (mut zp, mut zm) = (z.clone(), z.clone());
+            zp[j] += h;
+            zm[j] -= h;
+            let (fp, fm) = (eval(&zp), eval(&zm));
+            for i in 0..nx {
+                let fd = (fp[i] - fm[i]) / (2.0 * h);
+                let ad = if j < nx {
+                    jx[i * nx + j]
+                } else {
+                    ju[i * nu + j - nx]
+                };
+                assert!(
+                    (fd - ad).abs() <= 1e-6 * (1.0 + ad.abs()),
+                    "{}: dF{i}/dz{j}: fd {fd} ad {ad}",
+                    sys.system.name()
+                );
+            }
+        }
+        // Hessian of λᵀF: finite differences of the AD gradient λᵀ[A B].
+        let mut hess = vec![0.0; nz * nz];
+        sys.lagrangian_hessian(x, u, lam, &mut hess);
+        let grad = |z: &[f64]| {
+            let mut f = vec![0.0; nx];
+            let mut jx = vec![0.0; nx * nx];
+            let mut ju = vec![0.0; nx * nu];
+            sys.linearize(&z[..nx], &z[nx..], &mut f, &mut jx, &mut ju);
+            (0..nz)
+                .map(|j| {
+                    (0..nx)
+                        .map(|i| {
+                            lam[i]
+                                * if j < nx {
+                                    jx[i * nx + j]
+                                } else {
+                                    ju[i * nu + j - nx]
+                                }
+                        })
+                        .sum::<f64>()
+                })
+                .collect::<Vec<f64>>()
+        };
+        for j in 0..nz {
+            let (mut zp, mut zm) = (z.clone(), z.clone());
+            zp[j] += h;
+            zm[j] -= h;
+            let (gp, gm) = (grad(&zp), grad(&zm));
+            for r in 0..nz {
+                let fd = (gp[r] - gm[r]) / (2.0 * h);
+                let ad = hess[r * nz + j];
+                assert!(
+                    (fd - ad).abs() <= 1e-6 * (1.0 + ad.abs()),
+                    "{}: H[{r},{j}]: fd {fd} ad {ad}",
+                    sys.system.name()
+                );
+                assert!((hess[r * nz + j] - hess[j * nz + r]).abs() <= 1e-12 * (1.0 + ad.abs()));
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn ad_derivatives_match_finite_differences(
+            x in proptest::collection::vec(-3.0f64..3.0, 4),
+            u in -10.0f64..10.0,
+            lam in proptest::collection::vec(-5.0f64..5.0, 4),
+        ) {
+            for sys in systems() {
+                let nx = sys.nx();
+                check_derivatives(&sys, &x[..nx], &[u], &lam[..nx]);
+            }
+        }
+    }
+
+    #[test]
+    fn double_integrator_rk4_is_exact_discretisation() {
+        let sys = Discrete::new(
+            System::DoubleIntegrator(DoubleIntegrator { mass: 2.0 }),
+            0.1,
+            1,
+        );
+        let mut out = [0.0; 2];
+        sys.step(&[1.0, -0.5], &[3.0], &mut out);
+        let a = 3.0 / 2.0;
+        assert!((out[0] - (1.0 - 0.05 + 0.5 * a * 0.01)).abs() < 1e-14);
+        assert!((out[1] - (-0.5 + a * 0.1)).abs() < 1e-14);
+    }
+}

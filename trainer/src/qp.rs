@@ -1,0 +1,247 @@
+//! The SQP's quadratic subproblem and its reference solver (clarabel).
+//!
+//! At an iterate z with multipliers λ the subproblem in the step d is
+//! ```text
+//! min_d ½ dᵀ H d + ∇f(z)ᵀ d
+//! s.t.  c(z) + ∇c(z)ᵀ d = 0         (zero cone; multipliers λ⁺)
+//!       G d ≤ h − G z                (nonnegative cone; multipliers ν⁺ ≥ 0)
+//! ```
+//! with H the stage-block Hessian of the Lagrangian made positive definite block by block.
+//! The clarabel solver object is built once per OCP structure and only its numerical data
+//! (P, q, A, b) is updated between SQP iterations; the sparsity pattern is fixed
+//! (dense stage blocks, banded dynamics rows), so no re-analysis is needed.
+
+use crate::ocp::Ocp;
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+
+/// Outcome of one QP solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QpStatus {
+    /// Solved (full or reduced accuracy).
+    Solved,
+    /// The linearised constraints have no solution.
+    Infeasible,
+    /// Iteration limit, numerical error or lack of progress.
+    Failed,
+}
+
+/// Reusable clarabel QP workspace for one OCP structure.
+pub struct ClarabelQp {
+    solver: Option<DefaultSolver<f64>>,
+    p_colptr: Vec<usize>,
+    p_rowval: Vec<usize>,
+    a_colptr: Vec<usize>,
+    a_rowval: Vec<usize>,
+    /// For each variable, the inequality rows (index into `ocp.rows`, coefficient) it is in.
+    col_rows: Vec<Vec<(usize, f64)>>,
+    p_val: Vec<f64>,
+    a_val: Vec<f64>,
+    b: Vec<f64>,
+    /// Interior-point iterations of the last solve.
+    pub last_iterations: u32,
+}
+
+impl ClarabelQp {
+    /// Builds the fixed sparsity patterns of P and A for this OCP.
+    pub fn new(ocp: &Ocp) -> Self {
+        let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+        let nz = nx + nu;
+        let mut col_rows = vec![Vec::new(); ocp.n_var];
+        for (r, row) in ocp.rows.iter().enumerate() {
+            for j in 0..row.len {
+                col_rows[row.idx[j]].push((r, row.coef[j]));
+            }
+        }
+        // P: upper triangle of each stage block, then the slack diagonal.
+        let (mut p_colptr, mut p_rowval) = (vec![0], Vec::new());
+        for col in 0..ocp.n_var {
+            if col < ocp.is() {
+                let k = col / nz;
+                let start = k * nz;
+                for row in start..=col {
+                    p_rowval.push(row);
+                }
+            } else {
+                p_rowval.push(col);
+            }
+            p_colptr.push(p_rowval.len());
+        }
+        // A: equality rows (0..n_eq) then inequality rows (n_eq..).
+        let (mut a_colptr, mut a_rowval) = (vec![0], Vec::new());
+        for col in 0..ocp.n_var {
+            if col < ocp.is() {
+                let k = col / nz;
+                let local = col % nz;
+                if local < nx {
+                    // x_k: in c_k (identity or −identity) and in c_{k+1}'s A_k column.
+                    a_rowval.push(k * nx + local);
+                    if k < n {
+                        for r in 0..nx {
+                            a_rowval.push((k + 1) * nx + r);
+                        }
+                    }
+                } else {
+                    for r in 0..nx {
+                        a_rowval.push((k + 1) * nx + r);
+                    }
+                }
+            }
+            for &(r, _) in &col_rows[col] {
+                a_rowval.push(ocp.n_eq + r);
+            }
+            a_colptr.push(a_rowval.len());
+        }
+        let p_nnz = p_rowval.len();
+        let a_nnz = a_rowval.len();
+        ClarabelQp {
+            solver: None,
+            p_colptr,
+            p_rowval,
+            a_colptr,
+            a_rowval,
+            col_rows,
+            p_val: vec![0.0; p_nnz],
+            a_val: vec![0.0; a_nnz],
+            b: vec![0.0; ocp.n_eq + ocp.rows.len()],
+            last_iterations: 0,
+        }
+    }
+
+    fn settings() -> DefaultSettings<f64> {
+        DefaultSettings {
+            verbose: false,
+            presolve_enable: false,
+            input_sparse_dropzeros: false,
+            tol_gap_abs: 1e-10,
+            tol_gap_rel: 1e-10,
+            tol_feas: 1e-10,
+            max_iter: 100,
+            ..DefaultSettings::default()
+        }
+    }
+
+    /// Solves the subproblem. `hess` are the (already convexified) stage blocks as produced
+    /// by [`Ocp::hessian_blocks`]; `jac_x`, `jac_u` the dynamics Jacobians; `c` the
+    /// equality values at z. On success writes the step `d`, the equality multipliers
+    /// `lam` (length n_eq) and the inequality multipliers `nu` (length rows).
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve(
+        &mut self,
+        ocp: &Ocp,
+        z: &[f64],
+        hess: &[f64],
+        grad: &[f64],
+        c: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+        d: &mut [f64],
+        lam: &mut [f64],
+        nu: &mut [f64],
+    ) -> QpStatus {
+        let (nx, nu_dim, n) = (ocp.nx, ocp.nu, ocp.horizon);
+        let nz = nx + nu_dim;
+        // P values in CSC order.
+        let mut p = 0;
+        for col in 0..ocp.n_var {
+            if col < ocp.is() {
+                let k = col / nz;
+                let start = k * nz;
+                let cl = col - start;
+                let blk = &hess[k * nz * nz..(k + 1) * nz * nz];
+                for rl in 0..=cl {
+                    self.p_val[p] = blk[rl * nz + cl];
+                    p += 1;
+                }
+            } else {
+                self.p_val[p] = ocp.slack_curvature();
+                p += 1;
+            }
+        }
+        // A values in CSC order.
+        let mut a = 0;
+        for col in 0..ocp.n_var {
+            if col < ocp.is() {
+                let k = col / nz;
+                let local = col % nz;
+                if local < nx {
+                    self.a_val[a] = if k == 0 { 1.0 } else { -1.0 };
+                    a += 1;
+                    if k < n {
+                        for r in 0..nx {
+                            self.a_val[a] = jac_x[k * nx * nx + r * nx + local];
+                            a += 1;
+                        }
+                    }
+                } else {
+                    let j = local - nx;
+                    for r in 0..nx {
+                        self.a_val[a] = jac_u[k * nx * nu_dim + r * nu_dim + j];
+                        a += 1;
+                    }
+                }
+            }
+            for &(_, coef) in &self.col_rows[col] {
+                self.a_val[a] = coef;
+                a += 1;
+            }
+        }
+        for i in 0..ocp.n_eq {
+            self.b[i] = -c[i];
+        }
+        for (r, row) in ocp.rows.iter().enumerate() {
+            self.b[ocp.n_eq + r] = row.slack(z);
+        }
+        let updated = match self.solver.as_mut() {
+            Some(s) => s
+                .update_P(&self.p_val)
+                .and_then(|_| s.update_A(&self.a_val))
+                .and_then(|_| s.update_q(&grad.to_vec()))
+                .and_then(|_| s.update_b(&self.b))
+                .is_ok(),
+            None => false,
+        };
+        if !updated {
+            let pm = CscMatrix::new(
+                ocp.n_var,
+                ocp.n_var,
+                self.p_colptr.clone(),
+                self.p_rowval.clone(),
+                self.p_val.clone(),
+            );
+            let am = CscMatrix::new(
+                ocp.n_eq + ocp.rows.len(),
+                ocp.n_var,
+                self.a_colptr.clone(),
+                self.a_rowval.clone(),
+                self.a_val.clone(),
+            );
+            let cones = [
+                SupportedConeT::ZeroConeT(ocp.n_eq),
+                SupportedConeT::NonnegativeConeT(ocp.rows.len()),
+            ];
+            match DefaultSolver::new(&pm, grad, &am, &self.b, &cones, Self::settings()) {
+                Ok(s) => self.solver = Some(s),
+                Err(_) => return QpStatus::Failed,
+            }
+        }
+        let Some(solver) = self.solver.as_mut() else {
+            return QpStatus::Failed;
+        };
+        solver.solve();
+        let sol = &solver.solution;
+        self.last_iterations = sol.iterations;
+        match sol.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {
+                d.copy_from_slice(&sol.x);
+                lam.copy_from_slice(&sol.z[..ocp.n_eq]);
+                nu.copy_from_slice(&sol.z[ocp.n_eq..]);
+                QpStatus::Solved
+            }
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                QpStatus::Infeasible
+            }
+            _ => QpStatus::Failed,
+        }
+    }
+}
