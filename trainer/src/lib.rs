@@ -5,6 +5,7 @@
 #![deny(missing_docs)]
 
 pub mod config;
+pub mod dataset;
 #[cfg(test)]
 mod fixtures;
 pub mod kkt;
@@ -12,5 +13,6 @@ pub mod model;
 pub mod mpc;
 pub mod ocp;
 pub mod qp;
+pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;

@@ -1,0 +1,533 @@
+//! The labelled dataset D̂ = {(x_i, κ(x_i), ∂κ/∂x(x_i))}: generation, files, shards.
+//!
+//! **Generation.** The sampler's states are cut into fixed chunks of [`CHUNK`] consecutive
+//! indices. A chunk is solved sequentially (each state warm-started from the previous
+//! state's solution when `solver.warm_start` is on, after a cold start for the chunk's first
+//! state); chunks run in parallel on rayon's pool. A label therefore depends only on its
+//! chunk, never on the thread count or the schedule, and shards (`--shard K/N` takes the
+//! chunks c with c mod N = K) merge into exactly the single-run dataset.
+//!
+//! **File format** (version [`FORMAT_VERSION`]): the postcard encoding of [`Dataset`]
+//! (magic, version, header, records sorted by index). Written atomically (temporary file +
+//! rename). A run writes a checkpoint `<out>.partial` after each batch of chunks and resumes
+//! from it when restarted with the same problem, sampler and shard.
+//!
+//! **CSV export** (for Python users): `index,x1..xn,u1..um,du1_dx1,…,dum_dxn,cost,status,
+//! iterations,kkt,degenerate,max_slack`, one row per record; unlabelled states have `NaN`s.
+
+use crate::config::{ProblemConfig, SamplingSettings};
+use crate::mpc::{Label, MpcLaw};
+use crate::sampling::Sampler;
+use crate::sensitivity::Degeneracy;
+use crate::sqp::{PrimalDual, SqpStatus};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Dataset file format version.
+pub const FORMAT_VERSION: u32 = 1;
+/// Magic bytes at the start of a dataset file.
+pub const MAGIC: [u8; 8] = *b"AMPCDSET";
+/// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
+pub const CHUNK: usize = 16;
+
+/// Errors of dataset generation and files.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A file is not a dataset of this version, or is corrupt.
+    #[error("{path}: not a valid ampc dataset: {reason}")]
+    Format {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Shards cannot be merged.
+    #[error("cannot merge: {0}")]
+    Merge(String),
+    /// A bad shard specification.
+    #[error("invalid shard `{0}`: expected K/N with 0 ≤ K < N")]
+    Shard(String),
+}
+
+/// `K/N`: this process computes the chunks c with c mod N = K.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    /// This shard's index K.
+    pub index: u32,
+    /// Number of shards N.
+    pub count: u32,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = DatasetError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = || DatasetError::Shard(s.to_string());
+        let (k, n) = s.split_once('/').ok_or_else(err)?;
+        let index: u32 = k.trim().parse().map_err(|_| err())?;
+        let count: u32 = n.trim().parse().map_err(|_| err())?;
+        if count == 0 || index >= count {
+            return Err(err());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// What a dataset was made from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Problem name.
+    pub problem: String,
+    /// [`ProblemConfig::problem_hash`] of the labelling problem.
+    pub problem_hash: String,
+    /// The full problem file (TOML) used, for reproduction.
+    pub config_toml: String,
+    /// State dimension.
+    pub nx: u32,
+    /// Input dimension.
+    pub nu: u32,
+    /// The sampler.
+    pub sampling: SamplingSettings,
+    /// Number of states of the whole plan (all shards).
+    pub total: u64,
+    /// The shard this file holds (`None`: the whole plan).
+    pub shard: Option<Shard>,
+    /// Chunk size used.
+    pub chunk: u32,
+}
+
+/// One labelled state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// Index in the sampling plan.
+    pub index: u64,
+    /// State x.
+    pub x: Vec<f64>,
+    /// κ(x) (NaN if unlabelled).
+    pub u: Vec<f64>,
+    /// ∂κ/∂x, row-major nu × nx (NaN if unlabelled).
+    pub du_dx: Vec<f64>,
+    /// Optimal cost.
+    pub cost: f64,
+    /// Solve status.
+    pub status: SqpStatus,
+    /// SQP + polish iterations.
+    pub iterations: u32,
+    /// Final KKT residual.
+    pub kkt: f64,
+    /// Sensitivity degeneracy (the Jacobian term should be dropped in training).
+    pub degeneracy: Option<Degeneracy>,
+    /// Largest state-bound slack (soft labels), 0 otherwise.
+    pub max_slack: f64,
+}
+
+impl Record {
+    /// Builds a record from a label.
+    pub fn from_label(index: u64, l: Label) -> Self {
+        Record {
+            index,
+            x: l.x,
+            u: l.u,
+            du_dx: l.du_dx,
+            cost: l.cost,
+            status: l.status,
+            iterations: l.info.iterations as u32,
+            kkt: l.info.kkt.max(),
+            degeneracy: l.degeneracy,
+            max_slack: l.max_slack,
+        }
+    }
+    /// Whether the record may be used for training (hard or soft label).
+    pub fn is_labelled(&self) -> bool {
+        self.status.is_labelled()
+    }
+}
+
+/// A dataset file's content.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Dataset {
+    /// Must equal [`MAGIC`].
+    pub magic: [u8; 8],
+    /// Must equal [`FORMAT_VERSION`].
+    pub version: u32,
+    /// Provenance.
+    pub header: Header,
+    /// Records sorted by index.
+    pub records: Vec<Record>,
+}
+
+/// Counts by status, for reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// All records.
+    pub total: usize,
+    /// Hard optimum.
+    pub converged: usize,
+    /// Soft (exact-penalty) label of a hard-infeasible state.
+    pub soft: usize,
+    /// Infeasible, unlabelled.
+    pub infeasible: usize,
+    /// Max-iterations or numerical failures.
+    pub failed: usize,
+    /// Labelled points whose sensitivity is degenerate.
+    pub degenerate: usize,
+}
+
+impl Dataset {
+    /// Status counts.
+    pub fn counts(&self) -> Counts {
+        let mut c = Counts {
+            total: self.records.len(),
+            ..Default::default()
+        };
+        for r in &self.records {
+            match r.status {
+                SqpStatus::Converged => c.converged += 1,
+                SqpStatus::Soft => c.soft += 1,
+                SqpStatus::Infeasible => c.infeasible += 1,
+                _ => c.failed += 1,
+            }
+            if r.is_labelled() && r.degeneracy.is_some() {
+                c.degenerate += 1;
+            }
+        }
+        c
+    }
+
+    /// Reads and checks a dataset file.
+    pub fn load(path: &Path) -> Result<Self, DatasetError> {
+        let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+
+    /// Decodes and checks a dataset from bytes; `origin` names it in errors.
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, DatasetError> {
+        let fmt = |reason: String| DatasetError::Format {
+            path: origin.to_string(),
+            reason,
+        };
+        if bytes.len() < 8 || bytes[..8] != MAGIC {
+            return Err(fmt("missing magic bytes".into()));
+        }
+        let d: Dataset =
+            postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
+        if d.version != FORMAT_VERSION {
+            return Err(fmt(format!(
+                "format version {} (this build reads {FORMAT_VERSION})",
+                d.version
+            )));
+        }
+        let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
+        for (i, r) in d.records.iter().enumerate() {
+            if r.x.len() != nx || r.u.len() != nu || r.du_dx.len() != nx * nu {
+                return Err(fmt(format!("record {i} has wrong dimensions")));
+            }
+            if i > 0 && d.records[i - 1].index >= r.index {
+                return Err(fmt(format!("record {i} is out of order")));
+            }
+            if r.index >= d.header.total {
+                return Err(fmt(format!(
+                    "record {i} has index {} ≥ total {}",
+                    r.index, d.header.total
+                )));
+            }
+        }
+        Ok(d)
+    }
+
+    /// Encodes the dataset.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Writes the dataset atomically.
+    pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
+        write_atomic(path, &self.to_bytes())
+    }
+
+    /// The CSV export.
+    pub fn to_csv(&self) -> String {
+        let (nx, nu) = (self.header.nx as usize, self.header.nu as usize);
+        let mut s = String::from("index");
+        for i in 1..=nx {
+            s += &format!(",x{i}");
+        }
+        for j in 1..=nu {
+            s += &format!(",u{j}");
+        }
+        for j in 1..=nu {
+            for i in 1..=nx {
+                s += &format!(",du{j}_dx{i}");
+            }
+        }
+        s += ",cost,status,iterations,kkt,degenerate,max_slack\n";
+        for r in &self.records {
+            s += &r.index.to_string();
+            for v in r.x.iter().chain(&r.u).chain(&r.du_dx) {
+                s += &format!(",{v:?}");
+            }
+            let deg = match r.degeneracy {
+                None => "",
+                Some(Degeneracy::WeaklyActive(_)) => "weakly_active",
+                Some(Degeneracy::Singular) => "singular",
+            };
+            s += &format!(
+                ",{:?},{},{},{:e},{},{:?}\n",
+                r.cost,
+                r.status.as_str(),
+                r.iterations,
+                r.kkt,
+                deg,
+                r.max_slack
+            );
+        }
+        s
+    }
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
+    let io = |source| DatasetError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(io)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let res = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if res.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    res.map_err(io)
+}
+
+/// The checkpoint path of an output file.
+pub fn partial_path(out: &Path) -> PathBuf {
+    let mut s = out.as_os_str().to_owned();
+    s.push(".partial");
+    PathBuf::from(s)
+}
+
+/// The CSV path written beside a dataset file (`.csv` extension).
+pub fn csv_path(out: &Path) -> PathBuf {
+    out.with_extension("csv")
+}
+
+/// Labels one chunk of the plan: indices `[start, end)`, solved in order, warm-started.
+pub fn label_chunk(
+    law: &mut MpcLaw,
+    sampler: &Sampler,
+    start: usize,
+    end: usize,
+    warm_start: bool,
+) -> Vec<Record> {
+    let nx = law.hard_solver().ocp.nx;
+    let mut x = vec![0.0; nx];
+    let mut prev: Option<PrimalDual> = None;
+    let mut out = Vec::with_capacity(end - start);
+    for i in start..end {
+        sampler.point(i, &mut x);
+        let (label, sol) = law.solve(&x, if warm_start { prev.as_ref() } else { None });
+        prev = sol.or(prev);
+        out.push(Record::from_label(i as u64, label));
+    }
+    out
+}
+
+/// Options of a generation run.
+#[derive(Debug, Clone, Default)]
+pub struct GenerateOptions {
+    /// Compute only this shard.
+    pub shard: Option<Shard>,
+    /// Show a progress bar (rate, ETA) on stderr.
+    pub progress: bool,
+}
+
+/// Generates (or resumes) the dataset of `cfg` into `out` (plus the CSV beside it).
+pub fn generate(
+    cfg: &ProblemConfig,
+    out: &Path,
+    opts: &GenerateOptions,
+) -> Result<Dataset, DatasetError> {
+    let sampler = Sampler::new(&cfg.sampling, &cfg.domain);
+    let total = sampler.len();
+    let header = Header {
+        problem: cfg.name.clone(),
+        problem_hash: cfg.problem_hash(),
+        config_toml: toml::to_string(cfg).unwrap_or_default(),
+        nx: cfg.system.nx() as u32,
+        nu: cfg.system.nu() as u32,
+        sampling: cfg.sampling.clone(),
+        total: total as u64,
+        shard: opts.shard,
+        chunk: CHUNK as u32,
+    };
+    let n_chunks = total.div_ceil(CHUNK);
+    let mine: Vec<usize> = (0..n_chunks)
+        .filter(|c| {
+            opts.shard
+                .is_none_or(|s| c % s.count as usize == s.index as usize)
+        })
+        .collect();
+    // Resume from a checkpoint of the same plan.
+    let partial = partial_path(out);
+    let mut records: Vec<Record> = Vec::new();
+    if let Ok(bytes) = std::fs::read(&partial) {
+        match Dataset::from_bytes(&bytes, &partial.display().to_string()) {
+            Ok(d) if d.header == header => records = d.records,
+            _ => {} // a checkpoint of another plan or a torn file: start afresh
+        }
+    }
+    let done: std::collections::HashSet<usize> =
+        records.iter().map(|r| r.index as usize / CHUNK).collect();
+    let todo: Vec<usize> = mine.iter().copied().filter(|c| !done.contains(c)).collect();
+    let n_mine: usize = mine
+        .iter()
+        .map(|&c| (CHUNK * (c + 1)).min(total) - CHUNK * c)
+        .sum();
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new(n_mine as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} labelling [{bar:30}] {pos}/{len} states  {per_sec}  ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b.set_position(records.len() as u64);
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let warm = cfg.solver.warm_start;
+    let batch = (rayon::current_num_threads() * 8).max(8);
+    for group in todo.chunks(batch) {
+        let new: Vec<Vec<Record>> = group
+            .par_iter()
+            .map_init(
+                || MpcLaw::new(cfg),
+                |law, &c| {
+                    let r =
+                        label_chunk(law, &sampler, c * CHUNK, ((c + 1) * CHUNK).min(total), warm);
+                    bar.inc(r.len() as u64);
+                    r
+                },
+            )
+            .collect();
+        records.extend(new.into_iter().flatten());
+        records.sort_by_key(|r| r.index);
+        let ck = Dataset {
+            magic: MAGIC,
+            version: FORMAT_VERSION,
+            header: header.clone(),
+            records: records.clone(),
+        };
+        write_atomic(&partial, &ck.to_bytes())?;
+    }
+    bar.finish_and_clear();
+    records.sort_by_key(|r| r.index);
+    let d = Dataset {
+        magic: MAGIC,
+        version: FORMAT_VERSION,
+        header,
+        records,
+    };
+    d.save(out)?;
+    write_atomic(&csv_path(out), d.to_csv().as_bytes())?;
+    let _ = std::fs::remove_file(&partial);
+    Ok(d)
+}
+
+/// Merges shard files into the single-run dataset (byte-identical to an unsharded run).
+pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
+    let first = inputs
+        .first()
+        .ok_or_else(|| DatasetError::Merge("no input files".into()))?;
+    let mut base = first.header.clone();
+    base.shard = None;
+    let n = first.header.shard.map(|s| s.count).ok_or_else(|| {
+        DatasetError::Merge("input 1 is not a shard (it holds the whole plan)".into())
+    })?;
+    let mut seen = vec![false; n as usize];
+    for (i, d) in inputs.iter().enumerate() {
+        let mut h = d.header.clone();
+        let s = h
+            .shard
+            .take()
+            .ok_or_else(|| DatasetError::Merge(format!("input {} is not a shard", i + 1)))?;
+        if h != base {
+            return Err(DatasetError::Merge(format!(
+                "input {} was made from another problem, sampler or format than input 1",
+                i + 1
+            )));
+        }
+        if s.count != n {
+            return Err(DatasetError::Merge(format!(
+                "input {} is shard {}/{}, not of {n}",
+                i + 1,
+                s.index,
+                s.count
+            )));
+        }
+        if std::mem::replace(&mut seen[s.index as usize], true) {
+            return Err(DatasetError::Merge(format!(
+                "shard {}/{n} given twice",
+                s.index
+            )));
+        }
+    }
+    let missing: Vec<String> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, &s)| !s)
+        .map(|(k, _)| format!("{k}/{n}"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(DatasetError::Merge(format!(
+            "missing shards: {}",
+            missing.join(", ")
+        )));
+    }
+    let mut records: Vec<Record> = inputs
+        .iter()
+        .flat_map(|d| d.records.iter().cloned())
+        .collect();
+    records.sort_by_key(|r| r.index);
+    if records.len() as u64 != base.total || records.windows(2).any(|w| w[0].index == w[1].index) {
+        return Err(DatasetError::Merge(format!(
+            "shards hold {} records for a plan of {} states (incomplete shard files?)",
+            records.len(),
+            base.total
+        )));
+    }
+    Ok(Dataset {
+        magic: MAGIC,
+        version: FORMAT_VERSION,
+        header: base,
+        records,
+    })
+}
