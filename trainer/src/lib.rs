@@ -16,3 +16,5 @@ pub mod qp;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;
+#[cfg(test)]
+mod verification;

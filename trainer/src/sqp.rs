@@ -3,11 +3,15 @@
 //! Iteration (Nocedal & Wright, Alg. 18.3 with an ℓ₁ merit function):
 //! 1. At (z, λ, ν) evaluate ∇f, c, ∇c (exact, AD) and the exact Hessian of the Lagrangian
 //!    `∇²L = ∇²f + Σ_k ∇²(λ_{k+1}ᵀ F(x_k, u_k))`, stage block by stage block.
-//! 2. Convexify each block (eigenvalues below `δ = 1e-4·max(1, |λ|_max)` are raised to δ,
-//!    blocks that are already positive semidefinite are untouched) and solve the QP
-//!    subproblem (`qp` module, clarabel) for the step d and multipliers (λ⁺, ν⁺).
+//! 2. Convexify block by block: keep the exact block where it is positive semidefinite,
+//!    use the Gauss–Newton block (the objective's Hessian 2·diag(Q, R)) where it is not,
+//!    and solve the QP subproblem (`qp` module, clarabel) for the step d and multipliers
+//!    (λ⁺, ν⁺). Measured on 100 random cart-pole states: mean 12.9 SQP iterations and no
+//!    failure, against 24.1 and 4 failures when negative eigenvalues are clipped, and 12.6
+//!    for pure Gauss–Newton (pendulum: 3.21 / 3.21 / 3.35).
 //! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ‖c(z)‖₁` with `μ ≥ 1.1·‖λ⁺‖_∞`.
-//! 4. Once steps are full and the KKT residual is below 1e-3, guess the active set
+//! 4. Once steps are full and either the KKT residual is below 1e-3 or the QP's active set
+//!    repeated (and the residual is below 0.1), guess the active set
 //!    `A = {r : ν_r > slack_r}` and run Newton's method on the KKT conditions restricted to A
 //!    (`kkt` module, exact Hessian): quadratic convergence to machine precision, independent
 //!    of the interior-point QP's tolerance. The polish is accepted only if the full KKT
@@ -192,26 +196,15 @@ fn residual(ocp: &Ocp, z: &[f64], ev: &Evals, lam: &[f64], nu: &[f64]) -> KktRes
     }
 }
 
-/// Raises the eigenvalues of each symmetric stage block to at least δ where the block is
-/// indefinite.
-fn convexify(ocp: &Ocp, hess: &[f64], out: &mut [f64]) {
+/// The QP's Hessian, block by block: the exact block `∇²L_k` where it is positive
+/// semidefinite, else the Gauss–Newton block `∇²f_k` (the objective's, PSD by validation).
+fn convexify(ocp: &Ocp, exact: &[f64], gauss_newton: &[f64], out: &mut [f64]) {
     let nz = ocp.nx + ocp.nu;
-    out.copy_from_slice(hess);
-    for blk in out.chunks_mut(nz * nz) {
+    out.copy_from_slice(exact);
+    for (blk, gn) in out.chunks_mut(nz * nz).zip(gauss_newton.chunks(nz * nz)) {
         let m = DMatrix::from_row_slice(nz, nz, blk);
-        let eig = m.symmetric_eigen();
-        let min = eig.eigenvalues.min();
-        if min >= 0.0 {
-            continue;
-        }
-        let delta = 1e-4 * eig.eigenvalues.amax().max(1.0);
-        let clipped = eig.eigenvalues.map(|v| v.max(delta));
-        let fixed =
-            &eig.eigenvectors * DMatrix::from_diagonal(&clipped) * eig.eigenvectors.transpose();
-        for i in 0..nz {
-            for j in 0..nz {
-                blk[i * nz + j] = 0.5 * (fixed[(i, j)] + fixed[(j, i)]);
-            }
+        if m.symmetric_eigen().eigenvalues.min() < 0.0 {
+            blk.copy_from_slice(gn);
         }
     }
 }
@@ -278,7 +271,8 @@ impl SqpSolver {
             .collect();
         let mut p = start.clone();
         let mut ev = Evals::new(ocp);
-        for _ in 0..8 {
+        let mut last = f64::INFINITY;
+        for it in 0..8 {
             ev.first_order(ocp, &p.z, xs);
             let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
             if res.max() <= self.settings.tol {
@@ -286,6 +280,12 @@ impl SqpSolver {
                 info.polished = true;
                 return Some(p);
             }
+            // Newton on the right active set converges quadratically; anything else is a
+            // wrong guess: give up early and let SQP continue.
+            if it >= 2 && res.max() > 0.25 * last {
+                return None;
+            }
+            last = res.max();
             ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
             let kkt = ActiveSetKkt::new(ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active.clone());
             let (nv, ne) = (ocp.n_var, ocp.n_eq);
@@ -331,6 +331,8 @@ impl SqpSolver {
         let mut ev = Evals::new(&self.ocp);
         let n_var = self.ocp.n_var;
         let mut hreg = vec![0.0; ev.hess.len()];
+        let mut gn = vec![0.0; ev.hess.len()];
+        let zero_lam = vec![0.0; self.ocp.n_eq];
         let mut d = vec![0.0; n_var];
         let mut lam_qp = vec![0.0; self.ocp.n_eq];
         let mut nu_qp = vec![0.0; self.ocp.rows.len()];
@@ -338,6 +340,8 @@ impl SqpSolver {
         let mut z_trial = vec![0.0; n_var];
         let mut mu = 1.0f64;
         let mut full_step = false;
+        let mut stable_active = false;
+        let mut prev_active: Vec<usize> = Vec::new();
         let status = loop {
             ev.first_order(&self.ocp, &p.z, xs);
             let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
@@ -348,7 +352,7 @@ impl SqpSolver {
             if res.max() <= tol {
                 break SqpStatus::Converged;
             }
-            if full_step && res.max() < 1e-3 {
+            if full_step && (res.max() < 1e-3 || (stable_active && res.max() < 1e-1)) {
                 if let Some(q) = self.polish(xs, &p, &mut info) {
                     p = q;
                     break SqpStatus::Converged;
@@ -361,7 +365,8 @@ impl SqpSolver {
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
-            convexify(&self.ocp, &ev.hess, &mut hreg);
+            self.ocp.hessian_blocks(&p.z, &zero_lam, &mut gn);
+            convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
             let st = self.qp.solve(
                 &self.ocp,
                 &p.z,
@@ -409,6 +414,11 @@ impl SqpSolver {
                 break SqpStatus::NumericalFailure;
             }
             full_step = alpha == 1.0;
+            let active: Vec<usize> = (0..nu_qp.len())
+                .filter(|&r| nu_qp[r] > self.ocp.rows[r].slack(&z_trial).max(0.0))
+                .collect();
+            stable_active = active == prev_active;
+            prev_active = active;
             p.z.copy_from_slice(&z_trial);
             for (l, q) in p.lam.iter_mut().zip(&lam_qp) {
                 *l += alpha * (q - *l);
