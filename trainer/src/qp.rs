@@ -108,6 +108,17 @@ impl ClarabelQp {
         }
     }
 
+    /// Forgets the clarabel solver object, so that the next solve sets it up afresh.
+    ///
+    /// clarabel keeps the equilibration scaling of the first problem it was built with and
+    /// reuses it after data updates; a solve's result would then depend on which problem
+    /// the workspace saw first. Resetting at the start of every SQP run makes each run a
+    /// function of its inputs only (whatever the thread schedule); within a run the solver
+    /// is reused.
+    pub fn reset(&mut self) {
+        self.solver = None;
+    }
+
     fn settings() -> DefaultSettings<f64> {
         DefaultSettings {
             verbose: false,

@@ -326,6 +326,7 @@ impl SqpSolver {
     /// Solves OCP(xs) from the primal-dual guess `start`.
     pub fn solve(&mut self, xs: &[f64], start: PrimalDual) -> SqpResult {
         let tol = self.settings.tol;
+        self.qp.reset();
         let mut p = start;
         let mut info = SqpInfo::default();
         let mut ev = Evals::new(&self.ocp);
