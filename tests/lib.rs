@@ -1,1 +1,43 @@
 //! Shared helpers for the end-to-end scenarios in this folder.
+//!
+//! The scenarios drive the real `trainer` binary. `cargo test --workspace` builds it
+//! before any test runs (the `trainer` package has integration tests, so its binary is
+//! built), into the same target directory as these test executables.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Path of the `trainer` binary of this build.
+pub fn trainer_bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> → target/<profile>/trainer
+    let dir = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .expect("target directory");
+    let bin = dir.join(format!("trainer{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        bin.exists(),
+        "{} not found: run the tests with `cargo test --workspace` so that the trainer binary is built",
+        bin.display()
+    );
+    bin
+}
+
+/// Runs `trainer` with `args`.
+pub fn trainer(args: &[&str]) -> Output {
+    Command::new(trainer_bin())
+        .args(args)
+        .output()
+        .expect("run trainer")
+}
+
+/// Path of a problem file shipped in `configs/`.
+pub fn config(name: &str) -> String {
+    format!("{}/../configs/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh temporary directory.
+pub fn tempdir() -> tempfile::TempDir {
+    tempfile::tempdir().expect("temporary directory")
+}

@@ -4,7 +4,8 @@
 //! of `configs/pendulum.toml`): x1, x2, u0, ∂u0/∂x1, ∂u0/∂x2, optimal cost (including
 //! x0ᵀQx0). Copied from the project's reference material.
 
-/// (x1, x2, u0, du/dx1, du/dx2, cost).
+/// (x1, x2, u0, du/dx1, du/dx2, cost), digits as printed by the reference run.
+#[allow(clippy::approx_constant)]
 pub const PENDULUM_IPOPT: [[f64; 6]; 20] = [
     [1.72111132285, 0.7263578447, -15.0, 0.0, 0.0, 712.064716844],
     [

@@ -96,7 +96,7 @@ impl ActiveSetKkt {
 
     /// Whether K is numerically singular (LICQ or second-order sufficiency fails).
     pub fn is_singular(&self) -> bool {
-        !(self.pivot_ratio > 1e-14)
+        self.pivot_ratio.is_nan() || self.pivot_ratio <= 1e-14
     }
 
     /// Solves `K x = rhs`; `None` if K is singular.

@@ -3,6 +3,9 @@
 //! Data flows one way: `config` → `model` → `ocp` → `sqp` (+ `qp`, `kkt`) → `sensitivity`
 //! → `mpc` (the labelled law κ, ∂κ/∂x) → `dataset` (sampling, labelling, files, shards).
 #![deny(missing_docs)]
+// Numerical kernels index several arrays with one loop variable; explicit indices read
+// closer to the equations than zipped iterators.
+#![allow(clippy::needless_range_loop)]
 
 pub mod config;
 pub mod dataset;

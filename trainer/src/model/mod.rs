@@ -161,6 +161,7 @@ fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
 }
 
 /// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions.
+#[allow(clippy::too_many_arguments)]
 fn ad_linearize<S: Dynamics, const NZ: usize>(
     sys: &S,
     ts: f64,
