@@ -154,6 +154,8 @@ impl MpcLaw {
                 let label = self.finish(&self.hard, xs, &h, SqpStatus::Converged);
                 return (label, Some(h.point));
             }
+            // Feasible, yet the hard solve fails: report the failure, not a soft label.
+            return (self.unlabelled(xs, r.status, h.info), None);
         }
         if !self.cfg.solver.soft_fallback {
             return (self.unlabelled(xs, SqpStatus::Infeasible, s.info), None);

@@ -264,11 +264,57 @@ impl SqpSolver {
     }
 
     /// Newton's method on the KKT conditions with the active set guessed from (z, ν).
+    ///
+    /// The guess is `A = {r : ν_r > slack_r}`. Near a weakly active row the interior-point
+    /// QP returns ν_r ≈ slack_r ≈ √(gap) and the guess is a coin toss, so if it fails the
+    /// polish is retried with the ambiguous rows (ν_r and slack_r both ≤ 1e-4, scaled)
+    /// added, then removed.
     fn polish(&self, xs: &[f64], start: &PrimalDual, info: &mut SqpInfo) -> Option<PrimalDual> {
         let ocp = &self.ocp;
-        let active: Vec<usize> = (0..ocp.rows.len())
+        let nu_scale = start.nu.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        let guess: Vec<usize> = (0..ocp.rows.len())
             .filter(|&r| start.nu[r] > ocp.rows[r].slack(&start.z).max(0.0))
             .collect();
+        let ambiguous: Vec<usize> = (0..ocp.rows.len())
+            .filter(|&r| {
+                start.nu[r].abs() <= 1e-4 * nu_scale
+                    && ocp.rows[r].slack(&start.z).abs() <= 1e-4 * (1.0 + ocp.rows[r].rhs.abs())
+            })
+            .collect();
+        if let Some(p) = self.polish_on(xs, start, guess.clone(), info) {
+            return Some(p);
+        }
+        if ambiguous.is_empty() {
+            return None;
+        }
+        let mut with: Vec<usize> = guess.iter().chain(&ambiguous).copied().collect();
+        with.sort_unstable();
+        with.dedup();
+        if with != guess {
+            if let Some(p) = self.polish_on(xs, start, with, info) {
+                return Some(p);
+            }
+        }
+        let without: Vec<usize> = guess
+            .iter()
+            .copied()
+            .filter(|r| !ambiguous.contains(r))
+            .collect();
+        if without != guess {
+            return self.polish_on(xs, start, without, info);
+        }
+        None
+    }
+
+    /// Newton's method on the KKT conditions with the active set `active`.
+    fn polish_on(
+        &self,
+        xs: &[f64],
+        start: &PrimalDual,
+        active: Vec<usize>,
+        info: &mut SqpInfo,
+    ) -> Option<PrimalDual> {
+        let ocp = &self.ocp;
         let mut p = start.clone();
         let mut ev = Evals::new(ocp);
         let mut last = f64::INFINITY;

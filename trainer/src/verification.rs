@@ -333,3 +333,37 @@ fn cartpole_converges_on_its_domain() {
         assert_eq!(l.status, SqpStatus::Converged, "{x:?}: {:?}", l.info);
     }
 }
+
+/// On the boundary between saturated and unsaturated u0 the input bound is weakly active
+/// (u0 at its bound with a zero multiplier): found by bisection along a line, the state
+/// must be flagged `WeaklyActive`, while states on either side are plain derivatives.
+#[test]
+fn weakly_active_bound_is_flagged_degenerate() {
+    use crate::sensitivity::Degeneracy;
+    let cfg = load("double_integrator.toml");
+    let mut law = MpcLaw::new(&cfg);
+    let u_hi = cfg.ocp.u_hi[0];
+    let at = |law: &mut MpcLaw, t: f64| law.solve(&[-3.0 * t, 0.0], None).0;
+    let (mut a, mut b) = (0.0, 1.0); // u0(a) < u_hi, u0(b) = u_hi
+    assert!(at(&mut law, a).u[0] < u_hi - 1e-3);
+    assert!((at(&mut law, b).u[0] - u_hi).abs() < 1e-8);
+    for _ in 0..60 {
+        let m = 0.5 * (a + b);
+        // Labels are accurate to ~1e-10 (tol 1e-8 on the scaled KKT residual).
+        if at(&mut law, m).u[0] >= u_hi - 1e-8 {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    let l = at(&mut law, b);
+    assert_eq!(l.status, SqpStatus::Converged);
+    assert!(
+        matches!(l.degeneracy, Some(Degeneracy::WeaklyActive(_))),
+        "{:?} u {}",
+        l.degeneracy,
+        l.u[0]
+    );
+    assert_eq!(at(&mut law, 0.5 * b).degeneracy, None);
+    assert_eq!(at(&mut law, (1.5 * b).min(1.0)).degeneracy, None);
+}
