@@ -11,9 +11,10 @@ fn grid(c: &mut Criterion) {
     let out = dir.join("grid.bin");
     let mut g = c.benchmark_group("dataset");
     g.sample_size(20);
-    g.bench_function(format!("pendulum_grid_350_{}_threads", rayon::current_num_threads()), |b| {
-        b.iter(|| generate(&cfg, &out, &GenerateOptions::default()).map(|d| d.records.len()))
-    });
+    g.bench_function(
+        format!("pendulum_grid_350_{}_threads", rayon::current_num_threads()),
+        |b| b.iter(|| generate(&cfg, &out, &GenerateOptions::default()).map(|d| d.records.len())),
+    );
     g.finish();
     let _ = std::fs::remove_dir_all(&dir);
 }
