@@ -140,6 +140,9 @@ pub struct SolverSettings {
     pub degeneracy_tol: f64,
     /// Warm-start a sample from the nearest already-solved neighbour (default true).
     pub warm_start: bool,
+    /// QP subproblem solver: `"structured"` (default; interior point on the banded OCP
+    /// structure, cost linear in N, clarabel as fallback) or `"clarabel"` (reference).
+    pub qp: crate::qp::QpSolverKind,
 }
 
 impl Default for SolverSettings {
@@ -152,6 +155,7 @@ impl Default for SolverSettings {
             soft_l2: 1e2,
             degeneracy_tol: 1e-7,
             warm_start: true,
+            qp: crate::qp::QpSolverKind::default(),
         }
     }
 }
