@@ -1,0 +1,80 @@
+//! A `trainer sample` run killed with SIGKILL mid-way resumes from its checkpoint when the
+//! same command is run again, and the final file equals an uninterrupted run's.
+
+use ampc_tests::{tempdir, trainer, trainer_bin};
+use std::time::{Duration, Instant};
+
+#[test]
+fn killed_run_resumes_to_the_same_dataset() {
+    let dir = tempdir();
+    let d = dir.path();
+    // A plan long enough to be interrupted: 3000 random pendulum states.
+    let cfg = d.join("p.toml");
+    let text = trainer::config::PENDULUM_TOML.replace(
+        "sampler = \"grid\"\ncounts = [35, 10]\nseed = 0",
+        "sampler = \"random\"\nn = 3000\nseed = 3",
+    );
+    assert!(text.contains("n = 3000"));
+    std::fs::write(&cfg, text).unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let reference = d.join("ref.bin");
+    let o = trainer(&[
+        "sample",
+        "--config",
+        cfg,
+        "--out",
+        reference.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let out = d.join("run.bin");
+    let partial = d.join("run.bin.partial");
+    let mut child = std::process::Command::new(trainer_bin())
+        .args([
+            "sample",
+            "--config",
+            cfg,
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ])
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !partial.exists()
+        && child.try_wait().unwrap().is_none()
+        && t.elapsed() < Duration::from_secs(120)
+    {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let running = child.try_wait().unwrap().is_none();
+    child.kill().ok();
+    child.wait().unwrap();
+    assert!(
+        running,
+        "the run ended before its first checkpoint: make the plan longer"
+    );
+    assert!(!out.exists(), "killed before the end, no final file");
+    assert!(partial.exists());
+    let ck = trainer::dataset::Dataset::load(&partial).unwrap();
+    assert!(
+        !ck.records.is_empty() && ck.records.len() < 3000,
+        "{} records",
+        ck.records.len()
+    );
+    let o = trainer(&[
+        "sample",
+        "--config",
+        cfg,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&reference).unwrap()
+    );
+    assert!(!partial.exists());
+}
