@@ -64,9 +64,12 @@ impl BandLu {
         self.n
     }
 
-    #[inline]
-    fn at(&self, i: usize, j: usize) -> usize {
-        i * self.w + (j + self.kl - i)
+    /// Index of entry (i, j) in the band storage, if inside the band.
+    fn slot(&self, i: usize, j: usize) -> Option<usize> {
+        if i >= self.n || j >= self.n || j + self.kl < i || j > i + self.ku {
+            return None;
+        }
+        Some(i * self.w + (j + self.kl - i))
     }
 
     /// Adds v to entry (i, j). Returns false (and changes nothing) if (i, j) is outside the
@@ -75,38 +78,38 @@ impl BandLu {
         if i >= self.n || j >= self.n || j + self.kl < i || j > i + self.ku {
             return false;
         }
-        let p = self.at(i, j);
-        self.a[p] += v;
+        self.a[i * self.w + (j + self.kl - i)] += v;
         true
     }
 
     /// LU factorisation with partial pivoting, in place. Sets [`BandLu::pivot_ratio`]; a zero
     /// pivot column is skipped (the factor is then singular, ratio 0).
     pub fn factor(&mut self) {
-        let (n, kl, ku) = (self.n, self.kl, self.ku);
+        let (n, kl, ku, w) = (self.n, self.kl, self.ku, self.w);
         let ubw = kl + ku;
         let (mut mn, mut mx) = (f64::INFINITY, 0.0f64);
         for k in 0..n {
-            let last = (k + kl).min(n.saturating_sub(1));
-            // Pivot search in column k, rows k..=last.
+            let last = (k + kl).min(n - 1);
+            // Entry (i, k) of row i ≥ k sits at i·w + (k + kl − i).
             let mut p = k;
-            let mut best = self.a[self.at(k, k)].abs();
+            let mut best = self.a[k * w + kl].abs();
             for i in k + 1..=last {
-                let v = self.a[self.at(i, k)].abs();
+                let v = self.a[i * w + k + kl - i].abs();
                 if v > best {
                     best = v;
                     p = i;
                 }
             }
             self.piv[k] = p;
-            let jend = (k + ubw).min(n - 1);
+            // Columns k..k+len of a row are contiguous.
+            let len = (k + ubw).min(n - 1) - k + 1;
+            let rk0 = k * w + kl;
             if p != k {
-                for j in k..=jend {
-                    let (x, y) = (self.at(k, j), self.at(p, j));
-                    self.a.swap(x, y);
-                }
+                let (head, tail) = self.a.split_at_mut(p * w);
+                let rp0 = k + kl - p;
+                head[rk0..rk0 + len].swap_with_slice(&mut tail[rp0..rp0 + len]);
             }
-            let d = self.a[self.at(k, k)];
+            let d = self.a[rk0];
             let ad = d.abs();
             if !ad.is_finite() {
                 mn = 0.0;
@@ -117,18 +120,17 @@ impl BandLu {
                 continue;
             }
             let inv = 1.0 / d;
-            let rk = self.at(k, k);
             for i in k + 1..=last {
-                let ri = self.at(i, k);
-                let l = self.a[ri] * inv;
-                self.a[ri] = l;
-                if l == 0.0 {
-                    continue;
-                }
-                // Row i columns k+1..=jend are contiguous, as are row k's.
-                let len = jend - k;
-                for t in 1..=len {
-                    self.a[ri + t] -= l * self.a[rk + t];
+                let (head, tail) = self.a.split_at_mut(i * w);
+                let rk = &head[rk0..rk0 + len];
+                let ri0 = k + kl - i;
+                let ri = &mut tail[ri0..ri0 + len];
+                let l = ri[0] * inv;
+                ri[0] = l;
+                if l != 0.0 {
+                    for (x, y) in ri[1..].iter_mut().zip(&rk[1..]) {
+                        *x -= l * y;
+                    }
                 }
             }
         }
@@ -143,7 +145,8 @@ impl BandLu {
 
     /// Solves `A x = b` in place with the factors of [`BandLu::factor`] (b has length n).
     pub fn solve_in_place(&self, b: &mut [f64]) {
-        let (n, kl, ubw) = (self.n, self.kl, self.kl + self.ku);
+        let (n, kl, w) = (self.n, self.kl, self.w);
+        let ubw = kl + self.ku;
         for k in 0..n {
             let p = self.piv[k];
             if p != k {
@@ -151,19 +154,17 @@ impl BandLu {
             }
             let bk = b[k];
             if bk != 0.0 {
-                for i in k + 1..=(k + kl).min(n.saturating_sub(1)) {
-                    b[i] -= self.a[self.at(i, k)] * bk;
+                for i in k + 1..=(k + kl).min(n - 1) {
+                    b[i] -= self.a[i * w + k + kl - i] * bk;
                 }
             }
         }
         for k in (0..n).rev() {
-            let rk = self.at(k, k);
-            let jend = (k + ubw).min(n - 1);
-            let mut s = b[k];
-            for t in 1..=jend - k {
-                s -= self.a[rk + t] * b[k + t];
-            }
-            b[k] = s / self.a[rk];
+            let len = (k + ubw).min(n - 1) - k + 1;
+            let rk0 = k * w + kl;
+            let row = &self.a[rk0 + 1..rk0 + len];
+            let s: f64 = row.iter().zip(&b[k + 1..k + len]).map(|(a, x)| a * x).sum();
+            b[k] = (b[k] - s) / self.a[rk0];
         }
     }
 }
@@ -367,6 +368,10 @@ pub struct BandedKkt {
     /// The ordering.
     pub layout: KktLayout,
     lu: BandLu,
+    /// The assembled K without row weights (see [`BandedKkt::set_base`]).
+    base: Vec<f64>,
+    /// For each entry of `w_r a_r a_rᵀ`: (band storage index, row r, coefficient product).
+    weight_slots: Vec<(usize, usize, f64)>,
 }
 
 impl BandedKkt {
@@ -374,8 +379,54 @@ impl BandedKkt {
     pub fn new(layout: KktLayout) -> Self {
         BandedKkt {
             layout,
-            lu: BandLu::default(),
+            ..BandedKkt::default()
         }
+    }
+
+    /// Assembles K without row weights and keeps it as the base for
+    /// [`BandedKkt::factor_weighted`], which then only adds `Gᵀ W G` (the interior-point
+    /// iterations of one QP share H and ∇c). Returns false on a layout bug.
+    pub fn set_base(&mut self, ocp: &Ocp, hess: &[f64], jac_x: &[f64], jac_u: &[f64]) -> bool {
+        let (dim, bw) = (self.layout.dim(), self.layout.bw);
+        self.lu.reset(dim, bw, bw);
+        let (pos, lu) = (&self.layout.pos, &mut self.lu);
+        let mut inside = true;
+        for_each_entry(
+            ocp,
+            hess,
+            jac_x,
+            jac_u,
+            &self.layout.active,
+            None,
+            |i, j, v| {
+                inside &= lu.add(pos[i], pos[j], v);
+            },
+        );
+        self.base.clear();
+        self.base.extend_from_slice(&self.lu.a);
+        self.weight_slots.clear();
+        for (r, row) in ocp.rows.iter().enumerate() {
+            for a in 0..row.len {
+                for b in 0..row.len {
+                    let (i, j) = (pos[row.idx[a]], pos[row.idx[b]]);
+                    match self.lu.slot(i, j) {
+                        Some(s) => self.weight_slots.push((s, r, row.coef[a] * row.coef[b])),
+                        None => inside = false,
+                    }
+                }
+            }
+        }
+        inside
+    }
+
+    /// Factorises `base + Gᵀ W G` (after [`BandedKkt::set_base`]); returns the pivot ratio.
+    pub fn factor_weighted(&mut self, row_weight: &[f64]) -> f64 {
+        self.lu.a.copy_from_slice(&self.base);
+        for &(s, r, c) in &self.weight_slots {
+            self.lu.a[s] += row_weight[r] * c;
+        }
+        self.lu.factor();
+        self.lu.pivot_ratio
     }
 
     /// Assembles K from the Hessian blocks, the dynamics Jacobians, the layout's active rows

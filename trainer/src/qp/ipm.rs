@@ -261,8 +261,11 @@ impl IpmQp {
             return QpStatus::Failed;
         }
         // Starting point: solve with W = I, i.e. min ½dᵀHd + gᵀd + ½‖Gd − b‖² s.t. Ed = −c.
+        if !self.kkt.set_base(ocp, hess, jac_x, jac_u) {
+            return QpStatus::Failed;
+        }
         self.w.fill(1.0);
-        let ratio = self.kkt.factor(ocp, hess, jac_x, jac_u, Some(&self.w));
+        let ratio = self.kkt.factor_weighted(&self.w);
         if ratio.is_nan() || ratio <= 1e-14 {
             return QpStatus::Failed;
         }
@@ -338,7 +341,7 @@ impl IpmQp {
             for i in 0..m {
                 self.w[i] = self.nu[i] / self.t[i];
             }
-            let ratio = self.kkt.factor(ocp, hess, jac_x, jac_u, Some(&self.w));
+            let ratio = self.kkt.factor_weighted(&self.w);
             if ratio.is_nan() || ratio <= 0.0 {
                 if err <= TOL_REDUCED {
                     break;
