@@ -120,15 +120,16 @@ impl BandLu {
                 continue;
             }
             let inv = 1.0 / d;
-            for i in k + 1..=last {
-                let (head, tail) = self.a.split_at_mut(i * w);
-                let rk = &head[rk0..rk0 + len];
-                let ri0 = k + kl - i;
-                let ri = &mut tail[ri0..ri0 + len];
-                let l = ri[0] * inv;
-                ri[0] = l;
+            // Rows k+1..=last, chunk q = row i = k+1+q: its entry (i, j) is at offset
+            // j + kl − i, so (i, k) is at kl − (q + 1) and columns k+1.. follow it.
+            let (head, tail) = self.a.split_at_mut((k + 1) * w);
+            let rk = &head[rk0 + 1..rk0 + len];
+            for (q, row) in tail.chunks_exact_mut(w).take(last - k).enumerate() {
+                let ri0 = kl - (q + 1);
+                let l = row[ri0] * inv;
+                row[ri0] = l;
                 if l != 0.0 {
-                    for (x, y) in ri[1..].iter_mut().zip(&rk[1..]) {
+                    for (x, y) in row[ri0 + 1..ri0 + len].iter_mut().zip(rk) {
                         *x -= l * y;
                     }
                 }
@@ -154,8 +155,11 @@ impl BandLu {
             }
             let bk = b[k];
             if bk != 0.0 {
-                for i in k + 1..=(k + kl).min(n - 1) {
-                    b[i] -= self.a[i * w + k + kl - i] * bk;
+                // Entry (i, k) is at i·w + k + kl − i: a stride of w − 1 down the column.
+                let mut idx = k * w + kl + (w - 1);
+                for bi in &mut b[k + 1..=(k + kl).min(n - 1)] {
+                    *bi -= self.a[idx] * bk;
+                    idx += w - 1;
                 }
             }
         }

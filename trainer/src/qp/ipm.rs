@@ -174,7 +174,7 @@ impl IpmQp {
         }
     }
 
-    /// Residuals r_d, r_e, r_i at the current iterate.
+    /// Residuals r_d, r_e, r_i at the current iterate; returns the objective ½dᵀHd + gᵀd.
     #[allow(clippy::too_many_arguments)]
     fn residuals(
         &mut self,
@@ -184,9 +184,11 @@ impl IpmQp {
         c: &[f64],
         jx: &[f64],
         ju: &[f64],
-    ) {
+    ) -> f64 {
         mul_h(ocp, hess, &self.d, &mut self.rd);
-        for (r, g) in self.rd.iter_mut().zip(grad) {
+        let mut pobj = 0.0;
+        for ((r, g), d) in self.rd.iter_mut().zip(grad).zip(&self.d) {
+            pobj += (0.5 * *r + g) * d;
             *r += g;
         }
         add_et(ocp, jx, ju, &self.lam, &mut self.rd);
@@ -198,6 +200,7 @@ impl IpmQp {
         for (i, row) in ocp.rows.iter().enumerate() {
             self.ri[i] = row.dot(&self.d) + self.t[i] - self.b[i];
         }
+        pobj
     }
 
     /// Solves the Newton system for the complementarity target `rc` (in `self.tmp`) with the
@@ -306,15 +309,9 @@ impl IpmQp {
         let mut it = 0;
         loop {
             self.last_iterations = it;
-            self.residuals(ocp, hess, grad, c, jac_x, jac_u);
+            let pobj = self.residuals(ocp, hess, grad, c, jac_x, jac_u);
             let gap: f64 = self.t.iter().zip(&self.nu).map(|(a, b)| a * b).sum();
             let mu = gap / m as f64;
-            let pobj = {
-                mul_h(ocp, hess, &self.d, &mut self.rhs[..nv]);
-                let q: f64 = self.rhs[..nv].iter().zip(&self.d).map(|(a, b)| a * b).sum();
-                let l: f64 = grad.iter().zip(&self.d).map(|(a, b)| a * b).sum();
-                0.5 * q + l
-            };
             let err = (inf_norm(&self.rd) / scale_g)
                 .max(inf_norm(&self.re) / scale_c)
                 .max(inf_norm(&self.ri) / scale_b)
