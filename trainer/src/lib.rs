@@ -12,6 +12,7 @@ pub mod dataset;
 #[cfg(test)]
 mod fixtures;
 pub mod kkt;
+pub mod mlp;
 pub mod model;
 pub mod mpc;
 pub mod ocp;
