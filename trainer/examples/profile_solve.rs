@@ -1,6 +1,7 @@
 //! Profiling driver for the OCP solver: repeatedly solves the pendulum OCP (cold start +
 //! sensitivity) at fixed states and prints per-state iteration counts and the mean time.
-//! Usage: `cargo run --release -p trainer --example profile_solve -- [reps] [horizon]`.
+//! Usage: `cargo run --release -p trainer --example profile_solve -- [reps] [horizon] [qp]`
+//! with `qp` = `structured` (default) or `clarabel`.
 use std::time::Instant;
 use trainer::config::ProblemConfig;
 use trainer::mpc::MpcLaw;
@@ -20,6 +21,9 @@ fn main() {
     let horizon: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(20);
     let mut cfg = ProblemConfig::default();
     cfg.ocp.horizon = horizon;
+    if args.get(3).map(String::as_str) == Some("clarabel") {
+        cfg.solver.qp = trainer::qp::QpSolverKind::Clarabel;
+    }
     let mut law = MpcLaw::new(&cfg);
     for x in STATES {
         let (l, _) = law.solve(&x, None);
@@ -35,5 +39,9 @@ fn main() {
         }
     }
     let per = t.elapsed().as_secs_f64() / (reps * STATES.len()) as f64;
-    println!("mean {:.1} µs per solve (N = {horizon})", per * 1e6);
+    println!(
+        "mean {:.1} µs per solve (N = {horizon}, qp = {:?})",
+        per * 1e6,
+        cfg.solver.qp
+    );
 }
