@@ -215,6 +215,69 @@ pub struct ProblemConfig {
     /// Sampler settings.
     #[serde(default)]
     pub sampling: SamplingSettings,
+    /// Training settings.
+    #[serde(default)]
+    pub training: TrainSettings,
+}
+
+/// Learning-rate schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Schedule {
+    /// Constant learning rate.
+    Constant,
+    /// Cosine decay from the learning rate to 1 % of it over the epochs.
+    Cosine,
+}
+
+/// Training settings (`[training]`); defaults are the paper's setting.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainSettings {
+    /// Hidden layer widths (default [10, 10]).
+    pub hidden: Vec<usize>,
+    /// Hidden activation (default tanh).
+    pub activation: crate::mlp::Activation,
+    /// Epochs (default 2000).
+    pub epochs: usize,
+    /// Minibatch size (default 35: 10 Adam steps per epoch on the 350-point grid).
+    pub batch_size: usize,
+    /// Adam learning rate (default 1e-2).
+    pub learning_rate: f64,
+    /// Learning-rate schedule (default constant).
+    pub schedule: Schedule,
+    /// (λ₁, λ₂, λ₃) of the sensitivity-regularized loss (default the paper's (1, 3, 0.05));
+    /// the nominal net uses (λ₁, 0, 0).
+    pub lambda: [f64; 3],
+    /// Seed of the initial weights and of the minibatch shuffling (default 0).
+    pub seed: u64,
+    /// Stop early once ε_D (max error over the dataset) is at most this (default: none).
+    pub target_eps_d: Option<f64>,
+    /// Number of uniformly random validation states labelled by the MPC (default 1000).
+    pub validation_n: usize,
+    /// Seed of the validation states (default 12345).
+    pub validation_seed: u64,
+    /// Record the training curve every this many epochs (default 20).
+    pub log_every: usize,
+}
+
+impl Default for TrainSettings {
+    fn default() -> Self {
+        TrainSettings {
+            hidden: vec![10, 10],
+            activation: crate::mlp::Activation::Tanh,
+            epochs: 2000,
+            batch_size: 35,
+            learning_rate: 1e-2,
+            schedule: Schedule::Constant,
+            lambda: [1.0, 3.0, 0.05],
+            seed: 0,
+            target_eps_d: None,
+            validation_n: 1000,
+            validation_seed: 12345,
+            log_every: 20,
+        }
+    }
 }
 
 impl Default for ProblemConfig {
@@ -388,6 +451,40 @@ impl ProblemConfig {
         }
         if !(s.degeneracy_tol.is_finite() && s.degeneracy_tol > 0.0) {
             return Err(invalid("solver.degeneracy_tol", "must be finite and > 0"));
+        }
+        let t = &self.training;
+        if t.hidden.is_empty() || t.hidden.contains(&0) {
+            return Err(invalid(
+                "training.hidden",
+                "needs at least one hidden layer, all widths ≥ 1",
+            ));
+        }
+        if t.epochs == 0 {
+            return Err(invalid("training.epochs", "must be at least 1"));
+        }
+        if t.batch_size == 0 {
+            return Err(invalid("training.batch_size", "must be at least 1"));
+        }
+        if !(t.learning_rate.is_finite() && t.learning_rate > 0.0) {
+            return Err(invalid("training.learning_rate", "must be finite and > 0"));
+        }
+        if let Some(i) = t.lambda.iter().position(|l| !(l.is_finite() && *l >= 0.0)) {
+            return Err(invalid(
+                format!("training.lambda[{i}]"),
+                "must be finite and ≥ 0",
+            ));
+        }
+        if t.lambda[0] <= 0.0 {
+            return Err(invalid(
+                "training.lambda[0]",
+                "the value term's weight must be > 0",
+            ));
+        }
+        if t.target_eps_d.is_some_and(|e| !(e.is_finite() && e > 0.0)) {
+            return Err(invalid("training.target_eps_d", "must be finite and > 0"));
+        }
+        if t.log_every == 0 {
+            return Err(invalid("training.log_every", "must be at least 1"));
         }
         let sm = &self.sampling;
         match sm.sampler {

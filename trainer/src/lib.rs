@@ -7,11 +7,13 @@
 // closer to the equations than zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
+pub mod certificate;
 pub mod config;
 pub mod dataset;
 #[cfg(test)]
 mod fixtures;
 pub mod kkt;
+pub mod lipschitz;
 pub mod mlp;
 pub mod model;
 pub mod mpc;
@@ -20,5 +22,6 @@ pub mod qp;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;
+pub mod train;
 #[cfg(test)]
 mod verification;

@@ -8,15 +8,17 @@ use clap::{Parser, Subcommand};
 use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use trainer::certificate::{certify, requirement, CertifyOptions};
 use trainer::config::ProblemConfig;
 use trainer::dataset::{self, Dataset, GenerateOptions, Shard};
 use trainer::mpc::MpcLaw;
+use trainer::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
 
 #[derive(Parser)]
 #[command(
     name = "trainer",
     version,
-    about = "Certified approximate MPC: solve, sample, merge"
+    about = "Certified approximate MPC: solve, sample, merge, train, certify, eval"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -51,6 +53,60 @@ enum Cmd {
         /// No progress bar or summary.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Train a network on a dataset (sensitivity-regularized by default).
+    Train {
+        /// Problem file (default: the embedded pendulum); its `[training]` table applies.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Dataset file from `trainer sample`.
+        #[arg(long)]
+        data: PathBuf,
+        /// Output model file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Nominal training (λ₂ = λ₃ = 0).
+        #[arg(long)]
+        nominal: bool,
+        /// Override the seed of the initial weights and shuffling.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// No progress or summary.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Certify a trained model: ε = ε_D + (L_MPC + L_NN)·r with every term.
+    Certify {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Model file from `trainer train`.
+        #[arg(long)]
+        model: PathBuf,
+        /// The dataset the model was trained on.
+        #[arg(long)]
+        data: PathBuf,
+        /// Also report the data density a target ε requires.
+        #[arg(long)]
+        target_eps: Option<f64>,
+        /// A proven Lipschitz constant of the MPC law (otherwise an estimate is used).
+        #[arg(long)]
+        l_mpc: Option<f64>,
+        /// Print JSON (the certificate record) instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
+    Eval {
+        /// Model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// Input CSV with header `x1,…,xn`.
+        #[arg(long)]
+        states: PathBuf,
+        /// Output CSV `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
@@ -219,6 +275,209 @@ fn merge(out: &Path, inputs: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
+fn sha256_file(path: &Path) -> Result<String> {
+    use sha2::{Digest, Sha256};
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(trainer::config::hex(&Sha256::digest(&bytes)))
+}
+
+fn train_cmd(
+    config: &Option<PathBuf>,
+    data: &Path,
+    out: &Path,
+    nominal: bool,
+    seed: Option<u64>,
+    quiet: bool,
+) -> Result<()> {
+    let mut cfg = load_config(config)?;
+    if let Some(s) = seed {
+        cfg.training.seed = s;
+    }
+    let d = Dataset::load(data)?;
+    if d.header.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was labelled for another problem (hash {}…) than the config's {} ({}…)",
+            data.display(),
+            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            cfg.name,
+            &cfg.problem_hash()[..12]
+        );
+    }
+    let set = TrainSet::from_dataset(&d);
+    if set.is_empty() {
+        bail!("{}: no labelled points to train on", data.display());
+    }
+    let t0 = std::time::Instant::now();
+    let val = label_random_states(
+        &cfg,
+        cfg.training.validation_n,
+        cfg.training.validation_seed,
+    );
+    let t_val = t0.elapsed().as_secs_f64();
+    let t1 = std::time::Instant::now();
+    let opts = TrainOptions {
+        nominal,
+        progress: None,
+    };
+    let mut model = train(
+        &cfg.training,
+        &opts,
+        &set,
+        &val,
+        (&cfg.domain.lo, &cfg.domain.hi),
+        (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+        &d.header.problem_hash,
+        &sha256_file(data)?,
+    );
+    let t_train = t1.elapsed().as_secs_f64();
+    let cert = certify(
+        &model,
+        &d,
+        &cfg,
+        &CertifyOptions {
+            extra: Some(val),
+            ..Default::default()
+        },
+    );
+    model.certificate = Some(cert.clone());
+    model.save(out)?;
+    if !quiet {
+        eprintln!(
+            "{} net {:?}: {} epochs in {:.3} s (validation labels {:.3} s) | train ε_D {:.4}, median {:.4} | validation R² {:.5}, max err {:.4} | L_NN {:.2} ({:?}), naive {:.2}, lower {:.2} | ε {:.3} -> {}",
+            if nominal { "nominal" } else { "regularized" },
+            model.mlp.widths(),
+            model.epochs_run,
+            t_train,
+            t_val,
+            model.train_stats.max,
+            model.train_stats.median,
+            model.validation_stats.r2,
+            model.validation_stats.max,
+            cert.l_nn,
+            cert.l_nn_method,
+            cert.l_nn_naive,
+            cert.l_nn_lower,
+            cert.eps,
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+fn certify_cmd(
+    config: &Option<PathBuf>,
+    model: &Path,
+    data: &Path,
+    target: Option<f64>,
+    l_mpc: Option<f64>,
+    json: bool,
+) -> Result<()> {
+    let cfg = load_config(config)?;
+    let m = TrainedModel::load(model)?;
+    let d = Dataset::load(data)?;
+    if let Some(v) = l_mpc {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("--l-mpc must be a finite number ≥ 0, got {v}");
+        }
+    }
+    if let Some(e) = target {
+        if !(e.is_finite() && e > 0.0) {
+            bail!("--target-eps must be a finite number > 0, got {e}");
+        }
+    }
+    let c = certify(
+        &m,
+        &d,
+        &cfg,
+        &CertifyOptions {
+            l_mpc,
+            ..Default::default()
+        },
+    );
+    let req =
+        target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
+    if json {
+        let mut v = serde_json::to_value(&c)?;
+        if let (Some(r), Some(o)) = (req, v.as_object_mut()) {
+            o.insert("requirement".into(), serde_json::to_value(r)?);
+        }
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "certificate of {} on {} ({} labelled points)",
+        model.display(),
+        data.display(),
+        c.n_points
+    );
+    println!(
+        "  eps_D            {:.6}   (max ‖κ − κ_NN‖ over the data)",
+        c.eps_d
+    );
+    println!(
+        "  L_NN             {:.4}   ({:?}, sound)",
+        c.l_nn, c.l_nn_method
+    );
+    println!("    naive          {:.4}", c.l_nn_naive);
+    println!("    LipSDP-Neuron  {:.4}", c.l_nn_lipsdp);
+    if let Some(v) = c.l_nn_vertex {
+        println!("    slope vertices {v:.4}");
+    }
+    println!("    sampled lower  {:.4}", c.l_nn_lower);
+    println!("  L_MPC            {:.4}   ({})", c.l_mpc, c.l_mpc_method);
+    println!(
+        "  covering radius  {:.6}   ({})",
+        c.covering_radius, c.covering_method
+    );
+    println!(
+        "  eps              {:.6}   = eps_D + (L_MPC + L_NN)·r{}",
+        c.eps,
+        if c.l_mpc_is_estimate {
+            "  [L_MPC is an estimate]"
+        } else {
+            ""
+        }
+    );
+    if let Some(r) = req {
+        match (r.delta, r.spacing, r.solves) {
+            (Some(dl), Some(h), Some(n)) => println!(
+                "  target eps {}: covering radius δ ≤ {:.6}, e.g. a grid with spacing {:.6} per axis: {:.0} OCP solves",
+                r.target_eps, dl, h, n
+            ),
+            _ => println!("  target eps {} ≤ eps_D {:.6}: no data density can certify it with this network", r.target_eps, c.eps_d),
+        }
+    }
+    Ok(())
+}
+
+fn eval_cmd(model: &Path, states: &Path, out: &Path) -> Result<()> {
+    let m = TrainedModel::load(model)?;
+    let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
+    let xs = read_states(states, nx)?;
+    let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
+    head.extend((1..=nu).map(|j| format!("u{j}")));
+    for j in 1..=nu {
+        head.extend((1..=nx).map(|i| format!("du{j}_dx{i}")));
+    }
+    let mut s = head.join(",");
+    s.push('\n');
+    let mut ws = trainer::mlp::Workspace::default();
+    let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    for x in &xs {
+        m.mlp.eval(x, &mut u, &mut jac, &mut ws);
+        let nums: Vec<String> = x
+            .iter()
+            .chain(&u)
+            .chain(&jac)
+            .map(|v| format!("{v:?}"))
+            .collect();
+        s += &nums.join(",");
+        s.push('\n');
+    }
+    dataset::write_atomic(out, s.as_bytes())?;
+    Ok(())
+}
+
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let res = match &cli.cmd {
@@ -234,6 +493,23 @@ fn main() -> std::process::ExitCode {
             quiet,
         } => sample(config, out, *shard, *quiet),
         Cmd::Merge { out, inputs } => merge(out, inputs),
+        Cmd::Train {
+            config,
+            data,
+            out,
+            nominal,
+            seed,
+            quiet,
+        } => train_cmd(config, data, out, *nominal, *seed, *quiet),
+        Cmd::Certify {
+            config,
+            model,
+            data,
+            target_eps,
+            l_mpc,
+            json,
+        } => certify_cmd(config, model, data, *target_eps, *l_mpc, *json),
+        Cmd::Eval { model, states, out } => eval_cmd(model, states, out),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,481 @@
+//! Training: Adam on minibatches of the sensitivity-regularized loss (the paper's
+//! eq. (fullloss)), validation metrics, the training curve and the model file.
+//!
+//! ```text
+//! loss(Θ) = λ₁·MSE + λ₂·mean‖∂κ/∂x − ∂κ_NN/∂x‖²_F + λ₃·Σ_j‖W̃_j‖²_F          (mlp module)
+//! Adam:  m ← β₁m + (1−β₁)g,  v ← β₂v + (1−β₂)g²,  Θ ← Θ − η_t·m̂/(√v̂ + 1e-8)
+//! ```
+//! The nominal net is the same procedure with (λ₁, 0, 0). Training is single-threaded and
+//! fully determined by (dataset, settings, seed): same inputs → bit-identical weights.
+//! Points without a label are excluded; degenerate points keep their value term and drop
+//! the Jacobian term. Metrics: ε_D = max_i ‖κ(x_i) − κ_NN(x_i)‖ over the training set
+//! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
+
+use crate::config::{Schedule, TrainSettings};
+use crate::dataset::{write_atomic, Dataset, DatasetError};
+use crate::mlp::{Batch, LossParts, LossWeights, Mlp, Workspace};
+use crate::sampling::splitmix64;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Model file format version.
+pub const MODEL_VERSION: u32 = 1;
+/// Magic bytes of a model file.
+pub const MODEL_MAGIC: [u8; 8] = *b"AMPCMODL";
+
+/// Labelled points in training layout.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TrainSet {
+    /// State dimension.
+    pub nx: usize,
+    /// Input dimension.
+    pub nu: usize,
+    /// States, row-major.
+    pub x: Vec<f64>,
+    /// Labels κ, row-major.
+    pub u: Vec<f64>,
+    /// Label Jacobians, row-major (nu × nx each).
+    pub du: Vec<f64>,
+    /// Whether the Jacobian label is usable (not degenerate).
+    pub use_jac: Vec<bool>,
+}
+
+impl TrainSet {
+    /// The labelled records of a dataset (hard and soft labels; unlabelled ones dropped).
+    pub fn from_dataset(d: &Dataset) -> Self {
+        let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
+        let mut s = TrainSet {
+            nx,
+            nu,
+            ..Default::default()
+        };
+        for r in d.records.iter().filter(|r| r.is_labelled()) {
+            s.x.extend(&r.x);
+            s.u.extend(&r.u);
+            s.du.extend(&r.du_dx);
+            s.use_jac
+                .push(r.degeneracy.is_none() && r.du_dx.iter().all(|v| v.is_finite()));
+        }
+        s
+    }
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.use_jac.len()
+    }
+    /// Whether there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.use_jac.is_empty()
+    }
+}
+
+/// Error statistics of κ_NN against labels.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct ErrorStats {
+    /// Number of points.
+    pub n: usize,
+    /// max ‖κ − κ_NN‖ (ε_D on the training set).
+    pub max: f64,
+    /// Median.
+    pub median: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Mean.
+    pub mean: f64,
+    /// R² = 1 − SS_res/SS_tot over all outputs.
+    pub r2: f64,
+    /// Max ‖∂κ/∂x − ∂κ_NN/∂x‖_F over points with a usable Jacobian label.
+    pub max_jac_err: f64,
+}
+
+/// Errors of the network on a set, sorted ascending (for box plots), and statistics.
+pub fn errors(mlp: &Mlp, set: &TrainSet) -> (Vec<f64>, ErrorStats) {
+    let (nx, nu) = (set.nx, set.nu);
+    let mut ws = Workspace::default();
+    let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    let mut errs = Vec::with_capacity(set.len());
+    let (mut ss_res, mut max_jac) = (0.0, 0.0f64);
+    let mut mean_u = vec![0.0; nu];
+    for i in 0..set.len() {
+        for r in 0..nu {
+            mean_u[r] += set.u[i * nu + r] / set.len().max(1) as f64;
+        }
+    }
+    let mut ss_tot = 0.0;
+    for i in 0..set.len() {
+        mlp.eval(&set.x[i * nx..(i + 1) * nx], &mut u, &mut j, &mut ws);
+        let mut e2 = 0.0;
+        for r in 0..nu {
+            let e = u[r] - set.u[i * nu + r];
+            e2 += e * e;
+            ss_tot += (set.u[i * nu + r] - mean_u[r]).powi(2);
+        }
+        ss_res += e2;
+        errs.push(e2.sqrt());
+        if set.use_jac[i] {
+            let je: f64 = (0..nu * nx)
+                .map(|k| (j[k] - set.du[i * nu * nx + k]).powi(2))
+                .sum();
+            max_jac = max_jac.max(je.sqrt());
+        }
+    }
+    errs.sort_by(f64::total_cmp);
+    let q = |p: f64| -> f64 {
+        if errs.is_empty() {
+            return f64::NAN;
+        }
+        let k = ((errs.len() - 1) as f64 * p).round() as usize;
+        errs[k]
+    };
+    let stats = ErrorStats {
+        n: errs.len(),
+        max: errs.last().copied().unwrap_or(f64::NAN),
+        median: q(0.5),
+        p90: q(0.9),
+        p99: q(0.99),
+        mean: errs.iter().sum::<f64>() / errs.len().max(1) as f64,
+        r2: if ss_tot > 0.0 {
+            1.0 - ss_res / ss_tot
+        } else {
+            f64::NAN
+        },
+        max_jac_err: max_jac,
+    };
+    (errs, stats)
+}
+
+/// One point of the training curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EpochLog {
+    /// Epoch (1-based, after the epoch's updates).
+    pub epoch: usize,
+    /// Loss terms on the whole training set.
+    pub loss: LossParts,
+    /// ε_D on the training set.
+    pub eps_d: f64,
+    /// R² on the validation set (NaN without one).
+    pub r2_validation: f64,
+}
+
+/// Which loss a model was trained with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// λ₂ = λ₃ = 0.
+    Nominal,
+    /// The sensitivity-regularized loss.
+    Regularized,
+}
+
+/// A trained model file: the network, how it was made and how it did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainedModel {
+    /// Must equal [`MODEL_MAGIC`].
+    pub magic: [u8; 8],
+    /// Must equal [`MODEL_VERSION`].
+    pub version: u32,
+    /// The network.
+    pub mlp: Mlp,
+    /// Nominal or regularized.
+    pub kind: Kind,
+    /// Loss weights used.
+    pub lambda: LossWeights,
+    /// Settings used.
+    pub settings: TrainSettings,
+    /// Problem hash of the dataset's labels.
+    pub problem_hash: String,
+    /// SHA-256 of the dataset file's bytes.
+    pub dataset_hash: String,
+    /// Epochs actually run (early stop may end sooner).
+    pub epochs_run: usize,
+    /// Errors on the training set.
+    pub train_stats: ErrorStats,
+    /// Errors on the validation set.
+    pub validation_stats: ErrorStats,
+    /// Training curve.
+    pub history: Vec<EpochLog>,
+    /// The certificate computed after training (`trainer certify` recomputes it).
+    pub certificate: Option<crate::certificate::Certificate>,
+}
+
+impl TrainedModel {
+    /// Encodes the model.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+    /// Writes the model atomically.
+    pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
+        write_atomic(path, &self.to_bytes())
+    }
+    /// Decodes and checks a model; `origin` names it in errors.
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, DatasetError> {
+        let fmt = |reason: String| DatasetError::Format {
+            path: origin.to_string(),
+            reason,
+        };
+        if bytes.len() < 8 || bytes[..8] != MODEL_MAGIC {
+            return Err(fmt("not an ampc model file (magic bytes)".into()));
+        }
+        let m: TrainedModel =
+            postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
+        if m.version != MODEL_VERSION {
+            return Err(fmt(format!(
+                "model format version {} (this build reads {MODEL_VERSION})",
+                m.version
+            )));
+        }
+        let w = m.mlp.widths();
+        let shapes_ok = m.mlp.layers.iter().zip(w.windows(2)).all(|(l, p)| {
+            l.inp == p[0] && l.out == p[1] && l.w.len() == l.inp * l.out && l.b.len() == l.out
+        }) && m.mlp.in_center.len() == w[0]
+            && m.mlp.in_half.len() == w[0]
+            && m.mlp.out_center.len() == m.mlp.nu()
+            && m.mlp.out_half.len() == m.mlp.nu()
+            && m.mlp.layers.windows(2).all(|p| p[0].out == p[1].inp);
+        if !shapes_ok || m.mlp.layers.is_empty() {
+            return Err(fmt("inconsistent layer shapes".into()));
+        }
+        Ok(m)
+    }
+    /// SHA-256 (hex) of the network's parameters and scaling: what a certificate is about.
+    pub fn content_hash(&self) -> String {
+        use sha2::{Digest, Sha256};
+        crate::config::hex(&Sha256::digest(
+            postcard::to_allocvec(&self.mlp).unwrap_or_default(),
+        ))
+    }
+
+    /// Reads a model file.
+    pub fn load(path: &Path) -> Result<Self, DatasetError> {
+        let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+}
+
+/// Adam optimiser state.
+#[derive(Debug, Clone, PartialEq)]
+struct Adam {
+    m: Vec<f64>,
+    v: Vec<f64>,
+    t: u64,
+}
+
+fn flatten(mlp: &Mlp) -> Vec<f64> {
+    mlp.layers
+        .iter()
+        .flat_map(|l| l.w.iter().chain(&l.b).copied())
+        .collect()
+}
+
+fn unflatten(mlp: &mut Mlp, p: &[f64]) {
+    let mut k = 0;
+    for l in &mut mlp.layers {
+        let n = l.w.len();
+        l.w.copy_from_slice(&p[k..k + n]);
+        k += n;
+        let n = l.b.len();
+        l.b.copy_from_slice(&p[k..k + n]);
+        k += n;
+    }
+}
+
+/// Options of a training run.
+#[derive(Debug, Clone)]
+pub struct TrainOptions {
+    /// Nominal (λ₂ = λ₃ = 0) instead of regularized.
+    pub nominal: bool,
+    /// Called after each logged epoch (progress reporting).
+    pub progress: Option<fn(usize, usize)>,
+}
+
+/// Trains a network on `train` from its seeded initial weights; `validation` gives R².
+/// `u_range` is the output range used for scaling (the input bounds U_d).
+#[allow(clippy::too_many_arguments)]
+pub fn train(
+    settings: &TrainSettings,
+    opts: &TrainOptions,
+    train: &TrainSet,
+    validation: &TrainSet,
+    domain: (&[f64], &[f64]),
+    u_range: (&[f64], &[f64]),
+    problem_hash: &str,
+    dataset_hash: &str,
+) -> TrainedModel {
+    let mut widths = vec![train.nx];
+    widths.extend(&settings.hidden);
+    widths.push(train.nu);
+    let mut mlp = Mlp::new(
+        &widths,
+        settings.activation,
+        settings.seed,
+        domain.0,
+        domain.1,
+        u_range.0,
+        u_range.1,
+    );
+    let lam = if opts.nominal {
+        LossWeights {
+            value: settings.lambda[0],
+            jacobian: 0.0,
+            weights: 0.0,
+        }
+    } else {
+        LossWeights {
+            value: settings.lambda[0],
+            jacobian: settings.lambda[1],
+            weights: settings.lambda[2],
+        }
+    };
+    let (nx, nu) = (train.nx, train.nu);
+    let n = train.len();
+    let bs = settings.batch_size.min(n.max(1));
+    let mut params = flatten(&mlp);
+    let mut adam = Adam {
+        m: vec![0.0; params.len()],
+        v: vec![0.0; params.len()],
+        t: 0,
+    };
+    let mut grad = mlp.zero_grad();
+    let mut ws = Workspace::default();
+    let (mut bx, mut bu, mut bdu, mut bj) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut order: Vec<usize> = (0..n).collect();
+    let mut history = Vec::new();
+    let mut epochs_run = 0;
+    let (b1, b2) = (0.9f64, 0.999f64);
+    for epoch in 0..settings.epochs {
+        let lr = match settings.schedule {
+            Schedule::Constant => settings.learning_rate,
+            Schedule::Cosine => {
+                let f = epoch as f64 / settings.epochs as f64;
+                settings.learning_rate
+                    * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * f).cos()))
+            }
+        };
+        // Seeded Fisher–Yates shuffle.
+        for i in (1..n).rev() {
+            let r =
+                splitmix64(splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64);
+            order.swap(i, (r % (i as u64 + 1)) as usize);
+        }
+        for chunk in order.chunks(bs) {
+            bx.clear();
+            bu.clear();
+            bdu.clear();
+            bj.clear();
+            for &i in chunk {
+                bx.extend_from_slice(&train.x[i * nx..(i + 1) * nx]);
+                bu.extend_from_slice(&train.u[i * nu..(i + 1) * nu]);
+                bdu.extend_from_slice(&train.du[i * nu * nx..(i + 1) * nu * nx]);
+                bj.push(train.use_jac[i]);
+            }
+            let batch = Batch {
+                x: &bx,
+                u: &bu,
+                du: &bdu,
+                use_jac: &bj,
+            };
+            mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
+            adam.t += 1;
+            let (c1, c2) = (1.0 - b1.powi(adam.t as i32), 1.0 - b2.powi(adam.t as i32));
+            let mut k = 0;
+            for (gw, gb) in grad.w.iter().zip(&grad.b) {
+                for &g in gw.iter().chain(gb) {
+                    adam.m[k] = b1 * adam.m[k] + (1.0 - b1) * g;
+                    adam.v[k] = b2 * adam.v[k] + (1.0 - b2) * g * g;
+                    params[k] -= lr * (adam.m[k] / c1) / ((adam.v[k] / c2).sqrt() + 1e-8);
+                    k += 1;
+                }
+            }
+            unflatten(&mut mlp, &params);
+        }
+        epochs_run = epoch + 1;
+        let last = epoch + 1 == settings.epochs;
+        if (epoch + 1) % settings.log_every == 0 || last {
+            let full = Batch {
+                x: &train.x,
+                u: &train.u,
+                du: &train.du,
+                use_jac: &train.use_jac,
+            };
+            let loss = mlp.loss_grad(&full, lam, &mut grad, &mut ws);
+            let (_, st) = errors(&mlp, train);
+            let r2v = if validation.is_empty() {
+                f64::NAN
+            } else {
+                errors(&mlp, validation).1.r2
+            };
+            history.push(EpochLog {
+                epoch: epoch + 1,
+                loss,
+                eps_d: st.max,
+                r2_validation: r2v,
+            });
+            if let Some(p) = opts.progress {
+                p(epoch + 1, settings.epochs);
+            }
+            if settings.target_eps_d.is_some_and(|t| st.max <= t) {
+                break;
+            }
+        }
+    }
+    let (_, train_stats) = errors(&mlp, train);
+    let (_, validation_stats) = errors(&mlp, validation);
+    TrainedModel {
+        magic: MODEL_MAGIC,
+        version: MODEL_VERSION,
+        mlp,
+        kind: if opts.nominal {
+            Kind::Nominal
+        } else {
+            Kind::Regularized
+        },
+        lambda: lam,
+        settings: settings.clone(),
+        problem_hash: problem_hash.to_string(),
+        dataset_hash: dataset_hash.to_string(),
+        epochs_run,
+        train_stats,
+        validation_stats,
+        history,
+        certificate: None,
+    }
+}
+
+/// Labels `n` uniformly random states of X (seeded) with the MPC, in parallel, each from a
+/// cold start (so the result does not depend on the thread count). Unlabelled states are
+/// dropped.
+pub fn label_random_states(cfg: &crate::config::ProblemConfig, n: usize, seed: u64) -> TrainSet {
+    use rayon::prelude::*;
+    let s = crate::config::SamplingSettings {
+        sampler: crate::config::SamplerKind::Random,
+        n,
+        seed,
+        counts: vec![],
+    };
+    let sampler = crate::sampling::Sampler::new(&s, &cfg.domain);
+    let pts = sampler.points();
+    let labels: Vec<crate::mpc::Label> = pts
+        .par_iter()
+        .map_init(
+            || crate::mpc::MpcLaw::new(cfg),
+            |law, x| law.solve(x, None).0,
+        )
+        .collect();
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let mut set = TrainSet {
+        nx,
+        nu,
+        ..Default::default()
+    };
+    for l in labels.into_iter().filter(|l| l.status.is_labelled()) {
+        set.x.extend(&l.x);
+        set.u.extend(&l.u);
+        set.du.extend(&l.du_dx);
+        set.use_jac.push(l.degeneracy.is_none());
+    }
+    set
+}
