@@ -10,6 +10,7 @@
 pub mod certificate;
 pub mod config;
 pub mod dataset;
+pub mod export;
 #[cfg(test)]
 mod fixtures;
 pub mod kkt;
