@@ -108,6 +108,22 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The paper's Table I over seeds: nominal and regularized nets from the same initial
+    /// weights, median [min, max] of R², ε_D and the Lipschitz bounds.
+    Compare {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Dataset file.
+        #[arg(long)]
+        data: PathBuf,
+        /// Number of seeds (0..seeds).
+        #[arg(long, default_value_t = 10)]
+        seeds: u64,
+        /// Write the per-seed results as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
         /// Output dataset file.
@@ -478,6 +494,148 @@ fn eval_cmd(model: &Path, states: &Path, out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// One row of the seed comparison.
+#[derive(serde::Serialize)]
+struct SeedResult {
+    seed: u64,
+    kind: &'static str,
+    r2_validation: f64,
+    eps_d: f64,
+    median_error: f64,
+    l_nn: f64,
+    l_nn_lipsdp: f64,
+    l_nn_naive: f64,
+    l_nn_lower: f64,
+    eps: f64,
+}
+
+fn med_range(v: &[f64]) -> String {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let med = if s.is_empty() {
+        f64::NAN
+    } else if s.len() % 2 == 1 {
+        s[s.len() / 2]
+    } else {
+        0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
+    };
+    format!(
+        "{} [{}, {}]",
+        fmt_num(med),
+        fmt_num(s.first().copied().unwrap_or(f64::NAN)),
+        fmt_num(s.last().copied().unwrap_or(f64::NAN))
+    )
+}
+
+fn fmt_num(v: f64) -> String {
+    if v.abs() >= 100.0 {
+        format!("{v:.1}")
+    } else if v.abs() >= 0.9 && v.abs() < 1.0 {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+fn compare_cmd(
+    config: &Option<PathBuf>,
+    data: &Path,
+    seeds: u64,
+    json: Option<&Path>,
+) -> Result<()> {
+    let cfg = load_config(config)?;
+    let d = Dataset::load(data)?;
+    if d.header.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was labelled for another problem than the config's {}",
+            data.display(),
+            cfg.name
+        );
+    }
+    if seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    let set = TrainSet::from_dataset(&d);
+    let val = label_random_states(
+        &cfg,
+        cfg.training.validation_n,
+        cfg.training.validation_seed,
+    );
+    let dhash = sha256_file(data)?;
+    let jobs: Vec<(u64, bool)> = (0..seeds).flat_map(|s| [(s, true), (s, false)]).collect();
+    let results: Vec<SeedResult> = jobs
+        .par_iter()
+        .map(|&(seed, nominal)| {
+            let mut st = cfg.training.clone();
+            st.seed = seed;
+            let m = train(
+                &st,
+                &TrainOptions {
+                    nominal,
+                    progress: None,
+                },
+                &set,
+                &val,
+                (&cfg.domain.lo, &cfg.domain.hi),
+                (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                &d.header.problem_hash,
+                &dhash,
+            );
+            let c = certify(
+                &m,
+                &d,
+                &cfg,
+                &CertifyOptions {
+                    extra: Some(val.clone()),
+                    ..Default::default()
+                },
+            );
+            SeedResult {
+                seed,
+                kind: if nominal { "nominal" } else { "regularized" },
+                r2_validation: m.validation_stats.r2,
+                eps_d: c.eps_d,
+                median_error: m.train_stats.median,
+                l_nn: c.l_nn,
+                l_nn_lipsdp: c.l_nn_lipsdp,
+                l_nn_naive: c.l_nn_naive,
+                l_nn_lower: c.l_nn_lower,
+                eps: c.eps,
+            }
+        })
+        .collect();
+    println!("| net | validation R² | ε_D | L_NN (tightest sound) | LipSDP | naive | sampled lower | ε (Thm 1) | paper: R², ε_D, L |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for (kind, paper) in [
+        ("nominal", "0.985, 3.231, 384.01"),
+        ("regularized", "0.992, 1.823, 207.66"),
+    ] {
+        let rs: Vec<&SeedResult> = results.iter().filter(|r| r.kind == kind).collect();
+        let col =
+            |f: fn(&SeedResult) -> f64| med_range(&rs.iter().map(|r| f(r)).collect::<Vec<_>>());
+        println!(
+            "| {kind} | {} | {} | {} | {} | {} | {} | {} | {paper} |",
+            col(|r| r.r2_validation),
+            col(|r| r.eps_d),
+            col(|r| r.l_nn),
+            col(|r| r.l_nn_lipsdp),
+            col(|r| r.l_nn_naive),
+            col(|r| r.l_nn_lower),
+            col(|r| r.eps),
+        );
+    }
+    println!(
+        "median [min, max] over seeds 0..{}; {} labelled training points, {} validation states",
+        seeds,
+        set.len(),
+        val.len()
+    );
+    if let Some(p) = json {
+        dataset::write_atomic(p, serde_json::to_string_pretty(&results)?.as_bytes())?;
+    }
+    Ok(())
+}
+
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let res = match &cli.cmd {
@@ -510,6 +668,12 @@ fn main() -> std::process::ExitCode {
             json,
         } => certify_cmd(config, model, data, *target_eps, *l_mpc, *json),
         Cmd::Eval { model, states, out } => eval_cmd(model, states, out),
+        Cmd::Compare {
+            config,
+            data,
+            seeds,
+            json,
+        } => compare_cmd(config, data, *seeds, json.as_deref()),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -16,7 +16,10 @@
 //!   complementarity fails and κ is only directionally differentiable. We return the
 //!   derivative with those rows treated as inactive (the one-sided derivative for
 //!   perturbations that move the state into the row's interior).
-//! - a singular K (LICQ or second-order sufficiency fails): we return zeros.
+//! - a singular K: LICQ fails (an active row is implied by others, e.g. a state bound
+//!   reached exactly by saturated inputs) or second-order sufficiency fails. Active rows
+//!   with the smallest multipliers are dropped until K is nonsingular (at most 8) and that
+//!   derivative is returned, flagged `Singular`; if none is found, zeros.
 
 use crate::sqp::{PrimalDual, SqpSolver};
 use nalgebra::DMatrix;
@@ -28,7 +31,8 @@ use serde::{Deserialize, Serialize};
 pub enum Degeneracy {
     /// Some constraints are weakly active (their count); a one-sided derivative is returned.
     WeaklyActive(u32),
-    /// The active-set KKT matrix is singular (LICQ or SOSC fails); zeros are returned.
+    /// The active-set KKT matrix is singular (LICQ or SOSC fails): the derivative with the
+    /// smallest-multiplier rows dropped is returned (zeros if that fails too).
     Singular,
 }
 
@@ -63,13 +67,27 @@ pub fn sensitivity(solver: &SqpSolver, xs: &[f64], p: &PrimalDual, tol: f64) -> 
             }
         }
     }
-    let kkt = solver.active_set_kkt(xs, p, active.clone());
     let (nv, ne) = (ocp.n_var, ocp.n_eq);
-    let mut rhs = DMatrix::zeros(nv + ne + active.len(), nx);
-    for i in 0..nx {
-        rhs[(nv + i, i)] = 1.0;
+    let mut sol = None;
+    let mut licq_fails = false;
+    for _ in 0..=8 {
+        let kkt = solver.active_set_kkt(xs, p, active.clone());
+        let mut rhs = DMatrix::zeros(nv + ne + active.len(), nx);
+        for i in 0..nx {
+            rhs[(nv + i, i)] = 1.0;
+        }
+        sol = kkt.solve_many(&rhs);
+        if sol.is_some() || active.is_empty() {
+            break;
+        }
+        // Singular: drop the active row with the smallest multiplier (a row implied by the
+        // others when LICQ fails) and retry.
+        licq_fails = true;
+        let k = (0..active.len())
+            .min_by(|&a, &b| p.nu[active[a]].total_cmp(&p.nu[active[b]]))
+            .unwrap_or(0);
+        active.remove(k);
     }
-    let sol = kkt.solve_many(&rhs);
     let iu = ocp.iu(0);
     match sol {
         Some(s) => {
@@ -83,7 +101,11 @@ pub fn sensitivity(solver: &SqpSolver, xs: &[f64], p: &PrimalDual, tol: f64) -> 
                 du0_dx: du0,
                 dz_dx: Some(s.rows(0, nv).into_owned()),
                 active,
-                degeneracy: (weak > 0).then_some(Degeneracy::WeaklyActive(weak)),
+                degeneracy: if licq_fails {
+                    Some(Degeneracy::Singular)
+                } else {
+                    (weak > 0).then_some(Degeneracy::WeaklyActive(weak))
+                },
             }
         }
         None => Sensitivity {

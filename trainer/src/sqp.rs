@@ -311,14 +311,16 @@ impl SqpSolver {
         &self,
         xs: &[f64],
         start: &PrimalDual,
-        active: Vec<usize>,
+        mut active: Vec<usize>,
         info: &mut SqpInfo,
     ) -> Option<PrimalDual> {
         let ocp = &self.ocp;
         let mut p = start.clone();
         let mut ev = Evals::new(ocp);
         let mut last = f64::INFINITY;
-        for it in 0..8 {
+        let mut drops = 0;
+        let mut it = 0;
+        while it < 8 {
             ev.first_order(ocp, &p.z, xs);
             let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
             if res.max() <= self.settings.tol {
@@ -345,7 +347,23 @@ impl SqpSolver {
             for (t, &r) in active.iter().enumerate() {
                 rhs[nv + ne + t] = ocp.rows[r].slack(&p.z);
             }
-            let sol = kkt.solve(&rhs)?;
+            let Some(sol) = kkt.solve(&rhs) else {
+                // Singular: LICQ fails when an active row is implied by others (e.g. a
+                // state bound reached exactly by saturated inputs). Drop the active row
+                // with the smallest multiplier and retry; the Newton point still has to
+                // satisfy the dropped row to pass the residual check.
+                let (k, _) = active
+                    .iter()
+                    .enumerate()
+                    .min_by(|a, b| start.nu[*a.1].total_cmp(&start.nu[*b.1]))?;
+                drops += 1;
+                if drops > 8 {
+                    return None;
+                }
+                active.remove(k);
+                continue;
+            };
+            it += 1;
             info.iterations += 1;
             for i in 0..nv {
                 p.z[i] += sol[i];

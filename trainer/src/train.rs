@@ -479,3 +479,132 @@ pub fn label_random_states(cfg: &crate::config::ProblemConfig, n: usize, seed: u
     }
     set
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ProblemConfig;
+    use proptest::prelude::*;
+
+    fn setup(epochs: usize) -> (ProblemConfig, TrainSet, TrainSet) {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
+        );
+        let mut cfg = ProblemConfig::load(Path::new(path)).unwrap();
+        cfg.sampling.counts = vec![9, 5];
+        cfg.training.epochs = epochs;
+        cfg.training.batch_size = 9;
+        cfg.training.log_every = 5;
+        let sampler = crate::sampling::Sampler::new(&cfg.sampling, &cfg.domain);
+        let mut law = crate::mpc::MpcLaw::new(&cfg);
+        let recs = crate::dataset::label_chunk(&mut law, &sampler, 0, sampler.len(), true);
+        let d = Dataset {
+            magic: crate::dataset::MAGIC,
+            version: crate::dataset::FORMAT_VERSION,
+            header: crate::dataset::Header {
+                problem: cfg.name.clone(),
+                problem_hash: cfg.problem_hash(),
+                config_toml: String::new(),
+                nx: 2,
+                nu: 1,
+                sampling: cfg.sampling.clone(),
+                total: recs.len() as u64,
+                shard: None,
+                chunk: crate::dataset::CHUNK as u32,
+            },
+            records: recs,
+        };
+        let set = TrainSet::from_dataset(&d);
+        let val = label_random_states(&cfg, 40, 1);
+        (cfg, set, val)
+    }
+
+    fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> TrainedModel {
+        train(
+            &cfg.training,
+            &TrainOptions {
+                nominal,
+                progress: None,
+            },
+            set,
+            val,
+            (&cfg.domain.lo, &cfg.domain.hi),
+            (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+            "h",
+            "d",
+        )
+    }
+
+    #[test]
+    fn training_is_deterministic_and_learns() {
+        let (cfg, set, val) = setup(600);
+        let a = run(&cfg, &set, &val, false);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let b = pool.install(|| run(&cfg, &set, &val, false));
+        assert_eq!(
+            a.to_bytes(),
+            b.to_bytes(),
+            "same seed and data must give bit-identical models"
+        );
+        let first = a.history.first().unwrap().loss.total();
+        let last = a.history.last().unwrap().loss.total();
+        assert!(last < 0.5 * first, "loss {first} -> {last}");
+        assert!(a.validation_stats.r2 > 0.95, "R² {}", a.validation_stats.r2);
+        let mut other = cfg.clone();
+        other.training.seed = 1;
+        assert_ne!(run(&other, &set, &val, false).mlp, a.mlp);
+        // Nominal and regularized start from the same initial weights.
+        let mut zero = cfg.clone();
+        zero.training.epochs = 1;
+        zero.training.learning_rate = 1e-300;
+        let (n0, r0) = (run(&zero, &set, &val, true), run(&zero, &set, &val, false));
+        for (a, b) in n0.mlp.layers.iter().zip(&r0.mlp.layers) {
+            for (x, y) in a.w.iter().chain(&a.b).zip(b.w.iter().chain(&b.b)) {
+                assert!((x - y).abs() < 1e-250, "initial parameters differ: {x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn early_stop_on_target_eps_d() {
+        let (mut cfg, set, val) = setup(500);
+        cfg.training.target_eps_d = Some(1e6);
+        let m = run(&cfg, &set, &val, false);
+        assert_eq!(m.epochs_run, cfg.training.log_every);
+        assert_eq!(m.history.len(), 1);
+    }
+
+    #[test]
+    fn model_file_round_trip_and_corruption() {
+        let (cfg, set, val) = setup(5);
+        let m = run(&cfg, &set, &val, true);
+        let bytes = m.to_bytes();
+        assert_eq!(TrainedModel::from_bytes(&bytes, "m").unwrap(), m);
+        assert!(TrainedModel::from_bytes(&bytes[..bytes.len() - 3], "m.bin")
+            .unwrap_err()
+            .to_string()
+            .contains("m.bin"));
+        let mut bad = m.clone();
+        bad.mlp.layers[1].w.pop();
+        assert!(TrainedModel::from_bytes(&bad.to_bytes(), "m")
+            .unwrap_err()
+            .to_string()
+            .contains("shapes"));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        #[test]
+        fn model_decoder_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..600), keep_magic in any::<bool>()) {
+            let mut b = bytes;
+            if keep_magic && b.len() >= 8 {
+                b[..8].copy_from_slice(&MODEL_MAGIC);
+            }
+            let _ = TrainedModel::from_bytes(&b, "fuzz");
+        }
+    }
+}

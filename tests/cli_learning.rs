@@ -1,0 +1,182 @@
+//! `trainer train`, `certify` and `eval` end to end on a small double-integrator dataset:
+//! the certificate JSON has the contract's keys and consistent values, `eval` writes the
+//! network's outputs and Jacobians (checked against finite differences of its own
+//! outputs), and bad inputs are clear errors.
+
+use ampc_tests::{config, tempdir, trainer};
+
+fn setup(d: &std::path::Path) -> (String, String) {
+    let text = std::fs::read_to_string(config("double_integrator.toml"))
+        .unwrap()
+        .replace("counts = [21, 11]", "counts = [11, 6]")
+        + "\n[training]\nepochs = 200\nbatch_size = 11\nvalidation_n = 30\nlog_every = 50\n";
+    let cfg = d.join("di.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let data = d.join("di.bin");
+    let o = trainer(&[
+        "sample",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    (
+        cfg.to_str().unwrap().to_string(),
+        data.to_str().unwrap().to_string(),
+    )
+}
+
+#[test]
+fn train_certify_eval() {
+    let dir = tempdir();
+    let d = dir.path();
+    let (cfg, data) = setup(d);
+    let model = d.join("m.bin");
+    let m = model.to_str().unwrap();
+    let o = trainer(&[
+        "train", "--config", &cfg, "--data", &data, "--out", m, "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = trainer(&[
+        "certify",
+        "--config",
+        &cfg,
+        "--model",
+        m,
+        "--data",
+        &data,
+        "--json",
+        "--target-eps",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for k in [
+        "eps",
+        "eps_d",
+        "l_nn",
+        "l_nn_method",
+        "l_nn_naive",
+        "l_nn_lower",
+        "l_mpc",
+        "l_mpc_is_estimate",
+        "covering_radius",
+        "f32_allowance",
+        "domain_lo",
+        "domain_hi",
+        "u_lo",
+        "u_hi",
+        "clamp_lo",
+        "clamp_hi",
+        "hash",
+    ] {
+        assert!(v.get(k).is_some(), "missing key {k}: {v}");
+    }
+    let f = |k: &str| v[k].as_f64().unwrap();
+    assert!(f("l_nn_lower") <= f("l_nn") && f("l_nn") <= f("l_nn_naive"));
+    assert!(
+        (f("eps") - (f("eps_d") + (f("l_mpc") + f("l_nn")) * f("covering_radius"))).abs()
+            < 1e-9 * f("eps")
+    );
+    // 11 × 6 grid on [−4, 4] × [−1, 1]: r = ½·√(0.8² + 0.4²).
+    assert!((f("covering_radius") - 0.5 * (0.8f64.powi(2) + 0.4f64.powi(2)).sqrt()).abs() < 1e-12);
+    assert_eq!(v["l_mpc_is_estimate"], serde_json::Value::Bool(true));
+    let req = &v["requirement"];
+    let delta = req["delta"].as_f64().unwrap();
+    assert!((f("eps_d") + (f("l_mpc") + f("l_nn")) * delta - 50.0).abs() < 1e-9);
+    // A proven L_MPC replaces the estimate.
+    let o = trainer(&[
+        "certify", "--config", &cfg, "--model", m, "--data", &data, "--json", "--l-mpc", "2.5",
+    ]);
+    let v2: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v2["l_mpc"].as_f64(), Some(2.5));
+    assert_eq!(v2["l_mpc_is_estimate"], serde_json::Value::Bool(false));
+
+    // eval: outputs and Jacobians; the Jacobian matches differences of the outputs.
+    let states = d.join("s.csv");
+    let h = 1e-6;
+    std::fs::write(
+        &states,
+        format!(
+            "x1,x2\n0.5,0.25\n{},0.25\n{},0.25\n0.5,{}\n0.5,{}\n",
+            0.5 + h,
+            0.5 - h,
+            0.25 + h,
+            0.25 - h
+        ),
+    )
+    .unwrap();
+    let out = d.join("e.csv");
+    let o = trainer(&[
+        "eval",
+        "--model",
+        m,
+        "--states",
+        states.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap(), "x1,x2,u1,du1_dx1,du1_dx2");
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let fd1 = (rows[1][2] - rows[2][2]) / (2.0 * h);
+    let fd2 = (rows[3][2] - rows[4][2]) / (2.0 * h);
+    assert!(
+        (fd1 - rows[0][3]).abs() < 1e-5 * (1.0 + fd1.abs()),
+        "{fd1} vs {}",
+        rows[0][3]
+    );
+    assert!(
+        (fd2 - rows[0][4]).abs() < 1e-5 * (1.0 + fd2.abs()),
+        "{fd2} vs {}",
+        rows[0][4]
+    );
+}
+
+#[test]
+fn learning_commands_reject_bad_input() {
+    let dir = tempdir();
+    let d = dir.path();
+    let (cfg, data) = setup(d);
+    // Data labelled for another problem than the config.
+    let model = d.join("m.bin");
+    let o = trainer(&["train", "--data", &data, "--out", model.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("another problem"));
+    // A corrupt model names the file.
+    let bad = d.join("bad.bin");
+    std::fs::write(&bad, b"garbage").unwrap();
+    let o = trainer(&[
+        "certify",
+        "--config",
+        &cfg,
+        "--model",
+        bad.to_str().unwrap(),
+        "--data",
+        &data,
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("bad.bin"));
+    let o = trainer(&[
+        "eval",
+        "--model",
+        bad.to_str().unwrap(),
+        "--states",
+        "x.csv",
+        "--out",
+        "y.csv",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    // A dataset file given as a model is refused.
+    let o = trainer(&[
+        "eval", "--model", &data, "--states", "x.csv", "--out", "y.csv",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not an ampc model"));
+}
