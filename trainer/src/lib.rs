@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod certificate;
+pub mod closed_loop;
 pub mod config;
 pub mod dataset;
 pub mod export;
@@ -19,7 +20,9 @@ pub mod mlp;
 pub mod model;
 pub mod mpc;
 pub mod ocp;
+pub mod pipeline;
 pub mod qp;
+pub mod report;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;

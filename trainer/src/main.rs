@@ -27,6 +27,21 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
+    /// The whole pipeline: sample → train (nominal + regularized) → certify → closed loop →
+    /// report, each stage skipped when its inputs are unchanged.
+    Run {
+        /// Problem file (default: the embedded pendulum).
+        config: Option<PathBuf>,
+        /// Root directory of runs; the run goes to `<out>/<name>/`.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Redo a stage even if its inputs are unchanged (repeatable).
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(trainer::pipeline::STAGES))]
+        force: Vec<String>,
+        /// No progress bars or stage lines.
+        #[arg(long, short)]
+        quiet: bool,
+    },
     /// Solve the OCP at the states of a CSV file (header x1,…,xn) and write u, ∂u/∂x, cost.
     Solve {
         /// Problem file (default: the embedded pendulum).
@@ -288,6 +303,50 @@ fn merge(out: &Path, inputs: &[PathBuf]) -> Result<()> {
         d.records.len(),
         out.display()
     );
+    Ok(())
+}
+
+fn print_stage(r: &trainer::pipeline::StageReport) {
+    eprintln!(
+        "[{:>11}] {} {:.2} s  {}",
+        r.stage,
+        if r.skipped { "skipped" } else { "done   " },
+        r.seconds,
+        r.summary
+    );
+}
+
+fn run_cmd(config: &Option<PathBuf>, out: &Path, force: &[String], quiet: bool) -> Result<()> {
+    let (cfg, text) = match config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read problem file {}", p.display()))?;
+            (
+                ProblemConfig::from_toml_str(&text, &p.display().to_string())?,
+                text,
+            )
+        }
+        None => (
+            ProblemConfig::default(),
+            trainer::config::PENDULUM_TOML.to_string(),
+        ),
+    };
+    let t = std::time::Instant::now();
+    let opts = trainer::pipeline::RunOptions {
+        root: out.to_path_buf(),
+        force: force.to_vec(),
+        progress: !quiet && std::io::stderr().is_terminal(),
+        on_stage: if quiet { None } else { Some(print_stage) },
+    };
+    trainer::pipeline::run(&cfg, &text, &opts)?;
+    if !quiet {
+        eprintln!(
+            "run {} finished in {:.2} s -> {}",
+            cfg.name,
+            t.elapsed().as_secs_f64(),
+            out.join(&cfg.name).display()
+        );
+    }
     Ok(())
 }
 
@@ -651,6 +710,12 @@ fn main() -> std::process::ExitCode {
             quiet,
         } => sample(config, out, *shard, *quiet),
         Cmd::Merge { out, inputs } => merge(out, inputs),
+        Cmd::Run {
+            config,
+            out,
+            force,
+            quiet,
+        } => run_cmd(config, out, force, *quiet),
         Cmd::Train {
             config,
             data,

@@ -1,0 +1,478 @@
+//! `trainer run`: one command from a problem file to a certified controller.
+//!
+//! Stages, each writing its artifacts under `DIR/<name>/` with a manifest
+//! (`manifest_<stage>.json`: input hashes, settings, crate version, timing):
+//! `sample` (dataset.bin/.csv) → `validate` (validation.bin: MPC labels of random states)
+//! → `train` (model_nominal.bin, model_regularized.bin, same initial weights) → `certify`
+//! (certificate.json, certificate_nominal.json) → `closed_loop` (closed_loop.json) →
+//! `report` (report.md). A stage whose manifest matches its current inputs and whose
+//! outputs exist is skipped; `force` redoes named stages (and, through the changed hashes,
+//! everything downstream). Dataset generation resumes from its checkpoint when killed.
+
+use crate::certificate::{certify, Certificate, CertifyOptions};
+use crate::closed_loop::{simulate, Controller, Run, SimSettings};
+use crate::config::{hex, ProblemConfig, SamplerKind, SamplingSettings};
+use crate::dataset::{generate, write_atomic, Dataset, GenerateOptions};
+use crate::mpc::MpcLaw;
+use crate::train::{train, TrainOptions, TrainSet, TrainedModel};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The stages in order.
+pub const STAGES: [&str; 6] = [
+    "sample",
+    "validate",
+    "train",
+    "certify",
+    "closed_loop",
+    "report",
+];
+
+/// A failure, naming the stage and the cause.
+#[derive(Debug, thiserror::Error)]
+#[error("stage `{stage}` failed: {cause}")]
+pub struct PipelineError {
+    /// The stage.
+    pub stage: String,
+    /// What went wrong (names the file or setting).
+    pub cause: String,
+}
+
+fn fail(stage: &str, e: impl std::fmt::Display) -> PipelineError {
+    PipelineError {
+        stage: stage.to_string(),
+        cause: e.to_string(),
+    }
+}
+
+/// A stage's manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Stage name.
+    pub stage: String,
+    /// trainer version.
+    pub version: String,
+    /// Input name → SHA-256 (files) or settings hash.
+    pub inputs: BTreeMap<String, String>,
+    /// Output files (relative to the run directory).
+    pub outputs: Vec<String>,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+/// What happened to a stage.
+#[derive(Debug, Clone)]
+pub struct StageReport {
+    /// Stage name.
+    pub stage: String,
+    /// Skipped because its inputs were unchanged.
+    pub skipped: bool,
+    /// Wall time (of this run, or of the run that produced the artifacts when skipped).
+    pub seconds: f64,
+    /// One-line summary.
+    pub summary: String,
+}
+
+/// Options of a pipeline run.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Run directory root (the run goes to `root/<name>/`).
+    pub root: PathBuf,
+    /// Stages to redo even if unchanged.
+    pub force: Vec<String>,
+    /// Progress bars on a terminal.
+    pub progress: bool,
+    /// Called after each stage (for one summary line per stage).
+    pub on_stage: Option<fn(&StageReport)>,
+}
+
+fn sha_file(p: &Path) -> Result<String, std::io::Error> {
+    Ok(hex(&Sha256::digest(std::fs::read(p)?)))
+}
+
+fn sha_str(s: &str) -> String {
+    hex(&Sha256::digest(s.as_bytes()))
+}
+
+struct Ctx<'a> {
+    dir: PathBuf,
+    opts: &'a RunOptions,
+    reports: Vec<StageReport>,
+}
+
+impl Ctx<'_> {
+    /// Runs `body` unless the manifest says its inputs are unchanged.
+    fn stage(
+        &mut self,
+        name: &str,
+        inputs: BTreeMap<String, String>,
+        outputs: &[&str],
+        body: impl FnOnce(&Path) -> Result<String, PipelineError>,
+    ) -> Result<(), PipelineError> {
+        let mpath = self.dir.join(format!("manifest_{name}.json"));
+        let forced = self.opts.force.iter().any(|f| f == name);
+        if !forced {
+            if let Ok(text) = std::fs::read_to_string(&mpath) {
+                if let Ok(m) = serde_json::from_str::<Manifest>(&text) {
+                    if m.inputs == inputs
+                        && m.version == env!("CARGO_PKG_VERSION")
+                        && outputs.iter().all(|o| self.dir.join(o).exists())
+                    {
+                        let r = StageReport {
+                            stage: name.into(),
+                            skipped: true,
+                            seconds: m.seconds,
+                            summary: "unchanged inputs, skipped".into(),
+                        };
+                        if let Some(f) = self.opts.on_stage {
+                            f(&r);
+                        }
+                        self.reports.push(r);
+                        return Ok(());
+                    }
+                }
+            }
+        }
+        let t = Instant::now();
+        let summary = body(&self.dir)?;
+        let seconds = t.elapsed().as_secs_f64();
+        let m = Manifest {
+            stage: name.into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+            inputs,
+            outputs: outputs.iter().map(|s| s.to_string()).collect(),
+            seconds,
+        };
+        let json = serde_json::to_string_pretty(&m).map_err(|e| fail(name, e))?;
+        write_atomic(&mpath, json.as_bytes()).map_err(|e| fail(name, e))?;
+        let r = StageReport {
+            stage: name.into(),
+            skipped: false,
+            seconds,
+            summary,
+        };
+        if let Some(f) = self.opts.on_stage {
+            f(&r);
+        }
+        self.reports.push(r);
+        Ok(())
+    }
+
+    fn hash(&self, stage: &str, file: &str) -> Result<String, PipelineError> {
+        let p = self.dir.join(file);
+        sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
+    }
+}
+
+/// Closed-loop results keyed by controller name.
+pub type ClosedLoop = BTreeMap<String, Vec<Run>>;
+
+/// Runs the pipeline for `cfg`; `config_text` is the problem file's text (hashed).
+pub fn run(
+    cfg: &ProblemConfig,
+    config_text: &str,
+    opts: &RunOptions,
+) -> Result<Vec<StageReport>, PipelineError> {
+    let dir = opts.root.join(&cfg.name);
+    std::fs::create_dir_all(&dir).map_err(|e| fail("setup", format!("{}: {e}", dir.display())))?;
+    write_atomic(&dir.join("problem.toml"), config_text.as_bytes())
+        .map_err(|e| fail("setup", e))?;
+    let mut cx = Ctx {
+        dir,
+        opts,
+        reports: Vec::new(),
+    };
+    let settings = |v: &dyn erased::Ser| sha_str(&v.json());
+    // sample
+    let mut inputs = BTreeMap::new();
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("sampling".into(), settings(&cfg.sampling));
+    cx.stage("sample", inputs, &["dataset.bin", "dataset.csv"], |d| {
+        let g = GenerateOptions {
+            shard: None,
+            progress: opts.progress,
+        };
+        let ds = generate(cfg, &d.join("dataset.bin"), &g).map_err(|e| fail("sample", e))?;
+        let c = ds.counts();
+        Ok(format!(
+            "{} states: {} converged, {} soft, {} infeasible, {} failed, {} degenerate",
+            c.total, c.converged, c.soft, c.infeasible, c.failed, c.degenerate
+        ))
+    })?;
+    // validate
+    let mut vcfg = cfg.clone();
+    vcfg.sampling = SamplingSettings {
+        sampler: SamplerKind::Random,
+        n: cfg.training.validation_n.max(1),
+        seed: cfg.training.validation_seed,
+        counts: vec![],
+    };
+    let mut inputs = BTreeMap::new();
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("sampling".into(), settings(&vcfg.sampling));
+    cx.stage("validate", inputs, &["validation.bin"], |d| {
+        let g = GenerateOptions {
+            shard: None,
+            progress: opts.progress,
+        };
+        let ds = generate(&vcfg, &d.join("validation.bin"), &g).map_err(|e| fail("validate", e))?;
+        Ok(format!(
+            "{} random validation states labelled",
+            ds.records.len()
+        ))
+    })?;
+    // train
+    let mut inputs = BTreeMap::new();
+    inputs.insert("dataset".into(), cx.hash("train", "dataset.bin")?);
+    inputs.insert("validation".into(), cx.hash("train", "validation.bin")?);
+    inputs.insert("training".into(), settings(&cfg.training));
+    cx.stage(
+        "train",
+        inputs,
+        &["model_nominal.bin", "model_regularized.bin"],
+        |d| {
+            let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("train", e))?;
+            let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("train", e))?;
+            let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("train", e))?;
+            let (set, vset) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+            if set.is_empty() {
+                return Err(fail("train", "the dataset has no labelled points"));
+            }
+            let one = |nominal: bool| {
+                train(
+                    &cfg.training,
+                    &TrainOptions {
+                        nominal,
+                        progress: None,
+                    },
+                    &set,
+                    &vset,
+                    (&cfg.domain.lo, &cfg.domain.hi),
+                    (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                    &data.header.problem_hash,
+                    &dh,
+                )
+            };
+            let (n, r) = rayon::join(|| one(true), || one(false));
+            n.save(&d.join("model_nominal.bin"))
+                .map_err(|e| fail("train", e))?;
+            r.save(&d.join("model_regularized.bin"))
+                .map_err(|e| fail("train", e))?;
+            Ok(format!(
+                "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}",
+                n.train_stats.max, n.validation_stats.r2, r.train_stats.max, r.validation_stats.r2
+            ))
+        },
+    )?;
+    // certify
+    let mut inputs = BTreeMap::new();
+    for f in [
+        "dataset.bin",
+        "validation.bin",
+        "model_nominal.bin",
+        "model_regularized.bin",
+    ] {
+        inputs.insert(f.into(), cx.hash("certify", f)?);
+    }
+    cx.stage(
+        "certify",
+        inputs,
+        &["certificate.json", "certificate_nominal.json"],
+        |d| {
+            let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("certify", e))?;
+            let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("certify", e))?;
+            let extra = Some(TrainSet::from_dataset(&val));
+            let mut out = String::new();
+            for (file, json) in [
+                ("model_regularized.bin", "certificate.json"),
+                ("model_nominal.bin", "certificate_nominal.json"),
+            ] {
+                let mut m = TrainedModel::load(&d.join(file)).map_err(|e| fail("certify", e))?;
+                let c = certify(
+                    &m,
+                    &data,
+                    cfg,
+                    &CertifyOptions {
+                        extra: extra.clone(),
+                        ..Default::default()
+                    },
+                );
+                let text = serde_json::to_string_pretty(&c).map_err(|e| fail("certify", e))?;
+                write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
+                out += &format!(
+                    "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
+                    c.eps, c.eps_d, c.l_nn, c.covering_radius
+                );
+                m.certificate = Some(c);
+                m.save(&d.join(file)).map_err(|e| fail("certify", e))?;
+            }
+            Ok(out)
+        },
+    )?;
+    // closed loop
+    let mut inputs = BTreeMap::new();
+    for f in ["model_nominal.bin", "model_regularized.bin"] {
+        inputs.insert(f.into(), cx.hash("closed_loop", f)?);
+    }
+    inputs.insert("problem".into(), cfg.problem_hash());
+    cx.stage("closed_loop", inputs, &["closed_loop.json"], |d| {
+        let load = |f: &str| TrainedModel::load(&d.join(f)).map_err(|e| fail("closed_loop", e));
+        let (n, r) = (load("model_nominal.bin")?, load("model_regularized.bin")?);
+        let cl = closed_loop(cfg, &n, &r);
+        let text = serde_json::to_string(&cl).map_err(|e| fail("closed_loop", e))?;
+        write_atomic(&d.join("closed_loop.json"), text.as_bytes())
+            .map_err(|e| fail("closed_loop", e))?;
+        let first = |k: &str| cl.get(k).and_then(|v| v.first()).cloned();
+        let mut s = String::new();
+        for k in ["mpc", "nominal", "regularized"] {
+            if let Some(r) = first(k) {
+                s += &format!(
+                    "{k}: {:.1} % violating, max {:.3}, divergence {:.3}; ",
+                    r.violation_percent, r.max_violation, r.max_input_divergence
+                );
+            }
+        }
+        Ok(s)
+    })?;
+    // report
+    let mut inputs = BTreeMap::new();
+    for f in [
+        "dataset.bin",
+        "certificate.json",
+        "certificate_nominal.json",
+        "closed_loop.json",
+        "model_nominal.bin",
+        "model_regularized.bin",
+    ] {
+        inputs.insert(f.into(), cx.hash("report", f)?);
+    }
+    let timings: Vec<(String, f64)> = cx
+        .reports
+        .iter()
+        .map(|r| (r.stage.clone(), r.seconds))
+        .collect();
+    cx.stage("report", inputs, &["report.md"], |d| {
+        let md = crate::report::markdown(cfg, d, &timings).map_err(|e| fail("report", e))?;
+        write_atomic(&d.join("report.md"), md.as_bytes()).map_err(|e| fail("report", e))?;
+        Ok(format!("{}", d.join("report.md").display()))
+    })?;
+    Ok(cx.reports)
+}
+
+/// Initial states of the closed-loop study: the paper's (−π, 0) for the pendulum (the
+/// domain's centre-left otherwise), then 20 seeded random states of X.
+pub fn initial_states(cfg: &ProblemConfig) -> Vec<Vec<f64>> {
+    let first = match cfg.system {
+        crate::model::System::Pendulum(_) => vec![-std::f64::consts::PI, 0.0],
+        _ => cfg
+            .domain
+            .lo
+            .iter()
+            .zip(&cfg.domain.hi)
+            .map(|(l, h)| 0.5 * (l + h) + 0.25 * (l - h))
+            .collect(),
+    };
+    let s = SamplingSettings {
+        sampler: SamplerKind::Random,
+        n: 20,
+        seed: 4242,
+        counts: vec![],
+    };
+    let mut v = vec![first];
+    v.extend(crate::sampling::Sampler::new(&s, &cfg.domain).points());
+    v
+}
+
+/// The closed-loop study: MPC and both nets from every initial state (nominal plant, no
+/// noise), then robustness runs from the first state: measurement noise (1 % of the
+/// domain's half-width, 5 seeds) and ±10 % mass mismatch. Keys: `mpc`, `nominal`,
+/// `regularized`, and `<name>_noise`, `<name>_mass+10%`, `<name>_mass-10%`.
+pub fn closed_loop(
+    cfg: &ProblemConfig,
+    nominal: &TrainedModel,
+    regularized: &TrainedModel,
+) -> ClosedLoop {
+    let steps = match cfg.system {
+        crate::model::System::Pendulum(_) => 90,
+        _ => 100,
+    };
+    let base = SimSettings {
+        steps,
+        noise: vec![],
+        seed: 0,
+        mass_mismatch: 0.0,
+    };
+    let x0s = initial_states(cfg);
+    let eps = |m: &TrainedModel| {
+        m.certificate
+            .as_ref()
+            .map_or(f64::INFINITY, |c: &Certificate| c.eps)
+    };
+    let nets: [(&str, Option<&TrainedModel>); 3] = [
+        ("mpc", None),
+        ("nominal", Some(nominal)),
+        ("regularized", Some(regularized)),
+    ];
+    let noise: Vec<f64> = cfg
+        .domain
+        .lo
+        .iter()
+        .zip(&cfg.domain.hi)
+        .map(|(l, h)| 0.01 * 0.5 * (h - l))
+        .collect();
+    let mut jobs: Vec<(String, Option<&TrainedModel>, Vec<f64>, SimSettings)> = Vec::new();
+    for (name, m) in nets {
+        for x0 in &x0s {
+            jobs.push((name.to_string(), m, x0.clone(), base.clone()));
+        }
+        for seed in 0..5 {
+            let s = SimSettings {
+                noise: noise.clone(),
+                seed,
+                ..base.clone()
+            };
+            jobs.push((format!("{name}_noise"), m, x0s[0].clone(), s));
+        }
+        for (tag, mm) in [("mass+10%", 0.1), ("mass-10%", -0.1)] {
+            let s = SimSettings {
+                mass_mismatch: mm,
+                ..base.clone()
+            };
+            jobs.push((format!("{name}_{tag}"), m, x0s[0].clone(), s));
+        }
+    }
+    let runs: Vec<(String, Run)> = jobs
+        .par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, (name, m, x0, s)| {
+                let ctrl = match m {
+                    None => Controller::Mpc,
+                    Some(m) => Controller::Net(&m.mlp, eps(m)),
+                };
+                (name.clone(), simulate(cfg, law, &ctrl, x0, s))
+            },
+        )
+        .collect();
+    let mut out = ClosedLoop::new();
+    for (k, r) in runs {
+        out.entry(k).or_default().push(r);
+    }
+    out
+}
+
+mod erased {
+    /// Serialises settings for hashing.
+    pub trait Ser {
+        fn json(&self) -> String;
+    }
+    impl<T: serde::Serialize> Ser for T {
+        fn json(&self) -> String {
+            serde_json::to_string(self).unwrap_or_default()
+        }
+    }
+}
