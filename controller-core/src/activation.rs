@@ -60,6 +60,7 @@ pub const TANH_MAX_ABS_ERR: f64 = if cfg!(feature = "fast-tanh") {
 
 /// libm's `tanhf`.
 #[inline]
+#[cfg_attr(feature = "no-panic", no_panic::no_panic)]
 pub fn tanh_libm(x: f32) -> f32 {
     libm::tanhf(x)
 }
@@ -67,14 +68,22 @@ pub fn tanh_libm(x: f32) -> f32 {
 /// The clamped (7, 6) rational approximation (see the module doc). Odd, monotone on
 /// the clipped range, finite for every input (NaN maps to `r(−FAST_CLIP)`).
 #[inline]
-// `max`/`min` rather than `clamp`: they map NaN to a bound instead of propagating it.
-#[allow(clippy::manual_clamp)]
+#[cfg_attr(feature = "no-panic", no_panic::no_panic)]
 pub fn tanh_fast(x: f32) -> f32 {
-    let x = x.max(-FAST_CLIP).min(FAST_CLIP);
+    // Comparisons, not `f32::max`/`min` (a libcall on Cortex-M4) nor `clamp` (which would
+    // propagate NaN): NaN falls through to −FAST_CLIP.
+    let x = if x > FAST_CLIP {
+        FAST_CLIP
+    } else if x >= -FAST_CLIP {
+        x
+    } else {
+        -FAST_CLIP
+    };
     let x2 = x * x;
     let p = x * (135_135.0 + x2 * (17_325.0 + x2 * (378.0 + x2)));
     let q = 135_135.0 + x2 * (62_370.0 + x2 * (3_150.0 + x2 * 28.0));
-    (p / q).max(-1.0).min(1.0)
+    // q ≥ 135135 and x is finite, so r is never NaN.
+    (p / q).clamp(-1.0, 1.0)
 }
 
 /// The tanh of this build: [`tanh_libm`], or [`tanh_fast`] with the `fast-tanh` feature.

@@ -30,6 +30,7 @@ impl<const I: usize, const O: usize> Dense<I, O> {
 
     /// `W x + b`, in the documented operation order.
     #[inline]
+    #[cfg_attr(feature = "no-panic", no_panic::no_panic)]
     pub fn apply(&self, x: &[f32; I]) -> [f32; O] {
         let mut y = self.b;
         for (acc, row) in y.iter_mut().zip(self.w.iter()) {

@@ -1,4 +1,5 @@
 //! Layer sizes that do not chain are a compile error (trybuild).
+#![allow(clippy::indexing_slicing, clippy::unwrap_used)] // test code
 
 #[test]
 fn mismatched_layers_do_not_compile() {

@@ -1,6 +1,7 @@
 //! `evaluate` is total: for every bit pattern of the state, `u` is finite and inside the
 //! certified clamp band, and the flags say what happened. 10⁴ cases in the normal run;
 //! the ignored test runs 10⁶ (release, from `.ci/run`).
+#![allow(clippy::indexing_slicing, clippy::unwrap_used)] // test code
 
 use controller_core::{Flags, CERTIFICATE, CONTROLLER};
 use proptest::prelude::*;

@@ -1,8 +1,45 @@
-//! Firmware example: a control loop on a Cortex-M4 (arrives with the embedded-side work).
+//! Firmware example: the paper's pendulum upswing in closed loop on a Cortex-M4.
 //!
-//! On the host this binary does nothing; the bare-metal build is cfg-gated on
-//! `target_os = "none"`.
+//! Runs [`firmware_example::run`] (RK4 plant in f32 + `controller_core::evaluate`, 90
+//! steps from (−π, 0)) and prints `k,x1,x2,u,flags` rows over semihosting, then exits
+//! with status 0 (1 on a panic or a semihosting write error). Build and run in QEMU:
+//! `cargo firmware`. On the host this binary only prints a hint.
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
 
+#[cfg(target_os = "none")]
+mod device {
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::{debug, hio};
+    use firmware_example::{format_row, run, HEADER};
+
+    #[entry]
+    fn main() -> ! {
+        let mut ok = false;
+        if let Ok(mut out) = hio::hstdout() {
+            ok = out.write_all(HEADER.as_bytes()).is_ok() && out.write_all(b"\n").is_ok();
+            let mut buf = [0u8; 96];
+            run(|row| {
+                let n = format_row(row, &mut buf);
+                ok &= out.write_all(buf.get(..n).unwrap_or(&[])).is_ok();
+            });
+        }
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+        loop {}
+    }
+
+    #[panic_handler]
+    fn panic(_: &core::panic::PanicInfo) -> ! {
+        debug::exit(debug::EXIT_FAILURE);
+        loop {}
+    }
+}
+
+#[cfg(not(target_os = "none"))]
 fn main() {
-    println!("firmware-example: build for thumbv7em-none-eabihf to run on a Cortex-M4");
+    println!("firmware-example: run it on the Cortex-M4 (QEMU) with `cargo firmware`");
 }

@@ -168,16 +168,22 @@ impl Tanh {
     pub const ALL: [Tanh; 2] = [Tanh::Libm, Tanh::Fast];
 
     /// The f32 function as the device computes it (same code as `controller-core`).
-    #[allow(clippy::manual_clamp)] // NaN → bound, as on the device
     pub fn eval(self, x: f32) -> f32 {
         match self {
             Tanh::Libm => libm::tanhf(x),
             Tanh::Fast => {
-                let x = x.max(-FAST_CLIP).min(FAST_CLIP);
+                let x = if x > FAST_CLIP {
+                    FAST_CLIP
+                } else if x >= -FAST_CLIP {
+                    x
+                } else {
+                    -FAST_CLIP
+                };
                 let x2 = x * x;
                 let p = x * (135_135.0 + x2 * (17_325.0 + x2 * (378.0 + x2)));
                 let q = 135_135.0 + x2 * (62_370.0 + x2 * (3_150.0 + x2 * 28.0));
-                (p / q).max(-1.0).min(1.0)
+                // q ≥ 135135 and x is finite, so r is never NaN.
+                (p / q).clamp(-1.0, 1.0)
             }
         }
     }

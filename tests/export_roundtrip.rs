@@ -1,0 +1,94 @@
+//! Export round trip: the committed `controller-core/src/generated/weights.{rs,bin}` are
+//! exactly what `trainer::export` produces (byte for byte), and the core computes exactly
+//! what the exporter's f32 model of the device computes (bit for bit).
+//!
+//! The committed weights are the PLACEHOLDER network (`export::placeholder_pendulum`);
+//! when the trained pendulum net replaces them, this test's model source changes with it.
+
+use ampc_tests::tempdir;
+use controller_core::activation;
+use trainer::export::{self, Tanh};
+
+fn committed(name: &str) -> Vec<u8> {
+    let p = format!(
+        "{}/../controller-core/src/generated/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    std::fs::read(&p).unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+#[test]
+fn committed_files_are_what_the_exporter_writes() {
+    let model = export::placeholder_pendulum();
+    let dir = tempdir();
+    let (rs, bin) = (
+        dir.path().join("weights.rs"),
+        dir.path().join("weights.bin"),
+    );
+    let report = export::export_files(&model, &rs, &bin).unwrap();
+    assert!(report.f32_allowance[0] >= report.f32_observed[0]);
+    assert!(report.f32_allowance[1] >= report.f32_observed[1]);
+    let fresh = std::fs::read(&rs).unwrap();
+    assert!(
+        fresh == committed("weights.rs"),
+        "controller-core/src/generated/weights.rs is stale: regenerate it with trainer export"
+    );
+    assert_eq!(std::fs::read(&bin).unwrap(), committed("weights.bin"));
+    assert_eq!(controller_core::CERTIFICATE.hash, model.hash);
+}
+
+#[test]
+fn exporter_and_core_share_tanh_code_and_bounds() {
+    assert_eq!(Tanh::Libm.max_abs_err(), activation::TANH_LIBM_MAX_ABS_ERR);
+    assert_eq!(Tanh::Fast.max_abs_err(), activation::TANH_FAST_MAX_ABS_ERR);
+    for ((a, d), (b, e)) in export::TANH_FAST_ERR_BINS
+        .iter()
+        .zip(activation::TANH_FAST_ERR_BINS)
+    {
+        assert_eq!((*a, *d), (f64::from(b), e));
+    }
+    for k in -2_000_000..2_000_000 {
+        let x = k as f32 * 4e-6;
+        assert_eq!(
+            Tanh::Libm.eval(x).to_bits(),
+            activation::tanh_libm(x).to_bits()
+        );
+        assert_eq!(
+            Tanh::Fast.eval(x).to_bits(),
+            activation::tanh_fast(x).to_bits()
+        );
+    }
+    for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30] {
+        assert_eq!(
+            Tanh::Fast.eval(x).to_bits(),
+            activation::tanh_fast(x).to_bits()
+        );
+    }
+}
+
+#[test]
+fn core_matches_the_exporters_f32_model_bit_for_bit() {
+    let model = export::placeholder_pendulum();
+    let folded = model.folded();
+    let (lo, hi) = model.domain_f32();
+    let tanh = if activation::TANH_KIND == "fast" {
+        Tanh::Fast
+    } else {
+        Tanh::Libm
+    };
+    let mut s = 0x1234_5678_9abc_def1u64;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    for _ in 0..200_000 {
+        let x = [-8.0 + 16.0 * rnd(), -1.5 + 3.0 * rnd()];
+        let y = export::eval_f32(&folded, &lo, &hi, &x, tanh)[0];
+        let c = &controller_core::CERTIFICATE;
+        let expect = y.clamp(c.clamp_lo[0], c.clamp_hi[0]);
+        let got = controller_core::evaluate(&x).u[0];
+        assert_eq!(got.to_bits(), expect.to_bits(), "x = {x:?}");
+    }
+}
