@@ -43,8 +43,9 @@ mod tests {
         // Small angle, no torque: the pendulum near upright falls away (x1 grows).
         let x = rk4_step([0.01, 0.0], 0.0);
         assert!(x[0] > 0.01);
-        // Torque accelerates: ẋ2 ≈ u.
+        // Torque accelerates (ẋ2 ≈ u at the bottom) and gravity pulls back towards hanging:
+        // after one step x2 is just below u·Ts = 0.5.
         let x = rk4_step([-core::f32::consts::PI, 0.0], 10.0);
-        assert!((x[1] - 0.5).abs() < 1e-3, "{x:?}");
+        assert!(x[1] > 0.49 && x[1] < 0.5, "{x:?}");
     }
 }
