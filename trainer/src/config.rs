@@ -218,6 +218,42 @@ pub struct ProblemConfig {
     /// Training settings.
     #[serde(default)]
     pub training: TrainSettings,
+    /// Closed-loop study settings.
+    #[serde(default)]
+    pub closed_loop: ClosedLoopSettings,
+}
+
+/// Closed-loop study settings (`[closed_loop]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClosedLoopSettings {
+    /// Simulated steps (default 90: the paper's 4.5 s at Ts = 0.05 s).
+    pub steps: usize,
+    /// Initial state of the reference run (default: the pendulum's (−π, 0); for other
+    /// systems the default is a quarter of the way from the domain's centre to its lower
+    /// corner).
+    pub x0: Option<Vec<f64>>,
+    /// Number of additional seeded random initial states (default 20).
+    pub random_initial_states: usize,
+    /// Number of measurement-noise runs (default 5 seeds).
+    pub noise_runs: usize,
+    /// Noise amplitude as a fraction of each domain half-width (default 0.01).
+    pub noise_fraction: f64,
+    /// Relative mass mismatch of the robustness runs, ± (default 0.1).
+    pub mass_mismatch: f64,
+}
+
+impl Default for ClosedLoopSettings {
+    fn default() -> Self {
+        ClosedLoopSettings {
+            steps: 90,
+            x0: None,
+            random_initial_states: 20,
+            noise_runs: 5,
+            noise_fraction: 0.01,
+            mass_mismatch: 0.1,
+        }
+    }
 }
 
 /// Learning-rate schedule.
@@ -485,6 +521,21 @@ impl ProblemConfig {
         }
         if t.log_every == 0 {
             return Err(invalid("training.log_every", "must be at least 1"));
+        }
+        let c = &self.closed_loop;
+        if c.steps == 0 {
+            return Err(invalid("closed_loop.steps", "must be at least 1"));
+        }
+        if let Some(x0) = &c.x0 {
+            check_vec("closed_loop.x0", x0, nx, false)?;
+        }
+        for (k, v) in [
+            ("closed_loop.noise_fraction", c.noise_fraction),
+            ("closed_loop.mass_mismatch", c.mass_mismatch),
+        ] {
+            if !(v.is_finite() && (0.0..1.0).contains(&v)) {
+                return Err(invalid(k, format!("must be in [0, 1), got {v}")));
+            }
         }
         let sm = &self.sampling;
         match sm.sampler {

@@ -291,7 +291,7 @@ pub fn run(
                 ("model_regularized.bin", "certificate.json"),
                 ("model_nominal.bin", "certificate_nominal.json"),
             ] {
-                let mut m = TrainedModel::load(&d.join(file)).map_err(|e| fail("certify", e))?;
+                let m = TrainedModel::load(&d.join(file)).map_err(|e| fail("certify", e))?;
                 let c = certify(
                     &m,
                     &data,
@@ -307,21 +307,38 @@ pub fn run(
                     "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
                     c.eps, c.eps_d, c.l_nn, c.covering_radius
                 );
-                m.certificate = Some(c);
-                m.save(&d.join(file)).map_err(|e| fail("certify", e))?;
             }
             Ok(out)
         },
     )?;
     // closed loop
     let mut inputs = BTreeMap::new();
-    for f in ["model_nominal.bin", "model_regularized.bin"] {
+    for f in [
+        "model_nominal.bin",
+        "model_regularized.bin",
+        "certificate.json",
+        "certificate_nominal.json",
+    ] {
         inputs.insert(f.into(), cx.hash("closed_loop", f)?);
     }
     inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("settings".into(), settings(&cfg.closed_loop));
     cx.stage("closed_loop", inputs, &["closed_loop.json"], |d| {
-        let load = |f: &str| TrainedModel::load(&d.join(f)).map_err(|e| fail("closed_loop", e));
-        let (n, r) = (load("model_nominal.bin")?, load("model_regularized.bin")?);
+        let load = |f: &str, c: &str| -> Result<TrainedModel, PipelineError> {
+            let mut m = TrainedModel::load(&d.join(f)).map_err(|e| fail("closed_loop", e))?;
+            let p = d.join(c);
+            let text = std::fs::read_to_string(&p)
+                .map_err(|e| fail("closed_loop", format!("{}: {e}", p.display())))?;
+            m.certificate = Some(
+                serde_json::from_str(&text)
+                    .map_err(|e| fail("closed_loop", format!("{}: {e}", p.display())))?,
+            );
+            Ok(m)
+        };
+        let (n, r) = (
+            load("model_nominal.bin", "certificate_nominal.json")?,
+            load("model_regularized.bin", "certificate.json")?,
+        );
         let cl = closed_loop(cfg, &n, &r);
         let text = serde_json::to_string(&cl).map_err(|e| fail("closed_loop", e))?;
         write_atomic(&d.join("closed_loop.json"), text.as_bytes())
@@ -363,45 +380,49 @@ pub fn run(
     Ok(cx.reports)
 }
 
-/// Initial states of the closed-loop study: the paper's (−π, 0) for the pendulum (the
-/// domain's centre-left otherwise), then 20 seeded random states of X.
+/// Initial states of the closed-loop study: `closed_loop.x0` (default: the paper's
+/// (−π, 0) for the pendulum, a quarter of the way from the domain's centre to its lower
+/// corner otherwise), then `closed_loop.random_initial_states` seeded random states of X.
 pub fn initial_states(cfg: &ProblemConfig) -> Vec<Vec<f64>> {
-    let first = match cfg.system {
-        crate::model::System::Pendulum(_) => vec![-std::f64::consts::PI, 0.0],
-        _ => cfg
-            .domain
-            .lo
-            .iter()
-            .zip(&cfg.domain.hi)
-            .map(|(l, h)| 0.5 * (l + h) + 0.25 * (l - h))
-            .collect(),
-    };
+    let first = cfg
+        .closed_loop
+        .x0
+        .clone()
+        .unwrap_or_else(|| match cfg.system {
+            crate::model::System::Pendulum(_) => vec![-std::f64::consts::PI, 0.0],
+            _ => cfg
+                .domain
+                .lo
+                .iter()
+                .zip(&cfg.domain.hi)
+                .map(|(l, h)| 0.5 * (l + h) + 0.25 * (l - h))
+                .collect(),
+        });
     let s = SamplingSettings {
         sampler: SamplerKind::Random,
-        n: 20,
+        n: cfg.closed_loop.random_initial_states,
         seed: 4242,
         counts: vec![],
     };
     let mut v = vec![first];
-    v.extend(crate::sampling::Sampler::new(&s, &cfg.domain).points());
+    if s.n > 0 {
+        v.extend(crate::sampling::Sampler::new(&s, &cfg.domain).points());
+    }
     v
 }
 
 /// The closed-loop study: MPC and both nets from every initial state (nominal plant, no
-/// noise), then robustness runs from the first state: measurement noise (1 % of the
-/// domain's half-width, 5 seeds) and ±10 % mass mismatch. Keys: `mpc`, `nominal`,
-/// `regularized`, and `<name>_noise`, `<name>_mass+10%`, `<name>_mass-10%`.
+/// noise), then robustness runs from the first state: uniform measurement noise
+/// (`noise_fraction` of the domain's half-width, `noise_runs` seeds) and ± `mass_mismatch`.
+/// Keys: `mpc`, `nominal`, `regularized`, and `<name>_noise`, `<name>_mass+`, `<name>_mass-`.
 pub fn closed_loop(
     cfg: &ProblemConfig,
     nominal: &TrainedModel,
     regularized: &TrainedModel,
 ) -> ClosedLoop {
-    let steps = match cfg.system {
-        crate::model::System::Pendulum(_) => 90,
-        _ => 100,
-    };
+    let st = &cfg.closed_loop;
     let base = SimSettings {
-        steps,
+        steps: st.steps,
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
@@ -422,14 +443,14 @@ pub fn closed_loop(
         .lo
         .iter()
         .zip(&cfg.domain.hi)
-        .map(|(l, h)| 0.01 * 0.5 * (h - l))
+        .map(|(l, h)| st.noise_fraction * 0.5 * (h - l))
         .collect();
     let mut jobs: Vec<(String, Option<&TrainedModel>, Vec<f64>, SimSettings)> = Vec::new();
     for (name, m) in nets {
         for x0 in &x0s {
             jobs.push((name.to_string(), m, x0.clone(), base.clone()));
         }
-        for seed in 0..5 {
+        for seed in 0..st.noise_runs as u64 {
             let s = SimSettings {
                 noise: noise.clone(),
                 seed,
@@ -437,12 +458,14 @@ pub fn closed_loop(
             };
             jobs.push((format!("{name}_noise"), m, x0s[0].clone(), s));
         }
-        for (tag, mm) in [("mass+10%", 0.1), ("mass-10%", -0.1)] {
-            let s = SimSettings {
-                mass_mismatch: mm,
-                ..base.clone()
-            };
-            jobs.push((format!("{name}_{tag}"), m, x0s[0].clone(), s));
+        if st.mass_mismatch > 0.0 {
+            for (tag, mm) in [("mass+", st.mass_mismatch), ("mass-", -st.mass_mismatch)] {
+                let s = SimSettings {
+                    mass_mismatch: mm,
+                    ..base.clone()
+                };
+                jobs.push((format!("{name}_{tag}"), m, x0s[0].clone(), s));
+            }
         }
     }
     let runs: Vec<(String, Run)> = jobs
