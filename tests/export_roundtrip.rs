@@ -2,8 +2,11 @@
 //! exactly what `trainer::export` produces (byte for byte), and the core computes exactly
 //! what the exporter's f32 model of the device computes (bit for bit).
 //!
-//! The committed weights are the PLACEHOLDER network (`export::placeholder_pendulum`);
-//! when the trained pendulum net replaces them, this test's model source changes with it.
+//! The committed weights are the paper's pendulum controller (sensitivity-regularized) as
+//! `trainer run` produces it from the embedded `configs/pendulum.toml`: this test reruns
+//! that pipeline (sample → train → certify → export) and compares the files byte for byte.
+//! Regenerate them with
+//! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/generated/`.
 
 use ampc_tests::tempdir;
 use controller_core::activation;
@@ -19,13 +22,19 @@ fn committed(name: &str) -> Vec<u8> {
 
 #[test]
 fn committed_files_are_what_the_exporter_writes() {
-    let model = export::placeholder_pendulum();
+    let (model, run_dir) = ampc_tests::trained_pendulum();
+    assert!(!model.placeholder);
     let dir = tempdir();
     let (rs, bin) = (
         dir.path().join("weights.rs"),
         dir.path().join("weights.bin"),
     );
-    let report = export::export_files(&model, &rs, &bin).unwrap();
+    let report = export::export_files(model, &rs, &bin).unwrap();
+    // The pipeline's export stage wrote the same files.
+    assert_eq!(
+        std::fs::read(&rs).unwrap(),
+        std::fs::read(run_dir.join("weights.rs")).unwrap()
+    );
     assert!(report.f32_allowance[0] >= report.f32_observed[0]);
     assert!(report.f32_allowance[1] >= report.f32_observed[1]);
     let fresh = std::fs::read(&rs).unwrap();
@@ -68,7 +77,7 @@ fn exporter_and_core_share_tanh_code_and_bounds() {
 
 #[test]
 fn core_matches_the_exporters_f32_model_bit_for_bit() {
-    let model = export::placeholder_pendulum();
+    let (model, _) = ampc_tests::trained_pendulum();
     let folded = model.folded();
     let (lo, hi) = model.domain_f32();
     let tanh = if activation::TANH_KIND == "fast" {

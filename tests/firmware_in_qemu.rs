@@ -94,7 +94,7 @@ fn firmware_trajectory_matches_host_and_f64_network() {
 
     // (2) Along the device's trajectory, the f64 network (at the projected state, output
     // clamped to the same band) is within the certified f32 allowance.
-    let model = export::placeholder_pendulum();
+    let (model, _) = ampc_tests::trained_pendulum();
     assert_eq!(
         model.hash, CERTIFICATE.hash,
         "the test's model is not the compiled-in one"

@@ -73,7 +73,7 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     let o = trainer(&args);
     assert!(o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(err.matches("] skipped").count(), 6, "{err}");
+    assert_eq!(err.matches("] skipped").count(), 7, "{err}");
     // --force train retrains; training is deterministic, so the later stages see the same
     // model bytes and stay skipped.
     let mut forced = args.to_vec();
@@ -82,7 +82,7 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success());
     assert!(err.contains("[      train] done"), "{err}");
-    assert_eq!(err.matches("] skipped").count(), 5, "{err}");
+    assert_eq!(err.matches("] skipped").count(), 6, "{err}");
     // A usage error exits 2; a broken problem file exits 1 naming the key.
     assert_eq!(
         trainer(&["run", "--force", "nonsense"]).status.code(),

@@ -139,6 +139,25 @@ enum Cmd {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Export a trained model for controller-core: a generated Rust file and a postcard blob,
+    /// with the certificate's f32 allowance.
+    Export {
+        /// Model file from `trainer train`.
+        #[arg(long)]
+        model: PathBuf,
+        /// Certificate JSON (default: the one stored in the model by `trainer train`).
+        #[arg(long)]
+        certificate: Option<PathBuf>,
+        /// Output Rust file.
+        #[arg(long)]
+        rust: PathBuf,
+        /// Output postcard blob.
+        #[arg(long)]
+        postcard: PathBuf,
+        /// Name used in the generated file (default: pendulum).
+        #[arg(long, default_value = "pendulum")]
+        name: String,
+    },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
         /// Output dataset file.
@@ -306,6 +325,49 @@ fn merge(out: &Path, inputs: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
+fn export_cmd(
+    model: &Path,
+    certificate: Option<&Path>,
+    rust: &Path,
+    postcard: &Path,
+    name: &str,
+) -> Result<()> {
+    let m = TrainedModel::load(model)?;
+    let cert: trainer::certificate::Certificate = match certificate {
+        Some(p) => serde_json::from_str(
+            &std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
+        )
+        .with_context(|| format!("{}: not a certificate", p.display()))?,
+        None => m.certificate.clone().with_context(|| {
+            format!(
+                "{} holds no certificate: pass --certificate",
+                model.display()
+            )
+        })?,
+    };
+    if cert.hash != m.content_hash() {
+        bail!(
+            "the certificate is about another network (hash {}), not {}",
+            cert.hash,
+            model.display()
+        );
+    }
+    let em = trainer::export::ExportModel::from_trained(name, &m, &cert)?;
+    let r = trainer::export::export_files(&em, rust, postcard)?;
+    eprintln!(
+        "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | certified ε {:.4} + {:.3e}",
+        model.display(),
+        rust.display(),
+        postcard.display(),
+        r.f32_allowance[0],
+        r.samples,
+        r.f32_observed[0],
+        cert.eps,
+        r.f32_allowance[0]
+    );
+    Ok(())
+}
+
 fn print_stage(r: &trainer::pipeline::StageReport) {
     eprintln!(
         "[{:>11}] {} {:.2} s  {}",
@@ -337,6 +399,7 @@ fn run_cmd(config: &Option<PathBuf>, out: &Path, force: &[String], quiet: bool) 
         force: force.to_vec(),
         progress: !quiet && std::io::stderr().is_terminal(),
         on_stage: if quiet { None } else { Some(print_stage) },
+        until: None,
     };
     trainer::pipeline::run(&cfg, &text, &opts)?;
     if !quiet {
@@ -710,6 +773,13 @@ fn main() -> std::process::ExitCode {
             quiet,
         } => sample(config, out, *shard, *quiet),
         Cmd::Merge { out, inputs } => merge(out, inputs),
+        Cmd::Export {
+            model,
+            certificate,
+            rust,
+            postcard,
+            name,
+        } => export_cmd(model, certificate.as_deref(), rust, postcard, name),
         Cmd::Run {
             config,
             out,

@@ -4,8 +4,9 @@
 //! (`manifest_<stage>.json`: input hashes, settings, crate version, timing):
 //! `sample` (dataset.bin/.csv) → `validate` (validation.bin: MPC labels of random states)
 //! → `train` (model_nominal.bin, model_regularized.bin, same initial weights) → `certify`
-//! (certificate.json, certificate_nominal.json) → `closed_loop` (closed_loop.json) →
-//! `report` (report.md). A stage whose manifest matches its current inputs and whose
+//! (certificate.json, certificate_nominal.json) → `export` (weights.rs, weights.bin,
+//! export_report.json: the regularized net for controller-core) → `closed_loop`
+//! (closed_loop.json) → `report` (report.md). A stage whose manifest matches its current inputs and whose
 //! outputs exist is skipped; `force` redoes named stages (and, through the changed hashes,
 //! everything downstream). Dataset generation resumes from its checkpoint when killed.
 
@@ -88,6 +89,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// Called after each stage (for one summary line per stage).
     pub on_stage: Option<fn(&StageReport)>,
+    /// Stop after this stage (default: run all).
+    pub until: Option<String>,
 }
 
 fn sha_file(p: &Path) -> Result<String, std::io::Error> {
@@ -203,6 +206,9 @@ pub fn run(
             c.total, c.converged, c.soft, c.infeasible, c.failed, c.degenerate
         ))
     })?;
+    if opts.until.as_deref() == Some("sample") {
+        return Ok(cx.reports);
+    }
     // validate
     let mut vcfg = cfg.clone();
     vcfg.sampling = SamplingSettings {
@@ -225,6 +231,9 @@ pub fn run(
             ds.records.len()
         ))
     })?;
+    if opts.until.as_deref() == Some("validate") {
+        return Ok(cx.reports);
+    }
     // train
     let mut inputs = BTreeMap::new();
     inputs.insert("dataset".into(), cx.hash("train", "dataset.bin")?);
@@ -268,6 +277,9 @@ pub fn run(
             ))
         },
     )?;
+    if opts.until.as_deref() == Some("train") {
+        return Ok(cx.reports);
+    }
     // certify
     let mut inputs = BTreeMap::new();
     for f in [
@@ -311,6 +323,50 @@ pub fn run(
             Ok(out)
         },
     )?;
+    if opts.until.as_deref() == Some("certify") {
+        return Ok(cx.reports);
+    }
+    // export (the regularized net, for controller-core)
+    let mut inputs = BTreeMap::new();
+    for f in ["model_regularized.bin", "certificate.json"] {
+        inputs.insert(f.into(), cx.hash("export", f)?);
+    }
+    cx.stage(
+        "export",
+        inputs,
+        &["weights.rs", "weights.bin", "export_report.json"],
+        |d| {
+            let m = TrainedModel::load(&d.join("model_regularized.bin"))
+                .map_err(|e| fail("export", e))?;
+            let p = d.join("certificate.json");
+            let text = std::fs::read_to_string(&p)
+                .map_err(|e| fail("export", format!("{}: {e}", p.display())))?;
+            let c: Certificate = serde_json::from_str(&text)
+                .map_err(|e| fail("export", format!("{}: {e}", p.display())))?;
+            let em = crate::export::ExportModel::from_trained(&cfg.name, &m, &c)
+                .map_err(|e| fail("export", e))?;
+            let r = crate::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
+                .map_err(|e| fail("export", e))?;
+            let json = serde_json::json!({
+                "f32_allowance_libm": r.f32_allowance[0],
+                "f32_allowance_fast_tanh": r.f32_allowance[1],
+                "f32_observed_libm": r.f32_observed[0],
+                "f32_observed_fast_tanh": r.f32_observed[1],
+                "samples": r.samples,
+                "eps_f64": c.eps,
+                "eps_device_libm": c.eps + r.f32_allowance[0],
+            });
+            write_atomic(&d.join("export_report.json"), json.to_string().as_bytes())
+                .map_err(|e| fail("export", e))?;
+            Ok(format!(
+                "weights.rs + weights.bin; f32 allowance {:.3e} (observed {:.3e} on {} states)",
+                r.f32_allowance[0], r.f32_observed[0], r.samples
+            ))
+        },
+    )?;
+    if opts.until.as_deref() == Some("export") {
+        return Ok(cx.reports);
+    }
     // closed loop
     let mut inputs = BTreeMap::new();
     for f in [
@@ -355,8 +411,15 @@ pub fn run(
         }
         Ok(s)
     })?;
+    if opts.until.as_deref() == Some("closed_loop") {
+        return Ok(cx.reports);
+    }
     // report
     let mut inputs = BTreeMap::new();
+    inputs.insert(
+        "export_report.json".into(),
+        cx.hash("report", "export_report.json")?,
+    );
     for f in [
         "dataset.bin",
         "certificate.json",
