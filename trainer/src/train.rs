@@ -91,9 +91,21 @@ pub struct ErrorStats {
 
 /// Errors of the network on a set, sorted ascending (for box plots), and statistics.
 pub fn errors(mlp: &Mlp, set: &TrainSet) -> (Vec<f64>, ErrorStats) {
+    errors_impl(mlp, set, true)
+}
+
+/// [`errors`]; without `with_jac` the Jacobians are not computed (`max_jac_err` = 0).
+fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorStats) {
     let (nx, nu) = (set.nx, set.nu);
     let mut ws = Workspace::default();
-    let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    // All outputs and Jacobians at once (batched; the same values as point by point).
+    let (mut u_all, mut j_all) = (vec![0.0; set.len() * nu], vec![0.0; set.len() * nu * nx]);
+    mlp.eval_batch(
+        &set.x,
+        &mut u_all,
+        with_jac.then_some(&mut j_all[..]),
+        &mut ws,
+    );
     let mut errs = Vec::with_capacity(set.len());
     let (mut ss_res, mut max_jac) = (0.0, 0.0f64);
     let mut mean_u = vec![0.0; nu];
@@ -104,7 +116,8 @@ pub fn errors(mlp: &Mlp, set: &TrainSet) -> (Vec<f64>, ErrorStats) {
     }
     let mut ss_tot = 0.0;
     for i in 0..set.len() {
-        mlp.eval(&set.x[i * nx..(i + 1) * nx], &mut u, &mut j, &mut ws);
+        let u = &u_all[i * nu..(i + 1) * nu];
+        let j = &j_all[i * nu * nx..(i + 1) * nu * nx];
         let mut e2 = 0.0;
         for r in 0..nu {
             let e = u[r] - set.u[i * nu + r];
@@ -113,7 +126,7 @@ pub fn errors(mlp: &Mlp, set: &TrainSet) -> (Vec<f64>, ErrorStats) {
         }
         ss_res += e2;
         errs.push(e2.sqrt());
-        if set.use_jac[i] {
+        if with_jac && set.use_jac[i] {
             let je: f64 = (0..nu * nx)
                 .map(|k| (j[k] - set.du[i * nu * nx + k]).powi(2))
                 .sum();
@@ -271,18 +284,6 @@ fn flatten(mlp: &Mlp) -> Vec<f64> {
         .collect()
 }
 
-fn unflatten(mlp: &mut Mlp, p: &[f64]) {
-    let mut k = 0;
-    for l in &mut mlp.layers {
-        let n = l.w.len();
-        l.w.copy_from_slice(&p[k..k + n]);
-        k += n;
-        let n = l.b.len();
-        l.b.copy_from_slice(&p[k..k + n]);
-        k += n;
-    }
-}
-
 /// Options of a training run.
 #[derive(Debug, Clone)]
 pub struct TrainOptions {
@@ -333,10 +334,10 @@ pub fn train(
     let (nx, nu) = (train.nx, train.nu);
     let n = train.len();
     let bs = settings.batch_size.min(n.max(1));
-    let mut params = flatten(&mlp);
+    let n_params = flatten(&mlp).len();
     let mut adam = Adam {
-        m: vec![0.0; params.len()],
-        v: vec![0.0; params.len()],
+        m: vec![0.0; n_params],
+        v: vec![0.0; n_params],
         t: 0,
     };
     let mut grad = mlp.zero_grad();
@@ -381,16 +382,20 @@ pub fn train(
             mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
             adam.t += 1;
             let (c1, c2) = (1.0 - b1.powi(adam.t as i32), 1.0 - b2.powi(adam.t as i32));
-            let mut k = 0;
-            for (gw, gb) in grad.w.iter().zip(&grad.b) {
-                for &g in gw.iter().chain(gb) {
-                    adam.m[k] = b1 * adam.m[k] + (1.0 - b1) * g;
-                    adam.v[k] = b2 * adam.v[k] + (1.0 - b2) * g * g;
-                    params[k] -= lr * (adam.m[k] / c1) / ((adam.v[k] / c2).sqrt() + 1e-8);
-                    k += 1;
+            // Update the layers in place; m, v are flat in the order of `flatten`.
+            let (mut am, mut av) = (&mut adam.m[..], &mut adam.v[..]);
+            for (l, (gw, gb)) in mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b)) {
+                for (p, g) in [(&mut l.w, gw), (&mut l.b, gb)] {
+                    let (m0, m1) = std::mem::take(&mut am).split_at_mut(p.len());
+                    let (v0, v1) = std::mem::take(&mut av).split_at_mut(p.len());
+                    (am, av) = (m1, v1);
+                    for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m0).zip(v0) {
+                        *m = b1 * *m + (1.0 - b1) * g;
+                        *v = b2 * *v + (1.0 - b2) * g * g;
+                        *p -= lr * (*m / c1) / ((*v / c2).sqrt() + 1e-8);
+                    }
                 }
             }
-            unflatten(&mut mlp, &params);
         }
         epochs_run = epoch + 1;
         let last = epoch + 1 == settings.epochs;
@@ -401,12 +406,12 @@ pub fn train(
                 du: &train.du,
                 use_jac: &train.use_jac,
             };
-            let loss = mlp.loss_grad(&full, lam, &mut grad, &mut ws);
+            let loss = mlp.loss(&full, lam, &mut ws);
             let (_, st) = errors(&mlp, train);
             let r2v = if validation.is_empty() {
                 f64::NAN
             } else {
-                errors(&mlp, validation).1.r2
+                errors_impl(&mlp, validation, false).1.r2
             };
             history.push(EpochLog {
                 epoch: epoch + 1,
@@ -564,7 +569,10 @@ mod tests {
         let (n0, r0) = (run(&zero, &set, &val, true), run(&zero, &set, &val, false));
         for (a, b) in n0.mlp.layers.iter().zip(&r0.mlp.layers) {
             for (x, y) in a.w.iter().chain(&a.b).zip(b.w.iter().chain(&b.b)) {
-                assert!((x - y).abs() < 1e-250, "initial parameters differ: {x} vs {y}");
+                assert!(
+                    (x - y).abs() < 1e-250,
+                    "initial parameters differ: {x} vs {y}"
+                );
             }
         }
     }
