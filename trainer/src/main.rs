@@ -86,6 +86,10 @@ enum Cmd {
         /// Override the seed of the initial weights and shuffling.
         #[arg(long)]
         seed: Option<u64>,
+        /// A labelled validation dataset (e.g. a run's validation.bin); default: label
+        /// `training.validation_n` random states now.
+        #[arg(long)]
+        validation: Option<PathBuf>,
         /// No progress or summary.
         #[arg(long, short)]
         quiet: bool,
@@ -425,6 +429,7 @@ fn train_cmd(
     out: &Path,
     nominal: bool,
     seed: Option<u64>,
+    validation: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let mut cfg = load_config(config)?;
@@ -446,11 +451,24 @@ fn train_cmd(
         bail!("{}: no labelled points to train on", data.display());
     }
     let t0 = std::time::Instant::now();
-    let val = label_random_states(
-        &cfg,
-        cfg.training.validation_n,
-        cfg.training.validation_seed,
-    );
+    let val = match validation {
+        Some(p) => {
+            let v = Dataset::load(p)?;
+            if v.header.problem_hash != d.header.problem_hash {
+                bail!(
+                    "{} was labelled for another problem than {}",
+                    p.display(),
+                    data.display()
+                );
+            }
+            TrainSet::from_dataset(&v)
+        }
+        None => label_random_states(
+            &cfg,
+            cfg.training.validation_n,
+            cfg.training.validation_seed,
+        ),
+    };
     let t_val = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
     let opts = TrainOptions {
@@ -792,8 +810,17 @@ fn main() -> std::process::ExitCode {
             out,
             nominal,
             seed,
+            validation,
             quiet,
-        } => train_cmd(config, data, out, *nominal, *seed, *quiet),
+        } => train_cmd(
+            config,
+            data,
+            out,
+            *nominal,
+            *seed,
+            validation.as_deref(),
+            *quiet,
+        ),
         Cmd::Certify {
             config,
             model,
