@@ -76,7 +76,11 @@ impl Adam {
         let (c1, c2) = (1.0 - b1.powi(self.t), 1.0 - b2.powi(self.t));
         let mut k = 0;
         for (l, (gw, gb)) in mlp.layers.iter_mut().zip(g.w.iter().zip(&g.b)) {
-            for (p, &g) in l.w.iter_mut().chain(l.b.iter_mut()).zip(gw.iter().chain(gb)) {
+            for (p, &g) in
+                l.w.iter_mut()
+                    .chain(l.b.iter_mut())
+                    .zip(gw.iter().chain(gb))
+            {
                 self.m[k] = b1 * self.m[k] + (1.0 - b1) * g;
                 self.v[k] = b2 * self.v[k] + (1.0 - b2) * g * g;
                 *p -= lr * (self.m[k] / c1) / ((self.v[k] / c2).sqrt() + 1e-8);
@@ -174,9 +178,7 @@ fn synthetic(n: usize, cfg: &ProblemConfig) -> TrainSet {
     };
     for i in 0..n {
         let x: Vec<f64> = (0..2)
-            .map(|k| {
-                lo[k] + (hi[k] - lo[k]) * trainer::sampling::uniform(11, i as u64, k as u64)
-            })
+            .map(|k| lo[k] + (hi[k] - lo[k]) * trainer::sampling::uniform(11, i as u64, k as u64))
             .collect();
         let t = (0.8 * x[0] + 0.3 * x[1]).tanh();
         s.x.extend(&x);

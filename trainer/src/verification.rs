@@ -367,4 +367,3 @@ fn weakly_active_bound_is_flagged_degenerate() {
     assert_eq!(at(&mut law, 0.5 * b).degeneracy, None);
     assert_eq!(at(&mut law, (1.5 * b).min(1.0)).degeneracy, None);
 }
-
