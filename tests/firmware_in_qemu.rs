@@ -13,7 +13,6 @@ use std::process::Command;
 
 use controller_core::{Flags, CERTIFICATE};
 use firmware_example::{run, Row, HEADER, STEPS};
-use trainer::export;
 
 /// `target/` of this build (target/<profile>/deps/<test> → target).
 fn target_dir() -> PathBuf {

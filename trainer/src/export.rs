@@ -1174,6 +1174,62 @@ pub fn placeholder_pendulum() -> ExportModel {
     }
 }
 
+impl ExportModel {
+    /// The export description of a trained tanh network and its certificate (physical
+    /// units; the actuator limits are the data's input bounds U_d unless given).
+    pub fn from_trained(
+        name: &str,
+        model: &crate::train::TrainedModel,
+        cert: &crate::certificate::Certificate,
+    ) -> Result<Self, ExportError> {
+        let m = &model.mlp;
+        if m.activation != crate::mlp::Activation::Tanh {
+            return Err(ExportError::Invalid(format!(
+                "activation {:?}: the device supports tanh only",
+                m.activation
+            )));
+        }
+        let layers = m
+            .layers
+            .iter()
+            .map(|l| DenseF64 {
+                w: (0..l.out)
+                    .map(|r| l.w[r * l.inp..(r + 1) * l.inp].to_vec())
+                    .collect(),
+                b: l.b.clone(),
+            })
+            .collect();
+        Ok(ExportModel {
+            name: name.to_string(),
+            layers,
+            input: Scaling {
+                mean: m.in_center.clone(),
+                scale: m.in_half.clone(),
+            },
+            output: Scaling {
+                mean: m.out_center.clone(),
+                scale: m.out_half.clone(),
+            },
+            domain_lo: cert.domain_lo.clone(),
+            domain_hi: cert.domain_hi.clone(),
+            u_lo: cert.u_lo.clone(),
+            u_hi: cert.u_hi.clone(),
+            actuator_lo: cert.u_lo.clone(),
+            actuator_hi: cert.u_hi.clone(),
+            fallback: None,
+            eps: cert.eps,
+            eps_d: cert.eps_d,
+            l_nn: cert.l_nn,
+            l_nn_method: format!("{:?}", cert.l_nn_method),
+            l_mpc: cert.l_mpc,
+            l_mpc_is_estimate: cert.l_mpc_is_estimate,
+            covering_radius: cert.covering_radius,
+            hash: cert.hash.clone(),
+            placeholder: false,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1262,61 +1318,5 @@ mod tests {
     fn array_layout_rules() {
         let s: Vec<String> = (0..3).map(|i| format!("{i}.5")).collect();
         assert_eq!(array(&s, 0, 10, 1), "[0.5, 1.5, 2.5]");
-    }
-}
-
-impl ExportModel {
-    /// The export description of a trained tanh network and its certificate (physical
-    /// units; the actuator limits are the data's input bounds U_d unless given).
-    pub fn from_trained(
-        name: &str,
-        model: &crate::train::TrainedModel,
-        cert: &crate::certificate::Certificate,
-    ) -> Result<Self, ExportError> {
-        let m = &model.mlp;
-        if m.activation != crate::mlp::Activation::Tanh {
-            return Err(ExportError::Invalid(format!(
-                "activation {:?}: the device supports tanh only",
-                m.activation
-            )));
-        }
-        let layers = m
-            .layers
-            .iter()
-            .map(|l| DenseF64 {
-                w: (0..l.out)
-                    .map(|r| l.w[r * l.inp..(r + 1) * l.inp].to_vec())
-                    .collect(),
-                b: l.b.clone(),
-            })
-            .collect();
-        Ok(ExportModel {
-            name: name.to_string(),
-            layers,
-            input: Scaling {
-                mean: m.in_center.clone(),
-                scale: m.in_half.clone(),
-            },
-            output: Scaling {
-                mean: m.out_center.clone(),
-                scale: m.out_half.clone(),
-            },
-            domain_lo: cert.domain_lo.clone(),
-            domain_hi: cert.domain_hi.clone(),
-            u_lo: cert.u_lo.clone(),
-            u_hi: cert.u_hi.clone(),
-            actuator_lo: cert.u_lo.clone(),
-            actuator_hi: cert.u_hi.clone(),
-            fallback: None,
-            eps: cert.eps,
-            eps_d: cert.eps_d,
-            l_nn: cert.l_nn,
-            l_nn_method: format!("{:?}", cert.l_nn_method),
-            l_mpc: cert.l_mpc,
-            l_mpc_is_estimate: cert.l_mpc_is_estimate,
-            covering_radius: cert.covering_radius,
-            hash: cert.hash.clone(),
-            placeholder: false,
-        })
     }
 }
