@@ -218,17 +218,14 @@ impl Dataset {
             path: origin.to_string(),
             reason,
         };
-        if bytes.len() < 8 || bytes[..8] != MAGIC {
-            return Err(fmt("missing magic bytes".into()));
-        }
-        let d: Dataset =
-            postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
-        if d.version != FORMAT_VERSION {
-            return Err(fmt(format!(
-                "format version {} (this build reads {FORMAT_VERSION})",
-                d.version
-            )));
-        }
+        let d: Dataset = decode_checked(
+            bytes,
+            origin,
+            &MAGIC,
+            "dataset",
+            |d: &Dataset| d.version,
+            FORMAT_VERSION,
+        )?;
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
         for (i, r) in d.records.iter().enumerate() {
             if r.x.len() != nx || r.u.len() != nu || r.du_dx.len() != nx * nu {
@@ -295,6 +292,35 @@ impl Dataset {
         }
         s
     }
+}
+
+/// Checks the 8 magic bytes, decodes a postcard file and checks its format version;
+/// errors name `origin` (shared by the dataset and model files).
+pub fn decode_checked<T: serde::de::DeserializeOwned>(
+    bytes: &[u8],
+    origin: &str,
+    magic: &[u8; 8],
+    what: &str,
+    version_of: impl Fn(&T) -> u32,
+    expected: u32,
+) -> Result<T, DatasetError> {
+    let fmt = |reason: String| DatasetError::Format {
+        path: origin.to_string(),
+        reason,
+    };
+    if bytes.len() < 8 || bytes[..8] != magic[..] {
+        return Err(fmt(format!(
+            "not an ampc {what} file (missing magic bytes)"
+        )));
+    }
+    let v: T = postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
+    if version_of(&v) != expected {
+        return Err(fmt(format!(
+            "format version {} (this build reads {expected})",
+            version_of(&v)
+        )));
+    }
+    Ok(v)
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename.

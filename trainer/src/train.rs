@@ -227,17 +227,14 @@ impl TrainedModel {
             path: origin.to_string(),
             reason,
         };
-        if bytes.len() < 8 || bytes[..8] != MODEL_MAGIC {
-            return Err(fmt("not an ampc model file (magic bytes)".into()));
-        }
-        let m: TrainedModel =
-            postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
-        if m.version != MODEL_VERSION {
-            return Err(fmt(format!(
-                "model format version {} (this build reads {MODEL_VERSION})",
-                m.version
-            )));
-        }
+        let m: TrainedModel = crate::dataset::decode_checked(
+            bytes,
+            origin,
+            &MODEL_MAGIC,
+            "model",
+            |m: &TrainedModel| m.version,
+            MODEL_VERSION,
+        )?;
         let w = m.mlp.widths();
         let shapes_ok = m.mlp.layers.iter().zip(w.windows(2)).all(|(l, p)| {
             l.inp == p[0] && l.out == p[1] && l.w.len() == l.inp * l.out && l.b.len() == l.out
