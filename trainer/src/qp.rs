@@ -22,6 +22,23 @@ use crate::ocp::Ocp;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+/// The data of one QP subproblem at an SQP iterate (all borrowed from the SQP's workspace).
+#[derive(Debug, Clone, Copy)]
+pub struct QpData<'a> {
+    /// The iterate z.
+    pub z: &'a [f64],
+    /// Convexified Hessian stage blocks ([`Ocp::hessian_blocks`] layout).
+    pub hess: &'a [f64],
+    /// ∇f(z).
+    pub grad: &'a [f64],
+    /// c(z).
+    pub c: &'a [f64],
+    /// ∂F/∂x per stage.
+    pub jac_x: &'a [f64],
+    /// ∂F/∂u per stage.
+    pub jac_u: &'a [f64],
+}
+
 /// Outcome of one QP solve.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum QpStatus {
@@ -82,23 +99,17 @@ impl QpSolver {
     }
 
     /// Solves the subproblem; arguments and outputs as [`ClarabelQp::solve`].
-    #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
         ocp: &Ocp,
-        z: &[f64],
-        hess: &[f64],
-        grad: &[f64],
-        c: &[f64],
-        jac_x: &[f64],
-        jac_u: &[f64],
+        data: &QpData,
         d: &mut [f64],
         lam: &mut [f64],
         nu: &mut [f64],
     ) -> QpStatus {
         self.last_iterations = 0;
         if let Some(ipm) = self.ipm.as_mut() {
-            let st = ipm.solve(ocp, z, hess, grad, c, jac_x, jac_u, d, lam, nu);
+            let st = ipm.solve(ocp, data, d, lam, nu);
             self.last_iterations = ipm.last_iterations;
             if st == QpStatus::Solved {
                 return st;
@@ -106,7 +117,7 @@ impl QpSolver {
             self.fallbacks += 1;
         }
         let cl = self.clarabel.get_or_insert_with(|| ClarabelQp::new(ocp));
-        let st = cl.solve(ocp, z, hess, grad, c, jac_x, jac_u, d, lam, nu);
+        let st = cl.solve(ocp, data, d, lam, nu);
         self.last_iterations += cl.last_iterations;
         st
     }
@@ -222,20 +233,22 @@ impl ClarabelQp {
     /// by [`Ocp::hessian_blocks`]; `jac_x`, `jac_u` the dynamics Jacobians; `c` the
     /// equality values at z. On success writes the step `d`, the equality multipliers
     /// `lam` (length n_eq) and the inequality multipliers `nu` (length rows).
-    #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
         ocp: &Ocp,
-        z: &[f64],
-        hess: &[f64],
-        grad: &[f64],
-        c: &[f64],
-        jac_x: &[f64],
-        jac_u: &[f64],
+        data: &QpData,
         d: &mut [f64],
         lam: &mut [f64],
         nu: &mut [f64],
     ) -> QpStatus {
+        let QpData {
+            z,
+            hess,
+            grad,
+            c,
+            jac_x,
+            jac_u,
+        } = *data;
         let (nx, nu_dim, n) = (ocp.nx, ocp.nu, ocp.horizon);
         let nz = nx + nu_dim;
         // P values in CSC order.

@@ -23,7 +23,7 @@
 use crate::config::{ProblemConfig, SolverSettings};
 use crate::kkt::ActiveSetKkt;
 use crate::ocp::Ocp;
-use crate::qp::{QpSolver, QpStatus};
+use crate::qp::{QpData, QpSolver, QpStatus};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -432,18 +432,17 @@ impl SqpSolver {
             }
             self.ocp.hessian_blocks(&p.z, &zero_lam, &mut gn);
             convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
-            let st = self.qp.solve(
-                &self.ocp,
-                &p.z,
-                &hreg,
-                &ev.grad,
-                &ev.c,
-                &ev.jac_x,
-                &ev.jac_u,
-                &mut d,
-                &mut lam_qp,
-                &mut nu_qp,
-            );
+            let data = QpData {
+                z: &p.z,
+                hess: &hreg,
+                grad: &ev.grad,
+                c: &ev.c,
+                jac_x: &ev.jac_x,
+                jac_u: &ev.jac_u,
+            };
+            let st = self
+                .qp
+                .solve(&self.ocp, &data, &mut d, &mut lam_qp, &mut nu_qp);
             info.iterations += 1;
             info.qp_iterations += self.qp.last_iterations as usize;
             match st {

@@ -25,7 +25,7 @@
 //! (as for the clarabel reference); at the iteration limit, or when the iterates diverge
 //! (an infeasible QP), the solve reports failure and the caller may fall back to clarabel.
 
-use super::QpStatus;
+use super::{QpData, QpStatus};
 use crate::kkt::{BandedKkt, KktLayout};
 use crate::ocp::Ocp;
 
@@ -238,20 +238,22 @@ impl IpmQp {
     /// Solves the subproblem (same arguments and outputs as the clarabel solver). Returns
     /// [`QpStatus::Failed`] at the iteration limit, on divergence (e.g. an infeasible QP)
     /// or on a singular Newton system.
-    #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
         ocp: &Ocp,
-        z: &[f64],
-        hess: &[f64],
-        grad: &[f64],
-        c: &[f64],
-        jac_x: &[f64],
-        jac_u: &[f64],
+        data: &QpData,
         d: &mut [f64],
         lam: &mut [f64],
         nu: &mut [f64],
     ) -> QpStatus {
+        let QpData {
+            z,
+            hess,
+            grad,
+            c,
+            jac_x,
+            jac_u,
+        } = *data;
         let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
         self.last_iterations = 0;
         for (i, row) in ocp.rows.iter().enumerate() {
