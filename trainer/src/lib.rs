@@ -19,6 +19,7 @@ pub mod lipschitz;
 pub mod mlp;
 pub mod model;
 pub mod mpc;
+pub mod netbounds;
 pub mod ocp;
 pub mod pipeline;
 pub mod qp;
