@@ -295,6 +295,11 @@ pub struct TrainSettings {
     pub validation_seed: u64,
     /// Record the training curve every this many epochs (default 20).
     pub log_every: usize,
+    /// Saturation-aware loss (default false): the deployed output is clamped to the input
+    /// bounds, so a saturated label whose prediction is at or beyond its bound costs
+    /// nothing (see `mlp::Batch::band`). Lets the net overshoot where κ saturates instead
+    /// of rounding off the saturation kink.
+    pub saturation_aware: bool,
 }
 
 impl Default for TrainSettings {
@@ -312,6 +317,7 @@ impl Default for TrainSettings {
             validation_n: 1000,
             validation_seed: 12345,
             log_every: 20,
+            saturation_aware: false,
         }
     }
 }

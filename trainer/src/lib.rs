@@ -16,6 +16,7 @@ pub mod export;
 mod fixtures;
 pub mod kkt;
 pub mod lipschitz;
+pub mod local;
 pub mod mlp;
 pub mod model;
 pub mod mpc;

@@ -136,6 +136,27 @@ pub struct Batch<'a> {
     pub du: &'a [f64],
     /// Whether sample i's Jacobian term is used (false at degenerate points).
     pub use_jac: &'a [bool],
+    /// Saturation-aware loss: the deployed output is clamped to this band (lo, hi per
+    /// output). A label on a bound of the band (within [`SAT_TOL`]) with a prediction at or
+    /// beyond that bound is matched exactly after the clamp, so its value and Jacobian terms
+    /// are zero. `None`: the plain loss.
+    pub band: Option<(&'a [f64], &'a [f64])>,
+}
+
+/// Labels within this of a band bound count as saturated (see [`Batch::band`]).
+pub const SAT_TOL: f64 = 1e-6;
+
+/// Whether output r of a sample is matched exactly after the clamp to `band`: the label
+/// `target` sits on a bound and the prediction `pred` is at or beyond it.
+#[inline]
+pub fn clamped_exact(band: Option<(&[f64], &[f64])>, r: usize, pred: f64, target: f64) -> bool {
+    match band {
+        None => false,
+        Some((lo, hi)) => {
+            (target >= hi[r] - SAT_TOL && pred >= hi[r])
+                || (target <= lo[r] + SAT_TOL && pred <= lo[r])
+        }
+    }
 }
 
 /// Samples per block of the batched passes (a minibatch is processed in blocks of this
@@ -609,14 +630,20 @@ impl Mlp {
             let use_jac = batch.use_jac[gi] && tangent;
             for r in 0..nu {
                 let s = self.out_half[r];
-                let e = self.out_center[r] + s * y[r * nb + i] - batch.u[gi * nu + r];
+                let pred = self.out_center[r] + s * y[r * nb + i];
+                let exact = clamped_exact(batch.band, r, pred, batch.u[gi * nu + r]);
+                let e = if exact {
+                    0.0
+                } else {
+                    pred - batch.u[gi * nu + r]
+                };
                 parts.value += lam.value * inv_b * e * e;
                 ws.ga[r * nb + i] = 2.0 * lam.value * inv_b * e * s;
                 if !tangent {
                     continue;
                 }
                 for k in 0..nx {
-                    let g = if use_jac {
+                    let g = if use_jac && !exact {
                         let e = s * yt[(r * nx + k) * nb + i] - batch.du[gi * nu * nx + r * nx + k];
                         parts.jacobian += lam.jacobian * inv_b * e * e;
                         2.0 * lam.jacobian * inv_b * e * s
@@ -798,14 +825,43 @@ mod tests {
 
     /// Central differences of the loss against the hand-derived gradient, term by term.
     fn check_grad(act: Activation, widths: &[usize], seed: u64) {
+        check_grad_band(act, widths, seed, false);
+        check_grad_band(act, widths, seed, true);
+    }
+
+    /// With `saturated`, the labels are clamped to a band (about half of them land on a
+    /// bound) and the saturation-aware loss is used.
+    fn check_grad_band(act: Activation, widths: &[usize], seed: u64, saturated: bool) {
         let m = net(seed, act, widths);
         let (nx, nu) = (m.nx(), m.nu());
-        let (x, u, du, uj) = data(seed, nx, nu, 7);
+        let (x, mut u, du, uj) = data(seed, nx, nu, 16);
+        let (blo, bhi) = (vec![-0.3; nu], vec![0.3; nu]);
+        if saturated {
+            for v in u.iter_mut() {
+                *v = v.clamp(-0.3, 0.3);
+            }
+            // The test must see both cases: clamped-exact samples and ordinary ones.
+            let mut ws = Workspace::default();
+            let (mut p, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+            let mut exact = 0;
+            for i in 0..16 {
+                m.eval(&x[i * nx..(i + 1) * nx], &mut p, &mut jac, &mut ws);
+                for r in 0..nu {
+                    exact += clamped_exact(Some((&blo, &bhi)), r, p[r], u[i * nu + r]) as usize;
+                }
+            }
+            assert!(
+                exact > 0 && exact < 16 * nu,
+                "{exact} of {} clamped-exact",
+                16 * nu
+            );
+        }
         let batch = Batch {
             x: &x,
             u: &u,
             du: &du,
             use_jac: &uj,
+            band: saturated.then_some((&blo[..], &bhi[..])),
         };
         for lam in [
             LossWeights {
@@ -998,11 +1054,17 @@ mod tests {
                 let use_jac = batch.use_jac[i] && lam.jacobian != 0.0;
                 for r in 0..nu {
                     let s = mlp.out_half[r];
-                    let e = mlp.out_center[r] + s * ws.a[m][r] - batch.u[i * nu + r];
+                    let pred = mlp.out_center[r] + s * ws.a[m][r];
+                    let exact = super::clamped_exact(batch.band, r, pred, batch.u[i * nu + r]);
+                    let e = if exact {
+                        0.0
+                    } else {
+                        pred - batch.u[i * nu + r]
+                    };
                     parts.value += lam.value * inv_b * e * e;
                     ws.ga[r] = 2.0 * lam.value * inv_b * e * s;
                     for k in 0..nx {
-                        let g = if use_jac {
+                        let g = if use_jac && !exact {
                             let e = s * ws.t[m][r * nx + k] - batch.du[i * nu * nx + r * nx + k];
                             parts.jacobian += lam.jacobian * inv_b * e * e;
                             2.0 * lam.jacobian * inv_b * e * s
@@ -1096,12 +1158,18 @@ mod tests {
             let (nx, nu) = (m.nx(), m.nu());
             let mut ws = Workspace::default();
             for b in [1usize, 7, 35, 64, 65, 200] {
-                let (x, u, du, uj) = data(ci as u64 + 3 * b as u64, nx, nu, b);
+                let (x, mut u, du, uj) = data(ci as u64 + 3 * b as u64, nx, nu, b);
+                let (blo, bhi) = (vec![-0.5; nu], vec![0.5; nu]);
+                let banded = b % 2 == 1;
+                if banded {
+                    u.iter_mut().for_each(|v| *v = v.clamp(-0.5, 0.5));
+                }
                 let batch = Batch {
                     x: &x,
                     u: &u,
                     du: &du,
                     use_jac: &uj,
+                    band: banded.then_some((&blo[..], &bhi[..])),
                 };
                 for lam in [
                     LossWeights {

@@ -34,6 +34,9 @@ pub struct Label {
     pub degeneracy: Option<Degeneracy>,
     /// Largest state-bound slack (0 for hard labels).
     pub max_slack: f64,
+    /// The strongly active constraint rows of the solution (empty when unlabelled): two
+    /// labels with the same active set lie in the same smooth piece of κ.
+    pub active: Vec<usize>,
 }
 
 /// A reusable MPC law evaluator: one hard and (lazily) one soft SQP workspace.
@@ -78,6 +81,7 @@ impl MpcLaw {
             info: r.info,
             degeneracy: sens.degeneracy,
             max_slack: r.point.z[ocp.is()..].iter().fold(0.0f64, |m, v| m.max(*v)),
+            active: sens.active,
         }
     }
 
@@ -92,6 +96,7 @@ impl MpcLaw {
             info,
             degeneracy: None,
             max_slack: f64::NAN,
+            active: Vec::new(),
         }
     }
 

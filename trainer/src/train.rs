@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Model file format version.
-pub const MODEL_VERSION: u32 = 1;
+pub const MODEL_VERSION: u32 = 2;
 /// Magic bytes of a model file.
 pub const MODEL_MAGIC: [u8; 8] = *b"AMPCMODL";
 
@@ -303,18 +303,49 @@ pub fn train(
     problem_hash: &str,
     dataset_hash: &str,
 ) -> TrainedModel {
+    train_from(
+        None,
+        settings,
+        opts,
+        train,
+        validation,
+        domain,
+        u_range,
+        problem_hash,
+        dataset_hash,
+    )
+}
+
+/// [`train`], started from the weights of `init` (a warm start, e.g. after new data
+/// arrived) instead of the seeded initial weights. `init` must have the settings' layer
+/// widths; its input/output scaling is kept.
+#[allow(clippy::too_many_arguments)]
+pub fn train_from(
+    init: Option<Mlp>,
+    settings: &TrainSettings,
+    opts: &TrainOptions,
+    train: &TrainSet,
+    validation: &TrainSet,
+    domain: (&[f64], &[f64]),
+    u_range: (&[f64], &[f64]),
+    problem_hash: &str,
+    dataset_hash: &str,
+) -> TrainedModel {
     let mut widths = vec![train.nx];
     widths.extend(&settings.hidden);
     widths.push(train.nu);
-    let mut mlp = Mlp::new(
-        &widths,
-        settings.activation,
-        settings.seed,
-        domain.0,
-        domain.1,
-        u_range.0,
-        u_range.1,
-    );
+    let mut mlp = match init {
+        Some(m) if m.widths() == widths => m,
+        _ => Mlp::new(
+            &widths,
+            settings.activation,
+            settings.seed,
+            domain.0,
+            domain.1,
+            u_range.0,
+            u_range.1,
+        ),
+    };
     let lam = if opts.nominal {
         LossWeights {
             value: settings.lambda[0],
@@ -328,6 +359,7 @@ pub fn train(
             weights: settings.lambda[2],
         }
     };
+    let band = settings.saturation_aware.then_some(u_range);
     let (nx, nu) = (train.nx, train.nu);
     let n = train.len();
     let bs = settings.batch_size.min(n.max(1));
@@ -375,6 +407,7 @@ pub fn train(
                 u: &bu,
                 du: &bdu,
                 use_jac: &bj,
+                band,
             };
             mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
             adam.t += 1;
@@ -402,6 +435,7 @@ pub fn train(
                 u: &train.u,
                 du: &train.du,
                 use_jac: &train.use_jac,
+                band,
             };
             let loss = mlp.loss(&full, lam, &mut ws);
             let (_, st) = errors(&mlp, train);
