@@ -97,6 +97,7 @@ fn batch_of(set: &TrainSet, n: usize) -> Batch<'_> {
         u: &set.u[..n * nu],
         du: &set.du[..n * nu * nx],
         use_jac: &set.use_jac[..n],
+        band: None,
     }
 }
 
@@ -208,6 +209,7 @@ fn scaling(c: &mut Criterion) {
                 u: &set.u[s * nu..e * nu],
                 du: &set.du[s * nu * nx..e * nu * nx],
                 use_jac: &set.use_jac[s..e],
+                band: None,
             };
             mlp.loss_grad(&b, LAM, &mut grad, &mut ws);
             adam.step(&mut mlp, &grad, 1e-3);

@@ -24,6 +24,7 @@ pub mod netbounds;
 pub mod ocp;
 pub mod pipeline;
 pub mod qp;
+pub mod refine;
 pub mod report;
 pub mod sampling;
 pub mod sensitivity;

@@ -39,6 +39,11 @@
 use crate::netbounds::{BoxBounds, Iv};
 use serde::{Deserialize, Serialize};
 
+/// Accuracy allowance on the labels κ(v): the solver's KKT tolerance makes |κ̂ − κ| far
+/// below this; it is added to every ε_C (a cell whose corners all saturate would otherwise
+/// get ε_C = 0 while the labels themselves are only known to ~1e-8).
+pub const LABEL_TOL: f64 = 1e-6;
+
 /// Settings of the local certificate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -89,6 +94,41 @@ pub struct CellBound {
     pub form: Form,
     /// Per-axis contributions to the remainder, summed over the outputs (where to split).
     pub axis_terms: Vec<f64>,
+}
+
+/// The estimated range of ∂κ_i/∂x_k over a cell (corner sensitivities and k-edge secant
+/// slopes, widened about their centre by `safety`) and the largest k-edge difference
+/// quotient of ∂κ_i/∂x_k (unscaled). `wk` is the cell's width along k.
+pub fn mpc_slope_estimate(
+    corners: &[Corner],
+    wk: f64,
+    nx: usize,
+    i: usize,
+    k: usize,
+    safety: f64,
+) -> (Iv, f64) {
+    let (mut kmin, mut kmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut q = 0.0f64;
+    for (c, cv) in corners.iter().enumerate() {
+        let g = cv.du[i * nx + k];
+        kmin = kmin.min(g);
+        kmax = kmax.max(g);
+        if c & (1 << k) == 0 {
+            let d = &corners[c | (1 << k)];
+            let sec = (d.u[i] - cv.u[i]) / wk;
+            kmin = kmin.min(sec);
+            kmax = kmax.max(sec);
+            q = q.max((d.du[i * nx + k] - g).abs() / wk);
+        }
+    }
+    let (mid, half) = (0.5 * (kmin + kmax), 0.5 * (kmax - kmin) * safety);
+    (
+        Iv {
+            lo: mid - half,
+            hi: mid + half,
+        },
+        q,
+    )
 }
 
 /// Where the clamp leaves κ_NN,i over the cell.
@@ -144,25 +184,7 @@ pub fn cell_bound(
             if w[k] <= 0.0 {
                 continue;
             }
-            let (mut kmin, mut kmax) = (f64::INFINITY, f64::NEG_INFINITY);
-            let mut q = 0.0f64;
-            for (c, cv) in corners.iter().enumerate() {
-                let g = cv.du[i * nx + k];
-                kmin = kmin.min(g);
-                kmax = kmax.max(g);
-                if c & (1 << k) == 0 {
-                    let d = &corners[c | (1 << k)];
-                    let sec = (d.u[i] - cv.u[i]) / w[k];
-                    kmin = kmin.min(sec);
-                    kmax = kmax.max(sec);
-                    q = q.max((d.du[i * nx + k] - g).abs() / w[k]);
-                }
-            }
-            let (mid, half) = (0.5 * (kmin + kmax), 0.5 * (kmax - kmin) * s.safety);
-            let kr = Iv {
-                lo: mid - half,
-                hi: mid + half,
-            };
+            let (kr, q) = mpc_slope_estimate(corners, w[k], nx, i, k, s.safety);
             let j = net.jac[i * nx + k];
             let jr = match clamp {
                 Clamp::Inside => j,
@@ -209,7 +231,7 @@ pub fn cell_bound(
         eps2 += (e0 + r) * (e0 + r);
     }
     CellBound {
-        eps: eps2.sqrt(),
+        eps: eps2.sqrt() + LABEL_TOL,
         corner: corner2.sqrt(),
         remainder: rem2.sqrt(),
         form,

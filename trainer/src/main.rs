@@ -162,6 +162,32 @@ enum Cmd {
         #[arg(long, default_value = "pendulum")]
         name: String,
     },
+    /// Adaptive refinement with local certificates: grow the data and the net until every
+    /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
+    Refine {
+        /// Problem file (default: the embedded pendulum); its `[refine]` table applies.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Target certified ε (overrides `refine.target_eps`).
+        #[arg(long)]
+        target_eps: Option<f64>,
+        /// Budget of OCP solves (overrides `refine.budget`).
+        #[arg(long)]
+        budget: Option<usize>,
+        /// Output directory (default: runs/<name>/refine).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// After refining, check the certificate at this many random states solved by the
+        /// MPC (writes check.json).
+        #[arg(long)]
+        check: Option<usize>,
+        /// Seed of the check's states.
+        #[arg(long, default_value_t = 2024)]
+        check_seed: u64,
+        /// No progress lines.
+        #[arg(long, short)]
+        quiet: bool,
+    },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
         /// Output dataset file.
@@ -520,6 +546,111 @@ fn train_cmd(
     Ok(())
 }
 
+#[allow(clippy::too_many_arguments)]
+fn refine_cmd(
+    config: &Option<PathBuf>,
+    target_eps: Option<f64>,
+    budget: Option<usize>,
+    out: &Option<PathBuf>,
+    check: Option<usize>,
+    check_seed: u64,
+    quiet: bool,
+) -> Result<()> {
+    use trainer::refine;
+    let mut cfg = load_config(config)?;
+    if let Some(e) = target_eps {
+        cfg.refine.target_eps = e;
+    }
+    if let Some(b) = budget {
+        cfg.refine.budget = b;
+    }
+    cfg.refine
+        .validate(cfg.system.nx())
+        .context("invalid --target-eps / --budget")?;
+    let rs = cfg.refine.clone();
+    let dir = out
+        .clone()
+        .unwrap_or_else(|| Path::new("runs").join(&cfg.name).join("refine"));
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let t0 = std::time::Instant::now();
+    fn line(l: &refine::RoundLog, budget: usize) {
+        eprintln!(
+            "round {:>2}: cells {}/{} ok, certified ε {:.4} (corner max {:.4}), {} second-order, \
+             solves {}/{budget}, {:.1} s",
+            l.round, l.cells_ok, l.cells, l.eps, l.eps_d, l.second_order, l.solves, l.seconds
+        );
+    }
+    let opts = refine::RefineOptions {
+        on_round: (!quiet).then_some(line as fn(&refine::RoundLog, usize)),
+    };
+    let checkpoint = dir.join("refine_state.bin");
+    let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
+    let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    if !quiet {
+        let l = &cert.local;
+        println!(
+            "{}: certified ε {:.4} (target {}{}) with {} solves, {} cells ({} second-order), \
+             max corner error {:.4}; global Theorem 1 grid for this ε: {}; {:.1} s -> {}",
+            cfg.name,
+            cert.base.eps,
+            rs.target_eps,
+            if l.met { ", met" } else { ", NOT met" },
+            l.solves,
+            l.cells,
+            l.cells_second_order,
+            cert.base.eps_d,
+            match (l.global_grid_solves, l.sparsification) {
+                (Some(g), Some(s)) => format!("{g:.3e} solves ({s:.0}× more)"),
+                _ => "none suffices (ε ≤ ε_D)".into(),
+            },
+            t0.elapsed().as_secs_f64(),
+            dir.display()
+        );
+    }
+    if let Some(n) = check {
+        let c = refine::check(&cfg, &rs, &r, n, check_seed);
+        trainer::dataset::write_atomic(&dir.join("check.json"), refine::pretty(&c).as_bytes())?;
+        if !quiet {
+            println!(
+                "check at {} random states ({} labelled): max observed {:.4} vs certified {:.4} \
+                 (ratio {:.2}); over ε: {}, over own cell's ε_C: {} (max ratio {:.3}); \
+                 slope estimate misses {}/{}; {:.1} s",
+                c.states,
+                c.labelled,
+                c.max_observed,
+                c.certified,
+                c.ratio,
+                c.over_eps,
+                c.over_cell,
+                c.max_cell_ratio,
+                c.slope_misses,
+                c.slope_checks,
+                c.seconds
+            );
+        }
+        if c.over_eps > 0 || c.over_cell > 0 {
+            bail!(
+                "certificate check failed: {} states above ε, {} above their cell's ε_C (see {})",
+                c.over_eps,
+                c.over_cell,
+                dir.join("check.json").display()
+            );
+        }
+    }
+    if !r.met {
+        bail!(
+            "target ε {} not met within {} solves / {} rounds: certified ε {:.4} (outputs in {})",
+            rs.target_eps,
+            rs.budget,
+            rs.max_rounds,
+            cert.base.eps,
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 fn certify_cmd(
     config: &Option<PathBuf>,
     model: &Path,
@@ -791,6 +922,23 @@ fn main() -> std::process::ExitCode {
             quiet,
         } => sample(config, out, *shard, *quiet),
         Cmd::Merge { out, inputs } => merge(out, inputs),
+        Cmd::Refine {
+            config,
+            target_eps,
+            budget,
+            out,
+            check,
+            check_seed,
+            quiet,
+        } => refine_cmd(
+            config,
+            *target_eps,
+            *budget,
+            out,
+            *check,
+            *check_seed,
+            *quiet,
+        ),
         Cmd::Export {
             model,
             certificate,

@@ -99,6 +99,8 @@ impl Sampler {
                         + (self.hi[j] - self.lo[j]) * uniform(self.seed, i as u64, j as u64);
                 }
             }
+            // Not a plan (rejected by validation): no state.
+            SamplerKind::Adaptive => x[..d].fill(f64::NAN),
             SamplerKind::Halton => {
                 for j in 0..d {
                     let shift = if self.seed == 0 {
