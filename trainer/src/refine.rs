@@ -277,11 +277,21 @@ pub struct Refined {
     pub met: bool,
 }
 
+/// What a checkpoint must match: the labels (problem), the domain, the initial grid and
+/// the network's shape. Target, budget, rounds and training rates may change on resume
+/// (e.g. a larger budget continues a run).
 fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     h.update(cfg.problem_hash());
-    h.update(postcard::to_allocvec(&(rs, &cfg.domain)).unwrap_or_default());
+    let nx = cfg.system.nx();
+    let key = (
+        &cfg.domain,
+        rs.initial_counts(nx),
+        &rs.training.hidden,
+        rs.training.activation,
+    );
+    h.update(postcard::to_allocvec(&key).unwrap_or_default());
     crate::config::hex(&h.finalize())
 }
 
@@ -420,6 +430,10 @@ pub fn refine(
         Some(st) => {
             for (i, p) in st.points.iter().enumerate() {
                 ctx.index.insert(p.key.clone(), i);
+                // Points created by the last checkpointed round's splits, not yet solved.
+                if p.status.is_none() {
+                    pending.push(i);
+                }
             }
             st
         }
@@ -844,6 +858,10 @@ pub struct Check {
     pub over_cell: usize,
     /// Largest observed error / own cell's ε_C.
     pub max_cell_ratio: f64,
+    /// Largest share of a cell's remainder bound used: max (|e(x)| − corner term) / remainder
+    /// over states whose error exceeds their cell's corner term (≤ 1 when the estimated
+    /// remainder holds; how close to 1 says how tight it is).
+    pub max_remainder_use: f64,
     /// Sensitivities ∂κ/∂x_k (per state and axis, regular labels) outside their cell's
     /// estimated range.
     pub slope_misses: usize,
@@ -864,8 +882,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let st = &r.state;
     let mlp = &r.model.mlp;
     let band = (&cfg.ocp.u_lo[..], &cfg.ocp.u_hi[..]);
-    let eps_of: HashMap<usize, f64> = st.bounds.iter().map(|(n, b)| (*n, b.eps)).collect();
-    let certified = eps_of.values().copied().fold(0.0, f64::max);
+    let bound_of: HashMap<usize, &CellBound> = st.bounds.iter().map(|(n, b)| (*n, b)).collect();
+    let certified = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
     #[derive(Default, Clone)]
     struct Acc {
         labelled: usize,
@@ -873,6 +891,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         over_eps: usize,
         over_cell: usize,
         cell_ratio: f64,
+        rem_use: f64,
         misses: usize,
         checks: usize,
         offenders: Vec<(Vec<f64>, f64, f64, usize)>,
@@ -902,7 +921,11 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                         .sum::<f64>()
                         .sqrt();
                     let leaf = leaf_of(st, &lat, &counts, &x);
-                    let ec = eps_of.get(&leaf).copied().unwrap_or(f64::INFINITY);
+                    let b = bound_of.get(&leaf);
+                    let ec = b.map_or(f64::INFINITY, |b| b.eps);
+                    if let Some(b) = b.filter(|b| e > b.corner && b.remainder > 0.0) {
+                        a.rem_use = a.rem_use.max((e - b.corner) / b.remainder);
+                    }
                     a.max = a.max.max(e);
                     a.over_eps += (e > certified) as usize;
                     if e > ec {
@@ -954,6 +977,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             over_eps: x.over_eps + y.over_eps,
             over_cell: x.over_cell + y.over_cell,
             cell_ratio: x.cell_ratio.max(y.cell_ratio),
+            rem_use: x.rem_use.max(y.rem_use),
             misses: x.misses + y.misses,
             checks: x.checks + y.checks,
         });
@@ -967,6 +991,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         over_eps: acc.over_eps,
         over_cell: acc.over_cell,
         max_cell_ratio: acc.cell_ratio,
+        max_remainder_use: acc.rem_use,
         slope_misses: acc.misses,
         slope_checks: acc.checks,
         offenders: acc
@@ -1037,4 +1062,79 @@ pub fn write_outputs(
 /// Pretty JSON of a serialisable value.
 pub fn pretty<T: Serialize>(v: &T) -> String {
     serde_json::to_string_pretty(v).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn leaf_lookup_finds_the_cell_containing_the_state() {
+        let cfg = ProblemConfig::default();
+        let counts = [4usize, 3];
+        let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
+        let mut ctx = Ctx {
+            cfg: &cfg,
+            lat: lat.clone(),
+            index: HashMap::new(),
+        };
+        let mut st = RefineState {
+            hash: String::new(),
+            points: vec![],
+            nodes: vec![],
+            roots: vec![],
+            model: None,
+            best: None,
+            log: vec![],
+            bounds: vec![],
+        };
+        let mut new = Vec::new();
+        for r in 0..6u64 {
+            let lo = vec![(r / 2) << LEVELS, (r % 2) << LEVELS];
+            let n = ctx.node(&mut st, lo, vec![1 << LEVELS; 2], &mut new);
+            st.roots.push(n);
+        }
+        // Random splits.
+        for s in 0..300u64 {
+            let leaves: Vec<usize> = (0..st.nodes.len())
+                .filter(|&i| st.nodes[i].split.is_none())
+                .collect();
+            let n = leaves[(crate::sampling::uniform(5, s, 0) * leaves.len() as f64) as usize];
+            let axis = (crate::sampling::uniform(5, s, 1) * 2.0) as usize;
+            let node = st.nodes[n].clone();
+            let half = node.size[axis] / 2;
+            let mut size = node.size.clone();
+            size[axis] = half;
+            let a = ctx.node(&mut st, node.lo.clone(), size.clone(), &mut new);
+            let mut lo2 = node.lo.clone();
+            lo2[axis] += half;
+            let b = ctx.node(&mut st, lo2, size, &mut new);
+            st.nodes[n].split = Some((a, b, axis));
+        }
+        for s in 0..5000u64 {
+            let x: Vec<f64> = (0..2)
+                .map(|k| {
+                    cfg.domain.lo[k]
+                        + (cfg.domain.hi[k] - cfg.domain.lo[k])
+                            * crate::sampling::uniform(6, s, k as u64)
+                })
+                .collect();
+            let leaf = leaf_of(&st, &lat, &counts, &x);
+            let node = &st.nodes[leaf];
+            assert!(node.split.is_none());
+            let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
+            let (l, h) = (lat.x(&node.lo), lat.x(&hi));
+            for k in 0..2 {
+                assert!(
+                    l[k] - 1e-12 <= x[k] && x[k] <= h[k] + 1e-12,
+                    "{x:?} not in {l:?}..{h:?}"
+                );
+            }
+            // Corners are the lattice points of the box.
+            assert_eq!(st.points[node.corners[3]].x, h);
+        }
+        // The domain's upper corner belongs to a cell too.
+        let leaf = leaf_of(&st, &lat, &counts, &cfg.domain.hi);
+        assert!(st.nodes[leaf].split.is_none());
+    }
 }

@@ -1,0 +1,193 @@
+//! `trainer refine`: adaptive refinement with local certificates, end to end — the target
+//! is met, the certificate survives a check at fresh MPC solves, the outputs are usable by
+//! `trainer eval` / `trainer export`, and a run killed mid-way resumes to the same model.
+
+use ampc_tests::{tempdir, trainer, trainer_bin};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The paper's pendulum on a small domain around the upright position (saturation kinks
+/// included), a 2-16-16-1 net and a loose target, so that the run takes seconds.
+fn small_config(dir: &Path) -> String {
+    let mut out = Vec::new();
+    let mut skip = false;
+    for l in trainer::config::PENDULUM_TOML.lines() {
+        if l.starts_with("[domain]") {
+            out.push("[domain]\nlo = [-1.0, -0.5]\nhi = [1.0, 0.5]\n".to_string());
+            skip = true;
+            continue;
+        }
+        if skip && l.starts_with('[') {
+            skip = false;
+        }
+        if !skip {
+            out.push(l.to_string());
+        }
+    }
+    out.push(
+        "[refine]\ntarget_eps = 1.0\nbudget = 3000\ninitial = [5, 3]\nmax_rounds = 30\n\n\
+         [refine.training]\nhidden = [16, 16]\nepochs = 300\nbatch_size = 64\n\
+         learning_rate = 3e-3\nschedule = \"cosine\"\nlambda = [1.0, 0.1, 0.0]\n\
+         validation_n = 0\nlog_every = 1000000\nsaturation_aware = true\n"
+            .to_string(),
+    );
+    let p = dir.join("small.toml");
+    std::fs::write(&p, out.join("\n")).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+fn ok(o: &std::process::Output) {
+    assert!(
+        o.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn refine_meets_its_target_and_passes_the_check() {
+    let dir = tempdir();
+    let d = dir.path();
+    let cfg = small_config(d);
+    let out = d.join("r");
+    let o = trainer(&[
+        "refine",
+        "--config",
+        &cfg,
+        "--out",
+        out.to_str().unwrap(),
+        "--check",
+        "2000",
+        "--quiet",
+    ]);
+    ok(&o);
+    let cert: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("certificate.json")).unwrap()).unwrap();
+    for key in [
+        "eps",
+        "eps_d",
+        "l_nn",
+        "l_nn_method",
+        "l_nn_naive",
+        "l_nn_lower",
+        "l_mpc",
+        "l_mpc_is_estimate",
+        "covering_radius",
+        "f32_allowance",
+        "domain_lo",
+        "domain_hi",
+        "u_lo",
+        "u_hi",
+        "clamp_lo",
+        "clamp_hi",
+        "hash",
+        "local",
+    ] {
+        assert!(cert.get(key).is_some(), "certificate.json lacks `{key}`");
+    }
+    let eps = cert["eps"].as_f64().unwrap();
+    assert!(
+        eps <= 1.0 && eps >= cert["eps_d"].as_f64().unwrap(),
+        "ε {eps}"
+    );
+    assert_eq!(cert["local"]["met"], true);
+    let solves = cert["local"]["solves"].as_u64().unwrap();
+    assert!(solves <= 3000);
+    // The global Theorem 1 needs far more grid points for the same ε.
+    assert!(cert["local"]["sparsification"].as_f64().unwrap() > 10.0);
+    let check: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("check.json")).unwrap()).unwrap();
+    assert_eq!(check["over_eps"], 0);
+    assert_eq!(check["over_cell"], 0);
+    assert!(check["max_observed"].as_f64().unwrap() <= eps);
+    // cells.csv: one row per cell, every ε_C ≤ target.
+    let cells = std::fs::read_to_string(out.join("cells.csv")).unwrap();
+    let rows: Vec<&str> = cells.lines().skip(1).collect();
+    assert_eq!(rows.len() as u64, cert["local"]["cells"].as_u64().unwrap());
+    for r in &rows {
+        let e: f64 = r.split(',').nth(4).unwrap().parse().unwrap();
+        assert!(e <= 1.0, "{r}");
+    }
+    // The model is the format `trainer train` writes: eval and export take it.
+    let states = d.join("s.csv");
+    std::fs::write(&states, "x1,x2\n0.1,0.2\n-0.5,0.3\n").unwrap();
+    let model = out.join("model.bin");
+    ok(&trainer(&[
+        "eval",
+        "--model",
+        model.to_str().unwrap(),
+        "--states",
+        states.to_str().unwrap(),
+        "--out",
+        d.join("e.csv").to_str().unwrap(),
+    ]));
+    ok(&trainer(&[
+        "export",
+        "--model",
+        model.to_str().unwrap(),
+        "--rust",
+        d.join("w.rs").to_str().unwrap(),
+        "--postcard",
+        d.join("w.bin").to_str().unwrap(),
+    ]));
+    // The dataset file is a regular dataset (sampler "adaptive") with every solve.
+    let ds = trainer::dataset::Dataset::load(&out.join("dataset.bin")).unwrap();
+    assert_eq!(ds.records.len() as u64, solves);
+}
+
+#[test]
+fn killed_refine_resumes_to_the_same_model() {
+    let dir = tempdir();
+    let d = dir.path();
+    let cfg = small_config(d);
+    let reference = d.join("ref");
+    ok(&trainer(&[
+        "refine",
+        "--config",
+        &cfg,
+        "--out",
+        reference.to_str().unwrap(),
+        "--quiet",
+    ]));
+    let out = d.join("run");
+    let state = out.join("refine_state.bin");
+    let mut child = std::process::Command::new(trainer_bin())
+        .args([
+            "refine",
+            "--config",
+            &cfg,
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ])
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !state.exists()
+        && child.try_wait().unwrap().is_none()
+        && t.elapsed() < Duration::from_secs(120)
+    {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let running = child.try_wait().unwrap().is_none();
+    child.kill().ok();
+    child.wait().unwrap();
+    assert!(running, "the run ended before its first checkpoint");
+    assert!(!out.join("model.bin").exists());
+    ok(&trainer(&[
+        "refine",
+        "--config",
+        &cfg,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]));
+    for f in ["model.bin", "cells.csv", "dataset.bin"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(reference.join(f)).unwrap(),
+            "{f} differs after resuming"
+        );
+    }
+}
