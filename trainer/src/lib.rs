@@ -23,6 +23,7 @@ pub mod ocp;
 pub mod pipeline;
 pub mod qp;
 pub mod report;
+pub mod robust;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;
