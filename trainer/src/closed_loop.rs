@@ -66,7 +66,15 @@ pub enum Disturbance {
 
 impl Disturbance {
     /// The disturbance at step `k`, state `x`, nominal input `u` (before saturation).
-    pub fn at(&self, model: &Discrete, cfg: &ProblemConfig, k: usize, seed: u64, x: &[f64], u: &[f64]) -> Vec<f64> {
+    pub fn at(
+        &self,
+        model: &Discrete,
+        cfg: &ProblemConfig,
+        k: usize,
+        seed: u64,
+        x: &[f64],
+        u: &[f64],
+    ) -> Vec<f64> {
         let nu = u.len();
         match *self {
             Disturbance::None => vec![0.0; nu],
@@ -83,12 +91,16 @@ impl Disturbance {
                 .collect(),
             Disturbance::Adversarial { eps } => {
                 let nx = x.len();
-                let (mut f, mut jx, mut ju) = (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
+                let (mut f, mut jx, mut ju) =
+                    (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
                 model.linearize(x, u, &mut f, &mut jx, &mut ju);
                 // (margin, coordinate, side): side +1 = upper bound.
                 let mut best: Option<(f64, usize, f64)> = None;
                 for i in 0..nx {
-                    for (m, side) in [(cfg.ocp.x_hi[i] - f[i], 1.0), (f[i] - cfg.ocp.x_lo[i], -1.0)] {
+                    for (m, side) in [
+                        (cfg.ocp.x_hi[i] - f[i], 1.0),
+                        (f[i] - cfg.ocp.x_lo[i], -1.0),
+                    ] {
                         if m.is_finite() && best.is_none_or(|b| m < b.0) {
                             best = Some((m, i, side));
                         }
@@ -154,7 +166,8 @@ pub struct Run {
     /// Steps where the MPC found no label (its input then held at the last one).
     pub mpc_failures: usize,
     /// Steps where the MPC's hard problem was infeasible at the visited state (its label
-    /// was the soft one): the state had left the MPC's feasible set.
+    /// was the soft one): the state had left the MPC's feasible set (counted for the MPC
+    /// and, through the MPC solved for the divergence, for networks).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub mpc_soft_steps: usize,
 }
@@ -236,6 +249,9 @@ pub fn simulate(
                     run.left_band = true;
                 }
                 let (l, sol) = law.solve(&y, warm.as_ref());
+                if l.status == crate::sqp::SqpStatus::Soft {
+                    run.mpc_soft_steps += 1;
+                }
                 if l.status.is_labelled() {
                     warm = sol.or(warm);
                     let d =

@@ -263,7 +263,10 @@ pub struct ProblemConfig {
     pub closed_loop: ClosedLoopSettings,
     /// Robust MPC design for a certified ε (`[robust]`, off by default; not serialised
     /// when it is the default, so existing problems hash and serialise as before).
-    #[serde(default, skip_serializing_if = "crate::robust::RobustSettings::is_default")]
+    #[serde(
+        default,
+        skip_serializing_if = "crate::robust::RobustSettings::is_default"
+    )]
     pub robust: crate::robust::RobustSettings,
 }
 
@@ -689,7 +692,12 @@ mod tests {
 
     #[test]
     fn shipped_configs_parse_and_validate() {
-        for f in ["pendulum.toml", "cartpole.toml", "double_integrator.toml"] {
+        for f in [
+            "pendulum.toml",
+            "cartpole.toml",
+            "double_integrator.toml",
+            "pendulum_robust.toml",
+        ] {
             let path = std::path::PathBuf::from(DIR).join(f);
             ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{f}: {e}"));
         }

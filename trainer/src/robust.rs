@@ -419,7 +419,9 @@ impl Tube {
             .clone()
             .try_inverse()
             .unwrap_or_else(|| DMatrix::from_element(p.nrows(), p.ncols(), f64::NAN));
-        let x_margin = (0..p.nrows()).map(|i| pinv[(i, i)].max(0.0).sqrt()).collect();
+        let x_margin = (0..p.nrows())
+            .map(|i| pinv[(i, i)].max(0.0).sqrt())
+            .collect();
         let u_margin = (0..k.nrows())
             .map(|j| {
                 let kj = k.row(j);
@@ -715,10 +717,7 @@ pub fn feasible_states(rcfg: &ProblemConfig, n: usize, seed: u64) -> Vec<Vec<f64
 /// The disturbances of the robust-MPC runs, with their `closed_loop.json` keys.
 pub fn disturbances(eps: f64) -> Vec<(&'static str, Disturbance)> {
     vec![
-        (
-            "robust_mpc_bang+",
-            Disturbance::BangBang { eps, period: 0 },
-        ),
+        ("robust_mpc_bang+", Disturbance::BangBang { eps, period: 0 }),
         (
             "robust_mpc_bang-",
             Disturbance::BangBang {
@@ -737,15 +736,17 @@ pub fn disturbances(eps: f64) -> Vec<(&'static str, Disturbance)> {
 
 /// The robust closed-loop study. Keys: `robust` (the robust-design net from the upswing
 /// state, then from every Monte Carlo state; same per-run format as the other keys),
-/// `robust_mpc` (the robust MPC, no disturbance), `robust_mpc_<disturbance>` (the robust
-/// MPC with the applied input κ(x) + e, |e| ≤ ε), `nominal_mpc` (the untightened MPC, for
-/// the cost degradation). The MPC runs use the upswing state and the first
-/// `disturbed_states` Monte Carlo states.
+/// `nominal_net` (if given: the nominal design's net from the same states, its divergence
+/// measured against the nominal MPC), `robust_mpc` (the robust MPC, no disturbance),
+/// `robust_mpc_<disturbance>` (the robust MPC with the applied input κ(x) + e, |e| ≤ ε),
+/// `nominal_mpc` (the untightened MPC, for the cost degradation). The MPC runs use the
+/// upswing state and the first `disturbed_states` Monte Carlo states. Violations are
+/// always measured against the true (untightened) constraints.
 pub fn study(
     cfg: &ProblemConfig,
     rcfg: &ProblemConfig,
-    net: &TrainedModel,
-    net_eps: f64,
+    net: (&TrainedModel, f64),
+    nominal_net: Option<(&TrainedModel, f64)>,
     mc_states: &[Vec<f64>],
 ) -> ClosedLoop {
     let eps = cfg.robust.eps;
@@ -760,39 +761,49 @@ pub fn study(
     let mut net_x0 = vec![up.clone()];
     net_x0.extend(mc_states.iter().cloned());
     let mut mpc_x0 = vec![up];
-    mpc_x0.extend(
-        mc_states
-            .iter()
-            .take(cfg.robust.disturbed_states)
-            .cloned(),
+    mpc_x0.extend(mc_states.iter().take(cfg.robust.disturbed_states).cloned());
+    type Job<'a> = (
+        String,
+        bool,
+        Option<(&'a TrainedModel, f64)>,
+        Vec<f64>,
+        SimSettings,
     );
-    // (key, robust?, net?, x0, settings)
-    let mut jobs: Vec<(String, bool, bool, Vec<f64>, SimSettings)> = Vec::new();
+    // (key, robust law?, net, x0, settings)
+    let mut jobs: Vec<Job> = Vec::new();
     for x0 in &net_x0 {
-        jobs.push(("robust".into(), true, true, x0.clone(), base.clone()));
+        jobs.push(("robust".into(), true, Some(net), x0.clone(), base.clone()));
+        if let Some(nn) = nominal_net {
+            jobs.push((
+                "nominal_net".into(),
+                false,
+                Some(nn),
+                x0.clone(),
+                base.clone(),
+            ));
+        }
     }
     for (i, x0) in mpc_x0.iter().enumerate() {
-        jobs.push(("robust_mpc".into(), true, false, x0.clone(), base.clone()));
-        jobs.push(("nominal_mpc".into(), false, false, x0.clone(), base.clone()));
+        jobs.push(("robust_mpc".into(), true, None, x0.clone(), base.clone()));
+        jobs.push(("nominal_mpc".into(), false, None, x0.clone(), base.clone()));
         for (key, d) in disturbances(eps) {
             let s = SimSettings {
                 disturbance: d,
                 seed: i as u64,
                 ..base.clone()
             };
-            jobs.push((key.into(), true, false, x0.clone(), s));
+            jobs.push((key.into(), true, None, x0.clone(), s));
         }
     }
     let runs: Vec<(String, Run)> = jobs
         .par_iter()
         .map_init(
             || (MpcLaw::new(rcfg), MpcLaw::new(cfg)),
-            |(rlaw, nlaw), (key, robust, is_net, x0, s)| {
+            |(rlaw, nlaw), (key, robust, m, x0, s)| {
                 let law = if *robust { rlaw } else { nlaw };
-                let ctrl = if *is_net {
-                    Controller::Net(&net.mlp, net_eps)
-                } else {
-                    Controller::Mpc
+                let ctrl = match m {
+                    Some((m, e)) => Controller::Net(&m.mlp, *e),
+                    None => Controller::Mpc,
                 };
                 (key.clone(), simulate(rcfg, law, &ctrl, x0, s))
             },
@@ -860,8 +871,13 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let clpath = dir.join("closed_loop.json");
     let cltext = std::fs::read_to_string(&clpath).map_err(|e| io(&clpath, e))?;
     let mut cl: ClosedLoop = serde_json::from_str(&cltext).map_err(|e| io(&clpath, e))?;
+    let nominal_hash = std::fs::read(root.join("model_regularized.bin"))
+        .map(|b| crate::config::hex(&<sha2::Sha256 as sha2::Digest>::digest(&b)))
+        .unwrap_or_default();
     let inputs = format!(
-        "{}|{}|{}|{}",
+        "{}|{}|{}|{}|{}|{}",
+        env!("CARGO_PKG_VERSION"),
+        nominal_hash,
         rcfg.problem_hash(),
         cert.hash,
         serde_json::to_string(&cfg.robust).unwrap_or_default(),
@@ -878,10 +894,24 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         }
     }
     let t = std::time::Instant::now();
-    let upswing_feasible =
-        MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
+    let upswing_feasible = MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
     let mc = feasible_states(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
-    let st = study(cfg, &rcfg, &net, cert.eps, &mc);
+    // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
+    let load_nominal = || -> Option<(TrainedModel, f64)> {
+        let m = TrainedModel::load(&root.join("model_regularized.bin")).ok()?;
+        let c: Certificate =
+            serde_json::from_str(&std::fs::read_to_string(root.join("certificate.json")).ok()?)
+                .ok()?;
+        Some((m, c.eps))
+    };
+    let nominal = load_nominal();
+    let st = study(
+        cfg,
+        &rcfg,
+        (&net, cert.eps),
+        nominal.as_ref().map(|(m, e)| (m, *e)),
+        &mc,
+    );
     let study_seconds = t.elapsed().as_secs_f64();
     let mut summaries = BTreeMap::new();
     let mut upswing = BTreeMap::new();
@@ -951,7 +981,10 @@ pub fn markdown(r: &RobustReport) -> String {
     s += &format!(
         "Certificate: {:?}\n\nUpswing state feasible for the robust MPC: {}; Monte Carlo \
          states: {}; robust/nominal MPC cost: mean {:.4}, upswing {:.4}\n\n",
-        r.certificate, r.upswing_feasible, r.monte_carlo_states, r.cost_ratio_mean,
+        r.certificate,
+        r.upswing_feasible,
+        r.monte_carlo_states,
+        r.cost_ratio_mean,
         r.cost_ratio_upswing
     );
     let table = |title: &str, m: &BTreeMap<String, RunSummary>| {
@@ -1211,17 +1244,15 @@ mod tests {
         let t = &d.tube;
         eprintln!(
             "ρ {:.5} w̄ {:.4e} K {:?} scale {:?} s_N {:.4} σ {:?} τ {:?}",
-            t.rho,
-            t.w,
-            t.k,
-            t.lqr_r_scale,
-            t.s[20],
-            t.x_margin,
-            t.u_margin
+            t.rho, t.w, t.k, t.lqr_r_scale, t.s[20], t.x_margin, t.u_margin
         );
         assert_eq!(t.bound, JacobianBound::Vertices);
         assert!(t.rho < 1.0, "ρ = {}", t.rho);
-        assert!(d.stages.x_hi.iter().all(|x| x[1] > 0.3), "{:?}", d.stages.x_hi);
+        assert!(
+            d.stages.x_hi.iter().all(|x| x[1] > 0.3),
+            "{:?}",
+            d.stages.x_hi
+        );
         // The Lipschitz tightening is hopeless here.
         let mut lip = cfg.clone();
         lip.robust.method = RobustMethod::Lipschitz;
@@ -1288,7 +1319,12 @@ mod tests {
             let (l, sol) = law.solve(x, None);
             assert_eq!(l.status, SqpStatus::Converged);
             let (lr, _) = ref_law.solve(x, None);
-            assert!((l.u[0] - lr.u[0]).abs() < 1e-6, "{x:?}: {} vs {}", l.u[0], lr.u[0]);
+            assert!(
+                (l.u[0] - lr.u[0]).abs() < 1e-6,
+                "{x:?}: {} vs {}",
+                l.u[0],
+                lr.u[0]
+            );
             assert!((l.cost - lr.cost).abs() < 1e-6 * l.cost.max(1.0));
             if l.degeneracy.is_some() {
                 continue;
@@ -1370,7 +1406,12 @@ mod tests {
             )
             .flatten()
             .collect();
-        assert!(bad.is_empty(), "{} bad runs: {:?}", bad.len(), &bad[..bad.len().min(5)]);
+        assert!(
+            bad.is_empty(),
+            "{} bad runs: {:?}",
+            bad.len(),
+            &bad[..bad.len().min(5)]
+        );
     }
 
     #[test]
@@ -1387,7 +1428,10 @@ mod tests {
     fn settings_defaults_serialise_as_before_and_validate_with_keys() {
         let c = ProblemConfig::default();
         let text = toml::to_string(&c).unwrap();
-        assert!(!text.contains("robust") && !text.contains("stages"), "{text}");
+        assert!(
+            !text.contains("robust") && !text.contains("stages"),
+            "{text}"
+        );
         let mut r = c.clone();
         r.ocp.stages = Some(design(&pendulum(0.5)).unwrap().stages);
         assert_ne!(r.problem_hash(), c.problem_hash());
@@ -1419,7 +1463,10 @@ mod tests {
             "ocp.stages.x_lo"
         );
         let parsed = ProblemConfig::from_toml_str(
-            &format!("{}\n[robust]\neps = 0.7\nmethod = \"lipschitz\"\n", crate::config::PENDULUM_TOML),
+            &format!(
+                "{}\n[robust]\neps = 0.7\nmethod = \"lipschitz\"\n",
+                crate::config::PENDULUM_TOML
+            ),
             "f",
         )
         .unwrap();
