@@ -463,7 +463,7 @@ impl Tube {
                 if h[i].is_finite() {
                     h[i] -= d;
                 }
-                if !(l[i] < h[i]) {
+                if l[i] >= h[i] || l[i].is_nan() || h[i].is_nan() {
                     return Err(RobustError::Infeasible {
                         eps: self.eps,
                         reason: format!(
