@@ -1477,6 +1477,91 @@ mod tests {
     }
 
     #[test]
+    fn adversarial_disturbance_pushes_towards_the_nearest_bound() {
+        let cfg = ProblemConfig::default();
+        let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, 1);
+        let d = Disturbance::Adversarial { eps: 0.5 };
+        // x₂ near its upper bound 1: push up (∂x₂⁺/∂u > 0), so e = +ε.
+        assert_eq!(d.at(&model, &cfg, 0, 0, &[0.0, 0.95], &[0.0]), vec![0.5]);
+        // x₂ near −1: e = −ε.
+        assert_eq!(d.at(&model, &cfg, 0, 0, &[0.0, -0.95], &[0.0]), vec![-0.5]);
+        // x₁ near 2π with x₂ = 0: the x₁ bound is the nearest: e = +ε.
+        assert_eq!(d.at(&model, &cfg, 0, 0, &[6.2, 0.0], &[0.0]), vec![0.5]);
+        let b = Disturbance::BangBang {
+            eps: 0.5,
+            period: 2,
+        };
+        let seq: Vec<f64> = (0..6)
+            .map(|k| b.at(&model, &cfg, k, 0, &[0.0, 0.0], &[0.0])[0])
+            .collect();
+        assert_eq!(seq, vec![0.5, 0.5, -0.5, -0.5, 0.5, 0.5]);
+        let r = Disturbance::Random { eps: 0.5 };
+        assert!((0..100).all(|k| r.at(&model, &cfg, k, 3, &[0.0, 0.0], &[0.0])[0].abs() <= 0.5));
+    }
+
+    /// The whole robust loop on the double integrator with small sizes: files, keys,
+    /// per-run format, verdict, the certificate's U_d, and the cached second run.
+    #[test]
+    fn robust_run_end_to_end_on_the_double_integrator() {
+        let mut cfg = di(0.1);
+        cfg.robust.monte_carlo_states = 12;
+        cfg.robust.disturbed_states = 3;
+        cfg.closed_loop.steps = 40;
+        cfg.closed_loop.random_initial_states = 2;
+        cfg.closed_loop.noise_runs = 1;
+        cfg.training.epochs = 50;
+        cfg.training.validation_n = 50;
+        let root = std::env::temp_dir().join(format!("ampc_robust_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let opts = RunOptions {
+            root: root.clone(),
+            ..Default::default()
+        };
+        let rep = run(&cfg, &opts).unwrap();
+        let dir = root.join("double_integrator").join("robust");
+        for f in [
+            "robust.json",
+            "robust.md",
+            "report.md",
+            "certificate.json",
+            "weights.rs",
+        ] {
+            assert!(dir.join(f).exists(), "{f}");
+        }
+        assert!(!rep.verdict.certified);
+        assert_eq!(rep.monte_carlo_states, 12);
+        let cl: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("closed_loop.json")).unwrap())
+                .unwrap();
+        let robust = cl["robust"].as_array().unwrap();
+        assert_eq!(robust.len(), 13);
+        for k in [
+            "x0",
+            "steps",
+            "violation_steps",
+            "max_violation",
+            "max_input_divergence",
+            "cost",
+        ] {
+            assert!(robust[0].get(k).is_some(), "{k}");
+        }
+        for (k, _) in disturbances(0.1) {
+            let runs = cl[k].as_array().unwrap();
+            assert_eq!(runs.len(), 4, "{k}");
+            assert!(runs.iter().all(|r| r["violation_steps"] == 0), "{k}");
+        }
+        assert!(cl.get("mpc").is_some(), "the pipeline's own keys stay");
+        let cert: Certificate =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("certificate.json")).unwrap())
+                .unwrap();
+        assert!((cert.u_hi[0] - 0.9).abs() < 1e-12 && (cert.u_lo[0] + 0.9).abs() < 1e-12);
+        // Unchanged inputs: the study is not redone.
+        let again = run(&cfg, &opts).unwrap();
+        assert_eq!(again.study_seconds, rep.study_seconds);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
     fn verdict_compares_certified_with_design_eps() {
         assert!(verdict(0.5, 0.4).certified);
         assert!(verdict(0.5, 0.5).certified);
