@@ -432,43 +432,61 @@ fn run_cmd(
     }
     if robust.enabled() {
         cfg.robust = robust;
-        let r = trainer::robust::run(&cfg, &opts)?;
-        let tb = &r.design.tube;
-        println!(
-            "robust design ε = {}: ρ = {:.4}, w̄ = {:.4e} ({:?}), tightening at N: x {:?}",
-            tb.eps,
-            tb.rho,
-            tb.w,
-            tb.bound,
-            tb.x_margin
-                .iter()
-                .map(|m| m * tb.s[tb.s.len() - 1])
-                .collect::<Vec<_>>()
+        robust_run(&cfg, &opts, out, quiet)?;
+    }
+    Ok(())
+}
+
+/// The robust design loop of `run --robust-eps` (or `[robust] eps`), with its summary.
+fn robust_run(
+    cfg: &ProblemConfig,
+    opts: &trainer::pipeline::RunOptions,
+    out: &Path,
+    quiet: bool,
+) -> Result<()> {
+    if !quiet {
+        eprintln!(
+            "robust design for ε = {} -> {}",
+            cfg.robust.eps,
+            out.join(&cfg.name).join("robust").display()
         );
-        for (k, v) in &r.summaries {
-            println!(
-                "  {k}: {} runs, {} violating ({:.3} % of steps, max {:.4}), max divergence {:.4}, \
-                 MPC infeasible steps {}, mean cost {:.2}",
-                v.runs,
-                v.runs_violating,
-                v.violation_percent,
-                v.max_violation,
-                v.max_input_divergence,
-                v.mpc_soft_steps,
-                v.mean_cost
-            );
-        }
+    }
+    let r = trainer::robust::run(cfg, opts)?;
+    let tb = &r.design.tube;
+    println!(
+        "robust design ε = {}: ρ = {:.4}, w̄ = {:.4e} ({:?}), tightening at N: x {:?}",
+        tb.eps,
+        tb.rho,
+        tb.w,
+        tb.bound,
+        tb.x_margin
+            .iter()
+            .map(|m| m * tb.s[tb.s.len() - 1])
+            .collect::<Vec<_>>()
+    );
+    for (k, v) in &r.summaries {
         println!(
-            "  robust/nominal MPC cost: mean {:.4}, upswing {:.4}; upswing feasible: {}; study {:.1} s",
-            r.cost_ratio_mean, r.cost_ratio_upswing, r.upswing_feasible, r.study_seconds
+            "  {k}: {} runs, {} violating ({:.3} % of steps, max {:.4}), max divergence {:.4}, \
+             MPC infeasible steps {}, mean cost {:.2}",
+            v.runs,
+            v.runs_violating,
+            v.violation_percent,
+            v.max_violation,
+            v.max_input_divergence,
+            v.mpc_soft_steps,
+            v.mean_cost
         );
-        println!("{}", r.verdict.message);
-        if !quiet {
-            eprintln!(
-                "robust run -> {}",
-                out.join(&cfg.name).join("robust").display()
-            );
-        }
+    }
+    println!(
+        "  robust/nominal MPC cost: mean {:.4}, upswing {:.4}; upswing feasible: {}; study {:.1} s",
+        r.cost_ratio_mean, r.cost_ratio_upswing, r.upswing_feasible, r.study_seconds
+    );
+    println!("{}", r.verdict.message);
+    if !quiet {
+        eprintln!(
+            "robust run -> {}",
+            out.join(&cfg.name).join("robust").display()
+        );
     }
     Ok(())
 }
