@@ -384,10 +384,12 @@ pub fn certify(
         f32_allowance: 0.0,
         domain_lo: lo.clone(),
         domain_hi: hi.clone(),
-        u_lo: cfg.ocp.u_lo.clone(),
-        u_hi: cfg.ocp.u_hi.clone(),
-        clamp_lo: cfg.ocp.u_lo.iter().map(|u| u - eps).collect(),
-        clamp_hi: cfg.ocp.u_hi.iter().map(|u| u + eps).collect(),
+        // U_d, the input bounds of the data: the stage-0 bounds (tightened by the design ε
+        // in a robust design; the problem's U otherwise).
+        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        clamp_lo: cfg.ocp.u_bounds(0).0.iter().map(|u| u - eps).collect(),
+        clamp_hi: cfg.ocp.u_bounds(0).1.iter().map(|u| u + eps).collect(),
         n_points: set.len(),
         hash: model.content_hash(),
     }

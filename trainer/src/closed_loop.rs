@@ -33,6 +33,93 @@ pub enum Controller<'a> {
     Net(&'a Mlp, f64),
 }
 
+/// An additive input disturbance `e_k` (the input error of Corollary 1): the plant
+/// receives `sat(π(y_k) + e_k)`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Disturbance {
+    /// No disturbance.
+    #[default]
+    None,
+    /// Bang-bang at the bound: `e_k = eps·(−1)^⌊k/period⌋` on every input (`period` 0:
+    /// constant `eps`; a negative `eps` flips the sign).
+    BangBang {
+        /// Amplitude (signed).
+        eps: f64,
+        /// Steps between sign changes (0 = never).
+        period: usize,
+    },
+    /// Adversarial, ‖e‖₂ = eps: pushes the state towards the state bound that is closest
+    /// to active at the next state, along the input sensitivity of that bound:
+    /// `e = ±eps·(∂F_i/∂u)/‖∂F_i/∂u‖` for the coordinate i and side ± of the smallest
+    /// margin of `F(x, u)` (one-step greedy; the adversary sees the true state).
+    Adversarial {
+        /// Amplitude.
+        eps: f64,
+    },
+    /// Uniform in [−eps, eps] per input, seeded by the run's seed.
+    Random {
+        /// Amplitude.
+        eps: f64,
+    },
+}
+
+impl Disturbance {
+    /// The disturbance at step `k`, state `x`, nominal input `u` (before saturation).
+    pub fn at(
+        &self,
+        model: &Discrete,
+        cfg: &ProblemConfig,
+        k: usize,
+        seed: u64,
+        x: &[f64],
+        u: &[f64],
+    ) -> Vec<f64> {
+        let nu = u.len();
+        match *self {
+            Disturbance::None => vec![0.0; nu],
+            Disturbance::BangBang { eps, period } => {
+                let sign = if period > 0 && (k / period) % 2 == 1 {
+                    -1.0
+                } else {
+                    1.0
+                };
+                vec![sign * eps; nu]
+            }
+            Disturbance::Random { eps } => (0..nu)
+                .map(|j| eps * (2.0 * uniform(seed ^ 0x5eed_d157, k as u64, j as u64) - 1.0))
+                .collect(),
+            Disturbance::Adversarial { eps } => {
+                let nx = x.len();
+                let (mut f, mut jx, mut ju) =
+                    (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
+                model.linearize(x, u, &mut f, &mut jx, &mut ju);
+                // (margin, coordinate, side): side +1 = upper bound.
+                let mut best: Option<(f64, usize, f64)> = None;
+                for i in 0..nx {
+                    for (m, side) in [
+                        (cfg.ocp.x_hi[i] - f[i], 1.0),
+                        (f[i] - cfg.ocp.x_lo[i], -1.0),
+                    ] {
+                        if m.is_finite() && best.is_none_or(|b| m < b.0) {
+                            best = Some((m, i, side));
+                        }
+                    }
+                }
+                let Some((_, i, side)) = best else {
+                    return vec![eps; nu];
+                };
+                let row = &ju[i * nu..(i + 1) * nu];
+                let norm = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if norm == 0.0 {
+                    return vec![side * eps; nu];
+                }
+                row.iter().map(|v| side * eps * v / norm).collect()
+            }
+        }
+    }
+}
+
 /// Simulation settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SimSettings {
@@ -44,6 +131,9 @@ pub struct SimSettings {
     pub seed: u64,
     /// Relative change of the plant's first mass parameter (0.1 = +10 %).
     pub mass_mismatch: f64,
+    /// Additive input disturbance (default none).
+    #[serde(default)]
+    pub disturbance: Disturbance,
 }
 
 /// One closed-loop run.
@@ -75,6 +165,15 @@ pub struct Run {
     pub left_band: bool,
     /// Steps where the MPC found no label (its input then held at the last one).
     pub mpc_failures: usize,
+    /// Steps where the MPC's hard problem was infeasible at the visited state (its label
+    /// was the soft one): the state had left the MPC's feasible set (counted for the MPC
+    /// and, through the MPC solved for the divergence, for networks).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub mpc_soft_steps: usize,
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
 }
 
 fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
@@ -115,6 +214,7 @@ pub fn simulate(
         settling_step: None,
         left_band: false,
         mpc_failures: 0,
+        mpc_soft_steps: 0,
     };
     let mut warm: Option<PrimalDual> = None;
     let mut last_u = vec![0.0; nu];
@@ -129,6 +229,9 @@ pub fn simulate(
         let mut u = match ctrl {
             Controller::Mpc => {
                 let (l, sol) = law.solve(&y, warm.as_ref());
+                if l.status == crate::sqp::SqpStatus::Soft {
+                    run.mpc_soft_steps += 1;
+                }
                 if l.status.is_labelled() {
                     warm = sol.or(warm);
                     l.u
@@ -146,6 +249,9 @@ pub fn simulate(
                     run.left_band = true;
                 }
                 let (l, sol) = law.solve(&y, warm.as_ref());
+                if l.status == crate::sqp::SqpStatus::Soft {
+                    run.mpc_soft_steps += 1;
+                }
                 if l.status.is_labelled() {
                     warm = sol.or(warm);
                     let d =
@@ -162,6 +268,12 @@ pub fn simulate(
                 u
             }
         };
+        if s.disturbance != Disturbance::None {
+            let e = s.disturbance.at(&model, cfg, k, s.seed, &x, &u);
+            for (v, e) in u.iter_mut().zip(e) {
+                *v += e;
+            }
+        }
         for (j, v) in u.iter_mut().enumerate() {
             *v = if v.is_finite() {
                 v.clamp(ulo[j], uhi[j])
@@ -215,6 +327,7 @@ mod tests {
             noise: vec![],
             seed: 0,
             mass_mismatch: 0.0,
+            disturbance: Disturbance::None,
         };
         let r = simulate(
             &cfg,

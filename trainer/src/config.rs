@@ -45,7 +45,7 @@ pub enum ConfigError {
     },
 }
 
-fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ConfigError {
+pub(crate) fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ConfigError {
     ConfigError::Invalid {
         key: key.into(),
         reason: reason.into(),
@@ -106,6 +106,46 @@ pub struct OcpSettings {
     pub u_lo: Vec<f64>,
     /// Upper input bounds on u₀..u_{N−1}.
     pub u_hi: Vec<f64>,
+    /// Stage-dependent bounds (a tightened, robust OCP; see `trainer::robust`). When
+    /// present they replace the constant bounds above inside the OCP; the constant bounds
+    /// stay the true constraint set X × U (actuator limits, closed-loop violation checks).
+    /// Absent by default, and then not serialised, so hashes of existing problems are
+    /// unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stages: Option<StageBounds>,
+}
+
+/// Per-stage bounds of a tightened OCP: `x_lo[k−1]`, `x_hi[k−1]` bound x_k (k = 1..N),
+/// `u_lo[k]`, `u_hi[k]` bound u_k (k = 0..N−1). Infinite entries mean no bound.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageBounds {
+    /// Lower state bounds of x_1..x_N (N rows of nx).
+    pub x_lo: Vec<Vec<f64>>,
+    /// Upper state bounds of x_1..x_N (N rows of nx).
+    pub x_hi: Vec<Vec<f64>>,
+    /// Lower input bounds of u_0..u_{N−1} (N rows of nu).
+    pub u_lo: Vec<Vec<f64>>,
+    /// Upper input bounds of u_0..u_{N−1} (N rows of nu).
+    pub u_hi: Vec<Vec<f64>>,
+}
+
+impl OcpSettings {
+    /// Bounds `(lo, hi)` on the predicted state x_k, k = 1..N (stage-dependent if
+    /// [`stages`](Self::stages) is set).
+    pub fn x_bounds(&self, k: usize) -> (&[f64], &[f64]) {
+        match &self.stages {
+            Some(s) => (&s.x_lo[k - 1], &s.x_hi[k - 1]),
+            None => (&self.x_lo, &self.x_hi),
+        }
+    }
+    /// Bounds `(lo, hi)` on the input u_k, k = 0..N−1.
+    pub fn u_bounds(&self, k: usize) -> (&[f64], &[f64]) {
+        match &self.stages {
+            Some(s) => (&s.u_lo[k], &s.u_hi[k]),
+            None => (&self.u_lo, &self.u_hi),
+        }
+    }
 }
 
 fn one() -> usize {
@@ -224,9 +264,18 @@ pub struct ProblemConfig {
     /// Closed-loop study settings.
     #[serde(default)]
     pub closed_loop: ClosedLoopSettings,
-    /// Adaptive refinement with local certificates (`trainer refine`).
-    #[serde(default)]
+    /// Adaptive refinement with local certificates (`[refine]`, used by `trainer
+    /// refine`; not serialised when it is the default, so existing problems serialise as
+    /// before).
+    #[serde(default, skip_serializing_if = "RefineSettings::is_default")]
     pub refine: RefineSettings,
+    /// Robust MPC design for a certified ε (`[robust]`, off by default; not serialised
+    /// when it is the default, so existing problems hash and serialise as before).
+    #[serde(
+        default,
+        skip_serializing_if = "crate::robust::RobustSettings::is_default"
+    )]
+    pub robust: crate::robust::RobustSettings,
 }
 
 /// Adaptive refinement settings (`[refine]`, used by `trainer refine`).
@@ -343,6 +392,11 @@ impl RefineSettings {
             return Err(invalid("refine.training.learning_rate", "must be positive"));
         }
         Ok(())
+    }
+
+    /// Whether these are the default settings (then not serialised).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
     }
 
     /// Initial grid counts for an `nx`-dimensional domain.
@@ -499,7 +553,7 @@ fn check_bounds(
     Ok(())
 }
 
-fn check_matrix(
+pub(crate) fn check_matrix(
     key: &str,
     m: &MatrixSpec,
     n: usize,
@@ -593,6 +647,40 @@ impl ProblemConfig {
         check_vec("ocp.u_hi", &o.u_hi, nu, true)?;
         check_bounds("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi, false)?;
         check_bounds("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi, false)?;
+        if let Some(st) = &o.stages {
+            for (key, rows, n_rows, dim) in [
+                ("ocp.stages.x_lo", &st.x_lo, o.horizon, nx),
+                ("ocp.stages.x_hi", &st.x_hi, o.horizon, nx),
+                ("ocp.stages.u_lo", &st.u_lo, o.horizon, nu),
+                ("ocp.stages.u_hi", &st.u_hi, o.horizon, nu),
+            ] {
+                if rows.len() != n_rows {
+                    return Err(invalid(
+                        key,
+                        format!("expected {n_rows} stages (N), got {}", rows.len()),
+                    ));
+                }
+                for (k, r) in rows.iter().enumerate() {
+                    check_vec(&format!("{key}[{k}]"), r, dim, true)?;
+                }
+            }
+            for k in 0..o.horizon {
+                check_bounds(
+                    &format!("ocp.stages.x_lo[{k}]"),
+                    &format!("ocp.stages.x_hi[{k}]"),
+                    &st.x_lo[k],
+                    &st.x_hi[k],
+                    false,
+                )?;
+                check_bounds(
+                    &format!("ocp.stages.u_lo[{k}]"),
+                    &format!("ocp.stages.u_hi[{k}]"),
+                    &st.u_lo[k],
+                    &st.u_hi[k],
+                    false,
+                )?;
+            }
+        }
         check_vec("domain.lo", &self.domain.lo, nx, false)?;
         check_vec("domain.hi", &self.domain.hi, nx, false)?;
         check_bounds(
@@ -675,6 +763,7 @@ impl ProblemConfig {
                 return Err(invalid(k, format!("must be in [0, 1), got {v}")));
             }
         }
+        self.robust.validate(nx, nu)?;
         let sm = &self.sampling;
         match sm.sampler {
             SamplerKind::Grid => {
@@ -755,7 +844,12 @@ mod tests {
 
     #[test]
     fn shipped_configs_parse_and_validate() {
-        for f in ["pendulum.toml", "cartpole.toml", "double_integrator.toml"] {
+        for f in [
+            "pendulum.toml",
+            "cartpole.toml",
+            "double_integrator.toml",
+            "pendulum_robust.toml",
+        ] {
             let path = std::path::PathBuf::from(DIR).join(f);
             ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{f}: {e}"));
         }

@@ -26,6 +26,7 @@ pub mod pipeline;
 pub mod qp;
 pub mod refine;
 pub mod report;
+pub mod robust;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sqp;

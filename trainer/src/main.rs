@@ -41,6 +41,10 @@ enum Cmd {
         /// No progress bars or stage lines.
         #[arg(long, short)]
         quiet: bool,
+        /// Robust design for this input error ε (overrides `robust.eps`): tightened MPC,
+        /// data, training, certificate and the robust closed-loop study in `<out>/<name>/robust/`.
+        #[arg(long)]
+        robust_eps: Option<f64>,
     },
     /// Solve the OCP at the states of a CSV file (header x1,…,xn) and write u, ∂u/∂x, cost.
     Solve {
@@ -408,8 +412,14 @@ fn print_stage(r: &trainer::pipeline::StageReport) {
     );
 }
 
-fn run_cmd(config: &Option<PathBuf>, out: &Path, force: &[String], quiet: bool) -> Result<()> {
-    let (cfg, text) = match config {
+fn run_cmd(
+    config: &Option<PathBuf>,
+    out: &Path,
+    force: &[String],
+    quiet: bool,
+    robust_eps: Option<f64>,
+) -> Result<()> {
+    let (mut cfg, text) = match config {
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("cannot read problem file {}", p.display()))?;
@@ -423,6 +433,12 @@ fn run_cmd(config: &Option<PathBuf>, out: &Path, force: &[String], quiet: bool) 
             trainer::config::PENDULUM_TOML.to_string(),
         ),
     };
+    if let Some(e) = robust_eps {
+        cfg.robust.eps = e;
+        cfg.validate().context("--robust-eps")?;
+    }
+    // The nominal pipeline never sees the robust settings (its files stay byte-identical).
+    let robust = std::mem::take(&mut cfg.robust);
     let t = std::time::Instant::now();
     let opts = trainer::pipeline::RunOptions {
         root: out.to_path_buf(),
@@ -438,6 +454,64 @@ fn run_cmd(config: &Option<PathBuf>, out: &Path, force: &[String], quiet: bool) 
             cfg.name,
             t.elapsed().as_secs_f64(),
             out.join(&cfg.name).display()
+        );
+    }
+    if robust.enabled() {
+        cfg.robust = robust;
+        robust_run(&cfg, &opts, out, quiet)?;
+    }
+    Ok(())
+}
+
+/// The robust design loop of `run --robust-eps` (or `[robust] eps`), with its summary.
+fn robust_run(
+    cfg: &ProblemConfig,
+    opts: &trainer::pipeline::RunOptions,
+    out: &Path,
+    quiet: bool,
+) -> Result<()> {
+    if !quiet {
+        eprintln!(
+            "robust design for ε = {} -> {}",
+            cfg.robust.eps,
+            out.join(&cfg.name).join("robust").display()
+        );
+    }
+    let r = trainer::robust::run(cfg, opts)?;
+    let tb = &r.design.tube;
+    println!(
+        "robust design ε = {}: ρ = {:.4}, w̄ = {:.4e} ({:?}), tightening at N: x {:?}",
+        tb.eps,
+        tb.rho,
+        tb.w,
+        tb.bound,
+        tb.x_margin
+            .iter()
+            .map(|m| m * tb.s[tb.s.len() - 1])
+            .collect::<Vec<_>>()
+    );
+    for (k, v) in &r.summaries {
+        println!(
+            "  {k}: {} runs, {} violating ({:.3} % of steps, max {:.4}), max divergence {:.4}, \
+             MPC infeasible steps {}, mean cost {:.2}",
+            v.runs,
+            v.runs_violating,
+            v.violation_percent,
+            v.max_violation,
+            v.max_input_divergence,
+            v.mpc_soft_steps,
+            v.mean_cost
+        );
+    }
+    println!(
+        "  robust/nominal MPC cost: mean {:.4}, upswing {:.4}; upswing feasible: {}; study {:.1} s",
+        r.cost_ratio_mean, r.cost_ratio_upswing, r.upswing_feasible, r.study_seconds
+    );
+    println!("{}", r.verdict.message);
+    if !quiet {
+        eprintln!(
+            "robust run -> {}",
+            out.join(&cfg.name).join("robust").display()
         );
     }
     Ok(())
@@ -951,7 +1025,8 @@ fn main() -> std::process::ExitCode {
             out,
             force,
             quiet,
-        } => run_cmd(config, out, force, *quiet),
+            robust_eps,
+        } => run_cmd(config, out, force, *quiet, *robust_eps),
         Cmd::Train {
             config,
             data,

@@ -372,7 +372,9 @@ mod tests {
                 let b = nb.bounds(&lo, &hi);
                 for s in 0..200u64 {
                     let x: Vec<f64> = (0..2)
-                        .map(|k| lo[k] + (hi[k] - lo[k]) * uniform(seed + 100, cell * 1000 + s, k as u64))
+                        .map(|k| {
+                            lo[k] + (hi[k] - lo[k]) * uniform(seed + 100, cell * 1000 + s, k as u64)
+                        })
                         .collect();
                     let (mut u, mut j) = ([0.0], [0.0; 2]);
                     m.eval(&x, &mut u, &mut j, &mut ws);
@@ -434,7 +436,9 @@ mod tests {
         let nb = NetBounder::new(&m);
         let global = crate::lipschitz::naive_bound(&m);
         for cell in 0..50u64 {
-            let c: Vec<f64> = (0..2).map(|k| -2.0 + 5.0 * uniform(8, cell, k as u64)).collect();
+            let c: Vec<f64> = (0..2)
+                .map(|k| -2.0 + 5.0 * uniform(8, cell, k as u64))
+                .collect();
             let lo: Vec<f64> = c.iter().map(|v| v - 0.01).collect();
             let hi: Vec<f64> = c.iter().map(|v| v + 0.01).collect();
             let b = nb.bounds(&lo, &hi);

@@ -4,9 +4,13 @@
 //! min_z  Σ_{k<N} x_kᵀQx_k + u_kᵀRu_k + x_NᵀPx_N  [+ Σ l1·s + l2·s²  (soft)]
 //! s.t.   x_0 − x_s = 0                                 (parameter, an equality: LICQ-safe)
 //!        F(x_k, u_k) − x_{k+1} = 0,      k = 0..N−1     (RK4 dynamics)
-//!        x_lo ≤ x_k ≤ x_hi,              k = 1..N       (hard, or x_lo − s ≤ x_k ≤ x_hi + s, s ≥ 0)
-//!        u_lo ≤ u_k ≤ u_hi,              k = 0..N−1
+//!        x_lo,k ≤ x_k ≤ x_hi,k,          k = 1..N       (hard, or x_lo,k − s ≤ x_k ≤ x_hi,k + s, s ≥ 0)
+//!        u_lo,k ≤ u_k ≤ u_hi,k,          k = 0..N−1
 //! ```
+//! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
+//! `ocp.stages` of a tightened (robust) design ([`crate::config::OcpSettings::x_bounds`]);
+//! every consumer (SQP, QP, sensitivities) sees them only through the rows built here.
+//!
 //! Variables are ordered by stage, `z = (x_0, u_0, x_1, u_1, …, x_N, s…)`, so stage k's
 //! `(x_k, u_k)` is the contiguous block at `k·(nx+nu)`; the slacks of the soft problem
 //! follow. Equalities `c(z) = 0` are numbered `c_0` (initial state) then `c_{k+1}` (the
@@ -94,8 +98,9 @@ impl Ocp {
         for k in 0..=n {
             let off = k * (nx + nu);
             if k >= 1 {
+                let (x_lo, x_hi) = o.x_bounds(k);
                 for i in 0..nx {
-                    let (lo, hi) = (o.x_lo[i], o.x_hi[i]);
+                    let (lo, hi) = (x_lo[i], x_hi[i]);
                     if !lo.is_finite() && !hi.is_finite() {
                         continue;
                     }
@@ -130,12 +135,13 @@ impl Ocp {
                 }
             }
             if k < n {
+                let (u_lo, u_hi) = o.u_bounds(k);
                 for j in 0..nu {
-                    if o.u_hi[j].is_finite() {
-                        rows.push(one(off + nx + j, 1.0, o.u_hi[j]));
+                    if u_hi[j].is_finite() {
+                        rows.push(one(off + nx + j, 1.0, u_hi[j]));
                     }
-                    if o.u_lo[j].is_finite() {
-                        rows.push(one(off + nx + j, -1.0, -o.u_lo[j]));
+                    if u_lo[j].is_finite() {
+                        rows.push(one(off + nx + j, -1.0, -u_lo[j]));
                     }
                 }
             }

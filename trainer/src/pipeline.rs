@@ -489,6 +489,7 @@ pub fn closed_loop(
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
+        disturbance: Default::default(),
     };
     let x0s = initial_states(cfg);
     let eps = |m: &TrainedModel| {
