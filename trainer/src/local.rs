@@ -32,6 +32,7 @@
 //!   strongly active set (κ is smooth where the active set is constant — assumed to hold on
 //!   the whole cell): s × the largest edge difference quotient |∂_kκ(v + w_k e_k) −
 //!   ∂_kκ(v)| / w_k (each is a mean of ∂²_kk κ along its edge).
+//!
 //! These are estimates: a region of another active set strictly inside C, touching no
 //! corner, is not seen. The soundness check (`trainer refine --check`) measures how often
 //! the estimated ranges miss sampled values.
@@ -282,14 +283,11 @@ mod tests {
         )
     }
 
+    /// A test law: x ↦ (κ, ∂κ/∂x, active-set id).
+    type Law = dyn Fn(&[f64]) -> (f64, [f64; 2], u64);
+
     /// Bounds a cell of `law`; returns (bound, max sampled |e|).
-    fn check_cell(
-        law: &dyn Fn(&[f64]) -> (f64, [f64; 2], u64),
-        m: &Mlp,
-        lo: [f64; 2],
-        hi: [f64; 2],
-        seed: u64,
-    ) -> (CellBound, f64) {
+    fn check_cell(law: &Law, m: &Mlp, lo: [f64; 2], hi: [f64; 2], seed: u64) -> (CellBound, f64) {
         let nb = NetBounder::new(m);
         let band = ([-2.0], [2.0]);
         let mut us = Vec::new();
@@ -350,10 +348,7 @@ mod tests {
             )
         };
         let mut second = 0;
-        for (li, law) in [&sm as &dyn Fn(&[f64]) -> (f64, [f64; 2], u64), &kinked]
-            .into_iter()
-            .enumerate()
-        {
+        for (li, law) in [&sm as &Law, &kinked].into_iter().enumerate() {
             for cell in 0..300u64 {
                 let c = [
                     -1.8 + 3.6 * uniform(40 + li as u64, cell, 0),

@@ -837,6 +837,21 @@ fn leaf_of(st: &RefineState, lat: &Lattice, counts: &[usize], x: &[f64]) -> usiz
     n
 }
 
+/// A state whose observed error exceeds its cell's ε_C.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Offender {
+    /// The state.
+    pub x: Vec<f64>,
+    /// Its observed error |κ − sat(κ_NN)|.
+    pub error: f64,
+    /// Its cell's ε_C.
+    pub eps_cell: f64,
+    /// The cell's lower corner.
+    pub cell_lo: Vec<f64>,
+    /// The cell's upper corner.
+    pub cell_hi: Vec<f64>,
+}
+
 /// The soundness check: observed errors at random states against the certificate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Check {
@@ -867,8 +882,8 @@ pub struct Check {
     pub slope_misses: usize,
     /// Number of such comparisons.
     pub slope_checks: usize,
-    /// Up to 20 states whose error exceeds their cell's ε_C: (x, error, ε_C, cell lo, cell hi).
-    pub offenders: Vec<(Vec<f64>, f64, f64, Vec<f64>, Vec<f64>)>,
+    /// Up to 20 states whose error exceeds their cell's ε_C.
+    pub offenders: Vec<Offender>,
     /// Wall time, seconds.
     pub seconds: f64,
 }
@@ -1000,7 +1015,13 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             .map(|(x, e, ec, leaf)| {
                 let node = &st.nodes[*leaf];
                 let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
-                (x.clone(), *e, *ec, lat.x(&node.lo), lat.x(&hi))
+                Offender {
+                    x: x.clone(),
+                    error: *e,
+                    eps_cell: *ec,
+                    cell_lo: lat.x(&node.lo),
+                    cell_hi: lat.x(&hi),
+                }
             })
             .collect(),
         seconds: t0.elapsed().as_secs_f64(),
