@@ -632,6 +632,20 @@ fn refine_cmd(
 ) -> Result<()> {
     use trainer::refine;
     let mut cfg = load_config(config)?;
+    // A robust design (`[robust] eps > 0`): refine the data of the tightened MPC, with the
+    // design ε as the default target (Corollary 1 needs certified ε ≤ design ε).
+    let mut robust_note = None;
+    if cfg.robust.enabled() {
+        let design = trainer::robust::design(&cfg)?;
+        let eps = cfg.robust.eps;
+        let mut rcfg = trainer::robust::robust_config(&cfg, &design);
+        rcfg.name = format!("{}_robust", cfg.name);
+        if target_eps.is_none() {
+            rcfg.refine.target_eps = eps;
+        }
+        robust_note = Some(eps);
+        cfg = rcfg;
+    }
     if let Some(e) = target_eps {
         cfg.refine.target_eps = e;
     }
@@ -710,6 +724,12 @@ fn refine_cmd(
                 c.over_cell,
                 dir.join("check.json").display()
             );
+        }
+    }
+    if let Some(design) = robust_note {
+        let v = trainer::robust::verdict(design, cert.base.eps);
+        if !quiet {
+            println!("robust design: {}", v.message);
         }
     }
     if !r.met {

@@ -398,7 +398,7 @@ pub fn refine(
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let hash = settings_hash(cfg, rs);
-    let band = (&cfg.ocp.u_lo[..], &cfg.ocp.u_hi[..]);
+    let band = cfg.ocp.u_bounds(0);
     let ls = LocalSettings { safety: rs.safety };
     let mut ctx = Ctx {
         cfg,
@@ -768,11 +768,13 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         f32_allowance: 0.0,
         domain_lo: lo.clone(),
         domain_hi: hi.clone(),
-        u_lo: cfg.ocp.u_lo.clone(),
-        u_hi: cfg.ocp.u_hi.clone(),
-        // The output is clamped to U ⊕ [−ε, ε] ∩ U = U (the data's input bounds are U).
-        clamp_lo: cfg.ocp.u_lo.clone(),
-        clamp_hi: cfg.ocp.u_hi.clone(),
+        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        // The certificate is about sat(κ_NN), the output clamped to U_d (the data's stage-0
+        // input bounds): κ ∈ U_d, so the clamp never increases the error, and U_d lies
+        // inside the design's band U_d ⊕ [−ε, ε] ∩ U.
+        clamp_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        clamp_hi: cfg.ocp.u_bounds(0).1.to_vec(),
         n_points: set.len(),
         hash: r.model.content_hash(),
     };
@@ -896,7 +898,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let st = &r.state;
     let mlp = &r.model.mlp;
-    let band = (&cfg.ocp.u_lo[..], &cfg.ocp.u_hi[..]);
+    let band = cfg.ocp.u_bounds(0);
     let bound_of: HashMap<usize, &CellBound> = st.bounds.iter().map(|(n, b)| (*n, b)).collect();
     let certified = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
     #[derive(Default, Clone)]
