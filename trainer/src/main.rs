@@ -703,7 +703,7 @@ fn refine_cmd(
             println!(
                 "check at {} random states ({} labelled): max observed {:.4} vs certified {:.4} \
                  (ratio {:.2}); over ε: {}, over own cell's ε_C: {} (max ratio {:.3}); \
-                 slope estimate misses {}/{}; {:.1} s",
+                 slope estimate misses {}/{} (max excess {:.3}); {:.1} s",
                 c.states,
                 c.labelled,
                 c.max_observed,
@@ -714,6 +714,7 @@ fn refine_cmd(
                 c.max_cell_ratio,
                 c.slope_misses,
                 c.slope_checks,
+                c.max_slope_excess,
                 c.seconds
             );
         }

@@ -692,6 +692,11 @@ pub struct LocalSummary {
     pub safety: f64,
     /// The largest remainder bound of any cell.
     pub max_remainder: f64,
+    /// What binds in the cell with the largest ε_C: `corner` (the fit at its corners is the
+    /// larger term), `first_order` or `second_order` (the interpolation remainder).
+    pub binding: String,
+    /// The cell with the largest ε_C: (lower corner, upper corner).
+    pub worst_cell: (Vec<f64>, Vec<f64>),
     /// Uniform grid solves the global Theorem 1 needs for the same ε with this net's
     /// ε_D, L_NN and the L_MPC estimate (`null`: no density suffices, ε ≤ ε_D).
     pub global_grid_solves: Option<f64>,
@@ -745,6 +750,25 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         })
         .fold(0.0, f64::max);
     let req = requirement(eps, eps_d, l_mpc, l_nn, lo, hi);
+    let worst = st
+        .bounds
+        .iter()
+        .max_by(|a, b| a.1.eps.total_cmp(&b.1.eps).then(b.0.cmp(&a.0)));
+    let (binding, worst_cell) = match worst {
+        Some((n, b)) => {
+            let node = &st.nodes[*n];
+            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+            let what = if b.corner >= b.remainder {
+                "corner"
+            } else if b.form == Form::SecondOrder {
+                "second_order"
+            } else {
+                "first_order"
+            };
+            (what.to_string(), (lat.x(&node.lo), lat.x(&hi_key)))
+        }
+        None => (String::new(), (vec![], vec![])),
+    };
     let solves = st.points.len();
     let base = Certificate {
         eps,
@@ -884,6 +908,9 @@ pub struct Check {
     pub slope_misses: usize,
     /// Number of such comparisons.
     pub slope_checks: usize,
+    /// Largest distance of a missed sensitivity outside its estimated range (units of
+    /// ∂κ/∂x; 0 when none missed).
+    pub max_slope_excess: f64,
     /// Up to 20 states whose error exceeds their cell's ε_C.
     pub offenders: Vec<Offender>,
     /// Wall time, seconds.
@@ -911,6 +938,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         rem_use: f64,
         misses: usize,
         checks: usize,
+        excess: f64,
         offenders: Vec<(Vec<f64>, f64, f64, usize)>,
     }
     let acc = (0..n)
@@ -974,7 +1002,12 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                                     &corners, wk, nx, r, k, rs.safety,
                                 );
                                 a.checks += 1;
-                                a.misses += !kr.contains(l.du_dx[r * nx + k]) as usize;
+                                let g = l.du_dx[r * nx + k];
+                                if !kr.contains(g) {
+                                    a.misses += 1;
+                                    let out = (kr.lo - g).max(g - kr.hi);
+                                    a.excess = a.excess.max(out);
+                                }
                             }
                         }
                     }
@@ -997,6 +1030,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             rem_use: x.rem_use.max(y.rem_use),
             misses: x.misses + y.misses,
             checks: x.checks + y.checks,
+            excess: x.excess.max(y.excess),
         });
     Check {
         states: n,
@@ -1011,6 +1045,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         max_remainder_use: acc.rem_use,
         slope_misses: acc.misses,
         slope_checks: acc.checks,
+        max_slope_excess: acc.excess,
         offenders: acc
             .offenders
             .iter()
