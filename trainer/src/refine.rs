@@ -825,6 +825,8 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
             .iter()
             .map(|(_, b)| b.remainder)
             .fold(0.0, f64::max),
+        binding,
+        worst_cell,
         global_grid_solves: req.solves,
         sparsification: req.solves.map(|g| g / solves.max(1) as f64),
         note: format!(
