@@ -639,7 +639,11 @@ fn refine_cmd(
         let design = trainer::robust::design(&cfg)?;
         let eps = cfg.robust.eps;
         let mut rcfg = trainer::robust::robust_config(&cfg, &design);
-        rcfg.name = format!("{}_robust", cfg.name);
+        if !cfg.name.ends_with("robust") {
+            rcfg.name = format!("{}_robust", cfg.name);
+        } else {
+            rcfg.name = cfg.name.clone();
+        }
         if target_eps.is_none() {
             rcfg.refine.target_eps = eps;
         }

@@ -107,6 +107,11 @@ pub struct RobustSettings {
     /// Initial states (the first ones of the Monte Carlo set) of the robust MPC runs with
     /// input disturbances |e| ≤ ε and of the nominal-MPC cost comparison (default 100).
     pub disturbed_states: usize,
+    /// When the pipeline net's (global) certificate misses the design ε, run the adaptive
+    /// refinement with local certificates (`trainer refine`, the problem's `[refine]`
+    /// settings) on the tightened MPC with the design ε as target, and use the refined net
+    /// as the robust design's net (default false: minutes of solves).
+    pub refine: bool,
 }
 
 impl Default for RobustSettings {
@@ -122,6 +127,7 @@ impl Default for RobustSettings {
             seed: 7,
             monte_carlo_states: 1000,
             disturbed_states: 100,
+            refine: false,
         }
     }
 }
@@ -865,7 +871,31 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let ctext = std::fs::read_to_string(&cpath).map_err(|e| io(&cpath, e))?;
     let cert: Certificate = serde_json::from_str(&ctext).map_err(|e| io(&cpath, e))?;
     net.certificate = Some(cert.clone());
-    let v = verdict(cfg.robust.eps, cert.eps);
+    let mut cert = cert;
+    let mut v = verdict(cfg.robust.eps, cert.eps);
+    if !v.certified && cfg.robust.refine {
+        // The design loop's second step: refine data and network with local certificates
+        // until the certified ε meets the design ε (or the refinement budget is spent).
+        let mut fcfg = rcfg.clone();
+        fcfg.refine.target_eps = cfg.robust.eps;
+        let rdir = dir.join("refine");
+        std::fs::create_dir_all(&rdir).map_err(|e| io(&rdir, e))?;
+        let r = crate::refine::refine(
+            &fcfg,
+            &fcfg.refine,
+            Some(&rdir.join("refine_state.bin")),
+            &crate::refine::RefineOptions::default(),
+        )
+        .map_err(|e| io(&rdir, e))?;
+        let lc = crate::refine::write_outputs(&fcfg, &fcfg.refine, &r, &rdir)
+            .map_err(|e| io(&rdir, e))?;
+        if lc.base.eps < cert.eps {
+            net = r.model;
+            net.certificate = Some(lc.base.clone());
+            cert = lc.base;
+            v = verdict(cfg.robust.eps, cert.eps);
+        }
+    }
 
     // The study (skipped when closed_loop.json already holds it for the same inputs).
     let clpath = dir.join("closed_loop.json");
