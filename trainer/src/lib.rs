@@ -21,6 +21,7 @@ pub mod model;
 pub mod mpc;
 pub mod ocp;
 pub mod pipeline;
+pub mod plots;
 pub mod qp;
 pub mod report;
 pub mod sampling;
