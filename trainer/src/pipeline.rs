@@ -81,6 +81,10 @@ pub struct StageReport {
     pub seconds: f64,
     /// One-line summary.
     pub summary: String,
+    /// Input name → hash, as in the manifest.
+    pub inputs: BTreeMap<String, String>,
+    /// Output files (relative to the run directory).
+    pub outputs: Vec<String>,
 }
 
 /// Options of a pipeline run.
@@ -135,6 +139,8 @@ impl Ctx<'_> {
                             skipped: true,
                             seconds: m.seconds,
                             summary: "unchanged inputs, skipped".into(),
+                            inputs: m.inputs,
+                            outputs: m.outputs,
                         };
                         if let Some(f) = self.opts.on_stage {
                             f(&r);
@@ -146,12 +152,29 @@ impl Ctx<'_> {
             }
         }
         let t = Instant::now();
-        let summary = body(&self.dir)?;
+        // Labelling stages draw their own progress bar; the others show a spinner.
+        let spinner = if self.opts.progress && name != "sample" && name != "validate" {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} [{prefix:>11}] {elapsed}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+            );
+            b.set_prefix(name.to_string());
+            b.enable_steady_tick(std::time::Duration::from_millis(100));
+            Some(b)
+        } else {
+            None
+        };
+        let summary = body(&self.dir);
+        if let Some(b) = spinner {
+            b.finish_and_clear();
+        }
+        let summary = summary?;
         let seconds = t.elapsed().as_secs_f64();
         let m = Manifest {
             stage: name.into(),
             version: env!("CARGO_PKG_VERSION").into(),
-            inputs,
+            inputs: inputs.clone(),
             outputs: outputs.iter().map(|s| s.to_string()).collect(),
             seconds,
         };
@@ -162,6 +185,8 @@ impl Ctx<'_> {
             skipped: false,
             seconds,
             summary,
+            inputs,
+            outputs: m.outputs,
         };
         if let Some(f) = self.opts.on_stage {
             f(&r);
