@@ -76,10 +76,9 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     assert_eq!(seeds[0][1]["run"]["x"], cl["regularized"][0]["x"]);
     // Figures: the PNG is the SVG rasterised at png_scale = 1, the SVG parses (rendered
     // again here), both have text, lines and more than a blank page.
-    let index: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(run.join("plots/figures.json")).unwrap(),
-    )
-    .unwrap();
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("plots/figures.json")).unwrap())
+            .unwrap();
     assert_eq!(
         index.as_array().map(Vec::len),
         Some(trainer::pipeline::PLOTS.len())
@@ -132,7 +131,10 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     assert!(html.contains("<th>validation R²</th>") && !html.contains("|---|"));
     for st in trainer::pipeline::STAGES {
         if st != "report" {
-            assert!(html.contains(&format!("<td>{st}</td>")), "no timing of {st}");
+            assert!(
+                html.contains(&format!("<td>{st}</td>")),
+                "no timing of {st}"
+            );
         }
     }
     // Unchanged inputs: every stage is skipped.
@@ -162,7 +164,10 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     verbose.push("-v");
     let o = trainer(&verbose);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success() && err.contains("output report.html"), "{err}");
+    assert!(
+        o.status.success() && err.contains("output report.html"),
+        "{err}"
+    );
     let mut quiet = args.to_vec();
     quiet.push("--quiet");
     let o = trainer(&quiet);

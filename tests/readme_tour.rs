@@ -18,11 +18,19 @@ fn main_job_and_tour() {
         assert!(err.contains(&format!("{st:>11}] done")), "{st}: {err}");
     }
     let run = out.join("pendulum");
-    for f in ["report.md", "report.html", "plots/trajectories.png", "seeds.json"] {
+    for f in [
+        "report.md",
+        "report.html",
+        "plots/trajectories.png",
+        "seeds.json",
+    ] {
         assert!(run.join(f).exists(), "missing {f}");
     }
     let report = std::fs::read_to_string(run.join("report.md")).unwrap();
-    assert!(report.contains("Over 5 training seeds"), "default closed_loop.seeds");
+    assert!(
+        report.contains("Over 10 training seeds"),
+        "default closed_loop.seeds"
+    );
     let o = trainer(&["run", "--out", out.to_str().unwrap()]);
     assert_eq!(
         String::from_utf8_lossy(&o.stderr)
@@ -79,7 +87,12 @@ fn main_job_and_tour() {
     let col = |f: &std::path::Path, name: &str| -> Vec<f64> {
         let t = std::fs::read_to_string(f).unwrap();
         let mut l = t.lines();
-        let i = l.next().unwrap().split(',').position(|c| c == name).unwrap();
+        let i = l
+            .next()
+            .unwrap()
+            .split(',')
+            .position(|c| c == name)
+            .unwrap();
         l.map(|r| r.split(',').nth(i).unwrap().parse().unwrap())
             .collect()
     };
@@ -106,7 +119,10 @@ fn main_job_and_tour() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // The stage's export and the command's are the same files, and they are the weights
     // compiled into controller-core.
-    let gen = format!("{}/../controller-core/src/generated", env!("CARGO_MANIFEST_DIR"));
+    let gen = format!(
+        "{}/../controller-core/src/generated",
+        env!("CARGO_MANIFEST_DIR")
+    );
     for (mine, stage, committed) in [
         (&rs, "weights.rs", "weights.rs"),
         (&bin, "weights.bin", "weights.bin"),

@@ -264,8 +264,8 @@ pub struct ClosedLoopSettings {
     pub noise_fraction: f64,
     /// Relative mass mismatch of the robustness runs, ± (default 0.1).
     pub mass_mismatch: f64,
-    /// Training seeds of the seed study (default 5: seeds `training.seed` ..
-    /// `training.seed + 4`, the first one being the run's own nets): both nets are trained
+    /// Training seeds of the seed study (default 10: seeds `training.seed` ..
+    /// `training.seed + 9`, the first one being the run's own nets): both nets are trained
     /// from each seed's initial weights and simulated from the reference initial state.
     /// 0 or 1 = no extra training.
     pub seeds: usize,
@@ -280,7 +280,7 @@ impl Default for ClosedLoopSettings {
             noise_runs: 5,
             noise_fraction: 0.01,
             mass_mismatch: 0.1,
-            seeds: 5,
+            seeds: 10,
         }
     }
 }

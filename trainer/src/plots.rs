@@ -194,7 +194,7 @@ fn range(vals: impl IntoIterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn controllers<'a>(cl: &'a BTreeMap<String, Vec<Run>>) -> Vec<(&'static str, RGBColor, &'a Run)> {
+fn controllers(cl: &BTreeMap<String, Vec<Run>>) -> Vec<(&'static str, RGBColor, &Run)> {
     [
         ("MPC", "mpc", MPC_COLOR),
         ("nominal net", "nominal", NOM_COLOR),

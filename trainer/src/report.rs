@@ -677,7 +677,7 @@ mod tests {
 
     #[test]
     fn numbers_and_boxes() {
-        assert_eq!(num(-6.283185307179586), "-6.28319");
+        assert_eq!(num(-std::f64::consts::TAU), "-6.28319");
         assert_eq!(num(15.0), "15");
         assert_eq!(num(0.1), "0.1");
         assert_eq!(boxed(&[-1.0, 0.0], &[1.0, 2.5]), "[-1, 1] × [0, 2.5]");
