@@ -92,6 +92,15 @@ impl ErrorGrid {
                 lo[a] + (hi[a] - lo[a]) * i as f64 / (counts[a] - 1) as f64
             }
         };
+        if lo.len() < 2 {
+            // A one-dimensional state has no map: the figure reports the missing data.
+            return ErrorGrid {
+                counts,
+                lo: [0.0; 2],
+                hi: [1.0; 2],
+                err: Vec::new(),
+            };
+        }
         let pts: Vec<Vec<f64>> = (0..counts[0] * counts[1])
             .map(|k| {
                 let mut x = centre.clone();
@@ -177,6 +186,24 @@ fn draw_err<E: std::fmt::Debug>(figure: &str) -> impl Fn(E) -> PlotError + '_ {
     move |e| PlotError::Draw {
         figure: figure.to_string(),
         cause: format!("{e:?}"),
+    }
+}
+
+/// Tick label formatter for an axis spanning `span`: enough decimals for ~10 ticks, and
+/// no "-0.0".
+fn tick_fmt(span: f64) -> impl Fn(&f64) -> String {
+    let d = if span.is_finite() && span > 0.0 {
+        (-(span / 10.0).log10().floor()).clamp(0.0, 8.0) as usize
+    } else {
+        1
+    };
+    move |v: &f64| {
+        let s = format!("{v:.d$}");
+        if s.parse::<f64>() == Ok(0.0) {
+            format!("{:.d$}", 0.0)
+        } else {
+            s
+        }
     }
 }
 
@@ -274,9 +301,11 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
                 .y_label_area_size(75)
                 .build_cartesian_2d(0.0..t_end, ylo..yhi)
                 .map_err(draw_err(NAME))?;
+            let yfmt = tick_fmt(yhi - ylo);
             chart
                 .configure_mesh()
                 .x_desc("t [s]")
+                .y_label_formatter(&yfmt)
                 .y_desc(if is_u { &unames[idx] } else { &xnames[idx] })
                 .axis_desc_style((FONT, 17))
                 .label_style((FONT, 14))
@@ -946,6 +975,15 @@ mod tests {
         );
         assert_eq!(five_numbers(&[1.0, 2.0]), Some([1.0, 1.25, 1.5, 1.75, 2.0]));
         assert_eq!(five_numbers(&[f64::NAN]), None);
+    }
+
+    #[test]
+    fn tick_labels_have_no_negative_zero() {
+        let f = tick_fmt(2.0);
+        assert_eq!(f(&-0.00001), "0.0");
+        assert_eq!(f(&-0.25), "-0.2");
+        assert_eq!(tick_fmt(30.0)(&-4.0), "-4");
+        assert_eq!(tick_fmt(0.05)(&0.0123), "0.012");
     }
 
     #[test]
