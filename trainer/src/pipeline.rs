@@ -152,8 +152,8 @@ impl Ctx<'_> {
             }
         }
         let t = Instant::now();
-        // Labelling stages draw their own progress bar; the others show a spinner.
-        let spinner = if self.opts.progress && name != "sample" && name != "validate" {
+        // Labelling and seed stages draw their own progress bar; the others show a spinner.
+        let spinner = if self.opts.progress && !["sample", "validate", "seeds"].contains(&name) {
             let b = indicatif::ProgressBar::new_spinner();
             b.set_style(
                 indicatif::ProgressStyle::with_template("{spinner} [{prefix:>11}] {elapsed}")
@@ -465,7 +465,7 @@ pub fn run(
             TrainedModel::load(&d.join("model_regularized.bin")).map_err(|e| fail("seeds", e))?,
         ];
         let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
-        let study = seed_study(cfg, &data, &val, &dh, &own);
+        let study = seed_study(cfg, &data, &val, &dh, &own, opts.progress);
         let text = serde_json::to_string(&study).map_err(|e| fail("seeds", e))?;
         write_atomic(&d.join("seeds.json"), text.as_bytes()).map_err(|e| fail("seeds", e))?;
         Ok(format!(
@@ -632,13 +632,15 @@ pub struct SeedRun {
 
 /// The seed study: for `closed_loop.seeds` seeds starting at `training.seed`, both nets
 /// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
-/// the reference initial state. Returned per seed: [nominal, regularized].
+/// the reference initial state. Returned per seed: [nominal, regularized]. `progress`
+/// draws a bar over the (seed, net) jobs.
 pub fn seed_study(
     cfg: &ProblemConfig,
     data: &Dataset,
     validation: &Dataset,
     dataset_hash: &str,
     own: &[TrainedModel; 2],
+    progress: bool,
 ) -> Vec<[SeedRun; 2]> {
     let n = cfg.closed_loop.seeds.max(1) as u64;
     let base = cfg.training.seed;
@@ -655,6 +657,19 @@ pub fn seed_study(
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
+    };
+    let bar = if progress {
+        let b = indicatif::ProgressBar::new(jobs.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
     };
     let runs: Vec<SeedRun> = jobs
         .par_iter()
@@ -689,6 +704,7 @@ pub fn seed_study(
                 &x0,
                 &s,
             );
+            bar.inc(1);
             SeedRun {
                 seed,
                 kind: if nominal { "nominal" } else { "regularized" }.into(),
@@ -698,6 +714,7 @@ pub fn seed_study(
             }
         })
         .collect();
+    bar.finish_and_clear();
     let mut it = runs.into_iter();
     let mut out = Vec::new();
     while let (Some(a), Some(b)) = (it.next(), it.next()) {
