@@ -276,6 +276,9 @@ pub struct ProblemConfig {
         skip_serializing_if = "crate::robust::RobustSettings::is_default"
     )]
     pub robust: crate::robust::RobustSettings,
+    /// Figures of the report.
+    #[serde(default)]
+    pub plots: PlotSettings,
 }
 
 /// Adaptive refinement settings (`[refine]`, used by `trainer refine`).
@@ -409,6 +412,26 @@ impl RefineSettings {
     }
 }
 
+/// Figures of the report (`[plots]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlotSettings {
+    /// Grid of MPC-labelled states over the first two axes of X for the error map
+    /// (default [60, 30]; the other coordinates sit at the centre of X).
+    pub error_map_grid: [usize; 2],
+    /// PNG pixels per SVG unit (default 1.5).
+    pub png_scale: f64,
+}
+
+impl Default for PlotSettings {
+    fn default() -> Self {
+        PlotSettings {
+            error_map_grid: [60, 30],
+            png_scale: 1.5,
+        }
+    }
+}
+
 /// Closed-loop study settings (`[closed_loop]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -427,6 +450,11 @@ pub struct ClosedLoopSettings {
     pub noise_fraction: f64,
     /// Relative mass mismatch of the robustness runs, ± (default 0.1).
     pub mass_mismatch: f64,
+    /// Training seeds of the seed study (default 10: seeds `training.seed` ..
+    /// `training.seed + 9`, the first one being the run's own nets): both nets are trained
+    /// from each seed's initial weights and simulated from the reference initial state.
+    /// 0 or 1 = no extra training.
+    pub seeds: usize,
 }
 
 impl Default for ClosedLoopSettings {
@@ -438,6 +466,7 @@ impl Default for ClosedLoopSettings {
             noise_runs: 5,
             noise_fraction: 0.01,
             mass_mismatch: 0.1,
+            seeds: 10,
         }
     }
 }
@@ -764,6 +793,29 @@ impl ProblemConfig {
             }
         }
         self.robust.validate(nx, nu)?;
+        if c.seeds > 1000 {
+            return Err(invalid(
+                "closed_loop.seeds",
+                format!("at most 1000, got {}", c.seeds),
+            ));
+        }
+        let pl = &self.plots;
+        if let Some(i) = pl
+            .error_map_grid
+            .iter()
+            .position(|&n| !(2..=2000).contains(&n))
+        {
+            return Err(invalid(
+                format!("plots.error_map_grid[{i}]"),
+                format!("must be in 2..=2000, got {}", pl.error_map_grid[i]),
+            ));
+        }
+        if !(pl.png_scale.is_finite() && (0.1..=8.0).contains(&pl.png_scale)) {
+            return Err(invalid(
+                "plots.png_scale",
+                format!("must be in [0.1, 8], got {}", pl.png_scale),
+            ));
+        }
         let sm = &self.sampling;
         match sm.sampler {
             SamplerKind::Grid => {

@@ -23,6 +23,7 @@ pub mod mpc;
 pub mod netbounds;
 pub mod ocp;
 pub mod pipeline;
+pub mod plots;
 pub mod qp;
 pub mod refine;
 pub mod report;

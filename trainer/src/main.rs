@@ -27,8 +27,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// The whole pipeline: sample → train (nominal + regularized) → certify → closed loop →
-    /// report, each stage skipped when its inputs are unchanged.
+    /// The whole pipeline: sample → validate → train (nominal + regularized) → certify →
+    /// export → closed loop → seeds → plots → report (Markdown + HTML), each stage skipped
+    /// when its inputs are unchanged.
     Run {
         /// Problem file (default: the embedded pendulum).
         config: Option<PathBuf>,
@@ -39,12 +40,15 @@ enum Cmd {
         #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(trainer::pipeline::STAGES))]
         force: Vec<String>,
         /// No progress bars or stage lines.
-        #[arg(long, short)]
+        #[arg(long, short, conflicts_with = "verbose")]
         quiet: bool,
         /// Robust design for this input error ε (overrides `robust.eps`): tightened MPC,
         /// data, training, certificate and the robust closed-loop study in `<out>/<name>/robust/`.
         #[arg(long)]
         robust_eps: Option<f64>,
+        /// Also list each stage's input hashes and output files.
+        #[arg(long, short)]
+        verbose: bool,
     },
     /// Solve the OCP at the states of a CSV file (header x1,…,xn) and write u, ∂u/∂x, cost.
     Solve {
@@ -412,11 +416,22 @@ fn print_stage(r: &trainer::pipeline::StageReport) {
     );
 }
 
+fn print_stage_verbose(r: &trainer::pipeline::StageReport) {
+    print_stage(r);
+    for (k, h) in &r.inputs {
+        eprintln!("              input  {k} {}", &h[..h.len().min(16)]);
+    }
+    for o in &r.outputs {
+        eprintln!("              output {o}");
+    }
+}
+
 fn run_cmd(
     config: &Option<PathBuf>,
     out: &Path,
     force: &[String],
     quiet: bool,
+    verbose: bool,
     robust_eps: Option<f64>,
 ) -> Result<()> {
     let (mut cfg, text) = match config {
@@ -444,7 +459,11 @@ fn run_cmd(
         root: out.to_path_buf(),
         force: force.to_vec(),
         progress: !quiet && std::io::stderr().is_terminal(),
-        on_stage: if quiet { None } else { Some(print_stage) },
+        on_stage: match (quiet, verbose) {
+            (true, _) => None,
+            (false, true) => Some(print_stage_verbose),
+            (false, false) => Some(print_stage),
+        },
         until: None,
     };
     trainer::pipeline::run(&cfg, &text, &opts)?;
@@ -1050,8 +1069,9 @@ fn main() -> std::process::ExitCode {
             out,
             force,
             quiet,
+            verbose,
             robust_eps,
-        } => run_cmd(config, out, force, *quiet, *robust_eps),
+        } => run_cmd(config, out, force, *quiet, *verbose, *robust_eps),
         Cmd::Train {
             config,
             data,

@@ -6,7 +6,9 @@
 //! → `train` (model_nominal.bin, model_regularized.bin, same initial weights) → `certify`
 //! (certificate.json, certificate_nominal.json) → `export` (weights.rs, weights.bin,
 //! export_report.json: the regularized net for controller-core) → `closed_loop`
-//! (closed_loop.json) → `report` (report.md). A stage whose manifest matches its current inputs and whose
+//! (closed_loop.json) → `seeds` (seeds.json: both nets retrained from other seeds' initial
+//! weights and simulated from the reference initial state) → `plots` (plots/*.svg,
+//! plots/*.png) → `report` (report.md, report.html). A stage whose manifest matches its current inputs and whose
 //! outputs exist is skipped; `force` redoes named stages (and, through the changed hashes,
 //! everything downstream). Dataset generation resumes from its checkpoint when killed.
 
@@ -24,12 +26,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// The stages in order.
-pub const STAGES: [&str; 6] = [
+pub const STAGES: [&str; 9] = [
     "sample",
     "validate",
     "train",
     "certify",
+    "export",
     "closed_loop",
+    "seeds",
+    "plots",
     "report",
 ];
 
@@ -76,6 +81,10 @@ pub struct StageReport {
     pub seconds: f64,
     /// One-line summary.
     pub summary: String,
+    /// Input name → hash, as in the manifest.
+    pub inputs: BTreeMap<String, String>,
+    /// Output files (relative to the run directory).
+    pub outputs: Vec<String>,
 }
 
 /// Options of a pipeline run.
@@ -130,6 +139,8 @@ impl Ctx<'_> {
                             skipped: true,
                             seconds: m.seconds,
                             summary: "unchanged inputs, skipped".into(),
+                            inputs: m.inputs,
+                            outputs: m.outputs,
                         };
                         if let Some(f) = self.opts.on_stage {
                             f(&r);
@@ -141,12 +152,29 @@ impl Ctx<'_> {
             }
         }
         let t = Instant::now();
-        let summary = body(&self.dir)?;
+        // Labelling and seed stages draw their own progress bar; the others show a spinner.
+        let spinner = if self.opts.progress && !["sample", "validate", "seeds"].contains(&name) {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} [{prefix:>11}] {elapsed}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+            );
+            b.set_prefix(name.to_string());
+            b.enable_steady_tick(std::time::Duration::from_millis(100));
+            Some(b)
+        } else {
+            None
+        };
+        let summary = body(&self.dir);
+        if let Some(b) = spinner {
+            b.finish_and_clear();
+        }
+        let summary = summary?;
         let seconds = t.elapsed().as_secs_f64();
         let m = Manifest {
             stage: name.into(),
             version: env!("CARGO_PKG_VERSION").into(),
-            inputs,
+            inputs: inputs.clone(),
             outputs: outputs.iter().map(|s| s.to_string()).collect(),
             seconds,
         };
@@ -157,6 +185,8 @@ impl Ctx<'_> {
             skipped: false,
             seconds,
             summary,
+            inputs,
+            outputs: m.outputs,
         };
         if let Some(f) = self.opts.on_stage {
             f(&r);
@@ -414,33 +444,284 @@ pub fn run(
     if opts.until.as_deref() == Some("closed_loop") {
         return Ok(cx.reports);
     }
+    // seeds: the nets from other seeds' initial weights, in the closed loop
+    let mut inputs = BTreeMap::new();
+    for f in [
+        "dataset.bin",
+        "validation.bin",
+        "model_nominal.bin",
+        "model_regularized.bin",
+    ] {
+        inputs.insert(f.into(), cx.hash("seeds", f)?);
+    }
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("training".into(), settings(&cfg.training));
+    inputs.insert("settings".into(), settings(&cfg.closed_loop));
+    cx.stage("seeds", inputs, &["seeds.json"], |d| {
+        let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
+        let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("seeds", e))?;
+        let own = [
+            TrainedModel::load(&d.join("model_nominal.bin")).map_err(|e| fail("seeds", e))?,
+            TrainedModel::load(&d.join("model_regularized.bin")).map_err(|e| fail("seeds", e))?,
+        ];
+        let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
+        let study = seed_study(cfg, &data, &val, &dh, &own, opts.progress);
+        let text = serde_json::to_string(&study).map_err(|e| fail("seeds", e))?;
+        write_atomic(&d.join("seeds.json"), text.as_bytes()).map_err(|e| fail("seeds", e))?;
+        Ok(format!(
+            "{} seeds × 2 nets from x₀ = {:?}",
+            study.len(),
+            initial_states(cfg)[0]
+        ))
+    })?;
+    if opts.until.as_deref() == Some("seeds") {
+        return Ok(cx.reports);
+    }
+    // plots
+    let mut inputs = BTreeMap::new();
+    for f in [
+        "dataset.bin",
+        "validation.bin",
+        "model_nominal.bin",
+        "model_regularized.bin",
+        "closed_loop.json",
+    ] {
+        inputs.insert(f.into(), cx.hash("plots", f)?);
+    }
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("settings".into(), settings(&cfg.plots));
+    let plot_files: Vec<String> = PLOTS
+        .iter()
+        .flat_map(|n| [format!("plots/{n}.svg"), format!("plots/{n}.png")])
+        .collect();
+    let plot_refs: Vec<&str> = plot_files
+        .iter()
+        .map(String::as_str)
+        .chain(["plots/figures.json"])
+        .collect();
+    cx.stage("plots", inputs, &plot_refs, |d| {
+        let figs = make_plots(cfg, d)?;
+        let pdir = d.join("plots");
+        std::fs::create_dir_all(&pdir)
+            .map_err(|e| fail("plots", format!("{}: {e}", pdir.display())))?;
+        let pngs: Vec<Result<Vec<u8>, crate::plots::PlotError>> = figs
+            .par_iter()
+            .map(|f| crate::plots::to_png(f.name, &f.svg, cfg.plots.png_scale as f32))
+            .collect();
+        let mut index = Vec::new();
+        for (f, png) in figs.iter().zip(pngs) {
+            let png = png.map_err(|e| fail("plots", e))?;
+            index.push(FigureEntry {
+                name: f.name.to_string(),
+                caption: f.caption.clone(),
+                svg: format!("plots/{}.svg", f.name),
+                png: format!("plots/{}.png", f.name),
+            });
+            write_atomic(&pdir.join(format!("{}.svg", f.name)), f.svg.as_bytes())
+                .map_err(|e| fail("plots", e))?;
+            write_atomic(&pdir.join(format!("{}.png", f.name)), &png)
+                .map_err(|e| fail("plots", e))?;
+        }
+        let json = serde_json::to_string_pretty(&index).map_err(|e| fail("plots", e))?;
+        write_atomic(&pdir.join("figures.json"), json.as_bytes()).map_err(|e| fail("plots", e))?;
+        Ok(format!(
+            "{} figures (SVG + PNG) in {}",
+            figs.len(),
+            pdir.display()
+        ))
+    })?;
+    if opts.until.as_deref() == Some("plots") {
+        return Ok(cx.reports);
+    }
     // report
     let mut inputs = BTreeMap::new();
-    inputs.insert(
-        "export_report.json".into(),
-        cx.hash("report", "export_report.json")?,
-    );
     for f in [
+        "export_report.json",
         "dataset.bin",
         "certificate.json",
         "certificate_nominal.json",
         "closed_loop.json",
         "model_nominal.bin",
         "model_regularized.bin",
+        "seeds.json",
     ] {
         inputs.insert(f.into(), cx.hash("report", f)?);
     }
-    let timings: Vec<(String, f64)> = cx
+    for f in plot_refs {
+        inputs.insert(f.into(), cx.hash("report", f)?);
+    }
+    let timings: Vec<crate::report::Timing> = cx
         .reports
         .iter()
-        .map(|r| (r.stage.clone(), r.seconds))
+        .map(|r| crate::report::Timing {
+            stage: r.stage.clone(),
+            seconds: r.seconds,
+            skipped: r.skipped,
+        })
         .collect();
-    cx.stage("report", inputs, &["report.md"], |d| {
-        let md = crate::report::markdown(cfg, d, &timings).map_err(|e| fail("report", e))?;
-        write_atomic(&d.join("report.md"), md.as_bytes()).map_err(|e| fail("report", e))?;
-        Ok(format!("{}", d.join("report.md").display()))
+    // Timings change from run to run: they are shown, not hashed (a skipped report keeps the
+    // timings of the run that wrote it).
+    cx.stage("report", inputs, &["report.md", "report.html"], |d| {
+        let rep = crate::report::build(cfg, d, &timings).map_err(|e| fail("report", e))?;
+        write_atomic(&d.join("report.md"), rep.to_markdown().as_bytes())
+            .map_err(|e| fail("report", e))?;
+        let html = rep.to_html(d).map_err(|e| fail("report", e))?;
+        write_atomic(&d.join("report.html"), html.as_bytes()).map_err(|e| fail("report", e))?;
+        Ok(format!("{} + report.html", d.join("report.md").display()))
     })?;
     Ok(cx.reports)
+}
+
+/// One figure of `plots/figures.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FigureEntry {
+    /// File stem.
+    pub name: String,
+    /// Caption (with the figure's own numbers).
+    pub caption: String,
+    /// SVG path relative to the run directory.
+    pub svg: String,
+    /// PNG path relative to the run directory.
+    pub png: String,
+}
+
+/// File stems of the figures the `plots` stage writes (`plots/<stem>.svg` and `.png`).
+pub const PLOTS: [&str; 4] = ["trajectories", "errors", "error_map", "training"];
+
+/// Renders the figures of the run in `dir` (labels the error-map grid with the MPC).
+fn make_plots(cfg: &ProblemConfig, d: &Path) -> Result<Vec<crate::plots::Figure>, PipelineError> {
+    let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("plots", e))?;
+    let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("plots", e))?;
+    let nom = TrainedModel::load(&d.join("model_nominal.bin")).map_err(|e| fail("plots", e))?;
+    let reg = TrainedModel::load(&d.join("model_regularized.bin")).map_err(|e| fail("plots", e))?;
+    let p = d.join("closed_loop.json");
+    let text =
+        std::fs::read_to_string(&p).map_err(|e| fail("plots", format!("{}: {e}", p.display())))?;
+    let cl: ClosedLoop =
+        serde_json::from_str(&text).map_err(|e| fail("plots", format!("{}: {e}", p.display())))?;
+    let grid = crate::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid);
+    let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+    let inputs = crate::plots::PlotInputs {
+        cfg,
+        train: &train,
+        validation: &validation,
+        nominal: &nom,
+        regularized: &reg,
+        closed_loop: &cl,
+        grid: &grid,
+    };
+    let figs = crate::plots::all(&inputs).map_err(|e| fail("plots", e))?;
+    debug_assert_eq!(figs.len(), PLOTS.len());
+    Ok(figs)
+}
+
+/// One net of one seed in the seed study.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeedRun {
+    /// Training seed (initial weights and shuffling).
+    pub seed: u64,
+    /// `nominal` or `regularized`.
+    pub kind: String,
+    /// R² on the validation states.
+    pub r2_validation: f64,
+    /// ε_D on the dataset.
+    pub eps_d: f64,
+    /// Closed loop from the reference initial state (nominal plant, no noise).
+    pub run: Run,
+}
+
+/// The seed study: for `closed_loop.seeds` seeds starting at `training.seed`, both nets
+/// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
+/// the reference initial state. Returned per seed: [nominal, regularized]. `progress`
+/// draws a bar over the (seed, net) jobs.
+pub fn seed_study(
+    cfg: &ProblemConfig,
+    data: &Dataset,
+    validation: &Dataset,
+    dataset_hash: &str,
+    own: &[TrainedModel; 2],
+    progress: bool,
+) -> Vec<[SeedRun; 2]> {
+    let n = cfg.closed_loop.seeds.max(1) as u64;
+    let base = cfg.training.seed;
+    let (set, vset) = (
+        TrainSet::from_dataset(data),
+        TrainSet::from_dataset(validation),
+    );
+    let jobs: Vec<(u64, bool)> = (0..n)
+        .flat_map(|k| [(base + k, true), (base + k, false)])
+        .collect();
+    let x0 = initial_states(cfg).swap_remove(0);
+    let s = SimSettings {
+        steps: cfg.closed_loop.steps,
+        noise: vec![],
+        seed: 0,
+        mass_mismatch: 0.0,
+        disturbance: Default::default(),
+    };
+    let bar = if progress {
+        let b = indicatif::ProgressBar::new(jobs.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let runs: Vec<SeedRun> = jobs
+        .par_iter()
+        .map(|&(seed, nominal)| {
+            let trained;
+            let m = if seed == base {
+                &own[usize::from(!nominal)]
+            } else {
+                let mut st = cfg.training.clone();
+                st.seed = seed;
+                trained = train(
+                    &st,
+                    &TrainOptions {
+                        nominal,
+                        progress: None,
+                    },
+                    &set,
+                    &vset,
+                    (&cfg.domain.lo, &cfg.domain.hi),
+                    (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                    &data.header.problem_hash,
+                    dataset_hash,
+                );
+                &trained
+            };
+            let mut law = MpcLaw::new(cfg);
+            // No certificate for the extra seeds: the band check is off (ε = ∞) for all.
+            let run = simulate(
+                cfg,
+                &mut law,
+                &Controller::Net(&m.mlp, f64::INFINITY),
+                &x0,
+                &s,
+            );
+            bar.inc(1);
+            SeedRun {
+                seed,
+                kind: if nominal { "nominal" } else { "regularized" }.into(),
+                r2_validation: m.validation_stats.r2,
+                eps_d: m.train_stats.max,
+                run,
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut it = runs.into_iter();
+    let mut out = Vec::new();
+    while let (Some(a), Some(b)) = (it.next(), it.next()) {
+        out.push([a, b]);
+    }
+    out
 }
 
 /// Initial states of the closed-loop study: `closed_loop.x0` (default: the paper's
