@@ -698,6 +698,16 @@ fn refine_cmd(
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
     let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    if cfg.system.nx() >= 2 {
+        let fig = trainer::plots::eps_map(
+            &cfg,
+            &refine::cell_views(&cfg, &rs, &r.state),
+            rs.target_eps,
+        )?;
+        let png = trainer::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
+        trainer::dataset::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
+        trainer::dataset::write_atomic(&dir.join("eps_map.png"), &png)?;
+    }
     if !quiet {
         let l = &cert.local;
         println!(

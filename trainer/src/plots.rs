@@ -15,7 +15,9 @@
 //!   trajectories, and of the state-bound violations of the violating steps (Fig. 2);
 //! - `error_map`: ‖κ − κ_NN‖ of the regularized net on a grid over the first two axes of X
 //!   (other coordinates at the centre of X), dataset points overlaid;
-//! - `training`: loss terms, ε_D and validation R² per logged epoch.
+//! - `training`: loss terms, ε_D and validation R² per logged epoch;
+//! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
+//!   axes of X, and which term of ε_C binds there.
 
 use crate::closed_loop::{Run, VIOLATION_TOL};
 use crate::config::ProblemConfig;
@@ -1006,4 +1008,154 @@ mod tests {
         assert!(dark > 200, "{dark} dark pixels: no text drawn");
         assert!(to_png("t", "<svg", 1.0).is_err());
     }
+}
+
+/// One cell of a local certificate, for [`eps_map`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellView {
+    /// Lower corner (first two state axes are drawn).
+    pub lo: Vec<f64>,
+    /// Upper corner.
+    pub hi: Vec<f64>,
+    /// ε_C.
+    pub eps: f64,
+    /// 0: the corner (fit) term binds; 1: first-order remainder; 2: second-order remainder.
+    pub binding: u8,
+}
+
+/// The local certificate over X: ε_C per cell (left, colour scale up to max(target, max ε_C))
+/// and the term that binds in each cell (right).
+pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<Figure, PlotError> {
+    const NAME: &str = "eps_map";
+    register_font();
+    if cells.is_empty() || cfg.system.nx() < 2 {
+        return Err(PlotError::Data {
+            figure: NAME.into(),
+            cause: "no cells, or a one-dimensional state".into(),
+        });
+    }
+    let (xnames, unames) = axis_names(&cfg.system);
+    let unit = unames
+        .first()
+        .and_then(|s| s.split('[').nth(1))
+        .map(|s| format!("[{s}"))
+        .unwrap_or_default();
+    let emax = cells
+        .iter()
+        .map(|c| c.eps)
+        .filter(|v| v.is_finite())
+        .fold(target, f64::max);
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let (w, h) = (1500u32, 560u32);
+    let mut svg = String::new();
+    let bind_colors = [
+        ("fit at the corners", RGBColor(230, 159, 0)),
+        ("first-order remainder", RGBColor(0, 114, 178)),
+        ("second-order remainder", RGBColor(0, 158, 115)),
+    ];
+    {
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err(NAME))?;
+        let (left, right) = root.split_horizontally(800);
+        let (main, bar) = left.split_horizontally(800 - 110);
+        let n = cells.len();
+        let over = cells.iter().filter(|c| !(c.eps <= target)).count();
+        for (panel, title) in [
+            (
+                &main,
+                format!("ε_C per cell ({n} cells, {over} above the target {target})"),
+            ),
+            (&right, "which term of ε_C binds".to_string()),
+        ] {
+            let mut chart = ChartBuilder::on(panel)
+                .caption(title, (FONT, 18))
+                .margin(12)
+                .x_label_area_size(45)
+                .y_label_area_size(65)
+                .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
+                .map_err(draw_err(NAME))?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc(xnames[0].as_str())
+                .y_desc(xnames[1].as_str())
+                .axis_desc_style((FONT, 17))
+                .label_style((FONT, 14))
+                .draw()
+                .map_err(draw_err(NAME))?;
+            let heat = std::ptr::eq(panel, &main);
+            chart
+                .draw_series(cells.iter().map(|c| {
+                    let color = if heat {
+                        if c.eps.is_finite() {
+                            viridis(c.eps / emax)
+                        } else {
+                            RGBColor(200, 200, 200)
+                        }
+                    } else {
+                        bind_colors[c.binding.min(2) as usize].1
+                    };
+                    Rectangle::new([(c.lo[0], c.lo[1]), (c.hi[0], c.hi[1])], color.filled())
+                }))
+                .map_err(draw_err(NAME))?;
+            if !heat {
+                for (label, color) in bind_colors {
+                    chart
+                        .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                        .map_err(draw_err(NAME))?
+                        .label(label)
+                        .legend(move |(x, y)| {
+                            Rectangle::new([(x, y - 6), (x + 14, y + 6)], color.filled())
+                        });
+                }
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::UpperRight)
+                    .label_font((FONT, 14))
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(draw_err(NAME))?;
+            }
+        }
+        let mut cb = ChartBuilder::on(&bar)
+            .margin_top(45)
+            .margin_bottom(57)
+            .margin_right(10)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..1.0, 0.0..emax)
+            .map_err(draw_err(NAME))?;
+        cb.configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_desc(format!("ε_C {unit}"))
+            .axis_desc_style((FONT, 15))
+            .label_style((FONT, 13))
+            .draw()
+            .map_err(draw_err(NAME))?;
+        let nb = 100;
+        cb.draw_series((0..nb).map(|k| {
+            let (a, b) = (k as f64 / nb as f64, (k as f64 + 1.3) / nb as f64);
+            Rectangle::new(
+                [(0.0, a * emax), (1.0, b.min(1.0) * emax)],
+                viridis(a).filled(),
+            )
+        }))
+        .map_err(draw_err(NAME))?;
+        root.present().map_err(draw_err(NAME))?;
+    }
+    let slice = if cfg.system.nx() > 2 {
+        " (projected on the first two state axes)"
+    } else {
+        ""
+    };
+    Ok(Figure {
+        name: NAME,
+        caption: format!(
+            "Local certificate over X{slice}: ε_C of each of the {} cells (max {:.4}, target {target}) and the binding term.",
+            cells.len(),
+            cells.iter().map(|c| c.eps).fold(0.0, f64::max),
+        ),
+        svg,
+    })
 }

@@ -1119,6 +1119,38 @@ pub fn write_outputs(
     Ok(cert)
 }
 
+/// The leaf cells with their bounds, for the ε_C map.
+pub fn cell_views(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    st: &RefineState,
+) -> Vec<crate::plots::CellView> {
+    let lat = Lattice::new(
+        &cfg.domain.lo,
+        &cfg.domain.hi,
+        &rs.initial_counts(cfg.system.nx()),
+    );
+    st.bounds
+        .iter()
+        .map(|(n, b)| {
+            let node = &st.nodes[*n];
+            let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+            crate::plots::CellView {
+                lo: lat.x(&node.lo),
+                hi: lat.x(&hi),
+                eps: b.eps,
+                binding: if b.corner >= b.remainder {
+                    0
+                } else if b.form == Form::SecondOrder {
+                    2
+                } else {
+                    1
+                },
+            }
+        })
+        .collect()
+}
+
 /// Pretty JSON of a serialisable value.
 pub fn pretty<T: Serialize>(v: &T) -> String {
     serde_json::to_string_pretty(v).unwrap_or_default()
