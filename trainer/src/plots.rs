@@ -1059,7 +1059,10 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
         let (left, right) = root.split_horizontally(800);
         let (main, bar) = left.split_horizontally(800 - 110);
         let n = cells.len();
-        let over = cells.iter().filter(|c| !(c.eps <= target)).count();
+        let over = cells
+            .iter()
+            .filter(|c| c.eps > target || c.eps.is_nan())
+            .count();
         for (panel, title) in [
             (
                 &main,
