@@ -109,6 +109,17 @@ fn refine_meets_its_target_and_passes_the_check() {
         let e: f64 = r.split(',').nth(4).unwrap().parse().unwrap();
         assert!(e <= 1.0, "{r}");
     }
+    // The ε_C map: the PNG is the SVG's rendering and decodes at 1.5 × its size.
+    let svg = std::fs::read_to_string(out.join("eps_map.svg")).unwrap();
+    assert!(svg.contains("ε_C per cell") && svg.matches("<rect").count() >= rows.len());
+    let png = std::fs::read(out.join("eps_map.png")).unwrap();
+    assert_eq!(trainer::plots::to_png("eps_map", &svg, 1.5).unwrap(), png);
+    let info = png::Decoder::new(std::io::Cursor::new(png))
+        .read_info()
+        .expect("PNG header")
+        .info()
+        .clone();
+    assert_eq!((info.width, info.height), (2250, 840));
     // The model is the format `trainer train` writes: eval and export take it.
     let states = d.join("s.csv");
     std::fs::write(&states, "x1,x2\n0.1,0.2\n-0.5,0.3\n").unwrap();

@@ -1098,7 +1098,15 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
                     } else {
                         bind_colors[c.binding.min(2) as usize].1
                     };
-                    Rectangle::new([(c.lo[0], c.lo[1]), (c.hi[0], c.hi[1])], color.filled())
+                    // A slight overlap: anti-aliasing would leave seams between cells.
+                    let (ox, oy) = (1e-3 * (hi[0] - lo[0]), 1e-3 * (hi[1] - lo[1]));
+                    Rectangle::new(
+                        [
+                            ((c.lo[0] - ox).max(lo[0]), (c.lo[1] - oy).max(lo[1])),
+                            ((c.hi[0] + ox).min(hi[0]), (c.hi[1] + oy).min(hi[1])),
+                        ],
+                        color.filled(),
+                    )
                 }))
                 .map_err(draw_err(NAME))?;
             if !heat {
