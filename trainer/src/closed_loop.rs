@@ -29,8 +29,11 @@ pub const VIOLATION_TOL: f64 = 1e-6;
 pub enum Controller<'a> {
     /// The MPC, solved online.
     Mpc,
-    /// A network, with the certified band's half-width ε (for the band check).
-    Net(&'a Mlp, f64),
+    /// A network, with the certified band's half-width ε (for the band check) and, if
+    /// given, the output clamp of its certificate (lo, hi): the deployed controller clamps
+    /// its output there before the actuator saturation, and the input divergence is then
+    /// measured on the clamped output (the quantity the certificate bounds).
+    Net(&'a Mlp, f64, Option<(&'a [f64], &'a [f64])>),
 }
 
 /// An additive input disturbance `e_k` (the input error of Corollary 1): the plant
@@ -240,13 +243,20 @@ pub fn simulate(
                     last_u.clone()
                 }
             }
-            Controller::Net(m, eps) => {
-                let u = m.predict(&y);
+            Controller::Net(m, eps, clamp) => {
+                let mut u = m.predict(&y);
                 if u.iter()
                     .zip(ulo.iter().zip(uhi))
                     .any(|(v, (l, h))| !(*v >= l - eps && *v <= h + eps))
                 {
                     run.left_band = true;
+                }
+                if let Some((lo, hi)) = clamp {
+                    for ((v, l), h) in u.iter_mut().zip(*lo).zip(*hi) {
+                        if v.is_finite() {
+                            *v = v.clamp(*l, *h);
+                        }
+                    }
                 }
                 let (l, sol) = law.solve(&y, warm.as_ref());
                 if l.status == crate::sqp::SqpStatus::Soft {

@@ -701,7 +701,7 @@ pub fn seed_study(
             let run = simulate(
                 cfg,
                 &mut law,
-                &Controller::Net(&m.mlp, f64::INFINITY),
+                &Controller::Net(&m.mlp, f64::INFINITY, None),
                 &x0,
                 &s,
             );
@@ -820,7 +820,7 @@ pub fn closed_loop(
             |law, (name, m, x0, s)| {
                 let ctrl = match m {
                     None => Controller::Mpc,
-                    Some(m) => Controller::Net(&m.mlp, eps(m)),
+                    Some(m) => Controller::Net(&m.mlp, eps(m), None),
                 };
                 (name.clone(), simulate(cfg, law, &ctrl, x0, s))
             },

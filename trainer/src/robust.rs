@@ -808,7 +808,13 @@ pub fn study(
             |(rlaw, nlaw), (key, robust, m, x0, s)| {
                 let law = if *robust { rlaw } else { nlaw };
                 let ctrl = match m {
-                    Some((m, e)) => Controller::Net(&m.mlp, *e),
+                    Some((m, e)) => Controller::Net(
+                        &m.mlp,
+                        *e,
+                        m.certificate
+                            .as_ref()
+                            .map(|c| (&c.clamp_lo[..], &c.clamp_hi[..])),
+                    ),
                     None => Controller::Mpc,
                 };
                 (key.clone(), simulate(rcfg, law, &ctrl, x0, s))
