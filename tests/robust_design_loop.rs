@@ -1,0 +1,58 @@
+//! The whole Corollary 1 design loop at test size (`configs/pendulum_robust_small.toml`):
+//! `trainer run` designs the tightened MPC for ε = 0.5, the pipeline's net misses it, the
+//! local-certificate refinement certifies ε ≤ 0.5, and the certified net's closed loop
+//! keeps every state constraint, as the corollary promises.
+
+use ampc_tests::{config, tempdir, trainer};
+
+#[test]
+fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
+    let dir = tempdir();
+    let out = dir.path().join("runs");
+    let o = trainer(&[
+        "run",
+        &config("pendulum_robust_small.toml"),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(
+        o.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let rdir = out.join("pendulum_small").join("robust");
+    let rep: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(rdir.join("robust.json")).unwrap()).unwrap();
+    let v = &rep["verdict"];
+    assert_eq!(v["certified"], true, "{v}");
+    let eps = v["certified_eps"].as_f64().unwrap();
+    assert!(eps <= 0.5);
+    // The refined net is the one certified and simulated.
+    let cert: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(rdir.join("refine").join("certificate.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(cert["eps"].as_f64().unwrap(), eps);
+    assert_eq!(cert["local"]["met"], true);
+    let cl: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(rdir.join("closed_loop.json")).unwrap()).unwrap();
+    let robust = cl["robust"].as_array().unwrap();
+    assert!(robust.len() > 100, "{} robust-net runs", robust.len());
+    for r in robust {
+        assert_eq!(r["violation_steps"], 0, "x0 {}", r["x0"]);
+        // The clamped output stays within the certified ε of the robust MPC.
+        assert!(r["max_input_divergence"].as_f64().unwrap() <= eps + 1e-9);
+    }
+    for key in [
+        "robust_mpc_adversarial",
+        "robust_mpc_bang+",
+        "robust_mpc_bang-",
+        "robust_mpc_random",
+    ] {
+        for r in cl[key].as_array().unwrap() {
+            assert_eq!(r["violation_steps"], 0, "{key} x0 {}", r["x0"]);
+        }
+    }
+}
