@@ -42,6 +42,10 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     assert!(robust.len() > 100, "{} robust-net runs", robust.len());
     for r in robust {
         assert_eq!(r["violation_steps"], 0, "x0 {}", r["x0"]);
+        assert_eq!(r["mpc_failures"], 0, "x0 {}", r["x0"]);
+        let d = r["divergence"].as_array().unwrap();
+        assert_eq!(d.len() as u64, r["steps"].as_u64().unwrap());
+        assert!(d.iter().all(|v| v.as_f64().is_some_and(f64::is_finite)));
         // The clamped output stays within the certified ε of the robust MPC.
         assert!(r["max_input_divergence"].as_f64().unwrap() <= eps + 1e-9);
     }
@@ -51,7 +55,9 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
         "robust_mpc_bang-",
         "robust_mpc_random",
     ] {
-        for r in cl[key].as_array().unwrap() {
+        let runs = cl[key].as_array().unwrap();
+        assert!(!runs.is_empty(), "{key}");
+        for r in runs {
             assert_eq!(r["violation_steps"], 0, "{key} x0 {}", r["x0"]);
         }
     }

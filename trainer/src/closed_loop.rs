@@ -270,6 +270,8 @@ pub fn simulate(
                             .map(|(a, b)| (a - b).powi(2))
                             .sum::<f64>()
                             .sqrt();
+                    // A non-finite output (diverged net) is an infinite divergence.
+                    let d = if d.is_finite() { d } else { f64::INFINITY };
                     run.divergence.push(d);
                     run.max_input_divergence = run.max_input_divergence.max(d);
                 } else {

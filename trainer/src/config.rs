@@ -360,10 +360,24 @@ impl RefineSettings {
                 format!("expected {nx} per-axis counts, got {}", self.initial.len()),
             ));
         }
-        if let Some(i) = self.initial.iter().position(|&c| c < 2) {
+        if let Some(i) = self.initial.iter().position(|&c| !(2..=8193).contains(&c)) {
             return Err(invalid(
                 format!("refine.initial[{i}]"),
-                "must be at least 2",
+                "must be in 2..=8193 (the lattice has 40 bisection levels below it)",
+            ));
+        }
+        let grid = self
+            .initial_counts(nx)
+            .iter()
+            .try_fold(1usize, |a, &c| a.checked_mul(c));
+        if grid.is_none_or(|g| g > self.budget) {
+            return Err(invalid(
+                "refine.initial",
+                format!(
+                    "the initial grid ({:?} points per axis) needs more solves than the budget {}",
+                    self.initial_counts(nx),
+                    self.budget
+                ),
             ));
         }
         if !(self.safety.is_finite() && self.safety >= 1.0) {
@@ -946,6 +960,12 @@ mod tests {
         assert_eq!(err_key(|c| c.domain.hi[0] = f64::INFINITY), "domain.hi[0]");
         assert_eq!(err_key(|c| c.domain.lo = vec![0.0]), "domain.lo");
         assert_eq!(err_key(|c| c.sampling.counts = vec![3]), "sampling.counts");
+        assert_eq!(err_key(|c| c.refine.target_eps = 0.0), "refine.target_eps");
+        assert_eq!(err_key(|c| c.refine.budget = 80), "refine.initial");
+        assert_eq!(err_key(|c| c.refine.initial = vec![1, 3]), "refine.initial[0]");
+        assert_eq!(err_key(|c| c.refine.initial = vec![3, 9000]), "refine.initial[1]");
+        assert_eq!(err_key(|c| c.refine.safety = 0.5), "refine.safety");
+        assert_eq!(err_key(|c| c.sampling.sampler = SamplerKind::Adaptive), "sampling.sampler");
         assert_eq!(err_key(|c| c.solver.tol = 0.0), "solver.tol");
         assert_eq!(
             err_key(|c| c.system = System::Pendulum(crate::model::Pendulum {

@@ -156,6 +156,25 @@ pub fn cell_bound(
     let nu = net.value.len();
     debug_assert_eq!(corners.len(), 1 << nx);
     let w: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| b - a).collect();
+    // A non-finite network output or enclosure (a diverged net) or label: no bound.
+    let finite = net_u.iter().all(|v| v.is_finite())
+        && net
+            .value
+            .iter()
+            .all(|v| v.lo.is_finite() && v.hi.is_finite())
+        && net.jac.iter().all(|v| v.lo.is_finite() && v.hi.is_finite())
+        && corners
+            .iter()
+            .all(|c| c.u.iter().chain(c.du).all(|v| v.is_finite()));
+    if !finite {
+        return CellBound {
+            eps: f64::INFINITY,
+            corner: f64::INFINITY,
+            remainder: f64::INFINITY,
+            form: Form::FirstOrder,
+            axis_terms: vec![f64::INFINITY; nx],
+        };
+    }
     let smooth = corners
         .iter()
         .all(|c| c.regular && c.piece == corners[0].piece);
@@ -200,8 +219,8 @@ pub fn cell_bound(
             if b_ok {
                 let h = match (clamp, &net.hess_diag) {
                     (Clamp::Constant, _) => 0.0,
-                    (_, Some(h)) => h[i * nx + k].mag(),
-                    (_, None) => {
+                    (_, Some(h)) if h[i * nx + k].mag().is_finite() => h[i * nx + k].mag(),
+                    _ => {
                         b_ok = false;
                         0.0
                     }
@@ -369,6 +388,17 @@ mod tests {
             second > 50,
             "the second-order form was used on {second} cells only"
         );
+    }
+
+    #[test]
+    fn a_non_finite_network_gets_no_bound() {
+        let mut m = net();
+        let (lo, hi) = ([0.1, 0.1], [0.2, 0.2]);
+        let (b, _) = check_cell(&kinked, &m, lo, hi, 3);
+        assert!(b.eps.is_finite());
+        m.layers[0].b[0] = f64::NAN;
+        let (b, _) = check_cell(&kinked, &m, lo, hi, 3);
+        assert!(b.eps.is_infinite() && b.corner.is_infinite());
     }
 
     #[test]

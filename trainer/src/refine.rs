@@ -132,6 +132,8 @@ pub struct RefineState {
     pub log: Vec<RoundLog>,
     /// Per-leaf bounds of the last round (leaf node index, bound).
     pub bounds: Vec<(usize, CellBound)>,
+    /// The run ended (target met, or nothing left to split within budget and rounds).
+    pub finished: bool,
 }
 
 /// The geometry of the lattice.
@@ -426,6 +428,19 @@ pub fn refine(
         None => None,
     };
     let mut pending = Vec::new();
+    if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
+        // A finished run: return its result unless the settings now allow more (a lower
+        // target, a larger budget or more rounds).
+        let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
+        let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
+        if let (false, Some(model)) = (more, st.model.clone()) {
+            return Ok(Refined {
+                met,
+                state: st.clone(),
+                model,
+            });
+        }
+    }
     let mut st = match resumed {
         Some(st) => {
             for (i, p) in st.points.iter().enumerate() {
@@ -447,6 +462,7 @@ pub fn refine(
                 best: None,
                 log: Vec::new(),
                 bounds: Vec::new(),
+                finished: false,
             };
             // The initial grid's cells.
             let cells: Vec<usize> = counts.iter().map(|c| c - 1).collect();
@@ -565,24 +581,36 @@ pub fn refine(
                 // Axis: the largest remainder term; ties and infinite terms: longest side
                 // relative to X.
                 let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-                let mut axis = 0;
-                for k in 1..nx {
+                // A corner without an MPC label (failed solve): splitting cannot help; the
+                // cell stays uncertified (ε_C = ∞) and is reported.
+                if !b.corner.is_finite() {
+                    continue;
+                }
+                let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width;
+                let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
+                let Some(&first) = cand.first() else {
+                    continue;
+                };
+                // Axis: the largest remainder term; ties and infinite terms: longest side
+                // relative to X. Where the fit at the corners dominates: the longest side
+                // (more data there).
+                let mut axis = first;
+                for &k in &cand[1..] {
                     let (tk, ta) = (b.axis_terms[k], b.axis_terms[axis]);
                     if tk > ta || (tk == ta && rel(k) > rel(axis)) {
                         axis = k;
                     }
                 }
                 if b.remainder < 0.25 * b.corner || !b.axis_terms[axis].is_finite() {
-                    // The fit at the corners dominates: split the longest side for data.
-                    axis = (0..nx)
+                    axis = cand
+                        .iter()
+                        .copied()
                         .max_by(|&a, &c| rel(a).total_cmp(&rel(c)).then(c.cmp(&a)))
-                        .unwrap_or(0);
+                        .unwrap_or(first);
                 }
-                if node.size[axis] < 2 || rel(axis) < rs.min_width {
-                    continue;
-                }
+                // New points are pushed onto `st.points` as they are created.
                 let needed = 1usize << (nx - 1);
-                if st.points.len() + pending.len() + needed > rs.budget {
+                if st.points.len() + needed > rs.budget {
                     break;
                 }
                 let half = node.size[axis] / 2;
@@ -596,26 +624,29 @@ pub fn refine(
                 split_any = true;
             }
         }
+        let done = met || !split_any;
+        let mut model = model;
+        if done && !met {
+            // Not met: the best model so far, bounded on the final (finer) tree, may do
+            // better than the last one.
+            if let Some((_, best)) = st.best.clone() {
+                let b = bound_leaves(&st, &lat, &best.mlp, band, &ls);
+                let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+                if e < eps {
+                    st.bounds = b;
+                    model = best;
+                }
+            }
+            st.model = Some(model.clone());
+        }
+        st.finished = done;
         if let Some(p) = checkpoint {
             // The checkpoint holds the tree with the new (unlabelled) points: on resume,
             // they are the ones labelled first.
             let bytes = postcard::to_allocvec(&st).unwrap_or_default();
             write_atomic(p, &bytes)?;
         }
-        if met || !split_any {
-            // Not met: the best model so far, bounded on the final (finer) tree, may do
-            // better than the last one.
-            let mut model = model;
-            if !met {
-                if let Some((_, best)) = st.best.clone() {
-                    let b = bound_leaves(&st, &lat, &best.mlp, band, &ls);
-                    let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
-                    if e < eps {
-                        st.bounds = b;
-                        model = best;
-                    }
-                }
-            }
+        if done {
             let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
             return Ok(Refined {
                 met,
@@ -973,6 +1004,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     if let Some(b) = b.filter(|b| e > b.corner && b.remainder > 0.0) {
                         a.rem_use = a.rem_use.max((e - b.corner) / b.remainder);
                     }
+                    // A non-finite error (diverged net) counts as above every bound.
+                    let e = if e.is_finite() { e } else { f64::INFINITY };
                     a.max = a.max.max(e);
                     a.over_eps += (e > certified) as usize;
                     if e > ec {
@@ -1179,6 +1212,7 @@ mod tests {
             best: None,
             log: vec![],
             bounds: vec![],
+            finished: false,
         };
         let mut new = Vec::new();
         for r in 0..6u64 {
