@@ -229,3 +229,22 @@ fn killed_refine_resumes_to_the_same_model() {
         );
     }
 }
+
+#[test]
+fn a_corrupt_checkpoint_is_a_clear_error() {
+    let dir = tempdir();
+    let out = dir.path().join("r");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("refine_state.bin"), b"not a checkpoint").unwrap();
+    let o = trainer(&["refine", "--out", out.to_str().unwrap(), "--quiet"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("refine_state.bin") && err.contains("not a refinement checkpoint"),
+        "{err}"
+    );
+    // Settings that cannot work are refused with the key at fault.
+    let o = trainer(&["refine", "--out", out.to_str().unwrap(), "--budget", "10"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("refine.initial"));
+}

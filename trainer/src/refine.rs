@@ -40,6 +40,14 @@ pub enum RefineError {
     /// A file could not be read or written.
     #[error(transparent)]
     File(#[from] DatasetError),
+    /// The checkpoint file is not a refinement checkpoint of this version.
+    #[error("{path}: not a refinement checkpoint of this trainer version ({reason}); delete it or use another --out")]
+    Corrupt {
+        /// The checkpoint.
+        path: PathBuf,
+        /// The decoder's message.
+        reason: String,
+    },
     /// The checkpoint belongs to another problem or settings.
     #[error("checkpoint {path} was made for another problem or settings (delete it or use another --out)")]
     Mismatch {
@@ -414,9 +422,9 @@ pub fn refine(
                 source: e,
             })?;
             let st: RefineState =
-                postcard::from_bytes(&bytes).map_err(|e| DatasetError::Format {
-                    path: p.display().to_string(),
-                    reason: format!("not a refinement checkpoint: {e}"),
+                postcard::from_bytes(&bytes).map_err(|e| RefineError::Corrupt {
+                    path: p.to_path_buf(),
+                    reason: e.to_string(),
                 })?;
             if st.hash != hash {
                 return Err(RefineError::Mismatch {
