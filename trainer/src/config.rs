@@ -962,10 +962,19 @@ mod tests {
         assert_eq!(err_key(|c| c.sampling.counts = vec![3]), "sampling.counts");
         assert_eq!(err_key(|c| c.refine.target_eps = 0.0), "refine.target_eps");
         assert_eq!(err_key(|c| c.refine.budget = 80), "refine.initial");
-        assert_eq!(err_key(|c| c.refine.initial = vec![1, 3]), "refine.initial[0]");
-        assert_eq!(err_key(|c| c.refine.initial = vec![3, 9000]), "refine.initial[1]");
+        assert_eq!(
+            err_key(|c| c.refine.initial = vec![1, 3]),
+            "refine.initial[0]"
+        );
+        assert_eq!(
+            err_key(|c| c.refine.initial = vec![3, 9000]),
+            "refine.initial[1]"
+        );
         assert_eq!(err_key(|c| c.refine.safety = 0.5), "refine.safety");
-        assert_eq!(err_key(|c| c.sampling.sampler = SamplerKind::Adaptive), "sampling.sampler");
+        assert_eq!(
+            err_key(|c| c.sampling.sampler = SamplerKind::Adaptive),
+            "sampling.sampler"
+        );
         assert_eq!(err_key(|c| c.solver.tol = 0.0), "solver.tol");
         assert_eq!(
             err_key(|c| c.system = System::Pendulum(crate::model::Pendulum {
