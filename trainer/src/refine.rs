@@ -128,7 +128,7 @@ pub struct RefineState {
     pub hash: String,
     /// Points, in creation order.
     pub points: Vec<Point>,
-    /// The k-d tree (node 0 is X... or, with an initial grid, nodes 0..g are its cells).
+    /// The k-d tree's nodes; the roots are the initial grid's cells.
     pub nodes: Vec<Node>,
     /// Roots of the tree (the initial grid's cells).
     pub roots: Vec<usize>,
@@ -287,9 +287,9 @@ pub struct Refined {
     pub met: bool,
 }
 
-/// What a checkpoint must match: the labels (problem), the domain, the initial grid and
-/// the network's shape. Target, budget, rounds and training rates may change on resume
-/// (e.g. a larger budget continues a run).
+/// What a checkpoint must match: the labels (problem), the domain, the initial grid, the
+/// network's shape and the safety factor (the certificate's meaning). Target, budget,
+/// rounds and training rates may change on resume (e.g. a larger budget continues a run).
 fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
@@ -300,6 +300,7 @@ fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
         rs.initial_counts(nx),
         &rs.training.hidden,
         rs.training.activation,
+        rs.safety.to_bits(),
     );
     h.update(postcard::to_allocvec(&key).unwrap_or_default());
     crate::config::hex(&h.finalize())
