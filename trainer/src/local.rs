@@ -7,9 +7,13 @@
 //! max_v |e_v| (a convex combination of the corner values). The remainder is bounded one
 //! axis at a time (tensor-product interpolation, e − I₁⋯Iₙe = Σ_k I₁⋯I_{k−1}(e − I_k e),
 //! and each I_j is a convex combination):
-//! - **first-order form** (always valid): if |∂_k e| ≤ G_k on C, linear interpolation along
-//!   an edge of length w_k errs by at most 2t(1−t)·G_k·w_k ≤ G_k w_k / 2, so
-//!   `ε_C = max_v |e_v| + Σ_k G_k w_k / 2`;
+//! - **first-order form** (always valid): if ∂_k e ∈ [a_k, b_k] on C, linear interpolation
+//!   along an edge of length w_k errs by at most (b_k − a_k)·w_k / 4 (g = e − I_k e vanishes
+//!   at both ends and g′ = ∂_k e − s with s the edge's secant slope ∈ [a_k, b_k], so
+//!   g(x) ≤ min(x(b_k − s), (w_k − x)(s − a_k)) ≤ w_k(s − a_k)(b_k − s)/(b_k − a_k) ≤
+//!   w_k(b_k − a_k)/4, and the same below), so `ε_C = max_v |e_v| + Σ_k (b_k − a_k) w_k / 4`
+//!   — no larger than the Lipschitz form Σ_k max|∂_k e|·w_k/2, and much smaller where ∂_k e
+//!   keeps its sign;
 //! - **second-order form** (where e is C² on C): if |∂²_kk e| ≤ M_k on C, the 1-D error is
 //!   at most M_k w_k² / 8, so `ε_C = max_v |e_v| + Σ_k M_k w_k² / 8` — it shrinks
 //!   quadratically with the cell, and only the fit at the corners remains.
@@ -76,7 +80,7 @@ pub struct Corner<'a> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Form {
-    /// Σ_k G_k w_k / 2 (Lipschitz).
+    /// Σ_k (b_k − a_k) w_k / 4 with ∂_k e ∈ [a_k, b_k] on the cell.
     FirstOrder,
     /// Σ_k M_k w_k² / 8 (curvature).
     SecondOrder,
@@ -214,8 +218,9 @@ pub fn cell_bound(
                     hi: j.hi.max(0.0),
                 },
             };
-            let g = (kr.hi - jr.lo).max(jr.hi - kr.lo).max(0.0);
-            term_a[k] = g * w[k] / 2.0;
+            // ∂_k e ∈ [kr.lo − jr.hi, kr.hi − jr.lo]: the interpolation error along an edge
+            // is at most (width of that range)·w_k/4 (see the module doc).
+            term_a[k] = (kr.width() + jr.width()).max(0.0) * w[k] / 4.0;
             if b_ok {
                 let h = match (clamp, &net.hess_diag) {
                     (Clamp::Constant, _) => 0.0,

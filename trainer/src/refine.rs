@@ -941,9 +941,10 @@ pub struct Check {
     pub over_cell: usize,
     /// Largest observed error / own cell's ε_C.
     pub max_cell_ratio: f64,
-    /// Largest share of a cell's remainder bound used: max (|e(x)| − corner term) / remainder
-    /// over states whose error exceeds their cell's corner term (≤ 1 when the estimated
-    /// remainder holds; how close to 1 says how tight it is).
+    /// Largest share of a cell's allowance above its corner term that was used:
+    /// max (|e(x)| − corner term) / (ε_C − corner term) over states whose error exceeds their
+    /// cell's corner term (≤ 1 when the estimated remainder holds; how close to 1 says how
+    /// tight it is).
     pub max_remainder_use: f64,
     /// Sensitivities ∂κ/∂x_k (per state and axis, regular labels) outside their cell's
     /// estimated range.
@@ -1010,8 +1011,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     let leaf = leaf_of(st, &lat, &counts, &x);
                     let b = bound_of.get(&leaf);
                     let ec = b.map_or(f64::INFINITY, |b| b.eps);
-                    if let Some(b) = b.filter(|b| e > b.corner && b.remainder > 0.0) {
-                        a.rem_use = a.rem_use.max((e - b.corner) / b.remainder);
+                    if let Some(b) = b.filter(|b| e > b.corner && b.eps > b.corner) {
+                        a.rem_use = a.rem_use.max((e - b.corner) / (b.eps - b.corner));
                     }
                     // A non-finite error (diverged net) counts as above every bound.
                     let e = if e.is_finite() { e } else { f64::INFINITY };
