@@ -32,6 +32,28 @@ pub fn trainer(args: &[&str]) -> Output {
         .expect("run trainer")
 }
 
+/// Runs `trainer args` and kills it (SIGKILL) as soon as `checkpoint` exists (or after
+/// 120 s). Returns whether it was still running when killed, i.e. whether the kill
+/// interrupted it after its first checkpoint rather than after its end.
+pub fn kill_at_checkpoint(args: &[&str], checkpoint: &std::path::Path) -> bool {
+    use std::time::{Duration, Instant};
+    let mut child = Command::new(trainer_bin())
+        .args(args)
+        .spawn()
+        .expect("spawn trainer");
+    let t = Instant::now();
+    while !checkpoint.exists()
+        && child.try_wait().expect("poll trainer").is_none()
+        && t.elapsed() < Duration::from_secs(120)
+    {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let running = child.try_wait().expect("poll trainer").is_none();
+    child.kill().ok();
+    child.wait().expect("reap trainer");
+    running
+}
+
 /// Path of a problem file shipped in `configs/`.
 pub fn config(name: &str) -> String {
     format!("{}/../configs/{name}", env!("CARGO_MANIFEST_DIR"))

@@ -2,9 +2,8 @@
 //! is met, the certificate survives a check at fresh MPC solves, the outputs are usable by
 //! `trainer eval` / `trainer export`, and a run killed mid-way resumes to the same model.
 
-use ampc_tests::{tempdir, trainer, trainer_bin};
+use ampc_tests::{kill_at_checkpoint, tempdir, trainer};
 use std::path::Path;
-use std::time::{Duration, Instant};
 
 /// The paper's pendulum on a small domain around the upright position (saturation kinks
 /// included), a 2-16-16-1 net and a loose target, so that the run takes seconds.
@@ -177,27 +176,17 @@ fn killed_refine_resumes_to_the_same_model() {
     ]));
     let out = d.join("run");
     let state = out.join("refine_state.bin");
-    let mut child = std::process::Command::new(trainer_bin())
-        .args([
+    let running = kill_at_checkpoint(
+        &[
             "refine",
             "--config",
             &cfg,
             "--out",
             out.to_str().unwrap(),
             "--quiet",
-        ])
-        .spawn()
-        .unwrap();
-    let t = Instant::now();
-    while !state.exists()
-        && child.try_wait().unwrap().is_none()
-        && t.elapsed() < Duration::from_secs(120)
-    {
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    let running = child.try_wait().unwrap().is_none();
-    child.kill().ok();
-    child.wait().unwrap();
+        ],
+        &state,
+    );
     assert!(running, "the run ended before its first checkpoint");
     assert!(!out.join("model.bin").exists());
     // The rounds done before the kill, with their wall times: a resumed run keeps them,

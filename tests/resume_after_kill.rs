@@ -1,8 +1,7 @@
 //! A `trainer sample` run killed with SIGKILL mid-way resumes from its checkpoint when the
 //! same command is run again, and the final file equals an uninterrupted run's.
 
-use ampc_tests::{tempdir, trainer, trainer_bin};
-use std::time::{Duration, Instant};
+use ampc_tests::{kill_at_checkpoint, tempdir, trainer};
 
 #[test]
 fn killed_run_resumes_to_the_same_dataset() {
@@ -30,27 +29,17 @@ fn killed_run_resumes_to_the_same_dataset() {
 
     let out = d.join("run.bin");
     let partial = d.join("run.bin.partial");
-    let mut child = std::process::Command::new(trainer_bin())
-        .args([
+    let running = kill_at_checkpoint(
+        &[
             "sample",
             "--config",
             cfg,
             "--out",
             out.to_str().unwrap(),
             "--quiet",
-        ])
-        .spawn()
-        .unwrap();
-    let t = Instant::now();
-    while !partial.exists()
-        && child.try_wait().unwrap().is_none()
-        && t.elapsed() < Duration::from_secs(120)
-    {
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    let running = child.try_wait().unwrap().is_none();
-    child.kill().ok();
-    child.wait().unwrap();
+        ],
+        &partial,
+    );
     assert!(
         running,
         "the run ended before its first checkpoint: make the plan longer"
