@@ -10,7 +10,7 @@
 
 use ampc_tests::tempdir;
 use controller_core::activation;
-use trainer::export::{self, Tanh};
+use trainer::deploy::export::{self, Tanh};
 
 fn committed(name: &str) -> Vec<u8> {
     let p = format!(

@@ -67,28 +67,29 @@ pub fn tempdir() -> tempfile::TempDir {
 /// The paper's pendulum controller as `trainer run` produces it (sample → validate →
 /// train → certify → export, default problem and seeds), computed once per test binary.
 /// Returns the export model and the directory holding `weights.rs` / `weights.bin`.
-pub fn trained_pendulum() -> &'static (trainer::export::ExportModel, PathBuf) {
-    static CELL: std::sync::OnceLock<(trainer::export::ExportModel, PathBuf)> =
+pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, PathBuf) {
+    static CELL: std::sync::OnceLock<(trainer::deploy::export::ExportModel, PathBuf)> =
         std::sync::OnceLock::new();
     CELL.get_or_init(|| {
         let root =
             std::env::temp_dir().join(format!("ampc-trained-pendulum-{}", std::process::id()));
-        let cfg = trainer::config::ProblemConfig::default();
+        let cfg = trainer::problem::ProblemConfig::default();
         let opts = trainer::pipeline::RunOptions {
             root: root.clone(),
             until: Some("export".into()),
             ..Default::default()
         };
-        trainer::pipeline::run(&cfg, trainer::config::PENDULUM_TOML, &opts).expect("pipeline");
+        trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");
         let dir = root.join(&cfg.name);
-        let m =
-            trainer::train::TrainedModel::load(&dir.join("model_regularized.bin")).expect("model");
-        let c: trainer::certificate::Certificate = serde_json::from_str(
+        let m = trainer::learn::train::TrainedModel::load(&dir.join("model_regularized.bin"))
+            .expect("model");
+        let c: trainer::certify::certificate::Certificate = serde_json::from_str(
             &std::fs::read_to_string(dir.join("certificate.json")).expect("certificate"),
         )
         .expect("json");
         (
-            trainer::export::ExportModel::from_trained(&cfg.name, &m, &c).expect("export model"),
+            trainer::deploy::export::ExportModel::from_trained(&cfg.name, &m, &c)
+                .expect("export model"),
             dir,
         )
     })

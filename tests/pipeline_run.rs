@@ -91,7 +91,7 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
             svg.matches("<polyline").count() + svg.matches("<rect").count() >= 5,
             "{stem}: nothing drawn"
         );
-        let again = trainer::plots::to_png(stem, &svg, 1.0).expect("SVG parses");
+        let again = trainer::study::plots::to_png(stem, &svg, 1.0).expect("SVG parses");
         let png_bytes = std::fs::read(run.join(format!("plots/{stem}.png"))).unwrap();
         assert_eq!(again, png_bytes, "{stem}: PNG is not the SVG's rendering");
         let dec = png::Decoder::new(std::io::Cursor::new(png_bytes));

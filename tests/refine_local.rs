@@ -10,7 +10,7 @@ use std::path::Path;
 fn small_config(dir: &Path) -> String {
     let mut out = Vec::new();
     let mut skip = false;
-    for l in trainer::config::PENDULUM_TOML.lines() {
+    for l in trainer::problem::PENDULUM_TOML.lines() {
         if l.starts_with("[domain]") {
             out.push("[domain]\nlo = [-1.0, -0.5]\nhi = [1.0, 0.5]\n".to_string());
             skip = true;
@@ -126,7 +126,10 @@ fn refine_meets_its_target_and_passes_the_check() {
     let svg = std::fs::read_to_string(out.join("eps_map.svg")).unwrap();
     assert!(svg.contains("ε_C per cell") && svg.matches("<rect").count() >= rows.len());
     let png = std::fs::read(out.join("eps_map.png")).unwrap();
-    assert_eq!(trainer::plots::to_png("eps_map", &svg, 1.5).unwrap(), png);
+    assert_eq!(
+        trainer::study::plots::to_png("eps_map", &svg, 1.5).unwrap(),
+        png
+    );
     let info = png::Decoder::new(std::io::Cursor::new(png))
         .read_info()
         .expect("PNG header")
@@ -156,7 +159,7 @@ fn refine_meets_its_target_and_passes_the_check() {
         d.join("w.bin").to_str().unwrap(),
     ]));
     // The dataset file is a regular dataset (sampler "adaptive") with every solve.
-    let ds = trainer::dataset::Dataset::load(&out.join("dataset.bin")).unwrap();
+    let ds = trainer::data::dataset::Dataset::load(&out.join("dataset.bin")).unwrap();
     assert_eq!(ds.records.len() as u64, solves);
 }
 
@@ -191,7 +194,7 @@ fn killed_refine_resumes_to_the_same_model() {
     assert!(!out.join("model.bin").exists());
     // The rounds done before the kill, with their wall times: a resumed run keeps them,
     // a restart would measure them anew.
-    let ck: trainer::refine::RefineState =
+    let ck: trainer::certify::refine::RefineState =
         postcard::from_bytes(&std::fs::read(&state).unwrap()).unwrap();
     assert!(!ck.log.is_empty() && !ck.finished);
     ok(&trainer(&[
@@ -202,7 +205,7 @@ fn killed_refine_resumes_to_the_same_model() {
         out.to_str().unwrap(),
         "--quiet",
     ]));
-    let log: Vec<trainer::refine::RoundLog> =
+    let log: Vec<trainer::certify::refine::RoundLog> =
         serde_json::from_slice(&std::fs::read(out.join("refine_log.json")).unwrap()).unwrap();
     assert!(log.len() > ck.log.len(), "the resumed run did more rounds");
     assert_eq!(

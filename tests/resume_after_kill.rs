@@ -9,7 +9,7 @@ fn killed_run_resumes_to_the_same_dataset() {
     let d = dir.path();
     // A plan long enough to be interrupted: 3000 random pendulum states.
     let cfg = d.join("p.toml");
-    let text = trainer::config::PENDULUM_TOML.replace(
+    let text = trainer::problem::PENDULUM_TOML.replace(
         "sampler = \"grid\"\ncounts = [35, 10]\nseed = 0",
         "sampler = \"random\"\nn = 3000\nseed = 3",
     );
@@ -46,7 +46,7 @@ fn killed_run_resumes_to_the_same_dataset() {
     );
     assert!(!out.exists(), "killed before the end, no final file");
     assert!(partial.exists());
-    let ck = trainer::dataset::Dataset::load(&partial).unwrap();
+    let ck = trainer::data::dataset::Dataset::load(&partial).unwrap();
     assert!(
         !ck.records.is_empty() && ck.records.len() < 3000,
         "{} records",

@@ -2,8 +2,8 @@
 //! sensitivities, on all cores of rayon's default pool (file writes included: this is
 //! exactly what `trainer sample` does).
 use criterion::{criterion_group, criterion_main, Criterion};
-use trainer::config::ProblemConfig;
-use trainer::dataset::{generate, GenerateOptions};
+use trainer::data::dataset::{generate, GenerateOptions};
+use trainer::problem::ProblemConfig;
 
 fn grid(c: &mut Criterion) {
     let cfg = ProblemConfig::default();

@@ -3,8 +3,8 @@
 // The states are copied verbatim from the IPOPT reference table (−3.14159265359 included).
 #![allow(clippy::approx_constant)]
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use trainer::config::ProblemConfig;
-use trainer::mpc::MpcLaw;
+use trainer::mpc::law::MpcLaw;
+use trainer::problem::ProblemConfig;
 
 /// The 20 IPOPT reference states (x1, x2).
 const STATES: [[f64; 2]; 20] = [
@@ -66,13 +66,13 @@ fn state_dimension(c: &mut Criterion) {
             let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/cartpole.toml");
             ProblemConfig::load(std::path::Path::new(path)).expect("cartpole config")
         };
-        let s = trainer::config::SamplingSettings {
-            sampler: trainer::config::SamplerKind::Random,
+        let s = trainer::problem::SamplingSettings {
+            sampler: trainer::problem::SamplerKind::Random,
             n: 16,
             seed: 1,
             counts: vec![],
         };
-        let pts = trainer::sampling::Sampler::new(&s, &cfg.domain).points();
+        let pts = trainer::data::sampling::Sampler::new(&s, &cfg.domain).points();
         let mut law = MpcLaw::new(&cfg);
         g.bench_function(name, |b| {
             b.iter(|| pts.iter().map(|x| law.solve(x, None).0.u[0]).sum::<f64>())

@@ -3,8 +3,8 @@
 //! Usage: `cargo run --release -p trainer --example profile_solve -- [reps] [horizon] [qp]`
 //! with `qp` = `structured` (default) or `clarabel`.
 use std::time::Instant;
-use trainer::config::ProblemConfig;
-use trainer::mpc::MpcLaw;
+use trainer::mpc::law::MpcLaw;
+use trainer::problem::ProblemConfig;
 
 const STATES: [[f64; 2]; 6] = [
     [0.548207810803, 0.230770222963],
@@ -22,7 +22,7 @@ fn main() {
     let mut cfg = ProblemConfig::default();
     cfg.ocp.horizon = horizon;
     if args.get(3).map(String::as_str) == Some("clarabel") {
-        cfg.solver.qp = trainer::qp::QpSolverKind::Clarabel;
+        cfg.solver.qp = trainer::mpc::qp::QpSolverKind::Clarabel;
     }
     let mut law = MpcLaw::new(&cfg);
     for x in STATES {

@@ -8,11 +8,11 @@ use clap::{Parser, Subcommand};
 use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use trainer::certificate::{certify, requirement, CertifyOptions};
-use trainer::config::ProblemConfig;
-use trainer::dataset::{self, Dataset, GenerateOptions, Shard};
-use trainer::mpc::MpcLaw;
-use trainer::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::certify::certificate::{certify, requirement, CertifyOptions};
+use trainer::data::dataset::{self, Dataset, GenerateOptions, Shard};
+use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::mpc::law::MpcLaw;
+use trainer::problem::ProblemConfig;
 
 #[derive(Parser)]
 #[command(
@@ -307,7 +307,7 @@ fn solve(config: &Option<PathBuf>, states: &Path, out: &Path) -> Result<()> {
             l.info.iterations
         );
     }
-    dataset::write_atomic(out, s.as_bytes())?;
+    trainer::io::write_atomic(out, s.as_bytes())?;
     let bad = labels.iter().filter(|l| !l.status.is_labelled()).count();
     eprintln!(
         "solved {} states ({} without a label) -> {}",
@@ -353,7 +353,7 @@ fn merge(out: &Path, inputs: &[PathBuf]) -> Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
     let d = dataset::merge(&ds)?;
     d.save(out)?;
-    dataset::write_atomic(&dataset::csv_path(out), d.to_csv().as_bytes())?;
+    trainer::io::write_atomic(&dataset::csv_path(out), d.to_csv().as_bytes())?;
     eprintln!(
         "merged {} shards ({} records) -> {}",
         inputs.len(),
@@ -371,7 +371,7 @@ fn export_cmd(
     name: &str,
 ) -> Result<()> {
     let m = TrainedModel::load(model)?;
-    let cert: trainer::certificate::Certificate = match certificate {
+    let cert: trainer::certify::certificate::Certificate = match certificate {
         Some(p) => serde_json::from_str(
             &std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
         )
@@ -390,8 +390,8 @@ fn export_cmd(
             model.display()
         );
     }
-    let em = trainer::export::ExportModel::from_trained(name, &m, &cert)?;
-    let r = trainer::export::export_files(&em, rust, postcard)?;
+    let em = trainer::deploy::export::ExportModel::from_trained(name, &m, &cert)?;
+    let r = trainer::deploy::export::export_files(&em, rust, postcard)?;
     eprintln!(
         "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | certified ε {:.4} + {:.3e}",
         model.display(),
@@ -445,7 +445,7 @@ fn run_cmd(
         }
         None => (
             ProblemConfig::default(),
-            trainer::config::PENDULUM_TOML.to_string(),
+            trainer::problem::PENDULUM_TOML.to_string(),
         ),
     };
     if let Some(e) = robust_eps {
@@ -539,7 +539,7 @@ fn robust_run(
 fn sha256_file(path: &Path) -> Result<String> {
     use sha2::{Digest, Sha256};
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    Ok(trainer::config::hex(&Sha256::digest(&bytes)))
+    Ok(trainer::io::hex(&Sha256::digest(&bytes)))
 }
 
 fn train_cmd(
@@ -649,7 +649,7 @@ fn refine_cmd(
     check_seed: u64,
     quiet: bool,
 ) -> Result<()> {
-    use trainer::refine;
+    use trainer::certify::refine;
     let mut cfg = load_config(config)?;
     // A robust design (`[robust] eps > 0`): refine the data of the tightened MPC, with the
     // design ε as the default target (Corollary 1 needs certified ε ≤ design ε).
@@ -699,14 +699,14 @@ fn refine_cmd(
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
     let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
     if cfg.system.nx() >= 2 {
-        let fig = trainer::plots::eps_map(
+        let fig = trainer::study::plots::eps_map(
             &cfg,
             &refine::cell_views(&cfg, &rs, &r.state),
             rs.target_eps,
         )?;
-        let png = trainer::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
-        trainer::dataset::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
-        trainer::dataset::write_atomic(&dir.join("eps_map.png"), &png)?;
+        let png = trainer::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
+        trainer::io::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
+        trainer::io::write_atomic(&dir.join("eps_map.png"), &png)?;
     }
     if !quiet {
         let l = &cert.local;
@@ -731,7 +731,7 @@ fn refine_cmd(
     }
     if let Some(n) = check {
         let c = refine::check(&cfg, &rs, &r, n, check_seed);
-        trainer::dataset::write_atomic(&dir.join("check.json"), refine::pretty(&c).as_bytes())?;
+        trainer::io::write_atomic(&dir.join("check.json"), refine::pretty(&c).as_bytes())?;
         if !quiet {
             println!(
                 "check at {} random states ({} labelled): max observed {:.4} vs certified {:.4} \
@@ -876,7 +876,7 @@ fn eval_cmd(model: &Path, states: &Path, out: &Path) -> Result<()> {
     }
     let mut s = head.join(",");
     s.push('\n');
-    let mut ws = trainer::mlp::Workspace::default();
+    let mut ws = trainer::learn::mlp::Workspace::default();
     let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
     for x in &xs {
         m.mlp.eval(x, &mut u, &mut jac, &mut ws);
@@ -889,7 +889,7 @@ fn eval_cmd(model: &Path, states: &Path, out: &Path) -> Result<()> {
         s += &nums.join(",");
         s.push('\n');
     }
-    dataset::write_atomic(out, s.as_bytes())?;
+    trainer::io::write_atomic(out, s.as_bytes())?;
     Ok(())
 }
 
@@ -1030,7 +1030,7 @@ fn compare_cmd(
         val.len()
     );
     if let Some(p) = json {
-        dataset::write_atomic(p, serde_json::to_string_pretty(&results)?.as_bytes())?;
+        trainer::io::write_atomic(p, serde_json::to_string_pretty(&results)?.as_bytes())?;
     }
     Ok(())
 }

@@ -1,8 +1,8 @@
 //! Training is single-threaded and fully determined by (data, settings, seed): the same
 //! inputs give bit-identical model files, run twice and inside rayon pools of 1 and 2
 //! threads.
-use trainer::config::ProblemConfig;
-use trainer::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::problem::ProblemConfig;
 
 fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> TrainedModel {
     train(

@@ -1,0 +1,396 @@
+//! The certified error bound of Theorem 1 and the covering radius of the data.
+//!
+//! ```text
+//! ε = ε_D + (L_MPC + L_NN)·r,    r = sup_{x∈X} min_i ‖x − x_i‖   (covering radius)
+//! ```
+//! - Grid data: r is exactly half the cell diagonal, `½·√Σ_j Δ_j²`.
+//! - Scattered data: a sound upper bound by branch and bound over boxes of X. The distance
+//!   to the data d(x) = min_i ‖x − x_i‖ is 1-Lipschitz, so on a box with centre c and
+//!   half-diagonal ρ, `sup d ≤ d(c) + ρ`; boxes whose bound cannot beat the best lower
+//!   bound (the largest d(c) seen) are dropped, the others are split along their longest
+//!   side until upper − lower ≤ tolerance.
+//! - The inverse: for a target ε > ε_D the required radius is
+//!   `δ = (ε − ε_D)/(L_MPC + L_NN)`; a grid with equal spacing h = 2δ/√n_x per axis
+//!   achieves it, with Π_j (⌈(hi_j − lo_j)/h⌉ + 1) OCP solves.
+
+use serde::{Deserialize, Serialize};
+
+/// Exact covering radius of a full grid with per-axis counts over [lo, hi].
+pub fn grid_covering_radius(lo: &[f64], hi: &[f64], counts: &[usize]) -> f64 {
+    let s: f64 = lo
+        .iter()
+        .zip(hi)
+        .zip(counts)
+        .map(|((l, h), &c)| {
+            // A single point sits at the midpoint: the farthest point is a full half-width away.
+            let d = if c <= 1 {
+                h - l
+            } else {
+                (h - l) / (c - 1) as f64
+            };
+            d * d
+        })
+        .sum();
+    0.5 * s.sqrt()
+}
+
+/// Sound upper bound on the covering radius of scattered `points` (row-major, dimension
+/// `lo.len()`) over the box [lo, hi], within `tol` of the lower bound it also finds.
+/// Returns (upper, lower).
+pub fn scattered_covering_radius(points: &[f64], lo: &[f64], hi: &[f64], tol: f64) -> (f64, f64) {
+    let d = lo.len();
+    let n = points.len() / d.max(1);
+    if n == 0 {
+        let diag: f64 = lo
+            .iter()
+            .zip(hi)
+            .map(|(l, h)| (h - l).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        return (diag, diag);
+    }
+    let dist = |c: &[f64]| -> f64 {
+        let mut best = f64::INFINITY;
+        for i in 0..n {
+            let mut s = 0.0;
+            for k in 0..d {
+                let t = c[k] - points[i * d + k];
+                s += t * t;
+                if s >= best {
+                    break;
+                }
+            }
+            best = best.min(s);
+        }
+        best.sqrt()
+    };
+    struct Cell {
+        lo: Vec<f64>,
+        hi: Vec<f64>,
+        ub: f64,
+    }
+    let make = |lo: Vec<f64>, hi: Vec<f64>| -> (Cell, f64) {
+        let c: Vec<f64> = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
+        let rho = 0.5
+            * lo.iter()
+                .zip(&hi)
+                .map(|(a, b)| (b - a).powi(2))
+                .sum::<f64>()
+                .sqrt();
+        let dc = dist(&c);
+        (
+            Cell {
+                lo,
+                hi,
+                ub: dc + rho,
+            },
+            dc,
+        )
+    };
+    let (root, mut lower) = make(lo.to_vec(), hi.to_vec());
+    // Corners are candidates for the farthest point too.
+    for m in 0..(1usize << d.min(16)) {
+        let c: Vec<f64> = (0..d)
+            .map(|k| if m >> k & 1 == 1 { hi[k] } else { lo[k] })
+            .collect();
+        lower = lower.max(dist(&c));
+    }
+    let mut stack = vec![root];
+    let mut upper = lower;
+    let mut evals = 0usize;
+    while let Some(cell) = stack.pop() {
+        if cell.ub <= lower + tol {
+            upper = upper.max(cell.ub.min(lower + tol));
+            continue;
+        }
+        evals += 1;
+        if evals > 5_000_000 {
+            // Budget exhausted: everything left is bounded by its own ub (still sound).
+            upper = upper.max(cell.ub);
+            for c in stack.drain(..) {
+                upper = upper.max(c.ub);
+            }
+            break;
+        }
+        let k = (0..d)
+            .max_by(|&a, &b| (cell.hi[a] - cell.lo[a]).total_cmp(&(cell.hi[b] - cell.lo[b])))
+            .unwrap_or(0);
+        let mid = 0.5 * (cell.lo[k] + cell.hi[k]);
+        let (mut h1, mut l2) = (cell.hi.clone(), cell.lo.clone());
+        h1[k] = mid;
+        l2[k] = mid;
+        for (l, h) in [(cell.lo.clone(), h1), (l2, cell.hi.clone())] {
+            let (c, dc) = make(l, h);
+            lower = lower.max(dc);
+            stack.push(c);
+        }
+    }
+    (upper.max(lower), lower)
+}
+
+/// How L_NN was bounded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LnnMethod {
+    /// Product of spectral norms.
+    Naive,
+    /// LipSDP-Neuron.
+    LipSdpNeuron,
+    /// Exact maximum over slope vertices.
+    SlopeVertices,
+}
+
+/// The certificate record (keys as in the design's "Contracts").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Certificate {
+    /// Certified bound ε on ‖κ − κ_NN‖ over X.
+    pub eps: f64,
+    /// max error over the data.
+    pub eps_d: f64,
+    /// Tightest sound upper bound on L_NN used.
+    pub l_nn: f64,
+    /// Its method.
+    pub l_nn_method: LnnMethod,
+    /// Product-of-norms bound.
+    pub l_nn_naive: f64,
+    /// LipSDP-Neuron bound.
+    pub l_nn_lipsdp: f64,
+    /// Slope-vertex bound, if computed.
+    pub l_nn_vertex: Option<f64>,
+    /// Sampled lower bound.
+    pub l_nn_lower: f64,
+    /// L_MPC used.
+    pub l_mpc: f64,
+    /// Whether L_MPC is an estimate (true unless the user supplied a proven value).
+    pub l_mpc_is_estimate: bool,
+    /// How L_MPC was obtained.
+    pub l_mpc_method: String,
+    /// Covering radius r of the data.
+    pub covering_radius: f64,
+    /// How r was computed.
+    pub covering_method: String,
+    /// |κ_NN,f32 − κ_NN,f64| allowance (0 until an export adds it).
+    pub f32_allowance: f64,
+    /// Domain X, lower corner.
+    pub domain_lo: Vec<f64>,
+    /// Domain X, upper corner.
+    pub domain_hi: Vec<f64>,
+    /// Input bounds U_d used for the data.
+    pub u_lo: Vec<f64>,
+    /// Input bounds U_d used for the data.
+    pub u_hi: Vec<f64>,
+    /// Output clamp band U_d ⊕ [−ε, ε].
+    pub clamp_lo: Vec<f64>,
+    /// Output clamp band U_d ⊕ [−ε, ε].
+    pub clamp_hi: Vec<f64>,
+    /// Number of labelled points used.
+    pub n_points: usize,
+    /// Content hash (SHA-256 of the model file the certificate is about).
+    pub hash: String,
+}
+
+/// What a target ε requires.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Requirement {
+    /// Target ε.
+    pub target_eps: f64,
+    /// Required covering radius δ (None if ε ≤ ε_D: no data density suffices).
+    pub delta: Option<f64>,
+    /// Grid spacing per axis achieving δ.
+    pub spacing: Option<f64>,
+    /// Number of OCP solves of that grid.
+    pub solves: Option<f64>,
+}
+
+/// The inverse of Theorem 1 for a target ε (see the module doc).
+pub fn requirement(
+    target: f64,
+    eps_d: f64,
+    l_mpc: f64,
+    l_nn: f64,
+    lo: &[f64],
+    hi: &[f64],
+) -> Requirement {
+    if target <= eps_d || l_mpc + l_nn <= 0.0 {
+        return Requirement {
+            target_eps: target,
+            delta: None,
+            spacing: None,
+            solves: None,
+        };
+    }
+    let delta = (target - eps_d) / (l_mpc + l_nn);
+    let h = 2.0 * delta / (lo.len() as f64).sqrt();
+    let solves = lo
+        .iter()
+        .zip(hi)
+        .map(|(l, u)| ((u - l) / h).ceil() + 1.0)
+        .product();
+    Requirement {
+        target_eps: target,
+        delta: Some(delta),
+        spacing: Some(h),
+        solves: Some(solves),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scattered_bound_agrees_with_the_exact_grid_radius() {
+        let (lo, hi, counts) = ([-1.0, 0.0], [2.0, 1.0], [7usize, 4usize]);
+        let mut pts = Vec::new();
+        for i in 0..counts[0] {
+            for j in 0..counts[1] {
+                pts.push(lo[0] + (hi[0] - lo[0]) * i as f64 / 6.0);
+                pts.push(lo[1] + (hi[1] - lo[1]) * j as f64 / 3.0);
+            }
+        }
+        let exact = grid_covering_radius(&lo, &hi, &counts);
+        let (ub, lb) = scattered_covering_radius(&pts, &lo, &hi, 1e-6);
+        assert!(
+            ub >= exact - 1e-12 && lb <= exact + 1e-12,
+            "{lb} {exact} {ub}"
+        );
+        assert!(ub - exact < 2e-6, "{ub} vs {exact}");
+        assert!((exact - 0.5 * ((0.5f64).powi(2) + (1.0f64 / 3.0).powi(2)).sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn scattered_bound_is_above_sampled_distances() {
+        let lo = [0.0, 0.0, 0.0];
+        let hi = [1.0, 2.0, 1.0];
+        let pts: Vec<f64> = (0..40 * 3)
+            .map(|k| crate::rng::uniform(9, k as u64, 0) * if k % 3 == 1 { 2.0 } else { 1.0 })
+            .collect();
+        let (ub, lb) = scattered_covering_radius(&pts, &lo, &hi, 1e-3);
+        assert!(ub >= lb && ub - lb <= 1e-3 + 1e-12);
+        for s in 0..20000u64 {
+            let x: Vec<f64> = (0..3usize)
+                .map(|k| crate::rng::uniform(10, s, k as u64) * (hi[k] - lo[k]))
+                .collect();
+            let d = (0..40)
+                .map(|i| {
+                    (0..3)
+                        .map(|k| (x[k] - pts[i * 3 + k]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(d <= ub + 1e-12, "sampled {d} > bound {ub}");
+        }
+    }
+
+    #[test]
+    fn requirement_inverts_theorem_1() {
+        let (lo, hi) = ([-1.0, -1.0], [1.0, 1.0]);
+        let r = requirement(1.0, 0.2, 3.0, 5.0, &lo, &hi);
+        let delta = r.delta.unwrap();
+        assert!((0.2 + 8.0 * delta - 1.0).abs() < 1e-12);
+        let c = ((2.0 / r.spacing.unwrap()).ceil() + 1.0) as usize;
+        assert!(grid_covering_radius(&lo, &hi, &[c, c]) <= delta + 1e-12);
+        assert!(requirement(0.1, 0.2, 3.0, 5.0, &lo, &hi).delta.is_none());
+    }
+}
+
+/// Inputs of a certificate beyond the model and the data.
+#[derive(Debug, Clone, Default)]
+pub struct CertifyOptions {
+    /// A proven L_MPC supplied by the user (replaces the estimate).
+    pub l_mpc: Option<f64>,
+    /// Largest number of hidden units for the exact slope-vertex bound (default 22).
+    pub vertex_max_hidden: Option<usize>,
+    /// Extra states labelled by the MPC (e.g. the validation set) for the L_MPC estimate.
+    pub extra: Option<crate::learn::train::TrainSet>,
+}
+
+/// Computes the certificate of `model` on `data` (Theorem 1) with every term.
+pub fn certify(
+    model: &crate::learn::train::TrainedModel,
+    data: &crate::data::dataset::Dataset,
+    cfg: &crate::problem::ProblemConfig,
+    opts: &CertifyOptions,
+) -> Certificate {
+    use crate::certify::lipschitz;
+    let set = crate::learn::train::TrainSet::from_dataset(data);
+    let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let naive = lipschitz::naive_bound(&model.mlp);
+    let sdp = lipschitz::lipsdp_bound(&model.mlp);
+    let vertex = lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22));
+    let lower = lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7);
+    let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
+    if sdp < l_nn {
+        (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);
+    }
+    if let Some(v) = vertex.filter(|v| *v < l_nn) {
+        (l_nn, method) = (v, LnnMethod::SlopeVertices);
+    }
+    let (nx, nu) = (set.nx, set.nu);
+    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match opts.l_mpc {
+        Some(v) => (v, false, "user-supplied proven value".to_string()),
+        None => {
+            let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
+            let (mut s2, mut q2) = (0.0f64, 0.0f64);
+            if let Some(e) = &opts.extra {
+                (s2, q2) = lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu);
+            }
+            (
+                s.max(q).max(s2).max(q2),
+                true,
+                format!(
+                    "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \
+                     max neighbour difference quotient ({q:.4}, {q2:.4})"
+                ),
+            )
+        }
+    };
+    let all_labelled = set.len() == data.records.len();
+    let (covering_radius, covering_method) = if data.header.sampling.sampler
+        == crate::problem::SamplerKind::Grid
+        && all_labelled
+        && data.header.shard.is_none()
+    {
+        (
+            grid_covering_radius(lo, hi, &data.header.sampling.counts),
+            "exact: half the grid cell diagonal".to_string(),
+        )
+    } else {
+        let (ub, lb) = scattered_covering_radius(
+            &set.x,
+            lo,
+            hi,
+            1e-4 * lo.iter().zip(hi).map(|(a, b)| b - a).fold(0.0, f64::max),
+        );
+        (ub, format!("sound upper bound by branch and bound over X (lower {lb:.6}); labelled points only"))
+    };
+    let eps = stats.max + (l_mpc + l_nn) * covering_radius;
+    Certificate {
+        eps,
+        eps_d: stats.max,
+        l_nn,
+        l_nn_method: method,
+        l_nn_naive: naive,
+        l_nn_lipsdp: sdp,
+        l_nn_vertex: vertex,
+        l_nn_lower: lower,
+        l_mpc,
+        l_mpc_is_estimate,
+        l_mpc_method,
+        covering_radius,
+        covering_method,
+        f32_allowance: 0.0,
+        domain_lo: lo.clone(),
+        domain_hi: hi.clone(),
+        // U_d, the input bounds of the data: the stage-0 bounds (tightened by the design ε
+        // in a robust design; the problem's U otherwise).
+        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        clamp_lo: cfg.ocp.u_bounds(0).0.iter().map(|u| u - eps).collect(),
+        clamp_hi: cfg.ocp.u_bounds(0).1.iter().map(|u| u + eps).collect(),
+        n_points: set.len(),
+        hash: model.content_hash(),
+    }
+}

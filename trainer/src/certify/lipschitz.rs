@@ -1,0 +1,793 @@
+//! Lipschitz constants (2-norm, over X) of the network κ_NN and estimates for the MPC law κ.
+//!
+//! Upper bounds on `L_NN = sup_x ‖∂κ_NN/∂x‖₂` for hidden activations slope-restricted in
+//! [0, 1] (tanh, softplus, ReLU), all on the physical-unit weights W̃_j:
+//! 1. **naive**: `Π_j ‖W̃_j‖₂`.
+//! 2. **LipSDP-Neuron** (Fazlyab et al. 2019): the least ρ such that, for some diagonal
+//!    T_j ⪰ 0, the block-tridiagonal matrix M(ρ, T) ⪯ 0, with diagonal blocks
+//!    (−ρI, −2T_1, …, −2T_{m−1} + W̃_mᵀW̃_m) and off-diagonal blocks W̃_jᵀT_j; then
+//!    L_NN ≤ √ρ. For fixed T the least ρ is the largest eigenvalue of
+//!    `N₁ K(T)⁻¹ N₁ᵀ` (Schur complement; K = −(lower-right part of M), which must be ≻ 0,
+//!    N₁ = [W̃_1ᵀT_1, 0, …]); this function of T is convex (a partial minimisation of a
+//!    convex feasibility problem), so we minimise it over diag T > 0 by gradient steps
+//!    (Barzilai–Borwein, backtracking) in log T on the smoothing `μ ln tr exp(A/μ)` of
+//!    `λ_max(A)`, A = N₁K⁻¹N₁ᵀ, for decreasing μ (λ_max is not differentiable where
+//!    eigenvalues coalesce, typically at the optimum), with the exact eigenvector gradient
+//!    `∂ρ/∂t_{j,k} = 2 w_{j,k} ((W̃_j w_{j−1})_k − w_{j,k})`, `w = K⁻¹N₁ᵀv`, `w_0 = v`,
+//!    v the top eigenvector — started from the closed-form ECLipsE-Fast-style choice
+//!    `T_j = I/‖W̃_j S_{j−1}⁻¹W̃_jᵀ‖`. Whatever T the search ends at, the reported bound is
+//!    certified: M(ρ′, T) ⪯ 0 is verified by a Cholesky factorisation of −M at a slightly
+//!    inflated ρ′, so the bound is sound regardless of the optimiser's accuracy.
+//! 3. **vertex** (small nets): `max ‖W̃_m D_{m−1} ⋯ D_1 W̃_1‖₂` over diagonal D_j with
+//!    entries in {0, 1}. The Jacobian is W̃_m D_{m−1}(x)⋯D_1(x)W̃_1 with D_j(x) ∈ [0, 1]ⁿ,
+//!    and the norm is convex in each D_j separately, so the maximum over the box is at a
+//!    vertex: a sound bound, the tightest of the three, exact over all slope patterns.
+//!
+//! A lower bound: `max ‖∂κ_NN/∂x‖₂` over dense samples of X refined by local ascent.
+//! For κ itself only estimates exist (`L_MPC`): the largest ‖∂κ/∂x‖₂ over labelled
+//! points and the largest difference quotient between neighbouring points.
+
+use crate::learn::mlp::{Layer, Mlp, Workspace};
+use nalgebra::{DMatrix, DVector};
+
+fn mat(l: &Layer) -> DMatrix<f64> {
+    DMatrix::from_row_slice(l.out, l.inp, &l.w)
+}
+
+/// ‖A‖₂ (largest singular value).
+pub fn spectral_norm(a: &DMatrix<f64>) -> f64 {
+    if a.is_empty() {
+        return 0.0;
+    }
+    a.singular_values().max()
+}
+
+/// Product of the layers' spectral norms (physical units).
+pub fn naive_bound(mlp: &Mlp) -> f64 {
+    mlp.physical_layers()
+        .iter()
+        .map(|l| spectral_norm(&mat(l)))
+        .product()
+}
+
+/// The LipSDP-Neuron problem data for fixed weights.
+struct LipSdp {
+    w: Vec<DMatrix<f64>>,
+    sizes: Vec<usize>,
+    offs: Vec<usize>,
+    nh: usize,
+}
+
+impl LipSdp {
+    fn new(mlp: &Mlp) -> Self {
+        let w: Vec<DMatrix<f64>> = mlp.physical_layers().iter().map(mat).collect();
+        let sizes: Vec<usize> = w[..w.len() - 1].iter().map(|m| m.nrows()).collect();
+        let mut offs = vec![0];
+        for s in &sizes {
+            offs.push(offs.last().copied().unwrap_or(0) + s);
+        }
+        let nh = offs.last().copied().unwrap_or(0);
+        LipSdp { w, sizes, offs, nh }
+    }
+
+    /// K(T) = −(hidden part of M).
+    fn k(&self, t: &[f64]) -> DMatrix<f64> {
+        let m = self.w.len();
+        let mut k = DMatrix::zeros(self.nh, self.nh);
+        for j in 0..m - 1 {
+            let o = self.offs[j];
+            for a in 0..self.sizes[j] {
+                k[(o + a, o + a)] = 2.0 * t[o + a];
+            }
+            if j >= 1 {
+                // Off-diagonal block (j−1, j): −W̃_{j+1}ᵀ T_{j+1} in 1-based layer terms,
+                // i.e. −W[j]ᵀ T_j here (W[j] maps hidden j−1 to hidden j).
+                let op = self.offs[j - 1];
+                for a in 0..self.sizes[j - 1] {
+                    for b in 0..self.sizes[j] {
+                        let v = -self.w[j][(b, a)] * t[o + b];
+                        k[(op + a, o + b)] = v;
+                        k[(o + b, op + a)] = v;
+                    }
+                }
+            }
+        }
+        let last = &self.w[m - 1];
+        let o = self.offs[m - 2];
+        let wtw = last.transpose() * last;
+        for a in 0..self.sizes[m - 2] {
+            for b in 0..self.sizes[m - 2] {
+                k[(o + a, o + b)] -= wtw[(a, b)];
+            }
+        }
+        k
+    }
+
+    /// N₁ᵀ (nh × n0): rows of hidden layer 1 are T_1 W̃_1.
+    fn n1t(&self, t: &[f64]) -> DMatrix<f64> {
+        let n0 = self.w[0].ncols();
+        let mut n = DMatrix::zeros(self.nh, n0);
+        for a in 0..self.sizes[0] {
+            for c in 0..n0 {
+                n[(a, c)] = t[a] * self.w[0][(a, c)];
+            }
+        }
+        n
+    }
+
+    /// ρ(T) = λ_max(A(T)), A = N₁K⁻¹N₁ᵀ, its smoothing `f_μ = μ ln tr exp(A/μ)`
+    /// (λ_max ≤ f_μ ≤ λ_max + μ ln n₀) and ∇f_μ; `None` if K(T) is not positive definite.
+    /// ∇f_μ = Σᵢ pᵢ ∇λᵢ with softmax weights pᵢ ∝ exp(λᵢ/μ), where for an eigenvector v
+    /// `∂λ/∂t_{j,k} = 2 w_{j,k} ((W̃_j w_{j−1})_k − w_{j,k})`, `w = K⁻¹N₁ᵀv`, `w_0 = v`. The
+    /// smoothing makes the descent converge where eigenvalues of A coalesce (the typical
+    /// situation at the optimum), at which λ_max itself is not differentiable.
+    fn rho(&self, t: &[f64], mu: f64) -> Option<(f64, f64, Vec<f64>)> {
+        let chol = nalgebra::Cholesky::new(self.k(t))?;
+        let nt = self.n1t(t);
+        let kin = chol.solve(&nt);
+        let a = nt.transpose() * &kin;
+        let a = 0.5 * (&a + a.transpose());
+        let eig = a.symmetric_eigen();
+        let lmax = eig
+            .eigenvalues
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        let wts: Vec<f64> = eig
+            .eigenvalues
+            .iter()
+            .map(|&l| ((l - lmax) / mu).exp())
+            .collect();
+        let z: f64 = wts.iter().sum();
+        let f = lmax + mu * z.ln();
+        let mut g = vec![0.0; self.nh];
+        for (i, &wt) in wts.iter().enumerate() {
+            let p = wt / z;
+            if p < 1e-300 {
+                continue;
+            }
+            let v: DVector<f64> = eig.eigenvectors.column(i).into_owned();
+            let w = &kin * &v;
+            for j in 0..self.w.len() - 1 {
+                let o = self.offs[j];
+                let prev: DVector<f64> = if j == 0 {
+                    v.clone()
+                } else {
+                    w.rows(self.offs[j - 1], self.sizes[j - 1]).into_owned()
+                };
+                let wp = &self.w[j] * prev;
+                for k in 0..self.sizes[j] {
+                    g[o + k] += p * 2.0 * w[o + k] * (wp[k] - w[o + k]);
+                }
+            }
+        }
+        Some((lmax, f, g))
+    }
+
+    /// Whether M(ρ, T) ⪯ 0, checked by a Cholesky factorisation of −M + 0·I.
+    fn certify(&self, rho: f64, t: &[f64]) -> bool {
+        let n0 = self.w[0].ncols();
+        let dim = n0 + self.nh;
+        let mut neg = DMatrix::zeros(dim, dim);
+        for i in 0..n0 {
+            neg[(i, i)] = rho;
+        }
+        let k = self.k(t);
+        neg.view_mut((n0, n0), (self.nh, self.nh)).copy_from(&k);
+        let nt = self.n1t(t);
+        for a in 0..self.nh {
+            for c in 0..n0 {
+                neg[(n0 + a, c)] = -nt[(a, c)];
+                neg[(c, n0 + a)] = -nt[(a, c)];
+            }
+        }
+        nalgebra::Cholesky::new(neg).is_some()
+    }
+}
+
+/// LipSDP-Neuron bound √ρ (see the module doc), certified by a Cholesky factorisation;
+/// falls back to the naive bound if no certificate is found. Without hidden layers: ‖W̃‖₂.
+pub fn lipsdp_bound(mlp: &Mlp) -> f64 {
+    let sdp = LipSdp::new(mlp);
+    if sdp.w.len() == 1 {
+        return spectral_norm(&sdp.w[0]);
+    }
+    // Closed-form start: S_0 = I, t_j = 1/‖W̃_j S_{j−1}⁻¹ W̃_jᵀ‖, S_j = 2t_jI − t_j²W̃_jS⁻¹W̃_jᵀ.
+    let mut t = vec![0.0; sdp.nh];
+    let mut s_inv = DMatrix::<f64>::identity(sdp.w[0].ncols(), sdp.w[0].ncols());
+    for j in 0..sdp.w.len() - 1 {
+        let a = &sdp.w[j] * &s_inv * sdp.w[j].transpose();
+        let nrm = spectral_norm(&a).max(1e-300);
+        let tj = 1.0 / nrm;
+        for k in 0..sdp.sizes[j] {
+            t[sdp.offs[j] + k] = tj;
+        }
+        let s = DMatrix::identity(a.nrows(), a.nrows()) * (2.0 * tj) - a * (tj * tj);
+        s_inv = s
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::identity(sdp.sizes[j], sdp.sizes[j]));
+    }
+    // Scale T up until K(T) ≻ 0 (the last block subtracts W̃_mᵀW̃_m); ρ scales accordingly.
+    let mut scale = 1.0;
+    let mut cur = None;
+    for _ in 0..200 {
+        let ts: Vec<f64> = t.iter().map(|v| v * scale).collect();
+        if let Some(r) = sdp.rho(&ts, 1.0) {
+            t = ts;
+            cur = Some(r.0);
+            break;
+        }
+        scale *= 2.0;
+    }
+    let Some(rho0) = cur else {
+        return naive_bound(mlp);
+    };
+    // Minimise f_μ over θ = ln t by gradient steps with backtracking (BB step sizes), for
+    // μ = 10⁻²ρ₀, 10⁻³ρ₀, …, 10⁻¹¹ρ₀ (each stage warm-started), keeping the T of the least
+    // λ_max seen.
+    let mut theta: Vec<f64> = t.iter().map(|v| v.ln()).collect();
+    let (mut rho, mut best_theta) = (rho0, theta.clone());
+    let mut step = 0.1;
+    let mut mu = 1e-2 * rho0.max(1e-300);
+    for _stage in 0..10 {
+        let t: Vec<f64> = theta.iter().map(|v| v.exp()).collect();
+        let Some((_, mut f, g)) = sdp.rho(&t, mu) else {
+            break;
+        };
+        let mut gt: Vec<f64> = g.iter().zip(&t).map(|(g, t)| g * t).collect();
+        for _ in 0..300 {
+            let gn: f64 = gt.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if gn <= 1e-12 * f.abs().max(1e-300) {
+                break;
+            }
+            let mut accepted = false;
+            for _ in 0..40 {
+                let th2: Vec<f64> = theta.iter().zip(&gt).map(|(th, g)| th - step * g).collect();
+                let t2: Vec<f64> = th2.iter().map(|v| v.exp()).collect();
+                if let Some((l2, f2, g2)) = sdp.rho(&t2, mu) {
+                    if f2 <= f - 1e-4 * step * gn * gn {
+                        let gt2: Vec<f64> = g2.iter().zip(&t2).map(|(g, t)| g * t).collect();
+                        // Barzilai–Borwein step for the next iteration.
+                        let s: Vec<f64> = th2.iter().zip(&theta).map(|(a, b)| a - b).collect();
+                        let y: Vec<f64> = gt2.iter().zip(&gt).map(|(a, b)| a - b).collect();
+                        let sy: f64 = s.iter().zip(&y).map(|(a, b)| a * b).sum();
+                        let ss: f64 = s.iter().map(|a| a * a).sum();
+                        step = if sy > 0.0 {
+                            (ss / sy).clamp(1e-8, 1e3)
+                        } else {
+                            step * 2.0
+                        };
+                        let rel = (f - f2) / f.abs().max(1e-300);
+                        theta = th2;
+                        f = f2;
+                        gt = gt2;
+                        if l2 < rho {
+                            rho = l2;
+                            best_theta.clone_from(&theta);
+                        }
+                        accepted = rel >= 1e-13;
+                        break;
+                    }
+                }
+                step *= 0.5;
+            }
+            if !accepted {
+                break;
+            }
+        }
+        mu *= 0.1;
+    }
+    let theta = best_theta;
+    let t: Vec<f64> = theta.iter().map(|v| v.exp()).collect();
+    // Certify: inflate ρ until −M(ρ′, T) has a Cholesky factorisation.
+    let mut rho_c = rho * (1.0 + 1e-9) + 1e-12;
+    for _ in 0..60 {
+        if sdp.certify(rho_c, &t) {
+            return rho_c.sqrt();
+        }
+        rho_c *= 1.0 + 1e-6;
+        rho_c += 1e-9;
+    }
+    naive_bound(mlp)
+}
+
+/// Exact maximum of ‖W̃_m D_{m−1}⋯D_1 W̃_1‖₂ over slope vertices D_j ∈ {0,1}ⁿ; `None` if
+/// the number of hidden units exceeds `max_hidden` (2^units vertices).
+///
+/// Enumeration: with h the widest hidden layer, `J = A D_h B` where
+/// `A = W̃_m D_{m−1}⋯W̃_{h+1}` and `B = W̃_h D_{h−1}⋯W̃_1` depend only on the other layers'
+/// slopes, so `J(S) = Σ_{a∈S} A_{:,a} B_{a,:}` over the active units S of layer h. For each
+/// pattern of the other layers, the partial sums over the low and the high half of layer
+/// h's units are tabulated (each entry one addition from another), and every vertex costs
+/// one nu × n0 addition and a norm. Each J is a sum of at most n_h outer products, so it
+/// carries only the rounding of an ordinary matrix product (a different association than
+/// the plain product W̃_m D ⋯ W̃_1).
+pub fn vertex_bound(mlp: &Mlp, max_hidden: usize) -> Option<f64> {
+    let w: Vec<DMatrix<f64>> = mlp.physical_layers().iter().map(mat).collect();
+    let m = w.len();
+    let hidden: usize = w[..m - 1].iter().map(|m| m.nrows()).sum();
+    if hidden > max_hidden {
+        return None;
+    }
+    if m == 1 {
+        return Some(spectral_norm(&w[0]));
+    }
+    let n0 = w[0].ncols();
+    let nu = w[m - 1].nrows();
+    // Inner layer: the widest hidden layer (index into w: W[h] maps into hidden layer h).
+    let h = (0..m - 1)
+        .max_by_key(|&j| (w[j].nrows(), std::cmp::Reverse(j)))
+        .unwrap_or(0);
+    let nh = w[h].nrows();
+    let others: Vec<usize> = (0..m - 1).filter(|&j| j != h).collect();
+    let outer_bits: usize = others.iter().map(|&j| w[j].nrows()).sum();
+    let (lo_bits, hi_bits) = (nh / 2, nh - nh / 2);
+    let dim = nu * n0;
+    let mut lo_tab = vec![0.0; dim << lo_bits];
+    let mut hi_tab = vec![0.0; dim << hi_bits];
+    let mut rank1 = vec![0.0; dim * nh];
+    let mut j_buf = vec![0.0; dim];
+    let mut best = 0.0f64;
+    for outer in 0u64..1u64 << outer_bits {
+        // Slopes of the other layers from the outer mask.
+        let slope = |j: usize| -> DVector<f64> {
+            let mut bit = 0;
+            for &o in &others {
+                if o == j {
+                    break;
+                }
+                bit += w[o].nrows();
+            }
+            DVector::from_fn(w[j].nrows(), |r, _| {
+                if outer >> (bit + r) & 1 == 1 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+        };
+        // B = W̃_h D_{h−1} ⋯ D_1 W̃_1 (nh × n0), A = W̃_m D_{m−1} ⋯ D_{h+1} W̃_{h+1} (nu × nh).
+        let mut b = w[0].clone();
+        for j in 1..=h {
+            let d = slope(j - 1);
+            let mut db = b;
+            for (r, mut row) in db.row_iter_mut().enumerate() {
+                row *= d[r];
+            }
+            b = &w[j] * db;
+        }
+        let mut a = w[m - 1].clone();
+        for j in (h + 1..m - 1).rev() {
+            let d = slope(j);
+            for (c, mut col) in a.column_iter_mut().enumerate() {
+                col *= d[c];
+            }
+            a = &a * &w[j];
+        }
+        // Rank-one terms A_{:,u} B_{u,:}, row-major nu × n0.
+        for u in 0..nh {
+            for r in 0..nu {
+                for c in 0..n0 {
+                    rank1[u * dim + r * n0 + c] = a[(r, u)] * b[(u, c)];
+                }
+            }
+        }
+        for (tab, bits, first) in [
+            (&mut lo_tab, lo_bits, 0usize),
+            (&mut hi_tab, hi_bits, lo_bits),
+        ] {
+            for s in 1usize..1 << bits {
+                let low = s.trailing_zeros() as usize;
+                let prev = s & (s - 1);
+                let (done, rest) = tab.split_at_mut(s * dim);
+                let src = &done[prev * dim..(prev + 1) * dim];
+                let term = &rank1[(first + low) * dim..(first + low + 1) * dim];
+                for ((d, &p), &t) in rest[..dim].iter_mut().zip(src).zip(term) {
+                    *d = p + t;
+                }
+            }
+        }
+        for hv in hi_tab.chunks_exact(dim) {
+            for lv in lo_tab.chunks_exact(dim) {
+                let n2 = if nu == 1 || n0 == 1 {
+                    lv.iter()
+                        .zip(hv)
+                        .map(|(l, h)| (l + h) * (l + h))
+                        .sum::<f64>()
+                } else {
+                    for ((j, &l), &h) in j_buf.iter_mut().zip(lv).zip(hv) {
+                        *j = l + h;
+                    }
+                    squared_spectral_norm(&j_buf, nu, n0)
+                };
+                best = best.max(n2);
+            }
+        }
+    }
+    Some(best.sqrt())
+}
+
+/// ‖J‖₂² of a row-major r × c matrix: closed form for a 2 × 2 Gram matrix, SVD otherwise.
+fn squared_spectral_norm(j: &[f64], r: usize, c: usize) -> f64 {
+    if r == 2 || c == 2 {
+        // G = J Jᵀ (r = 2) or JᵀJ (c = 2); λ_max = (tr + √((g₁₁ − g₂₂)² + 4g₁₂²)) / 2.
+        let (mut g11, mut g22, mut g12) = (0.0, 0.0, 0.0);
+        if r == 2 {
+            for k in 0..c {
+                let (x, y) = (j[k], j[c + k]);
+                g11 += x * x;
+                g22 += y * y;
+                g12 += x * y;
+            }
+        } else {
+            for k in 0..r {
+                let (x, y) = (j[k * 2], j[k * 2 + 1]);
+                g11 += x * x;
+                g22 += y * y;
+                g12 += x * y;
+            }
+        }
+        let disc = ((g11 - g22) * (g11 - g22) + 4.0 * g12 * g12).sqrt();
+        return 0.5 * (g11 + g22 + disc);
+    }
+    spectral_norm(&DMatrix::from_row_slice(r, c, j)).powi(2)
+}
+
+/// Sampled lower bound on L_NN: max ‖∂κ_NN/∂x‖₂ over `n` seeded uniform points of the box,
+/// the best 10 refined by a shrinking random local search (every value is an attained
+/// ‖J(x)‖₂ at a point of X, so the result is a true lower bound).
+pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u64) -> f64 {
+    let nx = mlp.nx();
+    let nu = mlp.nu();
+    let mut ws = Workspace::default();
+    let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    let mut norm_at = |x: &[f64], ws: &mut Workspace| {
+        mlp.eval(x, &mut u, &mut j, ws);
+        spectral_norm(&DMatrix::from_row_slice(nu, nx, &j))
+    };
+    let mut pts: Vec<(f64, Vec<f64>)> = (0..n)
+        .map(|i| {
+            let x: Vec<f64> = (0..nx)
+                .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(seed, i as u64, k as u64))
+                .collect();
+            (norm_at(&x, &mut ws), x)
+        })
+        .collect();
+    pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut best = pts.first().map_or(0.0, |p| p.0);
+    for (k, (v0, x0)) in pts.into_iter().take(10).enumerate() {
+        let (mut v, mut x) = (v0, x0);
+        let mut radius: Vec<f64> = (0..nx).map(|i| 0.05 * (hi[i] - lo[i])).collect();
+        for it in 0..400 {
+            let cand: Vec<f64> = (0..nx)
+                .map(|i| {
+                    let r = 2.0
+                        * crate::rng::uniform(seed ^ 0x5151, (k * 1000 + it) as u64, i as u64)
+                        - 1.0;
+                    (x[i] + r * radius[i]).clamp(lo[i], hi[i])
+                })
+                .collect();
+            let c = norm_at(&cand, &mut ws);
+            if c > v {
+                v = c;
+                x = cand;
+            } else if it % 20 == 19 {
+                radius.iter_mut().for_each(|r| *r *= 0.5);
+            }
+        }
+        best = best.max(v);
+    }
+    best
+}
+
+/// L_MPC estimates from labelled points: (max ‖∂κ/∂x‖₂ over the points, max difference
+/// quotient ‖κ(x_i) − κ(x_j)‖/‖x_i − x_j‖ over each point's 2·nx nearest neighbours).
+pub fn mpc_estimates(
+    x: &[f64],
+    u: &[f64],
+    du: &[f64],
+    use_jac: &[bool],
+    nx: usize,
+    nu: usize,
+) -> (f64, f64) {
+    let n = use_jac.len();
+    let mut max_sens = 0.0f64;
+    for i in 0..n {
+        if use_jac[i] {
+            let m = DMatrix::from_row_slice(nu, nx, &du[i * nu * nx..(i + 1) * nu * nx]);
+            max_sens = max_sens.max(spectral_norm(&m));
+        }
+    }
+    let mut max_q = 0.0f64;
+    let k = (2 * nx).min(n.saturating_sub(1));
+    let stride = if n > 20_000 { n / 20_000 } else { 1 };
+    let dist = |i: usize, j: usize| -> f64 {
+        (0..nx)
+            .map(|c| (x[i * nx + c] - x[j * nx + c]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    for i in (0..n).step_by(stride) {
+        let mut near: Vec<(f64, usize)> = (0..n)
+            .filter(|&j| j != i)
+            .map(|j| (dist(i, j), j))
+            .collect();
+        if near.len() > k {
+            near.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+            near.truncate(k);
+        }
+        for (d, j) in near {
+            if d > 0.0 {
+                let du: f64 = (0..nu)
+                    .map(|r| (u[i * nu + r] - u[j * nu + r]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                max_q = max_q.max(du / d);
+            }
+        }
+    }
+    (max_sens, max_q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learn::mlp::Activation;
+
+    fn net(seed: u64, widths: &[usize]) -> Mlp {
+        let nx = widths[0];
+        let nu = *widths.last().unwrap();
+        Mlp::new(
+            widths,
+            Activation::Tanh,
+            seed,
+            &vec![-2.0; nx],
+            &vec![3.0; nx],
+            &vec![-4.0; nu],
+            &vec![4.0; nu],
+        )
+    }
+
+    #[test]
+    fn bounds_are_ordered_on_random_nets() {
+        for seed in 0..12 {
+            for widths in [[2usize, 10, 10, 1].as_slice(), &[2, 6, 1], &[3, 5, 4, 2]] {
+                let m = net(seed, widths);
+                let naive = naive_bound(&m);
+                let sdp = lipsdp_bound(&m);
+                let vert = vertex_bound(&m, 20).unwrap();
+                let lower = sampled_lower_bound(
+                    &m,
+                    &vec![-2.0; widths[0]],
+                    &vec![3.0; widths[0]],
+                    2000,
+                    seed,
+                );
+                assert!(
+                    lower <= vert * (1.0 + 1e-9),
+                    "{seed} {widths:?}: lower {lower} > vertex {vert}"
+                );
+                assert!(
+                    vert <= sdp * (1.0 + 1e-6),
+                    "{seed} {widths:?}: vertex {vert} > lipsdp {sdp}"
+                );
+                assert!(
+                    sdp <= naive * (1.0 + 1e-9),
+                    "{seed} {widths:?}: lipsdp {sdp} > naive {naive}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn single_linear_layer_all_bounds_equal_the_norm() {
+        let m = net(3, &[3, 2]);
+        let w = DMatrix::from_row_slice(2, 3, &m.physical_layers()[0].w);
+        let n = spectral_norm(&w);
+        assert!((naive_bound(&m) - n).abs() < 1e-12);
+        assert!((lipsdp_bound(&m) - n).abs() < 1e-12);
+        assert!((vertex_bound(&m, 20).unwrap() - n).abs() < 1e-12);
+        let lower = sampled_lower_bound(&m, &[-2.0; 3], &[3.0; 3], 10, 1);
+        assert!((lower - n).abs() < 1e-9);
+    }
+
+    /// One hidden neuron: LipSDP-Neuron is exact, |w₂·w₁|.
+    #[test]
+    fn lipsdp_is_exact_for_one_neuron() {
+        let mut m = net(1, &[1, 1, 1]);
+        m.layers[0].w = vec![0.7];
+        m.layers[1].w = vec![-1.9];
+        let exact = naive_bound(&m);
+        assert!((lipsdp_bound(&m) - exact).abs() <= 1e-6 * exact);
+    }
+
+    /// The original enumeration: the plain product for every slope pattern.
+    fn vertex_brute_force(mlp: &Mlp) -> f64 {
+        let w: Vec<DMatrix<f64>> = mlp.physical_layers().iter().map(mat).collect();
+        let hidden: usize = w[..w.len() - 1].iter().map(|m| m.nrows()).sum();
+        let mut best = 0.0f64;
+        for mask in 0u64..1 << hidden {
+            let mut bit = 0;
+            let mut p = DMatrix::zeros(0, 0);
+            for (j, wj) in w.iter().enumerate() {
+                p = if j == 0 { wj.clone() } else { wj * &p };
+                if j + 1 < w.len() {
+                    for r in 0..wj.nrows() {
+                        if mask >> bit & 1 == 0 {
+                            p.row_mut(r).fill(0.0);
+                        }
+                        bit += 1;
+                    }
+                }
+            }
+            best = best.max(spectral_norm(&p));
+        }
+        best
+    }
+
+    #[test]
+    fn vertex_enumeration_matches_brute_force() {
+        for (seed, widths) in [
+            (1u64, [2usize, 6, 5, 1].as_slice()),
+            (2, &[2, 4, 7, 2]),
+            (3, &[3, 5, 3]),
+            (4, &[3, 3, 4, 3, 3]),
+            (5, &[1, 6, 2]),
+            (6, &[4, 2, 3, 5]),
+        ] {
+            let m = net(seed, widths);
+            let (fast, brute) = (vertex_bound(&m, 22).unwrap(), vertex_brute_force(&m));
+            assert!(
+                (fast - brute).abs() <= 1e-12 * brute,
+                "{widths:?}: {fast} vs {brute}"
+            );
+        }
+    }
+
+    /// Diagonal (unit-wise decoupled) nets: x_i ↦ w₃ᵢ σ(w₂ᵢ σ(w₁ᵢ xᵢ)), whose Lipschitz
+    /// constant, LipSDP-Neuron optimum included, is maxᵢ |w₁ᵢ w₂ᵢ w₃ᵢ| (scaling removed).
+    #[test]
+    fn lipsdp_reaches_the_known_optimum_of_decoupled_nets() {
+        let n = 4;
+        let mut m = Mlp::new(
+            &[n, n, n, n],
+            Activation::Tanh,
+            0,
+            &vec![-1.0; n],
+            &vec![1.0; n],
+            &vec![-1.0; n],
+            &vec![1.0; n],
+        );
+        let w: [[f64; 4]; 3] = [
+            [0.7, -1.9, 2.5, 0.3],
+            [1.4, 0.8, -0.6, 3.0],
+            [-2.2, 1.1, 0.9, 0.5],
+        ];
+        let mut exact = 0.0f64;
+        for i in 0..n {
+            exact = exact.max((w[0][i] * w[1][i] * w[2][i]).abs());
+        }
+        for (l, wl) in m.layers.iter_mut().zip(&w) {
+            l.w.fill(0.0);
+            for i in 0..n {
+                l.w[i * n + i] = wl[i];
+            }
+        }
+        let sdp = lipsdp_bound(&m);
+        assert!(
+            sdp >= exact * (1.0 - 1e-12),
+            "{sdp} below the true constant {exact}"
+        );
+        assert!(sdp <= exact * (1.0 + 1e-5), "{sdp} vs optimum {exact}");
+        assert!((vertex_bound(&m, 22).unwrap() - exact).abs() <= 1e-12 * exact);
+    }
+
+    /// An independent LipSDP-Neuron solve: for fixed T, the least ρ with −M(ρ, T) ⪰ 0 by
+    /// bisection on Cholesky factorisations of the full matrix (no Schur complement, no
+    /// eigenvalues, no gradients), minimised over T by a derivative-free pattern search in
+    /// log T (coordinate and random directions, shrinking steps).
+    fn lipsdp_reference(mlp: &Mlp) -> f64 {
+        let sdp = LipSdp::new(mlp);
+        let least_rho = |t: &[f64]| -> f64 {
+            let (mut lo, mut hi) = (0.0, 1.0);
+            let mut k = 0;
+            while !sdp.certify(hi, t) {
+                hi *= 4.0;
+                k += 1;
+                if k > 200 {
+                    return f64::INFINITY;
+                }
+            }
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if sdp.certify(mid, t) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+                if hi - lo <= 1e-13 * hi {
+                    break;
+                }
+            }
+            hi
+        };
+        let mut th = vec![0.0; sdp.nh];
+        let eval = |th: &[f64]| least_rho(&th.iter().map(|v| v.exp()).collect::<Vec<_>>());
+        // A feasible start: T = 2^k I with K(T) ≻ 0.
+        let mut f = eval(&th);
+        while !f.is_finite() {
+            th.iter_mut().for_each(|v| *v += std::f64::consts::LN_2);
+            f = eval(&th);
+        }
+        let mut step = 1.0;
+        let mut it = 0u64;
+        while step > 1e-8 {
+            let mut improved = false;
+            let ndir = 2 * sdp.nh + 6 * sdp.nh;
+            for d in 0..ndir {
+                let dir: Vec<f64> = if d < 2 * sdp.nh {
+                    let s = if d % 2 == 0 { 1.0 } else { -1.0 };
+                    (0..sdp.nh)
+                        .map(|k| if k == d / 2 { s } else { 0.0 })
+                        .collect()
+                } else {
+                    it += 1;
+                    (0..sdp.nh)
+                        .map(|k| 2.0 * crate::rng::uniform(77, it, k as u64) - 1.0)
+                        .collect()
+                };
+                let cand: Vec<f64> = th.iter().zip(&dir).map(|(a, b)| a + step * b).collect();
+                let fc = eval(&cand);
+                if fc < f {
+                    f = fc;
+                    th = cand;
+                    improved = true;
+                }
+            }
+            if !improved {
+                step *= 0.7;
+            }
+        }
+        f.sqrt()
+    }
+
+    #[test]
+    fn lipsdp_agrees_with_an_independent_solve() {
+        for (seed, widths) in [
+            (1u64, [2usize, 4, 3, 1].as_slice()),
+            (2, &[2, 5, 5, 1]),
+            (3, &[3, 4, 2]),
+        ] {
+            let m = net(seed, widths);
+            let (fast, slow) = (lipsdp_bound(&m), lipsdp_reference(&m));
+            eprintln!("{widths:?}: descent {fast}, reference {slow}");
+            // Measured gap: both directions up to ~1e-3 (the derivative-free search stalls
+            // at kinks of λ_max; the descent in ln T converges slowly where optimal
+            // multipliers tend to 0). The target is ~1e-4: not reached yet.
+            assert!(
+                slow.is_finite() && (fast - slow).abs() <= 2e-3 * slow,
+                "{widths:?}: descent {fast} vs reference {slow}"
+            );
+        }
+    }
+
+    #[test]
+    fn mpc_estimates_of_a_linear_law() {
+        // κ(x) = A x with ‖A‖₂ known: both estimates recover it.
+        let a = [3.0, -4.0];
+        let mut x = Vec::new();
+        let mut u = Vec::new();
+        let mut du = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                let p = [i as f64 * 0.1, j as f64 * 0.2];
+                x.extend(p);
+                u.push(a[0] * p[0] + a[1] * p[1]);
+                du.extend(a);
+            }
+        }
+        let (s, q) = mpc_estimates(&x, &u, &du, &[true; 100], 2, 1);
+        assert!((s - 5.0).abs() < 1e-12);
+        assert!(q <= 5.0 + 1e-9 && q > 3.0);
+    }
+}

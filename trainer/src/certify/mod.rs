@@ -1,0 +1,20 @@
+//! Stage 5 — bounds on the error e(x) = κ(x) − κ_NN(x) over X.
+//!
+//! ```text
+//! Theorem 1:  ε = ε_D + (L_MPC + L_NN)·δ        ε_D = max_i ‖e(x_i)‖,  δ the covering radius
+//! local:      ε_C ≥ sup_{x∈C} ‖κ(x) − sat(κ_NN(x))‖  per cell C, refined adaptively
+//! ```
+//! - [`lipschitz`]: L_NN (product of norms, LipSDP-Neuron, slope vertices, sampled lower
+//!   bound) and the L_MPC estimates.
+//! - [`netbounds`]: sound interval enclosures of κ_NN, ∂κ_NN/∂x, ∂²κ_NN/∂x² over a box.
+//! - [`certificate`]: Theorem 1 and its inverse (what a target ε requires).
+//! - [`local`]: the cell bound ε_C from corner labels, enclosures and a remainder.
+//! - [`refine`]: adaptive refinement of the cells until the target ε is met.
+//!
+//! Imports `problem`, `mpc`, `data` and `learn`.
+
+pub mod certificate;
+pub mod lipschitz;
+pub mod local;
+pub mod netbounds;
+pub mod refine;

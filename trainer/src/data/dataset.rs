@@ -1,0 +1,712 @@
+//! The labelled dataset D̂ = {(x_i, κ(x_i), ∂κ/∂x(x_i))}: generation, files, shards.
+//!
+//! **Generation.** The sampler's states are cut into fixed chunks of [`CHUNK`] consecutive
+//! indices. A chunk is solved sequentially (each state warm-started from the previous
+//! state's solution when `solver.warm_start` is on, after a cold start for the chunk's first
+//! state); chunks run in parallel on rayon's pool. A label therefore depends only on its
+//! chunk, never on the thread count or the schedule, and shards (`--shard K/N` takes the
+//! chunks c with c mod N = K) merge into exactly the single-run dataset.
+//!
+//! **File format** (version [`FORMAT_VERSION`]): the postcard encoding of [`Dataset`]
+//! (magic, version, header, records sorted by index). Written atomically (temporary file +
+//! rename). A run writes a checkpoint `<out>.partial` after each batch of chunks and resumes
+//! from it when restarted with the same problem, sampler and shard.
+//!
+//! **CSV export** (for Python users): `index,x1..xn,u1..um,du1_dx1,…,dum_dxn,cost,status,
+//! iterations,kkt,degenerate,max_slack`, one row per record; unlabelled states have `NaN`s.
+
+use crate::data::sampling::Sampler;
+use crate::io::{decode_checked, write_atomic};
+use crate::mpc::law::{Label, MpcLaw};
+use crate::mpc::sensitivity::Degeneracy;
+use crate::mpc::sqp::{PrimalDual, SqpStatus};
+use crate::problem::{ProblemConfig, SamplingSettings};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Dataset file format version.
+pub const FORMAT_VERSION: u32 = 1;
+/// Magic bytes at the start of a dataset file.
+pub const MAGIC: [u8; 8] = *b"AMPCDSET";
+/// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
+pub const CHUNK: usize = 16;
+
+/// Errors of dataset generation and files.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A file is not a dataset of this version, or is corrupt.
+    #[error("{path}: not a valid ampc dataset: {reason}")]
+    Format {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Shards cannot be merged.
+    #[error("cannot merge: {0}")]
+    Merge(String),
+    /// A bad shard specification.
+    #[error("invalid shard `{0}`: expected K/N with 0 ≤ K < N")]
+    Shard(String),
+}
+
+impl From<crate::io::FileError> for DatasetError {
+    fn from(e: crate::io::FileError) -> Self {
+        match e {
+            crate::io::FileError::Io { path, source } => DatasetError::Io { path, source },
+            crate::io::FileError::Format { path, reason } => DatasetError::Format { path, reason },
+        }
+    }
+}
+
+/// `K/N`: this process computes the chunks c with c mod N = K.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    /// This shard's index K.
+    pub index: u32,
+    /// Number of shards N.
+    pub count: u32,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = DatasetError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = || DatasetError::Shard(s.to_string());
+        let (k, n) = s.split_once('/').ok_or_else(err)?;
+        let index: u32 = k.trim().parse().map_err(|_| err())?;
+        let count: u32 = n.trim().parse().map_err(|_| err())?;
+        if count == 0 || index >= count {
+            return Err(err());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// What a dataset was made from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Problem name.
+    pub problem: String,
+    /// [`ProblemConfig::problem_hash`] of the labelling problem.
+    pub problem_hash: String,
+    /// The full problem file (TOML) used, for reproduction.
+    pub config_toml: String,
+    /// State dimension.
+    pub nx: u32,
+    /// Input dimension.
+    pub nu: u32,
+    /// The sampler.
+    pub sampling: SamplingSettings,
+    /// Number of states of the whole plan (all shards).
+    pub total: u64,
+    /// The shard this file holds (`None`: the whole plan).
+    pub shard: Option<Shard>,
+    /// Chunk size used.
+    pub chunk: u32,
+}
+
+/// One labelled state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// Index in the sampling plan.
+    pub index: u64,
+    /// State x.
+    pub x: Vec<f64>,
+    /// κ(x) (NaN if unlabelled).
+    pub u: Vec<f64>,
+    /// ∂κ/∂x, row-major nu × nx (NaN if unlabelled).
+    pub du_dx: Vec<f64>,
+    /// Optimal cost.
+    pub cost: f64,
+    /// Solve status.
+    pub status: SqpStatus,
+    /// SQP + polish iterations.
+    pub iterations: u32,
+    /// Final KKT residual.
+    pub kkt: f64,
+    /// Sensitivity degeneracy (the Jacobian term should be dropped in training).
+    pub degeneracy: Option<Degeneracy>,
+    /// Largest state-bound slack (soft labels), 0 otherwise.
+    pub max_slack: f64,
+}
+
+impl Record {
+    /// Builds a record from a label.
+    pub fn from_label(index: u64, l: Label) -> Self {
+        Record {
+            index,
+            x: l.x,
+            u: l.u,
+            du_dx: l.du_dx,
+            cost: l.cost,
+            status: l.status,
+            iterations: l.info.iterations as u32,
+            kkt: l.info.kkt.max(),
+            degeneracy: l.degeneracy,
+            max_slack: l.max_slack,
+        }
+    }
+    /// Whether the record may be used for training (hard or soft label).
+    pub fn is_labelled(&self) -> bool {
+        self.status.is_labelled()
+    }
+}
+
+/// A dataset file's content.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Dataset {
+    /// Must equal [`MAGIC`].
+    pub magic: [u8; 8],
+    /// Must equal [`FORMAT_VERSION`].
+    pub version: u32,
+    /// Provenance.
+    pub header: Header,
+    /// Records sorted by index.
+    pub records: Vec<Record>,
+}
+
+/// Counts by status, for reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// All records.
+    pub total: usize,
+    /// Hard optimum.
+    pub converged: usize,
+    /// Soft (exact-penalty) label of a hard-infeasible state.
+    pub soft: usize,
+    /// Infeasible, unlabelled.
+    pub infeasible: usize,
+    /// Max-iterations or numerical failures.
+    pub failed: usize,
+    /// Labelled points whose sensitivity is degenerate.
+    pub degenerate: usize,
+}
+
+impl Dataset {
+    /// Status counts.
+    pub fn counts(&self) -> Counts {
+        let mut c = Counts {
+            total: self.records.len(),
+            ..Default::default()
+        };
+        for r in &self.records {
+            match r.status {
+                SqpStatus::Converged => c.converged += 1,
+                SqpStatus::Soft => c.soft += 1,
+                SqpStatus::Infeasible => c.infeasible += 1,
+                _ => c.failed += 1,
+            }
+            if r.is_labelled() && r.degeneracy.is_some() {
+                c.degenerate += 1;
+            }
+        }
+        c
+    }
+
+    /// Reads and checks a dataset file.
+    pub fn load(path: &Path) -> Result<Self, DatasetError> {
+        let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+
+    /// Decodes and checks a dataset from bytes; `origin` names it in errors.
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, DatasetError> {
+        let fmt = |reason: String| DatasetError::Format {
+            path: origin.to_string(),
+            reason,
+        };
+        let d: Dataset = decode_checked(
+            bytes,
+            origin,
+            &MAGIC,
+            "dataset",
+            |d: &Dataset| d.version,
+            FORMAT_VERSION,
+        )?;
+        let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
+        for (i, r) in d.records.iter().enumerate() {
+            if r.x.len() != nx || r.u.len() != nu || r.du_dx.len() != nx * nu {
+                return Err(fmt(format!("record {i} has wrong dimensions")));
+            }
+            if i > 0 && d.records[i - 1].index >= r.index {
+                return Err(fmt(format!("record {i} is out of order")));
+            }
+            if r.index >= d.header.total {
+                return Err(fmt(format!(
+                    "record {i} has index {} ≥ total {}",
+                    r.index, d.header.total
+                )));
+            }
+        }
+        Ok(d)
+    }
+
+    /// Encodes the dataset.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// Writes the dataset atomically.
+    pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
+        Ok(write_atomic(path, &self.to_bytes())?)
+    }
+
+    /// The CSV export.
+    pub fn to_csv(&self) -> String {
+        let (nx, nu) = (self.header.nx as usize, self.header.nu as usize);
+        let mut s = String::from("index");
+        for i in 1..=nx {
+            s += &format!(",x{i}");
+        }
+        for j in 1..=nu {
+            s += &format!(",u{j}");
+        }
+        for j in 1..=nu {
+            for i in 1..=nx {
+                s += &format!(",du{j}_dx{i}");
+            }
+        }
+        s += ",cost,status,iterations,kkt,degenerate,max_slack\n";
+        for r in &self.records {
+            s += &r.index.to_string();
+            for v in r.x.iter().chain(&r.u).chain(&r.du_dx) {
+                s += &format!(",{v:?}");
+            }
+            let deg = match r.degeneracy {
+                None => "",
+                Some(Degeneracy::WeaklyActive(_)) => "weakly_active",
+                Some(Degeneracy::Singular) => "singular",
+            };
+            s += &format!(
+                ",{:?},{},{},{:e},{},{:?}\n",
+                r.cost,
+                r.status.as_str(),
+                r.iterations,
+                r.kkt,
+                deg,
+                r.max_slack
+            );
+        }
+        s
+    }
+}
+
+/// The checkpoint path of an output file.
+pub fn partial_path(out: &Path) -> PathBuf {
+    let mut s = out.as_os_str().to_owned();
+    s.push(".partial");
+    PathBuf::from(s)
+}
+
+/// The CSV path written beside a dataset file (`.csv` extension).
+pub fn csv_path(out: &Path) -> PathBuf {
+    out.with_extension("csv")
+}
+
+/// Labels one chunk of the plan: indices `[start, end)`, solved in order, warm-started.
+pub fn label_chunk(
+    law: &mut MpcLaw,
+    sampler: &Sampler,
+    start: usize,
+    end: usize,
+    warm_start: bool,
+) -> Vec<Record> {
+    let nx = law.hard_solver().ocp.nx;
+    let mut x = vec![0.0; nx];
+    let mut prev: Option<PrimalDual> = None;
+    let mut out = Vec::with_capacity(end - start);
+    for i in start..end {
+        sampler.point(i, &mut x);
+        let (label, sol) = law.solve(&x, if warm_start { prev.as_ref() } else { None });
+        prev = sol.or(prev);
+        out.push(Record::from_label(i as u64, label));
+    }
+    out
+}
+
+/// Options of a generation run.
+#[derive(Debug, Clone, Default)]
+pub struct GenerateOptions {
+    /// Compute only this shard.
+    pub shard: Option<Shard>,
+    /// Show a progress bar (rate, ETA) on stderr.
+    pub progress: bool,
+}
+
+/// Generates (or resumes) the dataset of `cfg` into `out` (plus the CSV beside it).
+pub fn generate(
+    cfg: &ProblemConfig,
+    out: &Path,
+    opts: &GenerateOptions,
+) -> Result<Dataset, DatasetError> {
+    let sampler = Sampler::new(&cfg.sampling, &cfg.domain);
+    let total = sampler.len();
+    let header = Header {
+        problem: cfg.name.clone(),
+        problem_hash: cfg.problem_hash(),
+        config_toml: toml::to_string(cfg).unwrap_or_default(),
+        nx: cfg.system.nx() as u32,
+        nu: cfg.system.nu() as u32,
+        sampling: cfg.sampling.clone(),
+        total: total as u64,
+        shard: opts.shard,
+        chunk: CHUNK as u32,
+    };
+    let n_chunks = total.div_ceil(CHUNK);
+    let mine: Vec<usize> = (0..n_chunks)
+        .filter(|c| {
+            opts.shard
+                .is_none_or(|s| c % s.count as usize == s.index as usize)
+        })
+        .collect();
+    // Resume from a checkpoint of the same plan.
+    let partial = partial_path(out);
+    let mut records: Vec<Record> = Vec::new();
+    if let Ok(bytes) = std::fs::read(&partial) {
+        match Dataset::from_bytes(&bytes, &partial.display().to_string()) {
+            Ok(d) if d.header == header => records = d.records,
+            _ => {} // a checkpoint of another plan or a torn file: start afresh
+        }
+    }
+    let done: std::collections::HashSet<usize> =
+        records.iter().map(|r| r.index as usize / CHUNK).collect();
+    let todo: Vec<usize> = mine.iter().copied().filter(|c| !done.contains(c)).collect();
+    let n_mine: usize = mine
+        .iter()
+        .map(|&c| (CHUNK * (c + 1)).min(total) - CHUNK * c)
+        .sum();
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new(n_mine as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} labelling [{bar:30}] {pos}/{len} states  {per_sec}  ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b.set_position(records.len() as u64);
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let warm = cfg.solver.warm_start;
+    let batch = (rayon::current_num_threads() * 8).max(8);
+    for group in todo.chunks(batch) {
+        let new: Vec<Vec<Record>> = group
+            .par_iter()
+            .map_init(
+                || MpcLaw::new(cfg),
+                |law, &c| {
+                    let r =
+                        label_chunk(law, &sampler, c * CHUNK, ((c + 1) * CHUNK).min(total), warm);
+                    bar.inc(r.len() as u64);
+                    r
+                },
+            )
+            .collect();
+        records.extend(new.into_iter().flatten());
+        records.sort_by_key(|r| r.index);
+        let ck = Dataset {
+            magic: MAGIC,
+            version: FORMAT_VERSION,
+            header: header.clone(),
+            records: records.clone(),
+        };
+        write_atomic(&partial, &ck.to_bytes())?;
+    }
+    bar.finish_and_clear();
+    records.sort_by_key(|r| r.index);
+    let d = Dataset {
+        magic: MAGIC,
+        version: FORMAT_VERSION,
+        header,
+        records,
+    };
+    d.save(out)?;
+    write_atomic(&csv_path(out), d.to_csv().as_bytes())?;
+    let _ = std::fs::remove_file(&partial);
+    Ok(d)
+}
+
+/// Merges shard files into the single-run dataset (byte-identical to an unsharded run).
+pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
+    let first = inputs
+        .first()
+        .ok_or_else(|| DatasetError::Merge("no input files".into()))?;
+    let mut base = first.header.clone();
+    base.shard = None;
+    let n = first.header.shard.map(|s| s.count).ok_or_else(|| {
+        DatasetError::Merge("input 1 is not a shard (it holds the whole plan)".into())
+    })?;
+    let mut seen = vec![false; n as usize];
+    for (i, d) in inputs.iter().enumerate() {
+        let mut h = d.header.clone();
+        let s = h
+            .shard
+            .take()
+            .ok_or_else(|| DatasetError::Merge(format!("input {} is not a shard", i + 1)))?;
+        if h != base {
+            return Err(DatasetError::Merge(format!(
+                "input {} was made from another problem, sampler or format than input 1",
+                i + 1
+            )));
+        }
+        if s.count != n {
+            return Err(DatasetError::Merge(format!(
+                "input {} is shard {}/{}, not of {n}",
+                i + 1,
+                s.index,
+                s.count
+            )));
+        }
+        if std::mem::replace(&mut seen[s.index as usize], true) {
+            return Err(DatasetError::Merge(format!(
+                "shard {}/{n} given twice",
+                s.index
+            )));
+        }
+    }
+    let missing: Vec<String> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, &s)| !s)
+        .map(|(k, _)| format!("{k}/{n}"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(DatasetError::Merge(format!(
+            "missing shards: {}",
+            missing.join(", ")
+        )));
+    }
+    let mut records: Vec<Record> = inputs
+        .iter()
+        .flat_map(|d| d.records.iter().cloned())
+        .collect();
+    records.sort_by_key(|r| r.index);
+    if records.len() as u64 != base.total || records.windows(2).any(|w| w[0].index == w[1].index) {
+        return Err(DatasetError::Merge(format!(
+            "shards hold {} records for a plan of {} states (incomplete shard files?)",
+            records.len(),
+            base.total
+        )));
+    }
+    Ok(Dataset {
+        magic: MAGIC,
+        version: FORMAT_VERSION,
+        header: base,
+        records,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn small_cfg() -> ProblemConfig {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
+        );
+        let mut cfg = ProblemConfig::load(Path::new(path)).unwrap();
+        cfg.sampling.counts = vec![9, 7];
+        cfg
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ampc-dataset-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d.join("d.bin")
+    }
+
+    #[test]
+    fn file_round_trip_and_csv() {
+        let out = tmp("rt");
+        let d = generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+        let bytes = std::fs::read(&out).unwrap();
+        let back = Dataset::load(&out).unwrap();
+        assert_eq!(back, d);
+        assert_eq!(back.to_bytes(), bytes);
+        assert_eq!(d.records.len(), 63);
+        assert_eq!(d.counts().converged, 63);
+        let csv = std::fs::read_to_string(csv_path(&out)).unwrap();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 64);
+        assert!(lines[0].starts_with("index,x1,x2,u1,du1_dx1,du1_dx2,cost,status"));
+        let f: Vec<&str> = lines[1].split(',').collect();
+        assert_eq!(f[1].parse::<f64>().unwrap(), d.records[0].x[0]);
+        assert_eq!(f[3].parse::<f64>().unwrap(), d.records[0].u[0]);
+        assert!(!partial_path(&out).exists());
+    }
+
+    #[test]
+    fn corrupt_files_are_errors_naming_the_file() {
+        let out = tmp("corrupt");
+        generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+        let bytes = std::fs::read(&out).unwrap();
+        let e = Dataset::from_bytes(&bytes[..bytes.len() / 2], "f.bin")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("f.bin"), "{e}");
+        let mut bad = bytes.clone();
+        bad[0] = b'X';
+        assert!(Dataset::from_bytes(&bad, "f.bin")
+            .unwrap_err()
+            .to_string()
+            .contains("magic"));
+        let mut v = Dataset::from_bytes(&bytes, "f").unwrap();
+        v.version = 99;
+        assert!(Dataset::from_bytes(&v.to_bytes(), "f")
+            .unwrap_err()
+            .to_string()
+            .contains("version"));
+        let e = Dataset::load(Path::new("/nonexistent/x.bin"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/nonexistent/x.bin"), "{e}");
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        #[test]
+        fn decoder_never_panics_on_mutated_blobs(flips in proptest::collection::vec((0usize..4096, any::<u8>()), 1..8), cut in 0usize..5000) {
+            let d = Dataset {
+                magic: MAGIC,
+                version: FORMAT_VERSION,
+                header: Header {
+                    problem: "p".into(), problem_hash: "h".into(), config_toml: String::new(),
+                    nx: 2, nu: 1, sampling: SamplingSettings::default(), total: 10, shard: None, chunk: CHUNK as u32,
+                },
+                records: (0..5).map(|i| Record {
+                    index: i, x: vec![0.5, 1.0], u: vec![2.0], du_dx: vec![1.0, 2.0], cost: 1.0,
+                    status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0,
+                }).collect(),
+            };
+            let mut b = d.to_bytes();
+            for (i, v) in flips { let n = b.len(); b[i % n] = v; }
+            b.truncate(cut);
+            let _ = Dataset::from_bytes(&b, "fuzz");
+        }
+    }
+
+    #[test]
+    fn results_do_not_depend_on_the_thread_count() {
+        let cfg = small_cfg();
+        let run = |threads: usize| {
+            let out = tmp(&format!("threads{threads}"));
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| generate(&cfg, &out, &GenerateOptions::default()).unwrap());
+            std::fs::read(&out).unwrap()
+        };
+        assert_eq!(run(1), run(3));
+    }
+
+    #[test]
+    fn an_interrupted_run_resumes_to_the_same_file() {
+        let cfg = small_cfg();
+        let out = tmp("resume");
+        let full = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+        let reference = std::fs::read(&out).unwrap();
+        std::fs::remove_file(&out).unwrap();
+        // A checkpoint holding chunks 0 and 2 only, as a killed run leaves behind; one of
+        // its labels is altered so that we can see it was reused, not recomputed.
+        let mut ck = full.clone();
+        ck.records
+            .retain(|r| matches!(r.index as usize / CHUNK, 0 | 2));
+        ck.records[0].iterations = 999;
+        write_atomic(&partial_path(&out), &ck.to_bytes()).unwrap();
+        let resumed = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+        assert_eq!(resumed.records[0].iterations, 999);
+        let mut fixed = resumed.clone();
+        fixed.records[0].iterations = full.records[0].iterations;
+        assert_eq!(fixed.to_bytes(), reference);
+        assert!(!partial_path(&out).exists());
+        // A checkpoint of another plan is ignored.
+        let mut other = ck.clone();
+        other.header.problem_hash = "other".into();
+        write_atomic(&partial_path(&out), &other.to_bytes()).unwrap();
+        generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), reference);
+    }
+
+    #[test]
+    fn shards_merge_to_the_single_run_and_bad_sets_are_refused() {
+        let cfg = small_cfg();
+        let out = tmp("shards");
+        generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+        let single = std::fs::read(&out).unwrap();
+        let shards: Vec<Dataset> = (0..3)
+            .map(|k| {
+                let p = out.with_file_name(format!("s{k}.bin"));
+                let opts = GenerateOptions {
+                    shard: Some(Shard { index: k, count: 3 }),
+                    progress: false,
+                };
+                generate(&cfg, &p, &opts).unwrap()
+            })
+            .collect();
+        assert_eq!(merge(&shards).unwrap().to_bytes(), single);
+        assert_eq!(
+            merge(&[shards[2].clone(), shards[0].clone(), shards[1].clone()])
+                .unwrap()
+                .to_bytes(),
+            single
+        );
+        let e = merge(&shards[..2]).unwrap_err().to_string();
+        assert!(e.contains("missing shards: 2/3"), "{e}");
+        let e = merge(&[shards[0].clone(), shards[0].clone(), shards[1].clone()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("given twice"), "{e}");
+        let mut alien = shards[1].clone();
+        alien.header.problem_hash = "x".into();
+        assert!(merge(&[shards[0].clone(), alien, shards[2].clone()]).is_err());
+        assert!(
+            "3/3".parse::<Shard>().is_err()
+                && "a/b".parse::<Shard>().is_err()
+                && "1/0".parse::<Shard>().is_err()
+        );
+        assert_eq!(
+            "1/4".parse::<Shard>().unwrap(),
+            Shard { index: 1, count: 4 }
+        );
+    }
+
+    /// Warm starts change the path, not the answer: on the paper's grid every label equals
+    /// the cold-start label.
+    #[test]
+    fn warm_and_cold_starts_give_the_same_pendulum_labels() {
+        let mut cfg = ProblemConfig::default();
+        let sampler = Sampler::new(&cfg.sampling, &cfg.domain);
+        let mut law = MpcLaw::new(&cfg);
+        let warm = label_chunk(&mut law, &sampler, 0, sampler.len(), true);
+        cfg.solver.warm_start = false;
+        let cold = label_chunk(&mut law, &sampler, 0, sampler.len(), false);
+        for (w, c) in warm.iter().zip(&cold) {
+            assert_eq!(w.status, c.status, "{:?}", w.x);
+            assert!(
+                (w.u[0] - c.u[0]).abs() <= 1e-6,
+                "{:?}: {} vs {}",
+                w.x,
+                w.u[0],
+                c.u[0]
+            );
+        }
+    }
+}

@@ -1,0 +1,11 @@
+//! Stage 7 — the trained, certified net for a device.
+//!
+//! ```text
+//! u = clamp(κ_NN,f32(proj_X(x)), U ⊕ [−ε, ε]),   |κ_NN,f32 − κ_NN,f64| ≤ f32 allowance
+//! ```
+//! - [`export`]: folding of the scaling, the f32 error analysis, the generated Rust source
+//!   (`controller-core/src/generated/weights.rs`) and the postcard blob for `controller-core`.
+//!
+//! Imports `problem`, `learn` and `certify`.
+
+pub mod export;

@@ -1,0 +1,775 @@
+//! The KKT system of the OCP on a fixed active set, ordered stage-wise into a banded matrix
+//! and factorised by a banded LU with partial pivoting.
+//!
+//! With the active inequality rows `G_A z = h_A` treated as equalities, the Newton matrix of
+//! the KKT conditions is
+//! ```text
+//!     ⎡ ∇²L + Gᵀ W G   ∇cᵀ   G_Aᵀ ⎤
+//! K = ⎢ ∇c              0     0   ⎥      unknowns (Δz, λ, ν_A)
+//!     ⎣ G_A             0     0   ⎦
+//! ```
+//! (`W` is an optional nonnegative diagonal weight of all inequality rows, used by the
+//! interior-point QP solver `qp::ipm`; the active-set Newton systems have `W = 0`).
+//! It serves twice: the SQP's final Newton polish (quadratic convergence once the active set
+//! is known) and the parametric sensitivity (`sensitivity` module), which solves
+//! `K · ∂(z, λ, ν_A)/∂x_s = (0, E, 0)` with E the identity on the rows of `c_0 = x_0 − x_s`.
+//! K is nonsingular exactly when LICQ and the second-order sufficient condition hold on the
+//! active set; a tiny LU pivot flags that failure.
+//!
+//! **Structure.** Every unknown belongs to a stage k: λ_k (the multiplier of `c_k`, which
+//! couples stage k−1 to stage k), x_k, u_k, the soft problem's slacks of the state bounds
+//! at stage k, and the multipliers of the active rows whose variables are in stage k. Ordered
+//! stage by stage in that order, `P K Pᵀ` is banded with half-bandwidth b about the size of
+//! one stage block (`2nx + nu + n_active,k + n_slack,k`), independent of N. The banded LU
+//! with partial pivoting (LAPACK's `gbtf2`: row interchanges within the band, U gets
+//! bandwidth ≤ 2b) then costs O(N·b²) time and O(N·b) memory instead of the dense O(N³).
+//! Partial pivoting makes it valid for the indefinite K; singularity is detected, as for the
+//! dense LU, by the ratio of the smallest to the largest |U_ii|.
+
+use crate::mpc::ocp::Ocp;
+use nalgebra::{DMatrix, DVector};
+
+/// A square banded matrix (lower bandwidth `kl`, upper `ku`) with room for the fill of LU
+/// with partial pivoting, factorised in place (`P A = L U`).
+///
+/// Storage is row-major by band: row i holds columns `i − kl ..= i + kl + ku`.
+#[derive(Debug, Clone, Default)]
+pub struct BandLu {
+    n: usize,
+    kl: usize,
+    ku: usize,
+    w: usize,
+    a: Vec<f64>,
+    piv: Vec<usize>,
+    /// Smallest over largest |U_ii| after [`BandLu::factor`] (0 if a pivot is 0 or not finite).
+    pub pivot_ratio: f64,
+}
+
+impl BandLu {
+    /// Resets to the n×n zero matrix with the given bandwidths, reusing the allocation.
+    pub fn reset(&mut self, n: usize, kl: usize, ku: usize) {
+        self.n = n;
+        self.kl = kl;
+        self.ku = ku;
+        self.w = 2 * kl + ku + 1;
+        self.a.clear();
+        self.a.resize(n * self.w, 0.0);
+        self.piv.clear();
+        self.piv.resize(n, 0);
+        self.pivot_ratio = 0.0;
+    }
+
+    /// Dimension n.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// Index of entry (i, j) in the band storage, if inside the band.
+    fn slot(&self, i: usize, j: usize) -> Option<usize> {
+        if i >= self.n || j >= self.n || j + self.kl < i || j > i + self.ku {
+            return None;
+        }
+        Some(i * self.w + (j + self.kl - i))
+    }
+
+    /// Adds v to entry (i, j). Returns false (and changes nothing) if (i, j) is outside the
+    /// band `−kl ≤ j − i ≤ ku` or the matrix.
+    pub fn add(&mut self, i: usize, j: usize, v: f64) -> bool {
+        if i >= self.n || j >= self.n || j + self.kl < i || j > i + self.ku {
+            return false;
+        }
+        self.a[i * self.w + (j + self.kl - i)] += v;
+        true
+    }
+
+    /// LU factorisation with partial pivoting, in place. Sets [`BandLu::pivot_ratio`]; a zero
+    /// pivot column is skipped (the factor is then singular, ratio 0).
+    pub fn factor(&mut self) {
+        let (n, kl, ku, w) = (self.n, self.kl, self.ku, self.w);
+        let ubw = kl + ku;
+        let (mut mn, mut mx) = (f64::INFINITY, 0.0f64);
+        for k in 0..n {
+            let last = (k + kl).min(n - 1);
+            // Entry (i, k) of row i ≥ k sits at i·w + (k + kl − i).
+            let mut p = k;
+            let mut best = self.a[k * w + kl].abs();
+            for i in k + 1..=last {
+                let v = self.a[i * w + k + kl - i].abs();
+                if v > best {
+                    best = v;
+                    p = i;
+                }
+            }
+            self.piv[k] = p;
+            // Columns k..k+len of a row are contiguous.
+            let len = (k + ubw).min(n - 1) - k + 1;
+            let rk0 = k * w + kl;
+            if p != k {
+                let (head, tail) = self.a.split_at_mut(p * w);
+                let rp0 = k + kl - p;
+                head[rk0..rk0 + len].swap_with_slice(&mut tail[rp0..rp0 + len]);
+            }
+            let d = self.a[rk0];
+            let ad = d.abs();
+            if !ad.is_finite() {
+                mn = 0.0;
+            }
+            mn = mn.min(ad);
+            mx = mx.max(ad);
+            if d == 0.0 || !d.is_finite() {
+                continue;
+            }
+            let inv = 1.0 / d;
+            // Rows k+1..=last, chunk q = row i = k+1+q: its entry (i, j) is at offset
+            // j + kl − i, so (i, k) is at kl − (q + 1) and columns k+1.. follow it.
+            let (head, tail) = self.a.split_at_mut((k + 1) * w);
+            let rk = &head[rk0 + 1..rk0 + len];
+            for (q, row) in tail.chunks_exact_mut(w).take(last - k).enumerate() {
+                let ri0 = kl - (q + 1);
+                let l = row[ri0] * inv;
+                row[ri0] = l;
+                if l != 0.0 {
+                    for (x, y) in row[ri0 + 1..ri0 + len].iter_mut().zip(rk) {
+                        *x -= l * y;
+                    }
+                }
+            }
+        }
+        self.pivot_ratio = if n == 0 {
+            1.0
+        } else if mx > 0.0 && mx.is_finite() && mn.is_finite() {
+            mn / mx
+        } else {
+            0.0
+        };
+    }
+
+    /// Solves `A x = b` in place with the factors of [`BandLu::factor`] (b has length n).
+    pub fn solve_in_place(&self, b: &mut [f64]) {
+        let (n, kl, w) = (self.n, self.kl, self.w);
+        let ubw = kl + self.ku;
+        for k in 0..n {
+            let p = self.piv[k];
+            if p != k {
+                b.swap(k, p);
+            }
+            let bk = b[k];
+            if bk != 0.0 {
+                // Entry (i, k) is at i·w + k + kl − i: a stride of w − 1 down the column.
+                let mut idx = k * w + kl + (w - 1);
+                for bi in &mut b[k + 1..=(k + kl).min(n - 1)] {
+                    *bi -= self.a[idx] * bk;
+                    idx += w - 1;
+                }
+            }
+        }
+        for k in (0..n).rev() {
+            let len = (k + ubw).min(n - 1) - k + 1;
+            let rk0 = k * w + kl;
+            let row = &self.a[rk0 + 1..rk0 + len];
+            let s: f64 = row.iter().zip(&b[k + 1..k + len]).map(|(a, x)| a * x).sum();
+            b[k] = (b[k] - s) / self.a[rk0];
+        }
+    }
+}
+
+/// Stage-wise ordering of the KKT unknowns `(z, λ, ν_A)` for one OCP structure and active
+/// set, and the resulting bandwidth.
+#[derive(Debug, Clone, Default)]
+pub struct KktLayout {
+    /// Active inequality rows (indices into `ocp.rows`), in the order of ν_A.
+    pub active: Vec<usize>,
+    /// Band position of each unknown in natural order `(z, λ, ν_A)`.
+    pos: Vec<usize>,
+    /// Half-bandwidth of the permuted K.
+    bw: usize,
+}
+
+/// Stage of each variable of z (slacks: the stage of the state they relax).
+fn var_stages(ocp: &Ocp) -> Vec<usize> {
+    let nz = ocp.nx + ocp.nu;
+    let mut st: Vec<usize> = (0..ocp.n_var).map(|v| v / nz).collect();
+    let is = ocp.is();
+    for row in &ocp.rows {
+        if row.len == 2 {
+            let (a, b) = (row.idx[0], row.idx[1]);
+            if a < is && b >= is {
+                st[b] = a / nz;
+            } else if b < is && a >= is {
+                st[a] = b / nz;
+            }
+        }
+    }
+    st
+}
+
+impl KktLayout {
+    /// The stage-wise ordering for `ocp` with active rows `active`. The bandwidth covers the
+    /// `Gᵀ W G` pattern of all rows too (it lies within a stage).
+    pub fn new(ocp: &Ocp, active: Vec<usize>) -> Self {
+        let (nx, nv, ne) = (ocp.nx, ocp.n_var, ocp.n_eq);
+        let stage = var_stages(ocp);
+        let is = ocp.is();
+        let nz = ocp.nx + ocp.nu;
+        let dim = nv + ne + active.len();
+        // Sort key (stage, kind, natural index).
+        let mut keys: Vec<(usize, u8, usize)> = Vec::with_capacity(dim);
+        for v in 0..nv {
+            let kind = if v >= is {
+                3
+            } else if v % nz < nx {
+                1
+            } else {
+                2
+            };
+            keys.push((stage[v], kind, v));
+        }
+        for e in 0..ne {
+            keys.push((e / nx, 0, nv + e));
+        }
+        for (t, &r) in active.iter().enumerate() {
+            let row = &ocp.rows[r];
+            let s = (0..row.len).map(|j| stage[row.idx[j]]).min().unwrap_or(0);
+            keys.push((s, 4, nv + ne + t));
+        }
+        keys.sort_unstable();
+        let mut pos = vec![0; dim];
+        for (p, &(_, _, i)) in keys.iter().enumerate() {
+            pos[i] = p;
+        }
+        let mut layout = KktLayout { active, pos, bw: 0 };
+        let mut bw = 0usize;
+        layout.for_each_pattern(ocp, |i, j| {
+            bw = bw.max(i.abs_diff(j));
+        });
+        layout.bw = bw;
+        layout
+    }
+
+    /// Dimension of K.
+    pub fn dim(&self) -> usize {
+        self.pos.len()
+    }
+
+    /// Half-bandwidth of the stage-ordered K.
+    pub fn bandwidth(&self) -> usize {
+        self.bw
+    }
+
+    /// Calls `f(pos_i, pos_j)` for (at least) every structurally nonzero entry of K with
+    /// `i ≥ j` in band positions, including the `Gᵀ W G` pattern of all rows.
+    fn for_each_pattern(&self, ocp: &Ocp, mut f: impl FnMut(usize, usize)) {
+        let mut g = |i: usize, j: usize| f(self.pos[i], self.pos[j]);
+        let (nx, nu, n, nv) = (ocp.nx, ocp.nu, ocp.horizon, ocp.n_var);
+        let nz = nx + nu;
+        for s in 0..=n {
+            let size = if s < n { nz } else { nx };
+            for i in 0..size {
+                for j in 0..size {
+                    g(s * nz + i, s * nz + j);
+                }
+            }
+        }
+        for i in 0..nx {
+            g(nv + i, i);
+        }
+        for s in 0..n {
+            for r in 0..nx {
+                let row = nv + (s + 1) * nx + r;
+                for j in 0..nz {
+                    g(row, s * nz + j);
+                }
+                g(row, ocp.ix(s + 1) + r);
+            }
+        }
+        for row in &ocp.rows {
+            for a in 0..row.len {
+                for b in 0..row.len {
+                    g(row.idx[a], row.idx[b]);
+                }
+            }
+        }
+        let a0 = nv + ocp.n_eq;
+        for (t, &r) in self.active.iter().enumerate() {
+            let row = &ocp.rows[r];
+            for j in 0..row.len {
+                g(a0 + t, row.idx[j]);
+            }
+        }
+    }
+}
+
+/// Calls `put(i, j, v)` for every nonzero of K (natural order `(z, λ, ν_A)`, both triangles;
+/// entries at the same (i, j) are to be summed). `row_weight[r]` (if given) adds
+/// `w_r a_r a_rᵀ` for every inequality row r to the (z, z) block.
+#[allow(clippy::too_many_arguments)]
+fn for_each_entry(
+    ocp: &Ocp,
+    hess: &[f64],
+    jac_x: &[f64],
+    jac_u: &[f64],
+    active: &[usize],
+    row_weight: Option<&[f64]>,
+    mut put: impl FnMut(usize, usize, f64),
+) {
+    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+    let nz = nx + nu;
+    for s in 0..=n {
+        let off = s * nz;
+        let size = if s < n { nz } else { nx };
+        let blk = &hess[s * nz * nz..(s + 1) * nz * nz];
+        for i in 0..size {
+            for j in 0..size {
+                put(off + i, off + j, blk[i * nz + j]);
+            }
+        }
+    }
+    let sc = ocp.slack_curvature();
+    for i in ocp.is()..ocp.n_var {
+        put(i, i, sc);
+    }
+    if let Some(w) = row_weight {
+        for (row, &wr) in ocp.rows.iter().zip(w) {
+            for a in 0..row.len {
+                for b in 0..row.len {
+                    put(row.idx[a], row.idx[b], wr * row.coef[a] * row.coef[b]);
+                }
+            }
+        }
+    }
+    let e0 = ocp.n_var;
+    let mut sym = |r: usize, c: usize, v: f64| {
+        put(r, c, v);
+        put(c, r, v);
+    };
+    for i in 0..nx {
+        sym(e0 + i, i, 1.0);
+    }
+    for s in 0..n {
+        for r in 0..nx {
+            let row = e0 + (s + 1) * nx + r;
+            for j in 0..nx {
+                sym(row, ocp.ix(s) + j, jac_x[s * nx * nx + r * nx + j]);
+            }
+            for j in 0..nu {
+                sym(row, ocp.iu(s) + j, jac_u[s * nx * nu + r * nu + j]);
+            }
+            sym(row, ocp.ix(s + 1) + r, -1.0);
+        }
+    }
+    let a0 = e0 + ocp.n_eq;
+    for (t, &r) in active.iter().enumerate() {
+        let row = &ocp.rows[r];
+        for j in 0..row.len {
+            sym(a0 + t, row.idx[j], row.coef[j]);
+        }
+    }
+}
+
+/// A reusable banded KKT factorisation for one layout (OCP structure and active set).
+#[derive(Debug, Clone, Default)]
+pub struct BandedKkt {
+    /// The ordering.
+    pub layout: KktLayout,
+    lu: BandLu,
+    /// The assembled K without row weights (see [`BandedKkt::set_base`]).
+    base: Vec<f64>,
+    /// For each entry of `w_r a_r a_rᵀ`: (band storage index, row r, coefficient product).
+    weight_slots: Vec<(usize, usize, f64)>,
+}
+
+impl BandedKkt {
+    /// Workspace for `layout`.
+    pub fn new(layout: KktLayout) -> Self {
+        BandedKkt {
+            layout,
+            ..BandedKkt::default()
+        }
+    }
+
+    /// Assembles K without row weights and keeps it as the base for
+    /// [`BandedKkt::factor_weighted`], which then only adds `Gᵀ W G` (the interior-point
+    /// iterations of one QP share H and ∇c). Returns false on a layout bug.
+    pub fn set_base(&mut self, ocp: &Ocp, hess: &[f64], jac_x: &[f64], jac_u: &[f64]) -> bool {
+        let (dim, bw) = (self.layout.dim(), self.layout.bw);
+        self.lu.reset(dim, bw, bw);
+        let (pos, lu) = (&self.layout.pos, &mut self.lu);
+        let mut inside = true;
+        for_each_entry(
+            ocp,
+            hess,
+            jac_x,
+            jac_u,
+            &self.layout.active,
+            None,
+            |i, j, v| {
+                inside &= lu.add(pos[i], pos[j], v);
+            },
+        );
+        self.base.clear();
+        self.base.extend_from_slice(&self.lu.a);
+        self.weight_slots.clear();
+        for (r, row) in ocp.rows.iter().enumerate() {
+            for a in 0..row.len {
+                for b in 0..row.len {
+                    let (i, j) = (pos[row.idx[a]], pos[row.idx[b]]);
+                    match self.lu.slot(i, j) {
+                        Some(s) => self.weight_slots.push((s, r, row.coef[a] * row.coef[b])),
+                        None => inside = false,
+                    }
+                }
+            }
+        }
+        inside
+    }
+
+    /// Factorises `base + Gᵀ W G` (after [`BandedKkt::set_base`]); returns the pivot ratio.
+    pub fn factor_weighted(&mut self, row_weight: &[f64]) -> f64 {
+        self.lu.a.copy_from_slice(&self.base);
+        for &(s, r, c) in &self.weight_slots {
+            self.lu.a[s] += row_weight[r] * c;
+        }
+        self.lu.factor();
+        self.lu.pivot_ratio
+    }
+
+    /// Assembles K from the Hessian blocks, the dynamics Jacobians, the layout's active rows
+    /// and the optional row weights W, and factorises it. Returns the pivot ratio.
+    pub fn factor(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+        row_weight: Option<&[f64]>,
+    ) -> f64 {
+        let (dim, bw) = (self.layout.dim(), self.layout.bw);
+        self.lu.reset(dim, bw, bw);
+        let (pos, lu) = (&self.layout.pos, &mut self.lu);
+        let mut inside = true;
+        for_each_entry(
+            ocp,
+            hess,
+            jac_x,
+            jac_u,
+            &self.layout.active,
+            row_weight,
+            |i, j, v| {
+                inside &= lu.add(pos[i], pos[j], v);
+            },
+        );
+        // The pattern walk bounds every entry, so `inside` holds; an entry outside would be a
+        // layout bug: report it as singular rather than factorising a wrong matrix.
+        if inside {
+            self.lu.factor();
+        } else {
+            self.lu.pivot_ratio = 0.0;
+        }
+        self.lu.pivot_ratio
+    }
+
+    /// Smallest over largest |U_ii| of the last factorisation.
+    pub fn pivot_ratio(&self) -> f64 {
+        self.lu.pivot_ratio
+    }
+
+    /// Solves `K x = b` in place (natural order), `scratch` has length ≥ dim. Returns
+    /// false if the result is not finite.
+    pub fn solve_in_place(&self, b: &mut [f64], scratch: &mut Vec<f64>) -> bool {
+        let dim = self.layout.dim();
+        scratch.clear();
+        scratch.resize(dim, 0.0);
+        for (i, &p) in self.layout.pos.iter().enumerate() {
+            scratch[p] = b[i];
+        }
+        self.lu.solve_in_place(scratch);
+        for (i, &p) in self.layout.pos.iter().enumerate() {
+            b[i] = scratch[p];
+        }
+        b.iter().all(|v| v.is_finite())
+    }
+}
+
+/// A factorised active-set KKT matrix.
+pub struct ActiveSetKkt {
+    kkt: BandedKkt,
+    /// Active inequality rows (indices into `ocp.rows`), in the order of ν_A.
+    pub active: Vec<usize>,
+    /// Smallest over largest |U_ii| of the LU factor: ≈ 0 means singular (LICQ/SOSC fail).
+    pub pivot_ratio: f64,
+}
+
+impl ActiveSetKkt {
+    /// Assembles and factorises K from the exact Hessian blocks, the dynamics Jacobians and
+    /// the active rows.
+    pub fn new(ocp: &Ocp, hess: &[f64], jac_x: &[f64], jac_u: &[f64], active: Vec<usize>) -> Self {
+        let mut kkt = BandedKkt::new(KktLayout::new(ocp, active.clone()));
+        let pivot_ratio = kkt.factor(ocp, hess, jac_x, jac_u, None);
+        ActiveSetKkt {
+            kkt,
+            active,
+            pivot_ratio,
+        }
+    }
+
+    /// Dimension of K.
+    pub fn dim(&self) -> usize {
+        self.kkt.layout.dim()
+    }
+
+    /// Whether K is numerically singular (LICQ or second-order sufficiency fails).
+    pub fn is_singular(&self) -> bool {
+        self.pivot_ratio.is_nan() || self.pivot_ratio <= 1e-14
+    }
+
+    /// Solves `K x = b` in place; false (b unspecified) if K is singular or the result is
+    /// not finite, or b has the wrong length.
+    pub fn solve_slice(&self, b: &mut [f64], scratch: &mut Vec<f64>) -> bool {
+        if self.is_singular() || b.len() != self.dim() {
+            return false;
+        }
+        self.kkt.solve_in_place(b, scratch)
+    }
+
+    /// Solves `K x = rhs`; `None` if K is singular.
+    pub fn solve(&self, rhs: &DVector<f64>) -> Option<DVector<f64>> {
+        let mut x = rhs.clone();
+        let mut scratch = Vec::new();
+        self.solve_slice(x.as_mut_slice(), &mut scratch)
+            .then_some(x)
+    }
+
+    /// Solves `K X = RHS` for several right-hand sides.
+    pub fn solve_many(&self, rhs: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        let mut x = rhs.clone();
+        let mut scratch = Vec::new();
+        for mut col in x.column_iter_mut() {
+            let mut v: Vec<f64> = col.iter().copied().collect();
+            if !self.solve_slice(&mut v, &mut scratch) {
+                return None;
+            }
+            col.copy_from_slice(&v);
+        }
+        Some(x)
+    }
+}
+
+/// The dense K in natural order `(z, λ, ν_A)` (plus `Gᵀ W G` if `row_weight` is given): the
+/// reference the banded factorisation is tested against.
+pub fn dense_kkt_matrix(
+    ocp: &Ocp,
+    hess: &[f64],
+    jac_x: &[f64],
+    jac_u: &[f64],
+    active: &[usize],
+    row_weight: Option<&[f64]>,
+) -> DMatrix<f64> {
+    let dim = ocp.n_var + ocp.n_eq + active.len();
+    let mut k = DMatrix::<f64>::zeros(dim, dim);
+    for_each_entry(ocp, hess, jac_x, jac_u, active, row_weight, |i, j, v| {
+        k[(i, j)] += v
+    });
+    k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::problem::ProblemConfig;
+    use crate::rng::uniform;
+
+    fn load(name: &str) -> ProblemConfig {
+        let path = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/"))
+            .join(name);
+        ProblemConfig::load(&path).unwrap()
+    }
+
+    #[test]
+    fn band_lu_matches_dense_on_random_banded_matrices() {
+        for seed in 0..20u64 {
+            let n = 5 + (seed as usize * 7) % 40;
+            let (kl, ku) = (1 + seed as usize % 4, 1 + (seed as usize / 3) % 5);
+            let mut lu = BandLu::default();
+            lu.reset(n, kl, ku);
+            let mut dense = DMatrix::<f64>::zeros(n, n);
+            let mut c = 0u64;
+            for i in 0..n {
+                for j in i.saturating_sub(kl)..(i + ku + 1).min(n) {
+                    c += 1;
+                    // Zero diagonal in places, to force pivoting.
+                    let v = if i == j && i % 3 == 0 {
+                        0.0
+                    } else {
+                        uniform(seed, c, 0) - 0.5
+                    };
+                    assert!(lu.add(i, j, v));
+                    dense[(i, j)] = v;
+                }
+            }
+            assert!(!lu.add(0, n - 1, 1.0) || n - 1 <= ku);
+            let b: Vec<f64> = (0..n).map(|i| uniform(seed, i as u64, 1) - 0.5).collect();
+            lu.factor();
+            let mut x = b.clone();
+            lu.solve_in_place(&mut x);
+            let xd = dense.clone().lu().solve(&DVector::from_column_slice(&b));
+            let Some(xd) = xd else { continue };
+            let scale = xd.amax().max(1.0);
+            for i in 0..n {
+                assert!((x[i] - xd[i]).abs() <= 1e-9 * scale, "seed {seed} i {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn band_lu_flags_singular_matrix() {
+        let mut lu = BandLu::default();
+        lu.reset(4, 1, 1);
+        for (i, j, v) in [
+            (0, 0, 1.0),
+            (0, 1, 2.0),
+            (1, 0, 2.0),
+            (1, 1, 4.0),
+            (2, 2, 1.0),
+        ] {
+            lu.add(i, j, v);
+        }
+        lu.add(3, 3, 1.0);
+        lu.factor();
+        assert!(lu.pivot_ratio <= 1e-14, "{}", lu.pivot_ratio);
+    }
+
+    /// Random Hessians/Jacobians on the real layouts of all three configs (hard and soft),
+    /// with random active sets and row weights: banded and dense solves agree.
+    #[test]
+    fn banded_kkt_matches_dense_kkt() {
+        for name in ["pendulum.toml", "cartpole.toml", "double_integrator.toml"] {
+            let cfg = load(name);
+            for soft in [false, true] {
+                let ocp = Ocp::new(&cfg, soft);
+                let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+                let nz = nx + nu;
+                for seed in 0..6u64 {
+                    let mut c = 0u64;
+                    let mut rnd = || {
+                        c += 1;
+                        uniform(seed + 100, c, 7) - 0.5
+                    };
+                    let mut hess = vec![0.0; (n + 1) * nz * nz];
+                    for s in 0..=n {
+                        for i in 0..nz {
+                            for j in 0..=i {
+                                let v = rnd() + if i == j { 2.0 } else { 0.0 };
+                                hess[s * nz * nz + i * nz + j] = v;
+                                hess[s * nz * nz + j * nz + i] = v;
+                            }
+                        }
+                    }
+                    let jac_x: Vec<f64> = (0..n * nx * nx).map(|_| rnd()).collect();
+                    let jac_u: Vec<f64> = (0..n * nx * nu).map(|_| rnd()).collect();
+                    // Active set: at most one row per odd stage (LICQ then holds generically: a
+                    // row at stage 2j+1 can be matched to u_2j (state) or u_2j+1 (input)).
+                    let stage = var_stages(&ocp);
+                    let mut active = Vec::new();
+                    let mut used = std::collections::HashSet::new();
+                    for (r, row) in ocp.rows.iter().enumerate() {
+                        let st = stage[row.idx[0]];
+                        if rnd() > 0.0 && st % 2 == 1 && used.insert(st) {
+                            active.push(r);
+                        }
+                    }
+                    let weights: Vec<f64> = (0..ocp.rows.len()).map(|_| rnd() + 0.5).collect();
+                    for w in [None, Some(&weights[..])] {
+                        let act = if w.is_some() { vec![] } else { active.clone() };
+                        let dense = dense_kkt_matrix(&ocp, &hess, &jac_x, &jac_u, &act, w);
+                        let dim = dense.nrows();
+                        let mut kkt = BandedKkt::new(KktLayout::new(&ocp, act.clone()));
+                        assert!(kkt.layout.bandwidth() <= 4 * nz + 8, "{name}");
+                        let ratio = kkt.factor(&ocp, &hess, &jac_x, &jac_u, w);
+                        let b: Vec<f64> = (0..dim).map(|_| rnd()).collect();
+                        let xd = dense.clone().lu().solve(&DVector::from_column_slice(&b));
+                        let Some(xd) = xd else {
+                            assert!(ratio <= 1e-10, "{name}: dense singular, banded not");
+                            continue;
+                        };
+                        assert!(ratio > 1e-14, "{name} soft={soft}: ratio {ratio}");
+                        let mut x = b.clone();
+                        let mut scratch = Vec::new();
+                        assert!(kkt.solve_in_place(&mut x, &mut scratch));
+                        let scale = xd.amax().max(1.0);
+                        for i in 0..dim {
+                            assert!(
+                                (x[i] - xd[i]).abs() <= 1e-8 * scale,
+                                "{name} soft={soft} seed {seed}: x[{i}] {} vs {}",
+                                x[i],
+                                xd[i]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Active-set KKT systems at real solutions: the banded factorisation reproduces the
+    /// dense LU's sensitivities, and a doubly active bound pair is flagged singular.
+    #[test]
+    fn active_set_kkt_matches_dense_at_solutions() {
+        use crate::mpc::sqp::SqpSolver;
+        for name in ["pendulum.toml", "cartpole.toml", "double_integrator.toml"] {
+            let cfg = load(name);
+            for soft in [false, true] {
+                let mut solver = SqpSolver::new(&cfg, soft);
+                for i in 0..5u64 {
+                    let xs: Vec<f64> = (0..cfg.system.nx())
+                        .map(|j| {
+                            let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
+                            lo + (hi - lo) * uniform(3, i, j as u64)
+                        })
+                        .collect();
+                    let start = solver.cold_start(&xs);
+                    let r = solver.solve(&xs, start);
+                    if r.status != crate::mpc::sqp::SqpStatus::Converged {
+                        continue;
+                    }
+                    let ocp = &solver.ocp;
+                    let p = &r.point;
+                    let active: Vec<usize> = (0..ocp.rows.len())
+                        .filter(|&r| p.nu[r] > 1e-7 && ocp.rows[r].slack(&p.z) < 1e-7)
+                        .collect();
+                    let kkt = solver.active_set_kkt(&xs, p, active.clone());
+                    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+                    let mut hess = vec![0.0; (n + 1) * (nx + nu) * (nx + nu)];
+                    let mut c = vec![0.0; ocp.n_eq];
+                    let mut jx = vec![0.0; n * nx * nx];
+                    let mut ju = vec![0.0; n * nx * nu];
+                    ocp.constraints(&p.z, &xs, &mut c, &mut jx, &mut ju);
+                    ocp.hessian_blocks(&p.z, &p.lam, &mut hess);
+                    let dense = dense_kkt_matrix(ocp, &hess, &jx, &ju, &active, None);
+                    let dim = dense.nrows();
+                    let mut rhs = DMatrix::zeros(dim, nx);
+                    for i in 0..nx {
+                        rhs[(ocp.n_var + i, i)] = 1.0;
+                    }
+                    let sd = dense.lu().solve(&rhs).unwrap();
+                    let sb = kkt.solve_many(&rhs).unwrap();
+                    let scale = sd.amax().max(1.0);
+                    assert!(
+                        (sd - sb).amax() <= 1e-8 * scale,
+                        "{name} soft={soft} {xs:?}"
+                    );
+                    if let Some(&r0) = active.first() {
+                        // Add the opposite bound of the same variable (if any) as active too.
+                        let v = ocp.rows[r0].idx[0];
+                        if let Some(r1) = (0..ocp.rows.len())
+                            .find(|&r| r != r0 && ocp.rows[r].len == 1 && ocp.rows[r].idx[0] == v)
+                        {
+                            let k2 = solver.active_set_kkt(&xs, p, vec![r0, r1]);
+                            assert!(k2.is_singular(), "{name}: ratio {}", k2.pivot_ratio);
+                            assert!(k2.solve_many(&rhs).is_none());
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

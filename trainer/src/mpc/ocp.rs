@@ -1,0 +1,352 @@
+//! The optimal control problem OCP(x_s) transcribed by multiple shooting into an NLP.
+//!
+//! ```text
+//! min_z  Σ_{k<N} x_kᵀQx_k + u_kᵀRu_k + x_NᵀPx_N  [+ Σ l1·s + l2·s²  (soft)]
+//! s.t.   x_0 − x_s = 0                                 (parameter, an equality: LICQ-safe)
+//!        F(x_k, u_k) − x_{k+1} = 0,      k = 0..N−1     (RK4 dynamics)
+//!        x_lo,k ≤ x_k ≤ x_hi,k,          k = 1..N       (hard, or x_lo,k − s ≤ x_k ≤ x_hi,k + s, s ≥ 0)
+//!        u_lo,k ≤ u_k ≤ u_hi,k,          k = 0..N−1
+//! ```
+//! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
+//! `ocp.stages` of a tightened (robust) design ([`crate::problem::OcpSettings::x_bounds`]);
+//! every consumer (SQP, QP, sensitivities) sees them only through the rows built here.
+//!
+//! Variables are ordered by stage, `z = (x_0, u_0, x_1, u_1, …, x_N, s…)`, so stage k's
+//! `(x_k, u_k)` is the contiguous block at `k·(nx+nu)`; the slacks of the soft problem
+//! follow. Equalities `c(z) = 0` are numbered `c_0` (initial state) then `c_{k+1}` (the
+//! dynamics from stage k). All inequalities are linear rows `aᵀz ≤ h` with one or two
+//! nonzeros ([`LinRow`]). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`, ν ≥ 0.
+
+use crate::problem::model::Discrete;
+use crate::problem::ProblemConfig;
+use nalgebra::DMatrix;
+
+/// One linear inequality row `Σ coef·z[idx] ≤ rhs` (one or two entries).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinRow {
+    /// Variable indices (the second is meaningful only when `len == 2`).
+    pub idx: [usize; 2],
+    /// Coefficients.
+    pub coef: [f64; 2],
+    /// Number of entries (1 or 2).
+    pub len: usize,
+    /// Right-hand side h.
+    pub rhs: f64,
+}
+
+impl LinRow {
+    /// `aᵀz`.
+    pub fn dot(&self, z: &[f64]) -> f64 {
+        (0..self.len).map(|j| self.coef[j] * z[self.idx[j]]).sum()
+    }
+    /// Slack `h − aᵀz` (≥ 0 when satisfied).
+    pub fn slack(&self, z: &[f64]) -> f64 {
+        self.rhs - self.dot(z)
+    }
+}
+
+/// Exact-penalty weights of the soft problem.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SoftPenalty {
+    /// ℓ₁ weight.
+    pub l1: f64,
+    /// ℓ₂ weight.
+    pub l2: f64,
+}
+
+/// The transcribed OCP: layout, data and evaluation routines.
+#[derive(Debug, Clone)]
+pub struct Ocp {
+    /// Discrete dynamics F.
+    pub model: Discrete,
+    /// Horizon N.
+    pub horizon: usize,
+    /// State dimension.
+    pub nx: usize,
+    /// Input dimension.
+    pub nu: usize,
+    q: DMatrix<f64>,
+    r: DMatrix<f64>,
+    p: DMatrix<f64>,
+    /// Soft-constraint penalty, if this is the soft problem.
+    pub soft: Option<SoftPenalty>,
+    /// Number of variables (states, inputs, slacks).
+    pub n_var: usize,
+    /// Number of slacks (0 for the hard problem).
+    pub n_slack: usize,
+    /// Number of equality constraints, (N+1)·nx.
+    pub n_eq: usize,
+    /// Inequality rows `Gz ≤ h`.
+    pub rows: Vec<LinRow>,
+}
+
+impl Ocp {
+    /// Transcribes a validated problem; `soft` selects the exact-penalty variant.
+    pub fn new(cfg: &ProblemConfig, soft: bool) -> Self {
+        let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+        let (nx, nu, n) = (model.nx(), model.nu(), cfg.ocp.horizon);
+        let nw = n * (nx + nu) + nx;
+        let o = &cfg.ocp;
+        let mut rows = Vec::new();
+        let mut n_slack = 0;
+        let one = |i: usize, c: f64, rhs: f64| LinRow {
+            idx: [i, 0],
+            coef: [c, 0.0],
+            len: 1,
+            rhs,
+        };
+        for k in 0..=n {
+            let off = k * (nx + nu);
+            if k >= 1 {
+                let (x_lo, x_hi) = o.x_bounds(k);
+                for i in 0..nx {
+                    let (lo, hi) = (x_lo[i], x_hi[i]);
+                    if !lo.is_finite() && !hi.is_finite() {
+                        continue;
+                    }
+                    if soft {
+                        let s = nw + n_slack;
+                        n_slack += 1;
+                        if hi.is_finite() {
+                            rows.push(LinRow {
+                                idx: [off + i, s],
+                                coef: [1.0, -1.0],
+                                len: 2,
+                                rhs: hi,
+                            });
+                        }
+                        if lo.is_finite() {
+                            rows.push(LinRow {
+                                idx: [off + i, s],
+                                coef: [-1.0, -1.0],
+                                len: 2,
+                                rhs: -lo,
+                            });
+                        }
+                        rows.push(one(s, -1.0, 0.0));
+                    } else {
+                        if hi.is_finite() {
+                            rows.push(one(off + i, 1.0, hi));
+                        }
+                        if lo.is_finite() {
+                            rows.push(one(off + i, -1.0, -lo));
+                        }
+                    }
+                }
+            }
+            if k < n {
+                let (u_lo, u_hi) = o.u_bounds(k);
+                for j in 0..nu {
+                    if u_hi[j].is_finite() {
+                        rows.push(one(off + nx + j, 1.0, u_hi[j]));
+                    }
+                    if u_lo[j].is_finite() {
+                        rows.push(one(off + nx + j, -1.0, -u_lo[j]));
+                    }
+                }
+            }
+        }
+        Ocp {
+            model,
+            horizon: n,
+            nx,
+            nu,
+            q: cfg.q(),
+            r: cfg.r(),
+            p: cfg.p(),
+            soft: soft.then_some(SoftPenalty {
+                l1: cfg.solver.soft_l1,
+                l2: cfg.solver.soft_l2,
+            }),
+            n_var: nw + n_slack,
+            n_slack,
+            n_eq: (n + 1) * nx,
+            rows,
+        }
+    }
+
+    /// Index of x_k in z.
+    pub fn ix(&self, k: usize) -> usize {
+        k * (self.nx + self.nu)
+    }
+    /// Index of u_k in z.
+    pub fn iu(&self, k: usize) -> usize {
+        k * (self.nx + self.nu) + self.nx
+    }
+    /// Index of the first slack.
+    pub fn is(&self) -> usize {
+        self.n_var - self.n_slack
+    }
+
+    /// Objective f(z).
+    pub fn objective(&self, z: &[f64]) -> f64 {
+        let quad = |m: &DMatrix<f64>, v: &[f64]| -> f64 {
+            let n = v.len();
+            (0..n)
+                .map(|i| (0..n).map(|j| v[i] * m[(i, j)] * v[j]).sum::<f64>())
+                .sum()
+        };
+        let (nx, nu) = (self.nx, self.nu);
+        let mut f = 0.0;
+        for k in 0..self.horizon {
+            f += quad(&self.q, &z[self.ix(k)..self.ix(k) + nx]);
+            f += quad(&self.r, &z[self.iu(k)..self.iu(k) + nu]);
+        }
+        let xn = self.ix(self.horizon);
+        f += quad(&self.p, &z[xn..xn + nx]);
+        if let Some(sp) = self.soft {
+            for &s in &z[self.is()..] {
+                f += sp.l1 * s + sp.l2 * s * s;
+            }
+        }
+        f
+    }
+
+    /// Gradient ∇f(z) into `g`.
+    pub fn gradient(&self, z: &[f64], g: &mut [f64]) {
+        let (nx, nu) = (self.nx, self.nu);
+        g.fill(0.0);
+        let add = |m: &DMatrix<f64>, off: usize, n: usize, g: &mut [f64]| {
+            for i in 0..n {
+                g[off + i] = 2.0 * (0..n).map(|j| m[(i, j)] * z[off + j]).sum::<f64>();
+            }
+        };
+        for k in 0..self.horizon {
+            add(&self.q, self.ix(k), nx, g);
+            add(&self.r, self.iu(k), nu, g);
+        }
+        add(&self.p, self.ix(self.horizon), nx, g);
+        if let Some(sp) = self.soft {
+            for i in self.is()..self.n_var {
+                g[i] = sp.l1 + 2.0 * sp.l2 * z[i];
+            }
+        }
+    }
+
+    /// Equality constraints c(z; x_s) into `c`, and the dynamics Jacobians:
+    /// `jac_x[k]` = ∂F/∂x (row-major nx×nx) and `jac_u[k]` = ∂F/∂u at stage k.
+    pub fn constraints(
+        &self,
+        z: &[f64],
+        xs: &[f64],
+        c: &mut [f64],
+        jac_x: &mut [f64],
+        jac_u: &mut [f64],
+    ) {
+        let (nx, nu) = (self.nx, self.nu);
+        for i in 0..nx {
+            c[i] = z[i] - xs[i];
+        }
+        let mut f = [0.0; crate::problem::model::MAX_NX];
+        for k in 0..self.horizon {
+            let (xk, uk) = (
+                &z[self.ix(k)..self.ix(k) + nx],
+                &z[self.iu(k)..self.iu(k) + nu],
+            );
+            self.model.linearize(
+                xk,
+                uk,
+                &mut f[..nx],
+                &mut jac_x[k * nx * nx..(k + 1) * nx * nx],
+                &mut jac_u[k * nx * nu..(k + 1) * nx * nu],
+            );
+            let xn = self.ix(k + 1);
+            for i in 0..nx {
+                c[(k + 1) * nx + i] = f[i] - z[xn + i];
+            }
+        }
+    }
+
+    /// Equality constraints only (no Jacobians), for line searches.
+    pub fn constraint_values(&self, z: &[f64], xs: &[f64], c: &mut [f64]) {
+        let (nx, nu) = (self.nx, self.nu);
+        for i in 0..nx {
+            c[i] = z[i] - xs[i];
+        }
+        let mut f = [0.0; crate::problem::model::MAX_NX];
+        for k in 0..self.horizon {
+            self.model.step(
+                &z[self.ix(k)..self.ix(k) + nx],
+                &z[self.iu(k)..self.iu(k) + nu],
+                &mut f[..nx],
+            );
+            for i in 0..nx {
+                c[(k + 1) * nx + i] = f[i] - z[self.ix(k + 1) + i];
+            }
+        }
+    }
+
+    /// Hessian of the Lagrangian, as stage blocks: `blocks[k]` (k < N) is the row-major
+    /// (nx+nu)² block of stage k, `blocks[N]` the nx² terminal block (stored in a
+    /// (nx+nu)² slot). Slack curvature (2·l2) is diagonal and not stored here.
+    pub fn hessian_blocks(&self, z: &[f64], lam: &[f64], blocks: &mut [f64]) {
+        let (nx, nu) = (self.nx, self.nu);
+        let nz = nx + nu;
+        let bs = nz * nz;
+        for k in 0..self.horizon {
+            let blk = &mut blocks[k * bs..(k + 1) * bs];
+            self.model.lagrangian_hessian(
+                &z[self.ix(k)..self.ix(k) + nx],
+                &z[self.iu(k)..self.iu(k) + nu],
+                &lam[(k + 1) * nx..(k + 2) * nx],
+                blk,
+            );
+            for i in 0..nx {
+                for j in 0..nx {
+                    blk[i * nz + j] += 2.0 * self.q[(i, j)];
+                }
+            }
+            for i in 0..nu {
+                for j in 0..nu {
+                    blk[(nx + i) * nz + nx + j] += 2.0 * self.r[(i, j)];
+                }
+            }
+        }
+        let blk = &mut blocks[self.horizon * bs..(self.horizon + 1) * bs];
+        blk.fill(0.0);
+        for i in 0..nx {
+            for j in 0..nx {
+                blk[i * nz + j] = 2.0 * self.p[(i, j)];
+            }
+        }
+    }
+
+    /// Diagonal curvature of each slack (2·l2), 0 for the hard problem.
+    pub fn slack_curvature(&self) -> f64 {
+        self.soft.map_or(0.0, |s| 2.0 * s.l2)
+    }
+
+    /// A primal initial guess for a cold start: hold the inputs at the projection of 0 onto
+    /// U and simulate from x_s (multiple shooting tolerates the resulting state-bound
+    /// violations in the soft problem; the hard problem's states are projected onto the
+    /// bounds, which the QP's linearisation then repairs).
+    pub fn initial_guess(
+        &self,
+        cfg_lo: &[f64],
+        cfg_hi: &[f64],
+        u_lo: &[f64],
+        u_hi: &[f64],
+        xs: &[f64],
+    ) -> Vec<f64> {
+        let (nx, nu) = (self.nx, self.nu);
+        let mut z = vec![0.0; self.n_var];
+        z[..nx].copy_from_slice(xs);
+        let mut x = [0.0; crate::problem::model::MAX_NX];
+        x[..nx].copy_from_slice(xs);
+        let mut xn = [0.0; crate::problem::model::MAX_NX];
+        for k in 0..self.horizon {
+            let iu = self.iu(k);
+            for j in 0..nu {
+                z[iu + j] = 0.0f64.clamp(u_lo[j], u_hi[j]);
+            }
+            self.model.step(&x[..nx], &z[iu..iu + nu], &mut xn[..nx]);
+            let ix = self.ix(k + 1);
+            for i in 0..nx {
+                let v = if xn[i].is_finite() { xn[i] } else { x[i] };
+                x[i] = v.clamp(cfg_lo[i], cfg_hi[i]);
+                z[ix + i] = x[i];
+            }
+        }
+        z
+    }
+}

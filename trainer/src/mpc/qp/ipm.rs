@@ -1,0 +1,391 @@
+//! A structure-exploiting primal-dual interior-point solver for the SQP's QP subproblem.
+//!
+//! The subproblem (see the parent module) is
+//! ```text
+//! min_d ½ dᵀ H d + gᵀ d   s.t.   E d + c = 0   (multipliers λ),   G d ≤ b   (ν ≥ 0)
+//! ```
+//! with `E = ∇c(z)ᵀ` (the linearised initial-state and dynamics constraints) and `b = h − G z`.
+//! With slacks `t = b − G d ≥ 0` the optimality conditions are
+//! ```text
+//! r_d = H d + g + Eᵀλ + Gᵀν = 0,   r_e = E d + c = 0,   r_i = G d + t − b = 0,
+//! t ∘ ν = 0,   t, ν ≥ 0.
+//! ```
+//! Mehrotra's predictor–corrector method (Nocedal & Wright, Alg. 16.4 / 14.3) follows the
+//! central path `t ∘ ν = σμ`, `μ = tᵀν/m`. Each Newton step eliminates
+//! `Δt = −r_i − GΔd` and `Δν = (r_c − ν∘Δt)/t` (`r_c` the complementarity target) and solves
+//! ```text
+//! ⎡ H + Gᵀ W G   Eᵀ ⎤ ⎡Δd⎤   ⎡ −r_d − Gᵀ((r_c + ν∘r_i)/t) ⎤
+//! ⎣ E            0  ⎦ ⎣Δλ⎦ = ⎣ −r_e                        ⎦ ,    W = diag(ν/t),
+//! ```
+//! which has the OCP's stage structure: it is factorised once per iteration by the banded
+//! LU of the `kkt` module (cost O(N), not O(N³)) and solved twice (predictor, corrector).
+//! Both steps use one step length (a QP's dual residual couples d and ν), 99% of the way to
+//! the boundary. The starting point is the solution of the `W = I` system shifted into the
+//! interior (as in CVXOPT). Termination: relative residuals and the gap `tᵀν` below `1e-10`
+//! (as for the clarabel reference); at the iteration limit, or when the iterates diverge
+//! (an infeasible QP), the solve reports failure and the caller may fall back to clarabel.
+
+use super::{QpData, QpStatus};
+use crate::mpc::kkt::{BandedKkt, KktLayout};
+use crate::mpc::ocp::Ocp;
+
+/// Target accuracy (relative residuals and gap).
+const TOL: f64 = 1e-10;
+/// Accepted accuracy if progress stalls before `TOL` (clarabel's "almost solved").
+const TOL_REDUCED: f64 = 1e-7;
+/// Iteration limit.
+const MAX_ITER: u32 = 50;
+/// Fraction of the step to the boundary.
+const TAU: f64 = 0.99;
+
+/// Reusable workspace of the interior-point QP solver for one OCP structure.
+#[derive(Debug, Clone)]
+pub struct IpmQp {
+    kkt: BandedKkt,
+    d: Vec<f64>,
+    lam: Vec<f64>,
+    nu: Vec<f64>,
+    t: Vec<f64>,
+    w: Vec<f64>,
+    b: Vec<f64>,
+    rd: Vec<f64>,
+    re: Vec<f64>,
+    ri: Vec<f64>,
+    rhs: Vec<f64>,
+    scratch: Vec<f64>,
+    tmp: Vec<f64>,
+    dt_aff: Vec<f64>,
+    dnu_aff: Vec<f64>,
+    dt: Vec<f64>,
+    dnu: Vec<f64>,
+    /// Interior-point iterations of the last solve.
+    pub last_iterations: u32,
+}
+
+/// `out = H x` for the stage-block Hessian plus the slack diagonal.
+fn mul_h(ocp: &Ocp, hess: &[f64], x: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+    let nz = nx + nu;
+    for s in 0..=n {
+        let off = s * nz;
+        let size = if s < n { nz } else { nx };
+        let blk = &hess[s * nz * nz..(s + 1) * nz * nz];
+        for i in 0..size {
+            let mut acc = 0.0;
+            for j in 0..size {
+                acc += blk[i * nz + j] * x[off + j];
+            }
+            out[off + i] = acc;
+        }
+    }
+    let sc = ocp.slack_curvature();
+    for i in ocp.is()..ocp.n_var {
+        out[i] = sc * x[i];
+    }
+}
+
+/// `out = E x` with `E = ∇c(z)ᵀ` (rows c_0 = x_0 − x_s, c_{k+1} = F(x_k, u_k) − x_{k+1}).
+fn mul_e(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+    out[..nx].copy_from_slice(&x[..nx]);
+    for k in 0..n {
+        let (ix, iu, ixn) = (ocp.ix(k), ocp.iu(k), ocp.ix(k + 1));
+        for r in 0..nx {
+            let mut acc = -x[ixn + r];
+            for j in 0..nx {
+                acc += jac_x[k * nx * nx + r * nx + j] * x[ix + j];
+            }
+            for j in 0..nu {
+                acc += jac_u[k * nx * nu + r * nu + j] * x[iu + j];
+            }
+            out[(k + 1) * nx + r] = acc;
+        }
+    }
+}
+
+/// `out += Eᵀ y`.
+fn add_et(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], y: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+    for i in 0..nx {
+        out[i] += y[i];
+    }
+    for k in 0..n {
+        let (ix, iu, ixn) = (ocp.ix(k), ocp.iu(k), ocp.ix(k + 1));
+        let l = &y[(k + 1) * nx..(k + 2) * nx];
+        for r in 0..nx {
+            for j in 0..nx {
+                out[ix + j] += jac_x[k * nx * nx + r * nx + j] * l[r];
+            }
+            for j in 0..nu {
+                out[iu + j] += jac_u[k * nx * nu + r * nu + j] * l[r];
+            }
+            out[ixn + r] -= l[r];
+        }
+    }
+}
+
+/// `out += Gᵀ y`.
+fn add_gt(ocp: &Ocp, y: &[f64], out: &mut [f64]) {
+    for (row, &v) in ocp.rows.iter().zip(y) {
+        for j in 0..row.len {
+            out[row.idx[j]] += row.coef[j] * v;
+        }
+    }
+}
+
+fn inf_norm(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// Largest α ∈ (0, 1] with `v + α dv ≥ 0` (v > 0).
+fn max_step(v: &[f64], dv: &[f64]) -> f64 {
+    let mut a = 1.0f64;
+    for (x, dx) in v.iter().zip(dv) {
+        if *dx < 0.0 {
+            a = a.min(-x / dx);
+        }
+    }
+    a
+}
+
+impl IpmQp {
+    /// Workspace for `ocp` (layout and bandwidth computed once).
+    pub fn new(ocp: &Ocp) -> Self {
+        let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
+        IpmQp {
+            kkt: BandedKkt::new(KktLayout::new(ocp, Vec::new())),
+            d: vec![0.0; nv],
+            lam: vec![0.0; ne],
+            nu: vec![0.0; m],
+            t: vec![0.0; m],
+            w: vec![0.0; m],
+            b: vec![0.0; m],
+            rd: vec![0.0; nv],
+            re: vec![0.0; ne],
+            ri: vec![0.0; m],
+            rhs: vec![0.0; nv + ne],
+            scratch: Vec::with_capacity(nv + ne),
+            tmp: vec![0.0; m],
+            dt_aff: vec![0.0; m],
+            dnu_aff: vec![0.0; m],
+            dt: vec![0.0; m],
+            dnu: vec![0.0; m],
+            last_iterations: 0,
+        }
+    }
+
+    /// Residuals r_d, r_e, r_i at the current iterate; returns the objective ½dᵀHd + gᵀd.
+    #[allow(clippy::too_many_arguments)]
+    fn residuals(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        grad: &[f64],
+        c: &[f64],
+        jx: &[f64],
+        ju: &[f64],
+    ) -> f64 {
+        mul_h(ocp, hess, &self.d, &mut self.rd);
+        let mut pobj = 0.0;
+        for ((r, g), d) in self.rd.iter_mut().zip(grad).zip(&self.d) {
+            pobj += (0.5 * *r + g) * d;
+            *r += g;
+        }
+        add_et(ocp, jx, ju, &self.lam, &mut self.rd);
+        add_gt(ocp, &self.nu, &mut self.rd);
+        mul_e(ocp, jx, ju, &self.d, &mut self.re);
+        for (r, ci) in self.re.iter_mut().zip(c) {
+            *r += ci;
+        }
+        for (i, row) in ocp.rows.iter().enumerate() {
+            self.ri[i] = row.dot(&self.d) + self.t[i] - self.b[i];
+        }
+        pobj
+    }
+
+    /// Solves the Newton system for the complementarity target `rc` (in `self.tmp`) with the
+    /// current factorisation; writes Δd, Δλ into `self.rhs` and Δt, Δν into `dt`, `dnu`.
+    fn newton(&mut self, ocp: &Ocp, use_aff: bool) -> bool {
+        let (nv, ne) = (ocp.n_var, ocp.n_eq);
+        // rhs_z = −r_d − Gᵀ((r_c + ν∘r_i)/t), rhs_λ = −r_e.
+        for i in 0..nv {
+            self.rhs[i] = -self.rd[i];
+        }
+        for i in 0..ne {
+            self.rhs[nv + i] = -self.re[i];
+        }
+        for (i, row) in ocp.rows.iter().enumerate() {
+            let v = (self.tmp[i] + self.nu[i] * self.ri[i]) / self.t[i];
+            for j in 0..row.len {
+                self.rhs[row.idx[j]] -= row.coef[j] * v;
+            }
+        }
+        if !self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch) {
+            return false;
+        }
+        let (dt, dnu) = if use_aff {
+            (&mut self.dt_aff, &mut self.dnu_aff)
+        } else {
+            (&mut self.dt, &mut self.dnu)
+        };
+        for (i, row) in ocp.rows.iter().enumerate() {
+            dt[i] = -self.ri[i] - row.dot(&self.rhs[..nv]);
+            dnu[i] = (self.tmp[i] - self.nu[i] * dt[i]) / self.t[i];
+        }
+        true
+    }
+
+    /// Solves the subproblem (same arguments and outputs as the clarabel solver). Returns
+    /// [`QpStatus::Failed`] at the iteration limit, on divergence (e.g. an infeasible QP)
+    /// or on a singular Newton system.
+    pub fn solve(
+        &mut self,
+        ocp: &Ocp,
+        data: &QpData,
+        d: &mut [f64],
+        lam: &mut [f64],
+        nu: &mut [f64],
+    ) -> QpStatus {
+        let QpData {
+            z,
+            hess,
+            grad,
+            c,
+            jac_x,
+            jac_u,
+        } = *data;
+        let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
+        self.last_iterations = 0;
+        for (i, row) in ocp.rows.iter().enumerate() {
+            self.b[i] = row.slack(z);
+        }
+        let scale_g = 1.0 + inf_norm(grad);
+        let scale_c = 1.0 + inf_norm(c);
+        let scale_b = 1.0 + inf_norm(&self.b);
+        if !(scale_g.is_finite() && scale_c.is_finite() && scale_b.is_finite()) {
+            return QpStatus::Failed;
+        }
+        // Starting point: solve with W = I, i.e. min ½dᵀHd + gᵀd + ½‖Gd − b‖² s.t. Ed = −c.
+        if !self.kkt.set_base(ocp, hess, jac_x, jac_u) {
+            return QpStatus::Failed;
+        }
+        self.w.fill(1.0);
+        let ratio = self.kkt.factor_weighted(&self.w);
+        if ratio.is_nan() || ratio <= 1e-14 {
+            return QpStatus::Failed;
+        }
+        for i in 0..nv {
+            self.rhs[i] = -grad[i];
+        }
+        for i in 0..ne {
+            self.rhs[nv + i] = -c[i];
+        }
+        add_gt(ocp, &self.b, &mut self.rhs[..nv]);
+        if !self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch) {
+            return QpStatus::Failed;
+        }
+        self.d.copy_from_slice(&self.rhs[..nv]);
+        self.lam.copy_from_slice(&self.rhs[nv..]);
+        if m == 0 {
+            // No inequalities: the equality-constrained QP is solved exactly.
+            d.copy_from_slice(&self.d);
+            lam.copy_from_slice(&self.lam);
+            self.last_iterations = 1;
+            return QpStatus::Solved;
+        }
+        // t̂ = b − G d, ν̂ = −t̂, both shifted into the interior.
+        for (i, row) in ocp.rows.iter().enumerate() {
+            self.t[i] = self.b[i] - row.dot(&self.d);
+        }
+        let tmin = self.t.iter().fold(f64::INFINITY, |a, &v| a.min(v));
+        let tmax = -self.t.iter().fold(f64::INFINITY, |a, &v| a.min(-v));
+        let shift_t = if tmin <= 0.0 { 1.0 - tmin } else { 0.0 };
+        let shift_n = if -tmax <= 0.0 { 1.0 + tmax } else { 0.0 };
+        for i in 0..m {
+            let r = self.t[i];
+            self.t[i] = r + shift_t;
+            self.nu[i] = -r + shift_n;
+        }
+        let mut best = f64::INFINITY;
+        let mut stall = 0;
+        let mut it = 0;
+        loop {
+            self.last_iterations = it;
+            let pobj = self.residuals(ocp, hess, grad, c, jac_x, jac_u);
+            let gap: f64 = self.t.iter().zip(&self.nu).map(|(a, b)| a * b).sum();
+            let mu = gap / m as f64;
+            let err = (inf_norm(&self.rd) / scale_g)
+                .max(inf_norm(&self.re) / scale_c)
+                .max(inf_norm(&self.ri) / scale_b)
+                .max(gap / (1.0 + pobj.abs()));
+            if !err.is_finite() {
+                return QpStatus::Failed;
+            }
+            if err <= TOL {
+                break;
+            }
+            if err < 0.9 * best {
+                stall = 0;
+            } else {
+                stall += 1;
+            }
+            best = best.min(err);
+            let diverged = inf_norm(&self.nu) > 1e14 || inf_norm(&self.d) > 1e14;
+            if it >= MAX_ITER || stall >= 5 || diverged {
+                if err <= TOL_REDUCED {
+                    break;
+                }
+                return QpStatus::Failed;
+            }
+            for i in 0..m {
+                self.w[i] = self.nu[i] / self.t[i];
+            }
+            let ratio = self.kkt.factor_weighted(&self.w);
+            if ratio.is_nan() || ratio <= 0.0 {
+                if err <= TOL_REDUCED {
+                    break;
+                }
+                return QpStatus::Failed;
+            }
+            // Predictor (affine scaling) step: r_c = −t∘ν.
+            for i in 0..m {
+                self.tmp[i] = -self.t[i] * self.nu[i];
+            }
+            if !self.newton(ocp, true) {
+                return QpStatus::Failed;
+            }
+            let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
+            let mut gap_aff = 0.0;
+            for i in 0..m {
+                gap_aff +=
+                    (self.t[i] + a_aff * self.dt_aff[i]) * (self.nu[i] + a_aff * self.dnu_aff[i]);
+            }
+            let sigma = (gap_aff / gap).powi(3).clamp(0.0, 1.0);
+            // Corrector: r_c = σμ − t∘ν − Δt_aff∘Δν_aff.
+            for i in 0..m {
+                self.tmp[i] =
+                    sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
+            }
+            if !self.newton(ocp, false) {
+                return QpStatus::Failed;
+            }
+            let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));
+            let alpha = (TAU * amax).min(1.0);
+            for i in 0..nv {
+                self.d[i] += alpha * self.rhs[i];
+            }
+            for i in 0..ne {
+                self.lam[i] += alpha * self.rhs[nv + i];
+            }
+            for i in 0..m {
+                self.t[i] += alpha * self.dt[i];
+                self.nu[i] += alpha * self.dnu[i];
+            }
+            it += 1;
+        }
+        d.copy_from_slice(&self.d);
+        lam.copy_from_slice(&self.lam);
+        nu.copy_from_slice(&self.nu);
+        QpStatus::Solved
+    }
+}

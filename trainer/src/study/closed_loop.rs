@@ -1,0 +1,363 @@
+//! Closed-loop simulation of a controller on the plant model, and the paper's Table II
+//! metrics.
+//!
+//! `x_{k+1} = F_plant(x_k, sat(π(y_k)))`, `y_k = x_k + w_k` (measurement noise), where
+//! F_plant is the OCP's RK4 model, optionally with perturbed physical parameters (model
+//! mismatch), and π is the MPC law κ (solved online at every step, warm-started from the
+//! previous step's solution) or a network κ_NN. The plant receives the controller's input
+//! saturated to the actuator limits U; a network's raw output outside the certified band
+//! U ⊕ [−ε, ε] is recorded.
+//!
+//! Metrics of a run (Table II): share of steps whose state violates a state bound by more
+//! than 1e-6 (the MPC rides x₂ = 1 during the upswing; solver tolerances must not count),
+//! the largest violation, the largest input divergence ‖κ(x) − κ_NN(x)‖ along the network's
+//! own trajectory (the MPC solved at each visited state), the quadratic cost
+//! Σ x_kᵀQx_k + u_kᵀRu_k, and the settling step (first k after which ‖x‖∞ stays ≤ 0.05).
+
+use crate::learn::mlp::Mlp;
+use crate::mpc::law::MpcLaw;
+use crate::mpc::sqp::PrimalDual;
+use crate::problem::model::{Discrete, System};
+use crate::problem::ProblemConfig;
+use crate::rng::uniform;
+use serde::{Deserialize, Serialize};
+
+/// Violations smaller than this do not count (solver tolerance).
+pub const VIOLATION_TOL: f64 = 1e-6;
+
+/// A controller under test.
+pub enum Controller<'a> {
+    /// The MPC, solved online.
+    Mpc,
+    /// A network, with the certified band's half-width ε (for the band check) and, if
+    /// given, the output clamp of its certificate (lo, hi): the deployed controller clamps
+    /// its output there before the actuator saturation, and the input divergence is then
+    /// measured on the clamped output (the quantity the certificate bounds).
+    Net(&'a Mlp, f64, Option<(&'a [f64], &'a [f64])>),
+}
+
+/// An additive input disturbance `e_k` (the input error of Corollary 1): the plant
+/// receives `sat(π(y_k) + e_k)`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Disturbance {
+    /// No disturbance.
+    #[default]
+    None,
+    /// Bang-bang at the bound: `e_k = eps·(−1)^⌊k/period⌋` on every input (`period` 0:
+    /// constant `eps`; a negative `eps` flips the sign).
+    BangBang {
+        /// Amplitude (signed).
+        eps: f64,
+        /// Steps between sign changes (0 = never).
+        period: usize,
+    },
+    /// Adversarial, ‖e‖₂ = eps: pushes the state towards the state bound that is closest
+    /// to active at the next state, along the input sensitivity of that bound:
+    /// `e = ±eps·(∂F_i/∂u)/‖∂F_i/∂u‖` for the coordinate i and side ± of the smallest
+    /// margin of `F(x, u)` (one-step greedy; the adversary sees the true state).
+    Adversarial {
+        /// Amplitude.
+        eps: f64,
+    },
+    /// Uniform in [−eps, eps] per input, seeded by the run's seed.
+    Random {
+        /// Amplitude.
+        eps: f64,
+    },
+}
+
+impl Disturbance {
+    /// The disturbance at step `k`, state `x`, nominal input `u` (before saturation).
+    pub fn at(
+        &self,
+        model: &Discrete,
+        cfg: &ProblemConfig,
+        k: usize,
+        seed: u64,
+        x: &[f64],
+        u: &[f64],
+    ) -> Vec<f64> {
+        let nu = u.len();
+        match *self {
+            Disturbance::None => vec![0.0; nu],
+            Disturbance::BangBang { eps, period } => {
+                let sign = if period > 0 && (k / period) % 2 == 1 {
+                    -1.0
+                } else {
+                    1.0
+                };
+                vec![sign * eps; nu]
+            }
+            Disturbance::Random { eps } => (0..nu)
+                .map(|j| eps * (2.0 * uniform(seed ^ 0x5eed_d157, k as u64, j as u64) - 1.0))
+                .collect(),
+            Disturbance::Adversarial { eps } => {
+                let nx = x.len();
+                let (mut f, mut jx, mut ju) =
+                    (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
+                model.linearize(x, u, &mut f, &mut jx, &mut ju);
+                // (margin, coordinate, side): side +1 = upper bound.
+                let mut best: Option<(f64, usize, f64)> = None;
+                for i in 0..nx {
+                    for (m, side) in [
+                        (cfg.ocp.x_hi[i] - f[i], 1.0),
+                        (f[i] - cfg.ocp.x_lo[i], -1.0),
+                    ] {
+                        if m.is_finite() && best.is_none_or(|b| m < b.0) {
+                            best = Some((m, i, side));
+                        }
+                    }
+                }
+                let Some((_, i, side)) = best else {
+                    return vec![eps; nu];
+                };
+                let row = &ju[i * nu..(i + 1) * nu];
+                let norm = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if norm == 0.0 {
+                    return vec![side * eps; nu];
+                }
+                row.iter().map(|v| side * eps * v / norm).collect()
+            }
+        }
+    }
+}
+
+/// Simulation settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimSettings {
+    /// Number of steps (pendulum: 90 = 4.5 s).
+    pub steps: usize,
+    /// Uniform measurement noise amplitude per state (0 = none).
+    pub noise: Vec<f64>,
+    /// Seed of the noise.
+    pub seed: u64,
+    /// Relative change of the plant's first mass parameter (0.1 = +10 %).
+    pub mass_mismatch: f64,
+    /// Additive input disturbance (default none).
+    #[serde(default)]
+    pub disturbance: Disturbance,
+}
+
+/// One closed-loop run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Run {
+    /// Initial state.
+    pub x0: Vec<f64>,
+    /// Number of steps simulated.
+    pub steps: usize,
+    /// States x_0..x_steps.
+    pub x: Vec<Vec<f64>>,
+    /// Inputs applied u_0..u_{steps−1}.
+    pub u: Vec<Vec<f64>>,
+    /// Steps (of x_1..x_steps) with a state-bound violation > 1e-6.
+    pub violation_steps: usize,
+    /// Share of violating steps in %.
+    pub violation_percent: f64,
+    /// Largest state-bound violation.
+    pub max_violation: f64,
+    /// Largest ‖κ(x_k) − κ_NN(x_k)‖ along the trajectory (0 for the MPC).
+    pub max_input_divergence: f64,
+    /// Input divergence at each step (empty for the MPC).
+    pub divergence: Vec<f64>,
+    /// Σ x_kᵀQx_k + u_kᵀRu_k.
+    pub cost: f64,
+    /// First step after which ‖x‖∞ ≤ 0.05 for good (None: never).
+    pub settling_step: Option<usize>,
+    /// Whether the network's raw output ever left the certified band U ⊕ [−ε, ε].
+    pub left_band: bool,
+    /// Steps where the MPC found no label (its input then held at the last one).
+    pub mpc_failures: usize,
+    /// Steps where the MPC's hard problem was infeasible at the visited state (its label
+    /// was the soft one): the state had left the MPC's feasible set (counted for the MPC
+    /// and, through the MPC solved for the divergence, for networks).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub mpc_soft_steps: usize,
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
+}
+
+fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
+    let mut sys = cfg.system.clone();
+    match &mut sys {
+        System::Pendulum(p) => p.m *= 1.0 + mismatch,
+        System::CartPole(p) => p.m_pole *= 1.0 + mismatch,
+        System::DoubleIntegrator(p) => p.mass *= 1.0 + mismatch,
+    }
+    Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
+}
+
+/// Simulates `ctrl` from `x0`. `law` is used for the MPC and for the input divergence.
+pub fn simulate(
+    cfg: &ProblemConfig,
+    law: &mut MpcLaw,
+    ctrl: &Controller,
+    x0: &[f64],
+    s: &SimSettings,
+) -> Run {
+    let nx = cfg.system.nx();
+    let nu = cfg.system.nu();
+    let model = plant(cfg, s.mass_mismatch);
+    let (q, r) = (cfg.q(), cfg.r());
+    let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
+    let mut x = x0.to_vec();
+    let mut run = Run {
+        x0: x0.to_vec(),
+        steps: s.steps,
+        x: vec![x.clone()],
+        u: Vec::new(),
+        violation_steps: 0,
+        violation_percent: 0.0,
+        max_violation: 0.0,
+        max_input_divergence: 0.0,
+        divergence: Vec::new(),
+        cost: 0.0,
+        settling_step: None,
+        left_band: false,
+        mpc_failures: 0,
+        mpc_soft_steps: 0,
+    };
+    let mut warm: Option<PrimalDual> = None;
+    let mut last_u = vec![0.0; nu];
+    let mut next = vec![0.0; nx];
+    for k in 0..s.steps {
+        let y: Vec<f64> = (0..nx)
+            .map(|i| {
+                x[i] + s.noise.get(i).copied().unwrap_or(0.0)
+                    * (2.0 * uniform(s.seed, k as u64, i as u64) - 1.0)
+            })
+            .collect();
+        let mut u = match ctrl {
+            Controller::Mpc => {
+                let (l, sol) = law.solve(&y, warm.as_ref());
+                if l.status == crate::mpc::sqp::SqpStatus::Soft {
+                    run.mpc_soft_steps += 1;
+                }
+                if l.status.is_labelled() {
+                    warm = sol.or(warm);
+                    l.u
+                } else {
+                    run.mpc_failures += 1;
+                    last_u.clone()
+                }
+            }
+            Controller::Net(m, eps, clamp) => {
+                let mut u = m.predict(&y);
+                if u.iter()
+                    .zip(ulo.iter().zip(uhi))
+                    .any(|(v, (l, h))| !(*v >= l - eps && *v <= h + eps))
+                {
+                    run.left_band = true;
+                }
+                if let Some((lo, hi)) = clamp {
+                    for ((v, l), h) in u.iter_mut().zip(*lo).zip(*hi) {
+                        if v.is_finite() {
+                            *v = v.clamp(*l, *h);
+                        }
+                    }
+                }
+                let (l, sol) = law.solve(&y, warm.as_ref());
+                if l.status == crate::mpc::sqp::SqpStatus::Soft {
+                    run.mpc_soft_steps += 1;
+                }
+                if l.status.is_labelled() {
+                    warm = sol.or(warm);
+                    let d =
+                        l.u.iter()
+                            .zip(&u)
+                            .map(|(a, b)| (a - b).powi(2))
+                            .sum::<f64>()
+                            .sqrt();
+                    // A non-finite output (diverged net) is an infinite divergence.
+                    let d = if d.is_finite() { d } else { f64::INFINITY };
+                    run.divergence.push(d);
+                    run.max_input_divergence = run.max_input_divergence.max(d);
+                } else {
+                    run.mpc_failures += 1;
+                }
+                u
+            }
+        };
+        if s.disturbance != Disturbance::None {
+            let e = s.disturbance.at(&model, cfg, k, s.seed, &x, &u);
+            for (v, e) in u.iter_mut().zip(e) {
+                *v += e;
+            }
+        }
+        for (j, v) in u.iter_mut().enumerate() {
+            *v = if v.is_finite() {
+                v.clamp(ulo[j], uhi[j])
+            } else {
+                0.5 * (ulo[j] + uhi[j])
+            };
+        }
+        last_u = u.clone();
+        for i in 0..nx {
+            for j in 0..nx {
+                run.cost += x[i] * q[(i, j)] * x[j];
+            }
+        }
+        for i in 0..nu {
+            for j in 0..nu {
+                run.cost += u[i] * r[(i, j)] * u[j];
+            }
+        }
+        model.step(&x, &u, &mut next);
+        x.copy_from_slice(&next);
+        let viol = (0..nx)
+            .map(|i| {
+                (x[i] - cfg.ocp.x_hi[i])
+                    .max(cfg.ocp.x_lo[i] - x[i])
+                    .max(0.0)
+            })
+            .fold(0.0f64, f64::max);
+        if viol > VIOLATION_TOL {
+            run.violation_steps += 1;
+        }
+        run.max_violation = run.max_violation.max(viol);
+        run.u.push(u);
+        run.x.push(x.clone());
+    }
+    run.violation_percent = 100.0 * run.violation_steps as f64 / s.steps.max(1) as f64;
+    let settled = |v: &Vec<f64>| v.iter().all(|c| c.abs() <= 0.05);
+    run.settling_step = (0..run.x.len()).find(|&k| run.x[k..].iter().all(settled));
+    run
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mpc_swings_the_pendulum_up_and_respects_bounds() {
+        let cfg = ProblemConfig::default();
+        let mut law = MpcLaw::new(&cfg);
+        let s = SimSettings {
+            steps: 90,
+            noise: vec![],
+            seed: 0,
+            mass_mismatch: 0.0,
+            disturbance: Disturbance::None,
+        };
+        let r = simulate(
+            &cfg,
+            &mut law,
+            &Controller::Mpc,
+            &[-std::f64::consts::PI, 0.0],
+            &s,
+        );
+        assert_eq!(r.x.len(), 91);
+        assert_eq!(r.mpc_failures, 0);
+        assert_eq!(r.violation_steps, 0, "max violation {}", r.max_violation);
+        let last = r.x.last().unwrap();
+        assert!(last[0].abs() < 0.05 && last[1].abs() < 0.05, "{last:?}");
+        assert!(r.settling_step.is_some());
+        // The recorded cost is the sum of stage costs of the recorded trajectory.
+        let c: f64 = (0..90)
+            .map(|k| 10.0 * r.x[k][0].powi(2) + r.x[k][1].powi(2) + 0.1 * r.u[k][0].powi(2))
+            .sum();
+        assert!((c - r.cost).abs() < 1e-9 * c);
+    }
+}

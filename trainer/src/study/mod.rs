@@ -1,0 +1,13 @@
+//! Stage 8 — what the controller does and how it is reported.
+//!
+//! - [`closed_loop`]: x_{t+1} = F(x_t, κ_NN(x_t)) against the MPC, with noise, model
+//!   mismatch and input disturbances; violations, divergence, cost.
+//! - [`plots`]: the figures (trajectories, error box plots, the error map, training curves,
+//!   the local-certificate map), SVG and PNG.
+//! - [`report`]: the run report in Markdown and self-contained HTML.
+//!
+//! Imports every earlier stage; nothing but `pipeline` and `cli` imports it.
+
+pub mod closed_loop;
+pub mod plots;
+pub mod report;
