@@ -18,19 +18,8 @@
 //! `W̃_m = S W_m`), so that λ₃ penalises what the paper penalises on its unscaled network.
 //! The weight norm is the Frobenius norm.
 
+pub use crate::problem::Activation;
 use serde::{Deserialize, Serialize};
-
-/// Hidden-layer activation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Activation {
-    /// tanh (slope in [0, 1]).
-    Tanh,
-    /// ln(1 + eᶻ) (slope in [0, 1]).
-    Softplus,
-    /// max(0, z) (slope in {0, 1}).
-    Relu,
-}
 
 impl Activation {
     /// (α(z), α′(z), α″(z)).

@@ -19,6 +19,7 @@
 pub mod ipm;
 
 use crate::mpc::ocp::Ocp;
+pub use crate::problem::QpSolverKind;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
@@ -48,18 +49,6 @@ pub enum QpStatus {
     Infeasible,
     /// Iteration limit, numerical error or lack of progress.
     Failed,
-}
-
-/// Which QP solver the SQP uses (`solver.qp`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum QpSolverKind {
-    /// Structure-exploiting primal-dual interior point ([`ipm`], banded KKT factorisation,
-    /// cost linear in N), with clarabel as fallback for QPs it cannot solve.
-    #[default]
-    Structured,
-    /// The general sparse conic solver clarabel (reference).
-    Clarabel,
 }
 
 /// The SQP's QP solver: the chosen backend, workspaces allocated once per OCP structure.

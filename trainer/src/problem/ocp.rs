@@ -1,0 +1,105 @@
+//! `[ocp]`: the optimal control problem's data — sampling time, horizon, weights
+//! ℓ(x, u) = xᵀQx + uᵀRu, V_f(x) = xᵀPx, and the constraint boxes x_k ∈ X_k, u_k ∈ U_k.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+/// A square matrix given as a diagonal or as full rows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum MatrixSpec {
+    /// Diagonal entries.
+    Diagonal(Vec<f64>),
+    /// Full matrix, row-major rows.
+    Full(Vec<Vec<f64>>),
+}
+
+impl MatrixSpec {
+    /// Dense matrix; `None` if the rows are ragged.
+    pub fn to_dmatrix(&self) -> Option<DMatrix<f64>> {
+        match self {
+            MatrixSpec::Diagonal(d) => Some(DMatrix::from_diagonal(
+                &nalgebra::DVector::from_column_slice(d),
+            )),
+            MatrixSpec::Full(rows) => {
+                let n = rows.len();
+                let m = rows.first().map_or(0, |r| r.len());
+                if rows.iter().any(|r| r.len() != m) {
+                    return None;
+                }
+                Some(DMatrix::from_fn(n, m, |i, j| rows[i][j]))
+            }
+        }
+    }
+}
+
+/// The optimal control problem's data (`[ocp]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OcpSettings {
+    /// Sampling time Ts in s (pendulum: 0.05).
+    pub ts: f64,
+    /// Horizon N ≥ 1 (pendulum: 20).
+    pub horizon: usize,
+    /// RK4 sub-steps per sample (default 1).
+    #[serde(default = "one")]
+    pub rk4_substeps: usize,
+    /// Stage state weight Q (symmetric PSD).
+    pub q: MatrixSpec,
+    /// Stage input weight R (symmetric positive definite).
+    pub r: MatrixSpec,
+    /// Terminal weight P (symmetric PSD).
+    pub p: MatrixSpec,
+    /// Lower state bounds on x₁..x_N (`-inf` for none).
+    pub x_lo: Vec<f64>,
+    /// Upper state bounds on x₁..x_N (`inf` for none).
+    pub x_hi: Vec<f64>,
+    /// Lower input bounds on u₀..u_{N−1}.
+    pub u_lo: Vec<f64>,
+    /// Upper input bounds on u₀..u_{N−1}.
+    pub u_hi: Vec<f64>,
+    /// Stage-dependent bounds (a tightened, robust OCP; see `trainer::robust`). When
+    /// present they replace the constant bounds above inside the OCP; the constant bounds
+    /// stay the true constraint set X × U (actuator limits, closed-loop violation checks).
+    /// Absent by default, and then not serialised, so hashes of existing problems are
+    /// unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stages: Option<StageBounds>,
+}
+
+/// Per-stage bounds of a tightened OCP: `x_lo[k−1]`, `x_hi[k−1]` bound x_k (k = 1..N),
+/// `u_lo[k]`, `u_hi[k]` bound u_k (k = 0..N−1). Infinite entries mean no bound.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageBounds {
+    /// Lower state bounds of x_1..x_N (N rows of nx).
+    pub x_lo: Vec<Vec<f64>>,
+    /// Upper state bounds of x_1..x_N (N rows of nx).
+    pub x_hi: Vec<Vec<f64>>,
+    /// Lower input bounds of u_0..u_{N−1} (N rows of nu).
+    pub u_lo: Vec<Vec<f64>>,
+    /// Upper input bounds of u_0..u_{N−1} (N rows of nu).
+    pub u_hi: Vec<Vec<f64>>,
+}
+
+impl OcpSettings {
+    /// Bounds `(lo, hi)` on the predicted state x_k, k = 1..N (stage-dependent if
+    /// [`stages`](Self::stages) is set).
+    pub fn x_bounds(&self, k: usize) -> (&[f64], &[f64]) {
+        match &self.stages {
+            Some(s) => (&s.x_lo[k - 1], &s.x_hi[k - 1]),
+            None => (&self.x_lo, &self.x_hi),
+        }
+    }
+    /// Bounds `(lo, hi)` on the input u_k, k = 0..N−1.
+    pub fn u_bounds(&self, k: usize) -> (&[f64], &[f64]) {
+        match &self.stages {
+            Some(s) => (&s.u_lo[k], &s.u_hi[k]),
+            None => (&self.u_lo, &self.u_hi),
+        }
+    }
+}
+
+fn one() -> usize {
+    1
+}

@@ -1,0 +1,150 @@
+//! `[refine]`: adaptive refinement with local certificates — target ε, budget of OCP
+//! solves, initial grid, rounds, and the retraining settings of each round.
+
+use super::{invalid, ConfigError, Schedule, TrainSettings};
+use serde::{Deserialize, Serialize};
+
+/// Adaptive refinement settings (`[refine]`, used by `trainer refine`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RefineSettings {
+    /// Target certified ε (default 0.75; `--target-eps` overrides).
+    pub target_eps: f64,
+    /// Budget of OCP solves (default 50 000; `--budget` overrides).
+    pub budget: usize,
+    /// Points per axis of the initial grid (default: 9 per axis).
+    pub initial: Vec<usize>,
+    /// Largest number of refinement rounds (default 80).
+    pub max_rounds: usize,
+    /// Adam epochs of each warm-started retraining (default 60).
+    pub round_epochs: usize,
+    /// Learning rate of the warm-started retrainings (default 1e-3, cosine decay).
+    pub round_learning_rate: f64,
+    /// Retrain only when a failing cell's corner error exceeds this fraction of the target
+    /// (default 0.6); otherwise a round only splits cells.
+    pub retrain_at: f64,
+    /// Safety factor on the estimated MPC parts of the local certificate (default 2).
+    pub safety: f64,
+    /// Points whose error exceeds this fraction of the target are repeated `emphasis`
+    /// times in the training set (default 0.5).
+    pub emphasis_at: f64,
+    /// Repetitions of such points (default 4; 1 = no emphasis).
+    pub emphasis: usize,
+    /// Cells narrower than this fraction of the domain on every axis are not split
+    /// (default 1e-5).
+    pub min_width: f64,
+    /// The network and its first training (defaults: 2-32-32-1 tanh, 600 epochs, batch 64,
+    /// learning rate 3e-3 with cosine decay, λ = (1, 0.1, 0), saturation-aware loss).
+    pub training: TrainSettings,
+}
+
+impl Default for RefineSettings {
+    fn default() -> Self {
+        RefineSettings {
+            target_eps: 0.75,
+            budget: 50_000,
+            initial: Vec::new(),
+            max_rounds: 80,
+            round_epochs: 60,
+            round_learning_rate: 1e-3,
+            retrain_at: 0.6,
+            safety: 2.0,
+            emphasis_at: 0.5,
+            emphasis: 4,
+            min_width: 1e-5,
+            training: TrainSettings {
+                hidden: vec![32, 32],
+                epochs: 600,
+                batch_size: 64,
+                learning_rate: 3e-3,
+                schedule: Schedule::Cosine,
+                lambda: [1.0, 0.1, 0.0],
+                validation_n: 0,
+                log_every: 1_000_000,
+                saturation_aware: true,
+                ..TrainSettings::default()
+            },
+        }
+    }
+}
+
+impl RefineSettings {
+    /// Checks the settings (errors name the key).
+    pub fn validate(&self, nx: usize) -> Result<(), ConfigError> {
+        if !(self.target_eps.is_finite() && self.target_eps > 0.0) {
+            return Err(invalid("refine.target_eps", "must be positive and finite"));
+        }
+        if self.budget == 0 {
+            return Err(invalid("refine.budget", "must be at least 1"));
+        }
+        if !self.initial.is_empty() && self.initial.len() != nx {
+            return Err(invalid(
+                "refine.initial",
+                format!("expected {nx} per-axis counts, got {}", self.initial.len()),
+            ));
+        }
+        if let Some(i) = self.initial.iter().position(|&c| !(2..=8193).contains(&c)) {
+            return Err(invalid(
+                format!("refine.initial[{i}]"),
+                "must be in 2..=8193 (the lattice has 40 bisection levels below it)",
+            ));
+        }
+        let grid = self
+            .initial_counts(nx)
+            .iter()
+            .try_fold(1usize, |a, &c| a.checked_mul(c));
+        if grid.is_none_or(|g| g > self.budget) {
+            return Err(invalid(
+                "refine.initial",
+                format!(
+                    "the initial grid ({:?} points per axis) needs more solves than the budget {}",
+                    self.initial_counts(nx),
+                    self.budget
+                ),
+            ));
+        }
+        if !(self.safety.is_finite() && self.safety >= 1.0) {
+            return Err(invalid("refine.safety", "must be at least 1"));
+        }
+        if !(self.round_learning_rate.is_finite() && self.round_learning_rate > 0.0) {
+            return Err(invalid("refine.round_learning_rate", "must be positive"));
+        }
+        if !(self.retrain_at.is_finite() && self.retrain_at >= 0.0) {
+            return Err(invalid("refine.retrain_at", "must be ≥ 0"));
+        }
+        if !(self.min_width.is_finite() && self.min_width > 0.0 && self.min_width < 1.0) {
+            return Err(invalid("refine.min_width", "must be in (0, 1)"));
+        }
+        if !(self.emphasis_at.is_finite() && self.emphasis_at >= 0.0) || self.emphasis == 0 {
+            return Err(invalid(
+                "refine.emphasis",
+                "emphasis ≥ 1 and emphasis_at ≥ 0",
+            ));
+        }
+        let t = &self.training;
+        if t.hidden.is_empty() || t.hidden.contains(&0) || t.epochs == 0 || t.batch_size == 0 {
+            return Err(invalid(
+                "refine.training",
+                "hidden widths, epochs and batch_size must be positive",
+            ));
+        }
+        if !(t.learning_rate.is_finite() && t.learning_rate > 0.0) {
+            return Err(invalid("refine.training.learning_rate", "must be positive"));
+        }
+        Ok(())
+    }
+
+    /// Whether these are the default settings (then not serialised).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Initial grid counts for an `nx`-dimensional domain.
+    pub fn initial_counts(&self, nx: usize) -> Vec<usize> {
+        if self.initial.is_empty() {
+            vec![9; nx]
+        } else {
+            self.initial.clone()
+        }
+    }
+}

@@ -1,0 +1,82 @@
+//! `[training]`: the network's shape and activation, the loss weights λ₁, λ₂, λ₃ and the
+//! optimiser (Adam, schedule, epochs, batch size, early stopping).
+
+use serde::{Deserialize, Serialize};
+
+/// Learning-rate schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Schedule {
+    /// Constant learning rate.
+    Constant,
+    /// Cosine decay from the learning rate to 1 % of it over the epochs.
+    Cosine,
+}
+
+/// Training settings (`[training]`); defaults are the paper's setting.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainSettings {
+    /// Hidden layer widths (default [10, 10]).
+    pub hidden: Vec<usize>,
+    /// Hidden activation (default tanh).
+    pub activation: Activation,
+    /// Epochs (default 2000).
+    pub epochs: usize,
+    /// Minibatch size (default 35: 10 Adam steps per epoch on the 350-point grid).
+    pub batch_size: usize,
+    /// Adam learning rate (default 1e-2).
+    pub learning_rate: f64,
+    /// Learning-rate schedule (default constant).
+    pub schedule: Schedule,
+    /// (λ₁, λ₂, λ₃) of the sensitivity-regularized loss (default the paper's (1, 3, 0.05));
+    /// the nominal net uses (λ₁, 0, 0).
+    pub lambda: [f64; 3],
+    /// Seed of the initial weights and of the minibatch shuffling (default 0).
+    pub seed: u64,
+    /// Stop early once ε_D (max error over the dataset) is at most this (default: none).
+    pub target_eps_d: Option<f64>,
+    /// Number of uniformly random validation states labelled by the MPC (default 1000).
+    pub validation_n: usize,
+    /// Seed of the validation states (default 12345).
+    pub validation_seed: u64,
+    /// Record the training curve every this many epochs (default 20).
+    pub log_every: usize,
+    /// Saturation-aware loss (default false): the deployed output is clamped to the input
+    /// bounds, so a saturated label whose prediction is at or beyond its bound costs
+    /// nothing (see `mlp::Batch::band`). Lets the net overshoot where κ saturates instead
+    /// of rounding off the saturation kink.
+    pub saturation_aware: bool,
+}
+
+impl Default for TrainSettings {
+    fn default() -> Self {
+        TrainSettings {
+            hidden: vec![10, 10],
+            activation: Activation::Tanh,
+            epochs: 2000,
+            batch_size: 35,
+            learning_rate: 1e-2,
+            schedule: Schedule::Constant,
+            lambda: [1.0, 3.0, 0.05],
+            seed: 0,
+            target_eps_d: None,
+            validation_n: 1000,
+            validation_seed: 12345,
+            log_every: 20,
+            saturation_aware: false,
+        }
+    }
+}
+
+/// Hidden-layer activation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Activation {
+    /// tanh (slope in [0, 1]).
+    Tanh,
+    /// ln(1 + eᶻ) (slope in [0, 1]).
+    Softplus,
+    /// max(0, z) (slope in {0, 1}).
+    Relu,
+}

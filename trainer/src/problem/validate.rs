@@ -1,0 +1,292 @@
+//! Validation of a problem file: every setting is checked once, at the edge; each error names
+//! the dotted key at fault (`ocp.q`, `domain.lo[1]`, …).
+
+use super::*;
+
+fn check_vec(key: &str, v: &[f64], n: usize, allow_inf: bool) -> Result<(), ConfigError> {
+    if v.len() != n {
+        return Err(invalid(
+            key,
+            format!("expected {n} entries, got {}", v.len()),
+        ));
+    }
+    for (i, x) in v.iter().enumerate() {
+        if x.is_nan() || (!allow_inf && x.is_infinite()) {
+            return Err(invalid(
+                format!("{key}[{i}]"),
+                format!("must be a finite number, got {x}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_bounds(
+    key_lo: &str,
+    key_hi: &str,
+    lo: &[f64],
+    hi: &[f64],
+    strict: bool,
+) -> Result<(), ConfigError> {
+    for (i, (l, h)) in lo.iter().zip(hi).enumerate() {
+        if l > h || (strict && l >= h) {
+            return Err(invalid(
+                format!("{key_lo}[{i}]"),
+                format!("lower bound {l} is not below {key_hi}[{i}] = {h}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn check_matrix(
+    key: &str,
+    m: &MatrixSpec,
+    n: usize,
+    definite: bool,
+) -> Result<DMatrix<f64>, ConfigError> {
+    let mat = m
+        .to_dmatrix()
+        .ok_or_else(|| invalid(key, "rows have different lengths"))?;
+    if mat.nrows() != n || mat.ncols() != n {
+        return Err(invalid(
+            key,
+            format!(
+                "expected a {n}×{n} matrix (or {n} diagonal entries), got {}×{}",
+                mat.nrows(),
+                mat.ncols()
+            ),
+        ));
+    }
+    if mat.iter().any(|x| !x.is_finite()) {
+        return Err(invalid(key, "entries must be finite numbers"));
+    }
+    let scale = mat.amax().max(1.0);
+    if (&mat - mat.transpose()).amax() > 1e-12 * scale {
+        return Err(invalid(key, "must be symmetric"));
+    }
+    let min_eig = mat.clone().symmetric_eigen().eigenvalues.min();
+    if definite && min_eig <= 1e-12 * scale {
+        return Err(invalid(
+            key,
+            format!("must be positive definite (smallest eigenvalue {min_eig:.3e})"),
+        ));
+    }
+    if !definite && min_eig < -1e-12 * scale {
+        return Err(invalid(
+            key,
+            format!("must be positive semidefinite (smallest eigenvalue {min_eig:.3e})"),
+        ));
+    }
+    Ok(mat)
+}
+
+impl ProblemConfig {
+    /// Checks every setting once; the error names the key at fault.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.name.is_empty() || self.name.contains(['/', '\\']) {
+            return Err(invalid(
+                "name",
+                "must be a non-empty name without path separators",
+            ));
+        }
+        self.system.validate().map_err(|(k, r)| invalid(k, r))?;
+        let (nx, nu) = (self.system.nx(), self.system.nu());
+        let o = &self.ocp;
+        if !(o.ts.is_finite() && o.ts > 0.0) {
+            return Err(invalid(
+                "ocp.ts",
+                format!("must be finite and > 0, got {}", o.ts),
+            ));
+        }
+        if o.horizon == 0 {
+            return Err(invalid("ocp.horizon", "must be at least 1"));
+        }
+        if o.rk4_substeps == 0 {
+            return Err(invalid("ocp.rk4_substeps", "must be at least 1"));
+        }
+        check_matrix("ocp.q", &o.q, nx, false)?;
+        check_matrix("ocp.r", &o.r, nu, true)?;
+        check_matrix("ocp.p", &o.p, nx, false)?;
+        check_vec("ocp.x_lo", &o.x_lo, nx, true)?;
+        check_vec("ocp.x_hi", &o.x_hi, nx, true)?;
+        check_vec("ocp.u_lo", &o.u_lo, nu, true)?;
+        check_vec("ocp.u_hi", &o.u_hi, nu, true)?;
+        check_bounds("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi, false)?;
+        check_bounds("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi, false)?;
+        if let Some(st) = &o.stages {
+            for (key, rows, n_rows, dim) in [
+                ("ocp.stages.x_lo", &st.x_lo, o.horizon, nx),
+                ("ocp.stages.x_hi", &st.x_hi, o.horizon, nx),
+                ("ocp.stages.u_lo", &st.u_lo, o.horizon, nu),
+                ("ocp.stages.u_hi", &st.u_hi, o.horizon, nu),
+            ] {
+                if rows.len() != n_rows {
+                    return Err(invalid(
+                        key,
+                        format!("expected {n_rows} stages (N), got {}", rows.len()),
+                    ));
+                }
+                for (k, r) in rows.iter().enumerate() {
+                    check_vec(&format!("{key}[{k}]"), r, dim, true)?;
+                }
+            }
+            for k in 0..o.horizon {
+                check_bounds(
+                    &format!("ocp.stages.x_lo[{k}]"),
+                    &format!("ocp.stages.x_hi[{k}]"),
+                    &st.x_lo[k],
+                    &st.x_hi[k],
+                    false,
+                )?;
+                check_bounds(
+                    &format!("ocp.stages.u_lo[{k}]"),
+                    &format!("ocp.stages.u_hi[{k}]"),
+                    &st.u_lo[k],
+                    &st.u_hi[k],
+                    false,
+                )?;
+            }
+        }
+        check_vec("domain.lo", &self.domain.lo, nx, false)?;
+        check_vec("domain.hi", &self.domain.hi, nx, false)?;
+        check_bounds(
+            "domain.lo",
+            "domain.hi",
+            &self.domain.lo,
+            &self.domain.hi,
+            true,
+        )?;
+        let s = &self.solver;
+        if !(s.tol.is_finite() && s.tol > 0.0 && s.tol < 1.0) {
+            return Err(invalid(
+                "solver.tol",
+                format!("must be in (0, 1), got {}", s.tol),
+            ));
+        }
+        if s.max_iter == 0 {
+            return Err(invalid("solver.max_iter", "must be at least 1"));
+        }
+        for (k, v) in [("solver.soft_l1", s.soft_l1), ("solver.soft_l2", s.soft_l2)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(k, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if s.soft_l1 <= 0.0 && s.soft_l2 <= 0.0 {
+            return Err(invalid(
+                "solver.soft_l1",
+                "soft_l1 and soft_l2 cannot both be 0",
+            ));
+        }
+        if !(s.degeneracy_tol.is_finite() && s.degeneracy_tol > 0.0) {
+            return Err(invalid("solver.degeneracy_tol", "must be finite and > 0"));
+        }
+        let t = &self.training;
+        if t.hidden.is_empty() || t.hidden.contains(&0) {
+            return Err(invalid(
+                "training.hidden",
+                "needs at least one hidden layer, all widths ≥ 1",
+            ));
+        }
+        if t.epochs == 0 {
+            return Err(invalid("training.epochs", "must be at least 1"));
+        }
+        if t.batch_size == 0 {
+            return Err(invalid("training.batch_size", "must be at least 1"));
+        }
+        if !(t.learning_rate.is_finite() && t.learning_rate > 0.0) {
+            return Err(invalid("training.learning_rate", "must be finite and > 0"));
+        }
+        if let Some(i) = t.lambda.iter().position(|l| !(l.is_finite() && *l >= 0.0)) {
+            return Err(invalid(
+                format!("training.lambda[{i}]"),
+                "must be finite and ≥ 0",
+            ));
+        }
+        if t.lambda[0] <= 0.0 {
+            return Err(invalid(
+                "training.lambda[0]",
+                "the value term's weight must be > 0",
+            ));
+        }
+        if t.target_eps_d.is_some_and(|e| !(e.is_finite() && e > 0.0)) {
+            return Err(invalid("training.target_eps_d", "must be finite and > 0"));
+        }
+        if t.log_every == 0 {
+            return Err(invalid("training.log_every", "must be at least 1"));
+        }
+        let c = &self.closed_loop;
+        if c.steps == 0 {
+            return Err(invalid("closed_loop.steps", "must be at least 1"));
+        }
+        if let Some(x0) = &c.x0 {
+            check_vec("closed_loop.x0", x0, nx, false)?;
+        }
+        for (k, v) in [
+            ("closed_loop.noise_fraction", c.noise_fraction),
+            ("closed_loop.mass_mismatch", c.mass_mismatch),
+        ] {
+            if !(v.is_finite() && (0.0..1.0).contains(&v)) {
+                return Err(invalid(k, format!("must be in [0, 1), got {v}")));
+            }
+        }
+        self.robust.validate(nx, nu)?;
+        if c.seeds > 1000 {
+            return Err(invalid(
+                "closed_loop.seeds",
+                format!("at most 1000, got {}", c.seeds),
+            ));
+        }
+        let pl = &self.plots;
+        if let Some(i) = pl
+            .error_map_grid
+            .iter()
+            .position(|&n| !(2..=2000).contains(&n))
+        {
+            return Err(invalid(
+                format!("plots.error_map_grid[{i}]"),
+                format!("must be in 2..=2000, got {}", pl.error_map_grid[i]),
+            ));
+        }
+        if !(pl.png_scale.is_finite() && (0.1..=8.0).contains(&pl.png_scale)) {
+            return Err(invalid(
+                "plots.png_scale",
+                format!("must be in [0.1, 8], got {}", pl.png_scale),
+            ));
+        }
+        let sm = &self.sampling;
+        match sm.sampler {
+            SamplerKind::Grid => {
+                if sm.counts.len() != nx {
+                    return Err(invalid(
+                        "sampling.counts",
+                        format!("expected {nx} per-axis counts, got {}", sm.counts.len()),
+                    ));
+                }
+                if let Some(i) = sm.counts.iter().position(|&c| c == 0) {
+                    return Err(invalid(
+                        format!("sampling.counts[{i}]"),
+                        "must be at least 1",
+                    ));
+                }
+                let total = sm.counts.iter().try_fold(1usize, |a, &c| a.checked_mul(c));
+                if total.is_none_or(|t| t > 100_000_000) {
+                    return Err(invalid("sampling.counts", "grid has more than 1e8 points"));
+                }
+            }
+            SamplerKind::Random | SamplerKind::Halton => {
+                if sm.n == 0 || sm.n > 100_000_000 {
+                    return Err(invalid("sampling.n", "must be between 1 and 1e8"));
+                }
+            }
+            SamplerKind::Adaptive => {
+                return Err(invalid(
+                    "sampling.sampler",
+                    "\"adaptive\" datasets are made by `trainer refine`, not sampled",
+                ));
+            }
+        }
+        self.refine.validate(nx)?;
+        Ok(())
+    }
+}
