@@ -81,8 +81,7 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         };
         trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");
         let dir = root.join(&cfg.name);
-        let m = trainer::learn::train::TrainedModel::load(&dir.join("model_regularized.bin"))
-            .expect("model");
+        let m = trainer::certify::Model::load(&dir.join("model_regularized.bin")).expect("model");
         let c: trainer::certify::certificate::Certificate = serde_json::from_str(
             &std::fs::read_to_string(dir.join("certificate.json")).expect("certificate"),
         )

@@ -131,7 +131,7 @@ fn learning(c: &mut Criterion) {
     };
     g.bench_function("pendulum_350_2000ep", |b| {
         b.iter(|| {
-            train(
+            train::<()>(
                 &settings,
                 &opts,
                 &set,

@@ -9,8 +9,9 @@ use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use trainer::certify::certificate::{certify, requirement, CertifyOptions};
+use trainer::certify::Model;
 use trainer::data::dataset::{self, Dataset, GenerateOptions, Shard};
-use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::mpc::law::MpcLaw;
 use trainer::problem::ProblemConfig;
 
@@ -370,7 +371,7 @@ fn export_cmd(
     postcard: &Path,
     name: &str,
 ) -> Result<()> {
-    let m = TrainedModel::load(model)?;
+    let m = Model::load(model)?;
     let cert: trainer::certify::certificate::Certificate = match certificate {
         Some(p) => serde_json::from_str(
             &std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
@@ -788,7 +789,7 @@ fn certify_cmd(
     json: bool,
 ) -> Result<()> {
     let cfg = load_config(config)?;
-    let m = TrainedModel::load(model)?;
+    let m = Model::load(model)?;
     let d = Dataset::load(data)?;
     if let Some(v) = l_mpc {
         if !(v.is_finite() && v >= 0.0) {
@@ -866,7 +867,7 @@ fn certify_cmd(
 }
 
 fn eval_cmd(model: &Path, states: &Path, out: &Path) -> Result<()> {
-    let m = TrainedModel::load(model)?;
+    let m = Model::load(model)?;
     let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
     let xs = read_states(states, nx)?;
     let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();

@@ -1,10 +1,11 @@
 //! Training is single-threaded and fully determined by (data, settings, seed): the same
 //! inputs give bit-identical model files, run twice and inside rayon pools of 1 and 2
 //! threads.
-use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet, TrainedModel};
+use trainer::certify::Model;
+use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::problem::ProblemConfig;
 
-fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> TrainedModel {
+fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> Model {
     train(
         &cfg.training,
         &TrainOptions {

@@ -308,7 +308,7 @@ pub struct CertifyOptions {
 
 /// Computes the certificate of `model` on `data` (Theorem 1) with every term.
 pub fn certify(
-    model: &crate::learn::train::TrainedModel,
+    model: &crate::certify::Model,
     data: &crate::data::dataset::Dataset,
     cfg: &crate::problem::ProblemConfig,
     opts: &CertifyOptions,

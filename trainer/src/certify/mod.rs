@@ -18,3 +18,6 @@ pub mod lipschitz;
 pub mod local;
 pub mod netbounds;
 pub mod refine;
+
+/// A model file as the later stages see it: the trained net with its certificate slot.
+pub type Model = crate::learn::train::TrainedModel<certificate::Certificate>;

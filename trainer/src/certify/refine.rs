@@ -18,10 +18,11 @@
 
 use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
 use crate::certify::netbounds::NetBounder;
+use crate::certify::Model;
 use crate::data::dataset::{Dataset, DatasetError, Header, Record};
 use crate::io::write_atomic;
 use crate::learn::mlp::{Mlp, Workspace};
-use crate::learn::train::{train_from, TrainOptions, TrainSet, TrainedModel};
+use crate::learn::train::{train_from, TrainOptions, TrainSet};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::{ProblemConfig, RefineSettings, SamplerKind, SamplingSettings, TrainSettings};
@@ -140,9 +141,9 @@ pub struct RefineState {
     /// Roots of the tree (the initial grid's cells).
     pub roots: Vec<usize>,
     /// Current model, if trained.
-    pub model: Option<TrainedModel>,
+    pub model: Option<Model>,
     /// The model with the smallest certified ε so far (on the tree of its round).
-    pub best: Option<(f64, TrainedModel)>,
+    pub best: Option<(f64, Model)>,
     /// Rounds done.
     pub log: Vec<RoundLog>,
     /// Per-leaf bounds of the last round (leaf node index, bound).
@@ -289,7 +290,7 @@ pub struct Refined {
     /// The final state.
     pub state: RefineState,
     /// The final trained model.
-    pub model: TrainedModel,
+    pub model: Model,
     /// Whether every cell meets the target.
     pub met: bool,
 }

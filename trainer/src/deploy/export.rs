@@ -1179,7 +1179,7 @@ impl ExportModel {
     /// units; the actuator limits are the data's input bounds U_d unless given).
     pub fn from_trained(
         name: &str,
-        model: &crate::learn::train::TrainedModel,
+        model: &crate::certify::Model,
         cert: &crate::certify::certificate::Certificate,
     ) -> Result<Self, ExportError> {
         let m = &model.mlp;

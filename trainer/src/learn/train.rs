@@ -182,9 +182,11 @@ pub enum Kind {
     Regularized,
 }
 
-/// A trained model file: the network, how it was made and how it did.
+/// A trained model file: the network, how it was made and how it did, and a slot `C` for
+/// what a later stage attaches to it (the certificate: `certify::Model` is
+/// `TrainedModel<Certificate>`; this stage never fills it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TrainedModel {
+pub struct TrainedModel<C> {
     /// Must equal [`MODEL_MAGIC`].
     pub magic: [u8; 8],
     /// Must equal [`MODEL_VERSION`].
@@ -209,11 +211,12 @@ pub struct TrainedModel {
     pub validation_stats: ErrorStats,
     /// Training curve.
     pub history: Vec<EpochLog>,
-    /// The certificate computed after training (`trainer certify` recomputes it).
-    pub certificate: Option<crate::certify::certificate::Certificate>,
+    /// What a later stage attached (the certificate, which `trainer certify` recomputes);
+    /// `None` after training.
+    pub certificate: Option<C>,
 }
 
-impl TrainedModel {
+impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
     /// Encodes the model.
     pub fn to_bytes(&self) -> Vec<u8> {
         postcard::to_allocvec(self).unwrap_or_default()
@@ -228,12 +231,12 @@ impl TrainedModel {
             path: origin.to_string(),
             reason,
         };
-        let m: TrainedModel = crate::io::decode_checked(
+        let m: TrainedModel<C> = crate::io::decode_checked(
             bytes,
             origin,
             &MODEL_MAGIC,
             "model",
-            |m: &TrainedModel| m.version,
+            |m: &TrainedModel<C>| m.version,
             MODEL_VERSION,
         )?;
         let w = m.mlp.widths();
@@ -294,7 +297,7 @@ pub struct TrainOptions {
 /// Trains a network on `train` from its seeded initial weights; `validation` gives R².
 /// `u_range` is the output range used for scaling (the input bounds U_d).
 #[allow(clippy::too_many_arguments)]
-pub fn train(
+pub fn train<C>(
     settings: &TrainSettings,
     opts: &TrainOptions,
     train: &TrainSet,
@@ -303,7 +306,7 @@ pub fn train(
     u_range: (&[f64], &[f64]),
     problem_hash: &str,
     dataset_hash: &str,
-) -> TrainedModel {
+) -> TrainedModel<C> {
     train_from(
         None,
         settings,
@@ -321,7 +324,7 @@ pub fn train(
 /// arrived) instead of the seeded initial weights. `init` must have the settings' layer
 /// widths; its input/output scaling is kept.
 #[allow(clippy::too_many_arguments)]
-pub fn train_from(
+pub fn train_from<C>(
     init: Option<Mlp>,
     settings: &TrainSettings,
     opts: &TrainOptions,
@@ -331,7 +334,7 @@ pub fn train_from(
     u_range: (&[f64], &[f64]),
     problem_hash: &str,
     dataset_hash: &str,
-) -> TrainedModel {
+) -> TrainedModel<C> {
     let mut widths = vec![train.nx];
     widths.extend(&settings.hidden);
     widths.push(train.nu);
@@ -557,7 +560,7 @@ mod tests {
         (cfg, set, val)
     }
 
-    fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> TrainedModel {
+    fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> TrainedModel<()> {
         train(
             &cfg.training,
             &TrainOptions {
@@ -623,14 +626,16 @@ mod tests {
         let (cfg, set, val) = setup(5);
         let m = run(&cfg, &set, &val, true);
         let bytes = m.to_bytes();
-        assert_eq!(TrainedModel::from_bytes(&bytes, "m").unwrap(), m);
-        assert!(TrainedModel::from_bytes(&bytes[..bytes.len() - 3], "m.bin")
-            .unwrap_err()
-            .to_string()
-            .contains("m.bin"));
+        assert_eq!(TrainedModel::<()>::from_bytes(&bytes, "m").unwrap(), m);
+        assert!(
+            TrainedModel::<()>::from_bytes(&bytes[..bytes.len() - 3], "m.bin")
+                .unwrap_err()
+                .to_string()
+                .contains("m.bin")
+        );
         let mut bad = m.clone();
         bad.mlp.layers[1].w.pop();
-        assert!(TrainedModel::from_bytes(&bad.to_bytes(), "m")
+        assert!(TrainedModel::<()>::from_bytes(&bad.to_bytes(), "m")
             .unwrap_err()
             .to_string()
             .contains("shapes"));
@@ -644,7 +649,7 @@ mod tests {
             if keep_magic && b.len() >= 8 {
                 b[..8].copy_from_slice(&MODEL_MAGIC);
             }
-            let _ = TrainedModel::from_bytes(&b, "fuzz");
+            let _ = TrainedModel::<()>::from_bytes(&b, "fuzz");
         }
     }
 }

@@ -13,10 +13,11 @@
 //! everything downstream). Dataset generation resumes from its checkpoint when killed.
 
 use crate::certify::certificate::{certify, Certificate, CertifyOptions};
+use crate::certify::Model;
 use crate::data::dataset::{generate, Dataset, GenerateOptions};
 use crate::io::hex;
 use crate::io::write_atomic;
-use crate::learn::train::{train, TrainOptions, TrainSet, TrainedModel};
+use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::mpc::law::MpcLaw;
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::closed_loop::{simulate, Controller, Run, SimSettings};
@@ -284,7 +285,7 @@ pub fn run(
                 return Err(fail("train", "the dataset has no labelled points"));
             }
             let one = |nominal: bool| {
-                train(
+                train::<crate::certify::certificate::Certificate>(
                     &cfg.training,
                     &TrainOptions {
                         nominal,
@@ -335,7 +336,7 @@ pub fn run(
                 ("model_regularized.bin", "certificate.json"),
                 ("model_nominal.bin", "certificate_nominal.json"),
             ] {
-                let m = TrainedModel::load(&d.join(file)).map_err(|e| fail("certify", e))?;
+                let m = Model::load(&d.join(file)).map_err(|e| fail("certify", e))?;
                 let c = certify(
                     &m,
                     &data,
@@ -368,8 +369,7 @@ pub fn run(
         inputs,
         &["weights.rs", "weights.bin", "export_report.json"],
         |d| {
-            let m = TrainedModel::load(&d.join("model_regularized.bin"))
-                .map_err(|e| fail("export", e))?;
+            let m = Model::load(&d.join("model_regularized.bin")).map_err(|e| fail("export", e))?;
             let p = d.join("certificate.json");
             let text = std::fs::read_to_string(&p)
                 .map_err(|e| fail("export", format!("{}: {e}", p.display())))?;
@@ -416,8 +416,8 @@ pub fn run(
     inputs.insert("problem".into(), cfg.problem_hash());
     inputs.insert("settings".into(), settings(&cfg.closed_loop));
     cx.stage("closed_loop", inputs, &["closed_loop.json"], |d| {
-        let load = |f: &str, c: &str| -> Result<TrainedModel, PipelineError> {
-            let mut m = TrainedModel::load(&d.join(f)).map_err(|e| fail("closed_loop", e))?;
+        let load = |f: &str, c: &str| -> Result<Model, PipelineError> {
+            let mut m = Model::load(&d.join(f)).map_err(|e| fail("closed_loop", e))?;
             let p = d.join(c);
             let text = std::fs::read_to_string(&p)
                 .map_err(|e| fail("closed_loop", format!("{}: {e}", p.display())))?;
@@ -467,8 +467,8 @@ pub fn run(
         let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
         let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("seeds", e))?;
         let own = [
-            TrainedModel::load(&d.join("model_nominal.bin")).map_err(|e| fail("seeds", e))?,
-            TrainedModel::load(&d.join("model_regularized.bin")).map_err(|e| fail("seeds", e))?,
+            Model::load(&d.join("model_nominal.bin")).map_err(|e| fail("seeds", e))?,
+            Model::load(&d.join("model_regularized.bin")).map_err(|e| fail("seeds", e))?,
         ];
         let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
         let study = seed_study(cfg, &data, &val, &dh, &own, opts.progress);
@@ -601,8 +601,8 @@ fn make_plots(
 ) -> Result<Vec<crate::study::plots::Figure>, PipelineError> {
     let data = Dataset::load(&d.join("dataset.bin")).map_err(|e| fail("plots", e))?;
     let val = Dataset::load(&d.join("validation.bin")).map_err(|e| fail("plots", e))?;
-    let nom = TrainedModel::load(&d.join("model_nominal.bin")).map_err(|e| fail("plots", e))?;
-    let reg = TrainedModel::load(&d.join("model_regularized.bin")).map_err(|e| fail("plots", e))?;
+    let nom = Model::load(&d.join("model_nominal.bin")).map_err(|e| fail("plots", e))?;
+    let reg = Model::load(&d.join("model_regularized.bin")).map_err(|e| fail("plots", e))?;
     let p = d.join("closed_loop.json");
     let text =
         std::fs::read_to_string(&p).map_err(|e| fail("plots", format!("{}: {e}", p.display())))?;
@@ -648,7 +648,7 @@ pub fn seed_study(
     data: &Dataset,
     validation: &Dataset,
     dataset_hash: &str,
-    own: &[TrainedModel; 2],
+    own: &[Model; 2],
     progress: bool,
 ) -> Vec<[SeedRun; 2]> {
     let n = cfg.closed_loop.seeds.max(1) as u64;
@@ -768,11 +768,7 @@ pub fn initial_states(cfg: &ProblemConfig) -> Vec<Vec<f64>> {
 /// noise), then robustness runs from the first state: uniform measurement noise
 /// (`noise_fraction` of the domain's half-width, `noise_runs` seeds) and ± `mass_mismatch`.
 /// Keys: `mpc`, `nominal`, `regularized`, and `<name>_noise`, `<name>_mass+`, `<name>_mass-`.
-pub fn closed_loop(
-    cfg: &ProblemConfig,
-    nominal: &TrainedModel,
-    regularized: &TrainedModel,
-) -> ClosedLoop {
+pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) -> ClosedLoop {
     let st = &cfg.closed_loop;
     let base = SimSettings {
         steps: st.steps,
@@ -782,12 +778,12 @@ pub fn closed_loop(
         disturbance: Default::default(),
     };
     let x0s = initial_states(cfg);
-    let eps = |m: &TrainedModel| {
+    let eps = |m: &Model| {
         m.certificate
             .as_ref()
             .map_or(f64::INFINITY, |c: &Certificate| c.eps)
     };
-    let nets: [(&str, Option<&TrainedModel>); 3] = [
+    let nets: [(&str, Option<&Model>); 3] = [
         ("mpc", None),
         ("nominal", Some(nominal)),
         ("regularized", Some(regularized)),
@@ -799,7 +795,7 @@ pub fn closed_loop(
         .zip(&cfg.domain.hi)
         .map(|(l, h)| st.noise_fraction * 0.5 * (h - l))
         .collect();
-    let mut jobs: Vec<(String, Option<&TrainedModel>, Vec<f64>, SimSettings)> = Vec::new();
+    let mut jobs: Vec<(String, Option<&Model>, Vec<f64>, SimSettings)> = Vec::new();
     for (name, m) in nets {
         for x0 in &x0s {
             jobs.push((name.to_string(), m, x0.clone(), base.clone()));

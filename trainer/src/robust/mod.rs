@@ -56,8 +56,8 @@
 //! (`mpc_soft_steps` counts the steps where the robust MPC had become infeasible).
 
 use crate::certify::certificate::Certificate;
+use crate::certify::Model;
 use crate::io::write_atomic;
-use crate::learn::train::TrainedModel;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::pipeline::{ClosedLoop, PipelineError, RunOptions};
@@ -645,8 +645,8 @@ pub fn disturbances(eps: f64) -> Vec<(&'static str, Disturbance)> {
 pub fn study(
     cfg: &ProblemConfig,
     rcfg: &ProblemConfig,
-    net: (&TrainedModel, f64),
-    nominal_net: Option<(&TrainedModel, f64)>,
+    net: (&Model, f64),
+    nominal_net: Option<(&Model, f64)>,
     mc_states: &[Vec<f64>],
 ) -> ClosedLoop {
     let eps = cfg.robust.eps;
@@ -665,7 +665,7 @@ pub fn study(
     type Job<'a> = (
         String,
         bool,
-        Option<(&'a TrainedModel, f64)>,
+        Option<(&'a Model, f64)>,
         Vec<f64>,
         SimSettings,
     );
@@ -766,7 +766,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     o.until = Some("closed_loop".into());
     crate::pipeline::run(&rcfg, &text, &o)?;
     let model_path = dir.join("model_regularized.bin");
-    let mut net = TrainedModel::load(&model_path).map_err(|e| io(&model_path, e))?;
+    let mut net = Model::load(&model_path).map_err(|e| io(&model_path, e))?;
     let cpath = dir.join("certificate.json");
     let ctext = std::fs::read_to_string(&cpath).map_err(|e| io(&cpath, e))?;
     let cert: Certificate = serde_json::from_str(&ctext).map_err(|e| io(&cpath, e))?;
@@ -827,8 +827,8 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let upswing_feasible = MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
     let mc = feasible_states(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
     // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
-    let load_nominal = || -> Option<(TrainedModel, f64)> {
-        let m = TrainedModel::load(&root.join("model_regularized.bin")).ok()?;
+    let load_nominal = || -> Option<(Model, f64)> {
+        let m = Model::load(&root.join("model_regularized.bin")).ok()?;
         let c: Certificate =
             serde_json::from_str(&std::fs::read_to_string(root.join("certificate.json")).ok()?)
                 .ok()?;

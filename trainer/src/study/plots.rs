@@ -19,7 +19,8 @@
 //! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
 //!   axes of X, and which term of ε_C binds there.
 
-use crate::learn::train::{errors, TrainSet, TrainedModel};
+use crate::certify::Model;
+use crate::learn::train::{errors, TrainSet};
 use crate::problem::model::System;
 use crate::problem::ProblemConfig;
 use crate::study::closed_loop::{Run, VIOLATION_TOL};
@@ -147,9 +148,9 @@ pub struct PlotInputs<'a> {
     /// Labelled validation points.
     pub validation: &'a TrainSet,
     /// The nominal net.
-    pub nominal: &'a TrainedModel,
+    pub nominal: &'a Model,
     /// The sensitivity-regularized net.
-    pub regularized: &'a TrainedModel,
+    pub regularized: &'a Model,
     /// Closed-loop runs by controller (`mpc`, `nominal`, `regularized`, …).
     pub closed_loop: &'a BTreeMap<String, Vec<Run>>,
     /// Error of the regularized net on a grid.

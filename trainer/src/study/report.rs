@@ -10,8 +10,8 @@
 //! files; the only constants are the paper's published figures.
 
 use crate::certify::certificate::Certificate;
+use crate::certify::Model;
 use crate::data::dataset::Dataset;
-use crate::learn::train::TrainedModel;
 use crate::pipeline::{ClosedLoop, SeedRun, PLOTS};
 use crate::problem::ProblemConfig;
 use crate::study::closed_loop::Run;
@@ -117,8 +117,8 @@ fn strs(v: &[&str]) -> Vec<String> {
 pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Report, ReportError> {
     let e = |e: crate::data::dataset::DatasetError| ReportError(e.to_string());
     let data = Dataset::load(&dir.join("dataset.bin")).map_err(e)?;
-    let nom = TrainedModel::load(&dir.join("model_nominal.bin")).map_err(e)?;
-    let reg = TrainedModel::load(&dir.join("model_regularized.bin")).map_err(e)?;
+    let nom = Model::load(&dir.join("model_nominal.bin")).map_err(e)?;
+    let reg = Model::load(&dir.join("model_regularized.bin")).map_err(e)?;
     let cert: Certificate = load(&dir.join("certificate.json"))?;
     let cert_n: Certificate = load(&dir.join("certificate_nominal.json"))?;
     let cl: ClosedLoop = load(&dir.join("closed_loop.json"))?;
