@@ -1170,12 +1170,26 @@ pub fn write_outputs(
     Ok(cert)
 }
 
+/// One cell of a local certificate in physical coordinates (what `study::plots::eps_map`
+/// draws).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellView {
+    /// Lower corner (first two state axes are drawn).
+    pub lo: Vec<f64>,
+    /// Upper corner.
+    pub hi: Vec<f64>,
+    /// ε_C.
+    pub eps: f64,
+    /// 0: the corner (fit) term binds; 1: first-order remainder; 2: second-order remainder.
+    pub binding: u8,
+}
+
 /// The leaf cells with their bounds, for the ε_C map.
 pub fn cell_views(
     cfg: &ProblemConfig,
     rs: &RefineSettings,
     st: &RefineState,
-) -> Vec<crate::study::plots::CellView> {
+) -> Vec<CellView> {
     let lat = Lattice::new(
         &cfg.domain.lo,
         &cfg.domain.hi,
@@ -1186,7 +1200,7 @@ pub fn cell_views(
         .map(|(n, b)| {
             let node = &st.nodes[*n];
             let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
-            crate::study::plots::CellView {
+            CellView {
                 lo: lat.x(&node.lo),
                 hi: lat.x(&hi),
                 eps: b.eps,

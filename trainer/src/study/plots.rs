@@ -19,6 +19,7 @@
 //! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
 //!   axes of X, and which term of ε_C binds there.
 
+use crate::certify::refine::CellView;
 use crate::certify::Model;
 use crate::learn::train::{errors, TrainSet};
 use crate::problem::model::System;
@@ -1009,19 +1010,6 @@ mod tests {
         assert!(dark > 200, "{dark} dark pixels: no text drawn");
         assert!(to_png("t", "<svg", 1.0).is_err());
     }
-}
-
-/// One cell of a local certificate, for [`eps_map`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct CellView {
-    /// Lower corner (first two state axes are drawn).
-    pub lo: Vec<f64>,
-    /// Upper corner.
-    pub hi: Vec<f64>,
-    /// ε_C.
-    pub eps: f64,
-    /// 0: the corner (fit) term binds; 1: first-order remainder; 2: second-order remainder.
-    pub binding: u8,
 }
 
 /// The local certificate over X: ε_C per cell (left, colour scale up to max(target, max ε_C))
