@@ -81,9 +81,9 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
             .unwrap();
     assert_eq!(
         index.as_array().map(Vec::len),
-        Some(trainer::pipeline::PLOTS.len())
+        Some(trainer::study::plots::PLOTS.len())
     );
-    for stem in trainer::pipeline::PLOTS {
+    for stem in trainer::study::plots::PLOTS {
         let svg = std::fs::read_to_string(run.join(format!("plots/{stem}.svg"))).unwrap();
         let (w, h) = svg_size(&svg);
         assert!(svg.matches("<text").count() >= 5, "{stem}: too little text");
@@ -122,7 +122,10 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     let html = std::fs::read_to_string(run.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     // Self-contained: every figure inline, every Markdown table an HTML table.
-    assert_eq!(html.matches("<svg").count(), trainer::pipeline::PLOTS.len());
+    assert_eq!(
+        html.matches("<svg").count(),
+        trainer::study::plots::PLOTS.len()
+    );
     assert_eq!(
         html.matches("<table>").count(),
         report.matches("\n|---|").count(),

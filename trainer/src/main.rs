@@ -497,7 +497,7 @@ fn robust_run(
             out.join(&cfg.name).join("robust").display()
         );
     }
-    let r = trainer::robust::run(cfg, opts)?;
+    let r = trainer::pipeline::robust::run(cfg, opts)?;
     let tb = &r.design.tube;
     println!(
         "robust design ε = {}: ρ = {:.4}, w̄ = {:.4e} ({:?}), tightening at N: x {:?}",

@@ -1185,11 +1185,7 @@ pub struct CellView {
 }
 
 /// The leaf cells with their bounds, for the ε_C map.
-pub fn cell_views(
-    cfg: &ProblemConfig,
-    rs: &RefineSettings,
-    st: &RefineState,
-) -> Vec<CellView> {
+pub fn cell_views(cfg: &ProblemConfig, rs: &RefineSettings, st: &RefineState) -> Vec<CellView> {
     let lat = Lattice::new(
         &cfg.domain.lo,
         &cfg.domain.hi,

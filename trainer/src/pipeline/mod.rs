@@ -18,9 +18,12 @@ use crate::data::dataset::{generate, Dataset, GenerateOptions};
 use crate::io::hex;
 use crate::io::write_atomic;
 use crate::learn::train::{train, TrainOptions, TrainSet};
-use crate::mpc::law::MpcLaw;
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
-use crate::study::closed_loop::{simulate, Controller, Run, SimSettings};
+pub mod robust;
+
+use crate::study::plots::{FigureEntry, PLOTS};
+use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop};
+use crate::study::seeds::seed_study;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -203,9 +206,6 @@ impl Ctx<'_> {
         sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
     }
 }
-
-/// Closed-loop results keyed by controller name.
-pub type ClosedLoop = BTreeMap<String, Vec<Run>>;
 
 /// Runs the pipeline for `cfg`; `config_text` is the problem file's text (hashed).
 pub fn run(
@@ -578,22 +578,6 @@ pub fn run(
     Ok(cx.reports)
 }
 
-/// One figure of `plots/figures.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FigureEntry {
-    /// File stem.
-    pub name: String,
-    /// Caption (with the figure's own numbers).
-    pub caption: String,
-    /// SVG path relative to the run directory.
-    pub svg: String,
-    /// PNG path relative to the run directory.
-    pub png: String,
-}
-
-/// File stems of the figures the `plots` stage writes (`plots/<stem>.svg` and `.png`).
-pub const PLOTS: [&str; 4] = ["trajectories", "errors", "error_map", "training"];
-
 /// Renders the figures of the run in `dir` (labels the error-map grid with the MPC).
 fn make_plots(
     cfg: &ProblemConfig,
@@ -622,220 +606,6 @@ fn make_plots(
     let figs = crate::study::plots::all(&inputs).map_err(|e| fail("plots", e))?;
     debug_assert_eq!(figs.len(), PLOTS.len());
     Ok(figs)
-}
-
-/// One net of one seed in the seed study.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SeedRun {
-    /// Training seed (initial weights and shuffling).
-    pub seed: u64,
-    /// `nominal` or `regularized`.
-    pub kind: String,
-    /// R² on the validation states.
-    pub r2_validation: f64,
-    /// ε_D on the dataset.
-    pub eps_d: f64,
-    /// Closed loop from the reference initial state (nominal plant, no noise).
-    pub run: Run,
-}
-
-/// The seed study: for `closed_loop.seeds` seeds starting at `training.seed`, both nets
-/// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
-/// the reference initial state. Returned per seed: [nominal, regularized]. `progress`
-/// draws a bar over the (seed, net) jobs.
-pub fn seed_study(
-    cfg: &ProblemConfig,
-    data: &Dataset,
-    validation: &Dataset,
-    dataset_hash: &str,
-    own: &[Model; 2],
-    progress: bool,
-) -> Vec<[SeedRun; 2]> {
-    let n = cfg.closed_loop.seeds.max(1) as u64;
-    let base = cfg.training.seed;
-    let (set, vset) = (
-        TrainSet::from_dataset(data),
-        TrainSet::from_dataset(validation),
-    );
-    let jobs: Vec<(u64, bool)> = (0..n)
-        .flat_map(|k| [(base + k, true), (base + k, false)])
-        .collect();
-    let x0 = initial_states(cfg).swap_remove(0);
-    let s = SimSettings {
-        steps: cfg.closed_loop.steps,
-        noise: vec![],
-        seed: 0,
-        mass_mismatch: 0.0,
-        disturbance: Default::default(),
-    };
-    let bar = if progress {
-        let b = indicatif::ProgressBar::new(jobs.len() as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let runs: Vec<SeedRun> = jobs
-        .par_iter()
-        .map(|&(seed, nominal)| {
-            let trained;
-            let m = if seed == base {
-                &own[usize::from(!nominal)]
-            } else {
-                let mut st = cfg.training.clone();
-                st.seed = seed;
-                trained = train(
-                    &st,
-                    &TrainOptions {
-                        nominal,
-                        progress: None,
-                    },
-                    &set,
-                    &vset,
-                    (&cfg.domain.lo, &cfg.domain.hi),
-                    (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
-                    &data.header.problem_hash,
-                    dataset_hash,
-                );
-                &trained
-            };
-            let mut law = MpcLaw::new(cfg);
-            // No certificate for the extra seeds: the band check is off (ε = ∞) for all.
-            let run = simulate(
-                cfg,
-                &mut law,
-                &Controller::Net(&m.mlp, f64::INFINITY, None),
-                &x0,
-                &s,
-            );
-            bar.inc(1);
-            SeedRun {
-                seed,
-                kind: if nominal { "nominal" } else { "regularized" }.into(),
-                r2_validation: m.validation_stats.r2,
-                eps_d: m.train_stats.max,
-                run,
-            }
-        })
-        .collect();
-    bar.finish_and_clear();
-    let mut it = runs.into_iter();
-    let mut out = Vec::new();
-    while let (Some(a), Some(b)) = (it.next(), it.next()) {
-        out.push([a, b]);
-    }
-    out
-}
-
-/// Initial states of the closed-loop study: `closed_loop.x0` (default: the paper's
-/// (−π, 0) for the pendulum, a quarter of the way from the domain's centre to its lower
-/// corner otherwise), then `closed_loop.random_initial_states` seeded random states of X.
-pub fn initial_states(cfg: &ProblemConfig) -> Vec<Vec<f64>> {
-    let first = cfg
-        .closed_loop
-        .x0
-        .clone()
-        .unwrap_or_else(|| match cfg.system {
-            crate::problem::model::System::Pendulum(_) => vec![-std::f64::consts::PI, 0.0],
-            _ => cfg
-                .domain
-                .lo
-                .iter()
-                .zip(&cfg.domain.hi)
-                .map(|(l, h)| 0.5 * (l + h) + 0.25 * (l - h))
-                .collect(),
-        });
-    let s = SamplingSettings {
-        sampler: SamplerKind::Random,
-        n: cfg.closed_loop.random_initial_states,
-        seed: 4242,
-        counts: vec![],
-    };
-    let mut v = vec![first];
-    if s.n > 0 {
-        v.extend(crate::data::sampling::Sampler::new(&s, &cfg.domain).points());
-    }
-    v
-}
-
-/// The closed-loop study: MPC and both nets from every initial state (nominal plant, no
-/// noise), then robustness runs from the first state: uniform measurement noise
-/// (`noise_fraction` of the domain's half-width, `noise_runs` seeds) and ± `mass_mismatch`.
-/// Keys: `mpc`, `nominal`, `regularized`, and `<name>_noise`, `<name>_mass+`, `<name>_mass-`.
-pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) -> ClosedLoop {
-    let st = &cfg.closed_loop;
-    let base = SimSettings {
-        steps: st.steps,
-        noise: vec![],
-        seed: 0,
-        mass_mismatch: 0.0,
-        disturbance: Default::default(),
-    };
-    let x0s = initial_states(cfg);
-    let eps = |m: &Model| {
-        m.certificate
-            .as_ref()
-            .map_or(f64::INFINITY, |c: &Certificate| c.eps)
-    };
-    let nets: [(&str, Option<&Model>); 3] = [
-        ("mpc", None),
-        ("nominal", Some(nominal)),
-        ("regularized", Some(regularized)),
-    ];
-    let noise: Vec<f64> = cfg
-        .domain
-        .lo
-        .iter()
-        .zip(&cfg.domain.hi)
-        .map(|(l, h)| st.noise_fraction * 0.5 * (h - l))
-        .collect();
-    let mut jobs: Vec<(String, Option<&Model>, Vec<f64>, SimSettings)> = Vec::new();
-    for (name, m) in nets {
-        for x0 in &x0s {
-            jobs.push((name.to_string(), m, x0.clone(), base.clone()));
-        }
-        for seed in 0..st.noise_runs as u64 {
-            let s = SimSettings {
-                noise: noise.clone(),
-                seed,
-                ..base.clone()
-            };
-            jobs.push((format!("{name}_noise"), m, x0s[0].clone(), s));
-        }
-        if st.mass_mismatch > 0.0 {
-            for (tag, mm) in [("mass+", st.mass_mismatch), ("mass-", -st.mass_mismatch)] {
-                let s = SimSettings {
-                    mass_mismatch: mm,
-                    ..base.clone()
-                };
-                jobs.push((format!("{name}_{tag}"), m, x0s[0].clone(), s));
-            }
-        }
-    }
-    let runs: Vec<(String, Run)> = jobs
-        .par_iter()
-        .map_init(
-            || MpcLaw::new(cfg),
-            |law, (name, m, x0, s)| {
-                let ctrl = match m {
-                    None => Controller::Mpc,
-                    Some(m) => Controller::Net(&m.mlp, eps(m), None),
-                };
-                (name.clone(), simulate(cfg, law, &ctrl, x0, s))
-            },
-        )
-        .collect();
-    let mut out = ClosedLoop::new();
-    for (k, r) in runs {
-        out.entry(k).or_default().push(r);
-    }
-    out
 }
 
 mod erased {

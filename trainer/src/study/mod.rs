@@ -11,3 +11,6 @@
 pub mod closed_loop;
 pub mod plots;
 pub mod report;
+pub mod robust;
+pub mod scenarios;
+pub mod seeds;

@@ -12,9 +12,11 @@
 use crate::certify::certificate::Certificate;
 use crate::certify::Model;
 use crate::data::dataset::Dataset;
-use crate::pipeline::{ClosedLoop, SeedRun, PLOTS};
 use crate::problem::ProblemConfig;
 use crate::study::closed_loop::Run;
+use crate::study::plots::{FigureEntry, PLOTS};
+use crate::study::scenarios::ClosedLoop;
+use crate::study::seeds::SeedRun;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -403,7 +405,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
 
     // Figures.
     b.push(Block::Heading(2, "Figures".into()));
-    let figures: Vec<crate::pipeline::FigureEntry> = load(&dir.join("plots/figures.json"))?;
+    let figures: Vec<FigureEntry> = load(&dir.join("plots/figures.json"))?;
     for stem in PLOTS {
         let caption = figures
             .iter()

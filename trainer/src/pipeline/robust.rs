@@ -1,0 +1,331 @@
+//! The Corollary 1 design loop (`trainer run` with `[robust] eps > 0`): design the tube,
+//! run the pipeline on the tightened problem in `DIR/<name>/robust/`, refine with local
+//! certificates if asked, run the robust closed-loop study, and write `robust.json` and
+//! `robust.md` with the verdict.
+
+use super::{PipelineError, RunOptions};
+use crate::certify::certificate::Certificate;
+use crate::certify::Model;
+use crate::io::write_atomic;
+use crate::mpc::law::MpcLaw;
+use crate::mpc::sqp::SqpStatus;
+use crate::problem::ProblemConfig;
+use crate::robust::{design, robust_config, verdict, Design, RobustError, Verdict};
+use crate::study::closed_loop::Run;
+use crate::study::robust::*;
+use crate::study::scenarios::{initial_states, ClosedLoop};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Errors of the robust design loop.
+#[derive(Debug, thiserror::Error)]
+pub enum RobustRunError {
+    /// The design itself failed (an empty tightened set).
+    #[error(transparent)]
+    Design(#[from] RobustError),
+    /// A pipeline stage of the robust run failed.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// Reading or writing a file of the robust run.
+    #[error("robust design: {0}")]
+    Io(String),
+}
+
+/// What a robust run produced (also written as `robust.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RobustReport {
+    /// The design.
+    pub design: Design,
+    /// The certificate's verdict.
+    pub verdict: Verdict,
+    /// Parts of the certificate (ε_D, L_NN, L_MPC, r).
+    pub certificate: BTreeMap<String, f64>,
+    /// Whether the robust MPC's hard problem is feasible at the upswing state.
+    pub upswing_feasible: bool,
+    /// Monte Carlo states found in the robust MPC's feasible set.
+    pub monte_carlo_states: usize,
+    /// Summaries per `closed_loop.json` key.
+    pub summaries: BTreeMap<String, RunSummary>,
+    /// The upswing run per key (Table II rows).
+    pub upswing: BTreeMap<String, RunSummary>,
+    /// Mean cost of the robust MPC over that of the nominal MPC from the same states.
+    pub cost_ratio_mean: f64,
+    /// The same ratio for the upswing.
+    pub cost_ratio_upswing: f64,
+    /// Wall time of the closed-loop study in s.
+    pub study_seconds: f64,
+}
+
+fn io(p: &Path, e: impl std::fmt::Display) -> RobustRunError {
+    RobustRunError::Io(format!("{}: {e}", p.display()))
+}
+
+/// The robust design loop for `cfg` (with `cfg.robust.eps` > 0): design the tightened
+/// MPC, run the pipeline's stages on it in `DIR/<name>/robust/` (data, training,
+/// certificate, export, closed loop, report), add the robust closed-loop study to its
+/// `closed_loop.json`, and write `robust.json` and `robust.md` with the verdict.
+pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, RobustRunError> {
+    let d = design(cfg)?;
+    let rcfg = robust_config(cfg, &d);
+    let text = toml::to_string(&rcfg).map_err(|e| RobustRunError::Io(e.to_string()))?;
+    let root: PathBuf = opts.root.join(&cfg.name);
+    let dir = root.join(&rcfg.name);
+    let mut o = opts.clone();
+    o.root = root.clone();
+    o.until = Some("closed_loop".into());
+    crate::pipeline::run(&rcfg, &text, &o)?;
+    let model_path = dir.join("model_regularized.bin");
+    let mut net = Model::load(&model_path).map_err(|e| io(&model_path, e))?;
+    let cpath = dir.join("certificate.json");
+    let ctext = std::fs::read_to_string(&cpath).map_err(|e| io(&cpath, e))?;
+    let cert: Certificate = serde_json::from_str(&ctext).map_err(|e| io(&cpath, e))?;
+    net.certificate = Some(cert.clone());
+    let mut cert = cert;
+    let mut v = verdict(cfg.robust.eps, cert.eps);
+    if !v.certified && cfg.robust.refine {
+        // The design loop's second step: refine data and network with local certificates
+        // until the certified ε meets the design ε (or the refinement budget is spent).
+        let mut fcfg = rcfg.clone();
+        fcfg.refine.target_eps = cfg.robust.eps;
+        let rdir = dir.join("refine");
+        std::fs::create_dir_all(&rdir).map_err(|e| io(&rdir, e))?;
+        let r = crate::certify::refine::refine(
+            &fcfg,
+            &fcfg.refine,
+            Some(&rdir.join("refine_state.bin")),
+            &crate::certify::refine::RefineOptions::default(),
+        )
+        .map_err(|e| io(&rdir, e))?;
+        let lc = crate::certify::refine::write_outputs(&fcfg, &fcfg.refine, &r, &rdir)
+            .map_err(|e| io(&rdir, e))?;
+        if lc.base.eps < cert.eps {
+            net = r.model;
+            net.certificate = Some(lc.base.clone());
+            cert = lc.base;
+            v = verdict(cfg.robust.eps, cert.eps);
+        }
+    }
+
+    // The study (skipped when closed_loop.json already holds it for the same inputs).
+    let clpath = dir.join("closed_loop.json");
+    let cltext = std::fs::read_to_string(&clpath).map_err(|e| io(&clpath, e))?;
+    let mut cl: ClosedLoop = serde_json::from_str(&cltext).map_err(|e| io(&clpath, e))?;
+    let nominal_hash = std::fs::read(root.join("model_regularized.bin"))
+        .map(|b| crate::io::hex(&<sha2::Sha256 as sha2::Digest>::digest(&b)))
+        .unwrap_or_default();
+    let inputs = format!(
+        "{}|{}|{}|{}|{}|{}",
+        env!("CARGO_PKG_VERSION"),
+        nominal_hash,
+        rcfg.problem_hash(),
+        cert.hash,
+        serde_json::to_string(&cfg.robust).unwrap_or_default(),
+        serde_json::to_string(&cfg.closed_loop).unwrap_or_default()
+    );
+    let spath = dir.join("robust_study.json");
+    let cached: Option<(String, RobustReport)> = std::fs::read_to_string(&spath)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    let up = initial_states(cfg)[0].clone();
+    if let Some((inp, rep)) = cached {
+        if inp == inputs && cl.contains_key("robust") && rep.verdict == v {
+            return Ok(rep);
+        }
+    }
+    let t = std::time::Instant::now();
+    let upswing_feasible = MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
+    let mc = feasible_states(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
+    // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
+    let load_nominal = || -> Option<(Model, f64)> {
+        let m = Model::load(&root.join("model_regularized.bin")).ok()?;
+        let c: Certificate =
+            serde_json::from_str(&std::fs::read_to_string(root.join("certificate.json")).ok()?)
+                .ok()?;
+        Some((m, c.eps))
+    };
+    let nominal = load_nominal();
+    let st = study(
+        cfg,
+        &rcfg,
+        (&net, cert.eps),
+        nominal.as_ref().map(|(m, e)| (m, *e)),
+        &mc,
+    );
+    let study_seconds = t.elapsed().as_secs_f64();
+    let mut summaries = BTreeMap::new();
+    let mut upswing = BTreeMap::new();
+    for (k, runs) in &st {
+        summaries.insert(k.clone(), summarize(runs));
+        upswing.insert(k.clone(), summarize(&runs[..1]));
+    }
+    let ratio = |a: &[Run], b: &[Run]| {
+        let n = a.len().min(b.len());
+        a[..n].iter().map(|r| r.cost).sum::<f64>() / b[..n].iter().map(|r| r.cost).sum::<f64>()
+    };
+    let (rm, nm) = (&st["robust_mpc"], &st["nominal_mpc"]);
+    let rep = RobustReport {
+        design: d,
+        verdict: v,
+        certificate: BTreeMap::from([
+            ("eps".to_string(), cert.eps),
+            ("eps_d".to_string(), cert.eps_d),
+            ("l_nn".to_string(), cert.l_nn),
+            ("l_mpc".to_string(), cert.l_mpc),
+            ("covering_radius".to_string(), cert.covering_radius),
+        ]),
+        upswing_feasible,
+        monte_carlo_states: mc.len(),
+        summaries,
+        upswing,
+        cost_ratio_mean: ratio(rm, nm),
+        cost_ratio_upswing: rm[0].cost / nm[0].cost,
+        study_seconds,
+    };
+    for (k, runs) in st {
+        cl.insert(k, runs);
+    }
+    let text = serde_json::to_string(&cl).map_err(|e| io(&clpath, e))?;
+    write_atomic(&clpath, text.as_bytes()).map_err(|e| io(&clpath, e))?;
+    let json = serde_json::to_string_pretty(&rep).map_err(|e| io(&dir, e))?;
+    write_atomic(&dir.join("robust.json"), json.as_bytes()).map_err(|e| io(&dir, e))?;
+    write_atomic(&dir.join("robust.md"), markdown(&rep).as_bytes()).map_err(|e| io(&dir, e))?;
+    let cached = serde_json::to_string(&(&inputs, &rep)).map_err(|e| io(&spath, e))?;
+    write_atomic(&spath, cached.as_bytes()).map_err(|e| io(&spath, e))?;
+    // The report stage (re-runs because closed_loop.json changed).
+    let mut o = opts.clone();
+    o.root = root;
+    crate::pipeline::run(&rcfg, &text, &o)?;
+    Ok(rep)
+}
+
+/// `robust.md`: design, verdict, Table II rows and the Monte Carlo summaries.
+pub fn markdown(r: &RobustReport) -> String {
+    let t = &r.design.tube;
+    let mut s = String::new();
+    s += "# Robust design (Corollary 1)\n\n";
+    s += &format!(
+        "Design ε = {} ({:?}); ρ = {:.4}, w̄ = {:.4e} ({:?}); K = {:?}, LQR R-scale {:?}\n\n",
+        t.eps, t.method, t.rho, t.w, t.bound, t.k, t.lqr_r_scale
+    );
+    let n = t.s.len() - 1;
+    s += &format!(
+        "Tightening at stage N: states {:?}, inputs {:?} (ε + τ·s_(N−1))\n\n",
+        t.x_margin.iter().map(|m| m * t.s[n]).collect::<Vec<_>>(),
+        t.u_margin
+            .iter()
+            .map(|m| t.eps + m * t.s[n - 1])
+            .collect::<Vec<_>>()
+    );
+    s += &format!("**{}**\n\n", r.verdict.message);
+    s += &format!(
+        "Certificate: {:?}\n\nUpswing state feasible for the robust MPC: {}; Monte Carlo \
+         states: {}; robust/nominal MPC cost: mean {:.4}, upswing {:.4}\n\n",
+        r.certificate,
+        r.upswing_feasible,
+        r.monte_carlo_states,
+        r.cost_ratio_mean,
+        r.cost_ratio_upswing
+    );
+    let table = |title: &str, m: &BTreeMap<String, RunSummary>| {
+        let mut s = format!(
+            "## {title}\n\n| key | runs | runs violating | % steps violating | max violation | \
+             max input divergence | MPC infeasible steps | mean cost |\n|---|---|---|---|---|---|---|---|\n"
+        );
+        for (k, v) in m {
+            s += &format!(
+                "| {k} | {} | {} | {:.3} | {:.4} | {:.4} | {} | {:.2} |\n",
+                v.runs,
+                v.runs_violating,
+                v.violation_percent,
+                v.max_violation,
+                v.max_input_divergence,
+                v.mpc_soft_steps,
+                v.mean_cost
+            );
+        }
+        s + "\n"
+    };
+    s += &table("Upswing (Table II rows)", &r.upswing);
+    s += &table("Monte Carlo", &r.summaries);
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(name: &str) -> ProblemConfig {
+        let path = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/"))
+            .join(name);
+        ProblemConfig::load(&path).unwrap()
+    }
+
+    fn di(eps: f64) -> ProblemConfig {
+        let mut c = load("double_integrator.toml");
+        c.robust.eps = eps;
+        c
+    }
+
+    /// The whole robust loop on the double integrator with small sizes: files, keys,
+    /// per-run format, verdict, the certificate's U_d, and the cached second run.
+    #[test]
+    fn robust_run_end_to_end_on_the_double_integrator() {
+        let mut cfg = di(0.1);
+        cfg.robust.monte_carlo_states = 12;
+        cfg.robust.disturbed_states = 3;
+        cfg.closed_loop.steps = 40;
+        cfg.closed_loop.random_initial_states = 2;
+        cfg.closed_loop.noise_runs = 1;
+        cfg.training.epochs = 50;
+        cfg.training.validation_n = 50;
+        let root = std::env::temp_dir().join(format!("ampc_robust_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let opts = RunOptions {
+            root: root.clone(),
+            ..Default::default()
+        };
+        let rep = run(&cfg, &opts).unwrap();
+        let dir = root.join("double_integrator").join("robust");
+        for f in [
+            "robust.json",
+            "robust.md",
+            "report.md",
+            "certificate.json",
+            "weights.rs",
+        ] {
+            assert!(dir.join(f).exists(), "{f}");
+        }
+        assert!(!rep.verdict.certified);
+        assert_eq!(rep.monte_carlo_states, 12);
+        let cl: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("closed_loop.json")).unwrap())
+                .unwrap();
+        let robust = cl["robust"].as_array().unwrap();
+        assert_eq!(robust.len(), 13);
+        for k in [
+            "x0",
+            "steps",
+            "violation_steps",
+            "max_violation",
+            "max_input_divergence",
+            "cost",
+        ] {
+            assert!(robust[0].get(k).is_some(), "{k}");
+        }
+        for (k, _) in disturbances(0.1) {
+            let runs = cl[k].as_array().unwrap();
+            assert_eq!(runs.len(), 4, "{k}");
+            assert!(runs.iter().all(|r| r["violation_steps"] == 0), "{k}");
+        }
+        assert!(cl.get("mpc").is_some(), "the pipeline's own keys stay");
+        let cert: Certificate =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("certificate.json")).unwrap())
+                .unwrap();
+        assert!((cert.u_hi[0] - 0.9).abs() < 1e-12 && (cert.u_lo[0] + 0.9).abs() < 1e-12);
+        // Unchanged inputs: the study is not redone.
+        let again = run(&cfg, &opts).unwrap();
+        assert_eq!(again.study_seconds, rep.study_seconds);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+}

@@ -1,0 +1,289 @@
+//! The robust design against closed forms, hand computations, the AD linearisation and
+//! sampled error trajectories.
+
+use super::*;
+use crate::problem::model::{Discrete, Pendulum, System};
+use crate::problem::{ConfigError, MatrixSpec, ProblemConfig};
+use crate::rng::uniform;
+use crate::robust::jacobians::linearize_at;
+use nalgebra::DMatrix;
+
+fn load(name: &str) -> ProblemConfig {
+    let path =
+        std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/")).join(name);
+    ProblemConfig::load(&path).unwrap()
+}
+
+fn pendulum(eps: f64) -> ProblemConfig {
+    let mut c = ProblemConfig::default();
+    c.robust.eps = eps;
+    c
+}
+
+fn di(eps: f64) -> ProblemConfig {
+    let mut c = load("double_integrator.toml");
+    c.robust.eps = eps;
+    c
+}
+
+/// σ_max of a 2×2 matrix in closed form.
+fn sigma_max_2x2(m: &DMatrix<f64>) -> f64 {
+    let f2 = m.iter().map(|v| v * v).sum::<f64>();
+    let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
+    ((f2 + (f2 * f2 - 4.0 * det * det).max(0.0).sqrt()) / 2.0).sqrt()
+}
+
+#[test]
+fn double_integrator_lipschitz_tightening_in_closed_form() {
+    let mut cfg = di(0.1);
+    cfg.robust.method = RobustMethod::Lipschitz;
+    let d = design(&cfg).unwrap();
+    let t = &d.tube;
+    let h: f64 = cfg.ocp.ts; // mass 1: A = [[1, h], [0, 1]], B = [h²/2, h]
+    let lx = (h + (h * h + 4.0).sqrt()) / 2.0; // σ_max of the shear [[1, h], [0, 1]]
+    let lu = h * (1.0 + h * h / 4.0).sqrt();
+    assert_eq!(t.bound, JacobianBound::Exact);
+    assert!((t.rho - lx).abs() < 1e-12, "{} vs {lx}", t.rho);
+    assert!((t.w - 0.1 * lu).abs() < 1e-12);
+    for k in 0..=cfg.ocp.horizon {
+        let r = 0.1 * lu * (lx.powi(k as i32) - 1.0) / (lx - 1.0);
+        assert!((t.s[k] - r).abs() < 1e-12 * (1.0 + r), "s_{k}");
+    }
+    // P = I: σ_i = 1; K = 0: the inputs lose exactly ε.
+    for k in 1..=cfg.ocp.horizon {
+        assert!((d.stages.x_hi[k - 1][1] - (1.0 - t.s[k])).abs() < 1e-12);
+        assert!((d.stages.x_lo[k - 1][0] - (-5.0 + t.s[k])).abs() < 1e-12);
+    }
+    assert!(d.stages.u_hi.iter().all(|u| (u[0] - 0.9).abs() < 1e-12));
+    assert!(d.stages.u_lo.iter().all(|u| (u[0] + 0.9).abs() < 1e-12));
+}
+
+#[test]
+fn double_integrator_tube_for_a_chosen_gain_by_hand() {
+    let cfg = di(0.1);
+    let js = jacobian_set(&cfg);
+    let h: f64 = cfg.ocp.ts;
+    let k = DMatrix::from_row_slice(1, 2, &[-2.0, -3.0]);
+    let t = Tube::new(
+        &js,
+        &k,
+        &DMatrix::identity(2, 2),
+        0.1,
+        cfg.ocp.horizon,
+        RobustMethod::Tube,
+    );
+    let m = DMatrix::from_row_slice(
+        2,
+        2,
+        &[
+            1.0 - 2.0 * h * h / 2.0,
+            h - 3.0 * h * h / 2.0,
+            -2.0 * h,
+            1.0 - 3.0 * h,
+        ],
+    );
+    let rho = sigma_max_2x2(&m); // ≈ 1.013: P = I is not a contraction metric here
+    assert!((rho - 1.0).abs() > 1e-3);
+    assert!((t.rho - rho).abs() < 1e-12, "{} vs {rho}", t.rho);
+    let w = 0.1 * h * (1.0 + h * h / 4.0).sqrt();
+    assert!((t.w - w).abs() < 1e-12);
+    for kk in 0..=cfg.ocp.horizon {
+        let r = w * (1.0 - rho.powi(kk as i32)) / (1.0 - rho);
+        assert!((t.s[kk] - r).abs() < 1e-12);
+    }
+    assert!((t.u_margin[0] - 13f64.sqrt()).abs() < 1e-12);
+    let st = t.tighten(&cfg).unwrap();
+    let n = cfg.ocp.horizon;
+    assert!((st.u_hi[n - 1][0] - (1.0 - 0.1 - 13f64.sqrt() * t.s[n - 1])).abs() < 1e-12);
+    assert!((st.u_hi[0][0] - 0.9).abs() < 1e-12);
+}
+
+#[test]
+fn pendulum_vertex_jacobian_matches_the_ad_linearisation() {
+    let p = Pendulum::default();
+    for substeps in [1usize, 2] {
+        let model = Discrete::new(System::Pendulum(p.clone()), 0.05, substeps);
+        for n in 0..20u64 {
+            let x = [
+                -6.0 + 12.0 * uniform(3, n, 0),
+                -3.0 + 6.0 * uniform(3, n, 1),
+            ];
+            let u = [-15.0 + 30.0 * uniform(3, n, 2)];
+            // The stage cosines of the actual RK4 step.
+            let h = 0.05 / substeps as f64;
+            let f = |x: [f64; 2]| [x[1], u[0] - 9.81 * (x[0] + std::f64::consts::PI).sin()];
+            let mut c = Vec::new();
+            let mut xs = x;
+            for _ in 0..substeps {
+                let k1 = f(xs);
+                let p2 = [xs[0] + h / 2.0 * k1[0], xs[1] + h / 2.0 * k1[1]];
+                let k2 = f(p2);
+                let p3 = [xs[0] + h / 2.0 * k2[0], xs[1] + h / 2.0 * k2[1]];
+                let k3 = f(p3);
+                let p4 = [xs[0] + h * k3[0], xs[1] + h * k3[1]];
+                let k4 = f(p4);
+                c.extend([xs[0].cos(), p2[0].cos(), p3[0].cos(), p4[0].cos()]);
+                for i in 0..2 {
+                    xs[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                }
+            }
+            let (a, b) = pendulum_rk4_jacobian(&p, 0.05, substeps, &c);
+            let (a2, b2) = linearize_at(&model, &x, &u);
+            assert!((&a - &a2).amax() < 1e-12, "{a} vs {a2}");
+            assert!((&b - &b2).amax() < 1e-12, "{b} vs {b2}");
+        }
+    }
+}
+
+/// Simulates the error dynamics x⁺ = F(x, v + K(x − z) + e), z⁺ = F(z, v) along random
+/// nominal trajectories with bang-bang, alternating, random and greedy worst-case
+/// |e| ≤ ε, and checks ‖x_k − z_k‖_P ≤ s_k and |x_k,i − z_k,i| ≤ σ_i s_k. Returns the
+/// largest ratio ‖Δ_k‖_P / s_k seen.
+fn check_tube_soundness(cfg: &ProblemConfig, trajectories: u64) -> f64 {
+    let d = design(cfg).unwrap();
+    let t = &d.tube;
+    let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    let nx = cfg.system.nx();
+    let p = DMatrix::from_fn(nx, nx, |i, j| t.p[i][j]);
+    let k = DMatrix::from_fn(1, nx, |_, j| t.k[0][j]);
+    let pnorm = |d: &[f64]| {
+        let v = nalgebra::DVector::from_column_slice(d);
+        (v.transpose() * &p * &v)[(0, 0)].sqrt()
+    };
+    let eps = cfg.robust.eps;
+    let step = |x: &[f64], z: &[f64], v: f64, e: f64| {
+        let dz: Vec<f64> = (0..nx).map(|i| x[i] - z[i]).collect();
+        let kd = (0..nx).map(|i| k[(0, i)] * dz[i]).sum::<f64>();
+        let mut out = vec![0.0; nx];
+        model.step(x, &[v + kd + e], &mut out);
+        out
+    };
+    let mut worst_ratio = 0.0f64;
+    for n in 0..trajectories {
+        for mode in 0..4 {
+            let mut z: Vec<f64> = (0..nx)
+                .map(|i| {
+                    let (l, h) = (cfg.domain.lo[i], cfg.domain.hi[i]);
+                    l + (h - l) * uniform(11, n, i as u64)
+                })
+                .collect();
+            let mut x = z.clone();
+            for kk in 0..cfg.ocp.horizon {
+                let (ul, uh) = (cfg.ocp.u_lo[0], cfg.ocp.u_hi[0]);
+                let v = ul + (uh - ul) * uniform(12, n, kk as u64);
+                let e = match mode {
+                    0 => eps,
+                    1 => {
+                        if kk % 2 == 0 {
+                            eps
+                        } else {
+                            -eps
+                        }
+                    }
+                    2 => eps * (2.0 * uniform(13, n, kk as u64) - 1.0),
+                    _ => {
+                        let mut zn = vec![0.0; nx];
+                        model.step(&z, &[v], &mut zn);
+                        let grow = |e: f64| {
+                            let xn = step(&x, &z, v, e);
+                            pnorm(&(0..nx).map(|i| xn[i] - zn[i]).collect::<Vec<_>>())
+                        };
+                        if grow(eps) >= grow(-eps) {
+                            eps
+                        } else {
+                            -eps
+                        }
+                    }
+                };
+                let xn = step(&x, &z, v, e);
+                let mut zn = vec![0.0; nx];
+                model.step(&z, &[v], &mut zn);
+                x = xn;
+                z = zn;
+                let dlt: Vec<f64> = (0..nx).map(|i| x[i] - z[i]).collect();
+                let s = t.s[kk + 1];
+                let pn = pnorm(&dlt);
+                assert!(
+                    pn <= s * (1.0 + 1e-9) + 1e-14,
+                    "‖Δ_{}‖_P = {pn} > s = {s} (mode {mode})",
+                    kk + 1
+                );
+                for i in 0..nx {
+                    assert!(dlt[i].abs() <= t.x_margin[i] * s * (1.0 + 1e-9) + 1e-14);
+                }
+                worst_ratio = worst_ratio.max(pn / s);
+            }
+        }
+    }
+    worst_ratio
+}
+
+#[test]
+fn tube_is_sound_for_the_error_dynamics() {
+    let r = check_tube_soundness(&di(0.1), 50);
+    eprintln!("double integrator: largest ‖Δ‖_P / s_k = {r:.4}");
+    // Bang-bang at the bound of a linear system nearly attains the bound.
+    assert!(r > 0.5, "{r}");
+    let r = check_tube_soundness(&pendulum(0.5), 200);
+    eprintln!("pendulum: largest ‖Δ‖_P / s_k = {r:.4}");
+    assert!(r > 0.05, "{r}");
+}
+
+#[test]
+fn settings_defaults_serialise_as_before_and_validate_with_keys() {
+    let c = ProblemConfig::default();
+    let text = toml::to_string(&c).unwrap();
+    assert!(
+        !text.contains("robust") && !text.contains("stages"),
+        "{text}"
+    );
+    let mut r = c.clone();
+    r.ocp.stages = Some(design(&pendulum(0.5)).unwrap().stages);
+    assert_ne!(r.problem_hash(), c.problem_hash());
+    let back = ProblemConfig::from_toml_str(&toml::to_string(&r).unwrap(), "r").unwrap();
+    assert_eq!(back.ocp.stages, r.ocp.stages);
+    let key = |edit: &dyn Fn(&mut ProblemConfig)| {
+        let mut c = ProblemConfig::default();
+        edit(&mut c);
+        match c.validate() {
+            Err(ConfigError::Invalid { key, .. }) => key,
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!(key(&|c| c.robust.eps = -1.0), "robust.eps");
+    assert_eq!(
+        key(&|c| c.robust.lqr_r_scales = vec![1.0, 0.0]),
+        "robust.lqr_r_scales[1]"
+    );
+    assert_eq!(
+        key(&|c| c.robust.lqr_q = Some(MatrixSpec::Diagonal(vec![1.0]))),
+        "robust.lqr_q"
+    );
+    let st = r.ocp.stages.clone();
+    assert_eq!(
+        key(&|c| {
+            c.ocp.stages = st.clone();
+            c.ocp.stages.as_mut().unwrap().x_lo.pop();
+        }),
+        "ocp.stages.x_lo"
+    );
+    let parsed = ProblemConfig::from_toml_str(
+        &format!(
+            "{}\n[robust]\neps = 0.7\nmethod = \"lipschitz\"\n",
+            crate::problem::PENDULUM_TOML
+        ),
+        "f",
+    )
+    .unwrap();
+    assert_eq!(parsed.robust.eps, 0.7);
+    assert_eq!(parsed.robust.method, RobustMethod::Lipschitz);
+}
+
+#[test]
+fn verdict_compares_certified_with_design_eps() {
+    assert!(verdict(0.5, 0.4).certified);
+    assert!(verdict(0.5, 0.5).certified);
+    let v = verdict(0.5, 31.0);
+    assert!(!v.certified && v.message.contains("NOT certified") && v.message.contains("31"));
+    assert!(!verdict(0.5, f64::NAN).certified);
+}

@@ -1,0 +1,219 @@
+//! The tube: ρ = sup‖P^{1/2}(A + BK)P^{−1/2}‖₂, w̄ = ε·sup‖P^{1/2}B‖₂,
+//! s_k = w̄ Σ_{j<k} ρ^j, and the tightened bounds X ⊖ {σ_i s_k}, U ⊖ {ε + τ_j s_k}.
+
+use super::jacobians::{JacobianBound, JacobianSet};
+use super::RobustError;
+use crate::problem::{ProblemConfig, RobustMethod, StageBounds};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+/// Symmetric square root and inverse square root of a symmetric positive definite matrix.
+fn sqrt_pd(p: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+    let e = p.clone().symmetric_eigen();
+    let d = e.eigenvalues.map(|l| l.max(0.0).sqrt());
+    let di = e.eigenvalues.map(|l| 1.0 / l.max(1e-300).sqrt());
+    let v = &e.eigenvectors;
+    (
+        v * DMatrix::from_diagonal(&d) * v.transpose(),
+        v * DMatrix::from_diagonal(&di) * v.transpose(),
+    )
+}
+
+fn spectral_norm(m: &DMatrix<f64>) -> f64 {
+    m.clone().singular_values().max()
+}
+
+/// `(ρ, L_B)`: the largest `‖P^{1/2}(A + BK)P^{−1/2}‖₂` and `‖P^{1/2}B‖₂` over the family.
+pub fn contraction(js: &JacobianSet, k: &DMatrix<f64>, p: &DMatrix<f64>) -> (f64, f64) {
+    let (ph, pmh) = sqrt_pd(p);
+    let mut rho = 0.0f64;
+    let mut lb = 0.0f64;
+    for (a, b) in js.a.iter().zip(&js.b) {
+        rho = rho.max(spectral_norm(&(&ph * (a + b * k) * &pmh)));
+        lb = lb.max(spectral_norm(&(&ph * b)));
+    }
+    (rho, lb)
+}
+
+/// Solves the discrete algebraic Riccati equation by fixed-point iteration; returns
+/// (P, K) with `u = Kx` (K = −(R + BᵀPB)⁻¹BᵀPA), or None if it does not converge.
+pub fn dare(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
+    let mut p = q.clone() + DMatrix::identity(q.nrows(), q.ncols()) * 1e-9;
+    for _ in 0..100_000 {
+        let s = r + b.transpose() * &p * b;
+        let k = -s.clone().try_inverse()? * b.transpose() * &p * a;
+        let next = q + a.transpose() * &p * a + a.transpose() * &p * b * &k;
+        let next = (&next + next.transpose()) * 0.5;
+        let diff = (&next - &p).amax();
+        p = next;
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        if diff <= 1e-13 * p.amax().max(1.0) {
+            let s = r + b.transpose() * &p * b;
+            let k = -s.try_inverse()? * b.transpose() * &p * a;
+            return Some((p, k));
+        }
+    }
+    None
+}
+
+/// The tube of a design: gain, Lyapunov matrix, rates and the per-stage radii.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tube {
+    /// Design input error ε.
+    pub eps: f64,
+    /// Method.
+    pub method: RobustMethod,
+    /// Ancillary gain K (nu rows of nx), u = v + K(x − z).
+    pub k: Vec<Vec<f64>>,
+    /// Incremental Lyapunov matrix P (nx rows).
+    pub p: Vec<Vec<f64>>,
+    /// The LQR input-weight scale that produced K (tube method).
+    pub lqr_r_scale: Option<f64>,
+    /// Contraction rate ρ.
+    pub rho: f64,
+    /// One-step disturbance bound w̄ = ε·L_B in the P-norm.
+    pub w: f64,
+    /// How ρ and w̄ were obtained.
+    pub bound: JacobianBound,
+    /// s_0..s_N: bounds on ‖x_k − z_k‖_P.
+    pub s: Vec<f64>,
+    /// σ_i = √((P⁻¹)_ii): state-coordinate tightening per unit of s.
+    pub x_margin: Vec<f64>,
+    /// τ_j = √(K_j P⁻¹ K_jᵀ): input tightening per unit of s.
+    pub u_margin: Vec<f64>,
+}
+
+impl Tube {
+    /// The tube of a given gain K and Lyapunov matrix P over a Jacobian family.
+    pub fn new(
+        js: &JacobianSet,
+        k: &DMatrix<f64>,
+        p: &DMatrix<f64>,
+        eps: f64,
+        horizon: usize,
+        method: RobustMethod,
+    ) -> Tube {
+        let (rho, lb) = contraction(js, k, p);
+        let w = eps * lb;
+        let mut s = vec![0.0; horizon + 1];
+        for i in 1..=horizon {
+            s[i] = rho * s[i - 1] + w;
+        }
+        let pinv = p
+            .clone()
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::from_element(p.nrows(), p.ncols(), f64::NAN));
+        let x_margin = (0..p.nrows())
+            .map(|i| pinv[(i, i)].max(0.0).sqrt())
+            .collect();
+        let u_margin = (0..k.nrows())
+            .map(|j| {
+                let kj = k.row(j);
+                (kj * &pinv * kj.transpose())[(0, 0)].max(0.0).sqrt()
+            })
+            .collect();
+        let rows = |m: &DMatrix<f64>| {
+            (0..m.nrows())
+                .map(|i| m.row(i).iter().copied().collect())
+                .collect()
+        };
+        Tube {
+            eps,
+            method,
+            k: rows(k),
+            p: rows(p),
+            lqr_r_scale: None,
+            rho,
+            w,
+            bound: js.bound,
+            s,
+            x_margin,
+            u_margin,
+        }
+    }
+
+    /// The tightened bounds of `cfg`'s OCP; an error names the first empty interval.
+    pub fn tighten(&self, cfg: &ProblemConfig) -> Result<StageBounds, RobustError> {
+        let o = &cfg.ocp;
+        let n = o.horizon;
+        let shrink = |lo: &[f64], hi: &[f64], m: &dyn Fn(usize) -> f64, what: &str, k: usize| {
+            let mut l = lo.to_vec();
+            let mut h = hi.to_vec();
+            for i in 0..lo.len() {
+                let d = m(i);
+                if l[i].is_finite() {
+                    l[i] += d;
+                }
+                if h[i].is_finite() {
+                    h[i] -= d;
+                }
+                if l[i] >= h[i] || l[i].is_nan() || h[i].is_nan() {
+                    return Err(RobustError::Infeasible {
+                        eps: self.eps,
+                        reason: format!(
+                            "{what}[{i}] at stage {k}: tightening {d:.4} leaves [{:.4}, {:.4}] \
+                             (ρ = {:.4}, w̄ = {:.4e})",
+                            l[i], h[i], self.rho, self.w
+                        ),
+                    });
+                }
+            }
+            Ok((l, h))
+        };
+        let mut st = StageBounds {
+            x_lo: vec![],
+            x_hi: vec![],
+            u_lo: vec![],
+            u_hi: vec![],
+        };
+        for k in 1..=n {
+            let (l, h) = shrink(&o.x_lo, &o.x_hi, &|i| self.x_margin[i] * self.s[k], "x", k)?;
+            st.x_lo.push(l);
+            st.x_hi.push(h);
+        }
+        for k in 0..n {
+            let (l, h) = shrink(
+                &o.u_lo,
+                &o.u_hi,
+                &|j| self.eps + self.u_margin[j] * self.s[k],
+                "u",
+                k,
+            )?;
+            st.u_lo.push(l);
+            st.u_hi.push(h);
+        }
+        Ok(st)
+    }
+
+    /// The largest tightening relative to the half-width of each finite bound (the
+    /// design's score: smaller is better, ≥ 1 is infeasible).
+    pub fn score(&self, cfg: &ProblemConfig) -> f64 {
+        let o = &cfg.ocp;
+        let n = o.horizon;
+        let mut worst = 0.0f64;
+        for i in 0..o.x_lo.len() {
+            let half = 0.5 * (o.x_hi[i] - o.x_lo[i]);
+            if half.is_finite() {
+                worst = worst.max(self.x_margin[i] * self.s[n] / half);
+            }
+        }
+        for j in 0..o.u_lo.len() {
+            let half = 0.5 * (o.u_hi[j] - o.u_lo[j]);
+            if half.is_finite() {
+                worst = worst.max((self.eps + self.u_margin[j] * self.s[n - 1]) / half);
+            }
+        }
+        if worst.is_nan() {
+            f64::INFINITY
+        } else {
+            worst
+        }
+    }
+}

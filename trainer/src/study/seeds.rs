@@ -1,0 +1,122 @@
+//! The seed study (`seeds.json`): both nets retrained from `closed_loop.seeds` training
+//! seeds' initial weights, each simulated from the reference initial state — the spread of
+//! R², ε_D and the closed loop over seeds (Table II as median [min, max]).
+
+use crate::certify::Model;
+use crate::data::dataset::Dataset;
+use crate::learn::train::{train, TrainOptions, TrainSet};
+use crate::mpc::law::MpcLaw;
+use crate::problem::ProblemConfig;
+use crate::study::closed_loop::{simulate, Controller, Run, SimSettings};
+use crate::study::scenarios::initial_states;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// One net of one seed in the seed study.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeedRun {
+    /// Training seed (initial weights and shuffling).
+    pub seed: u64,
+    /// `nominal` or `regularized`.
+    pub kind: String,
+    /// R² on the validation states.
+    pub r2_validation: f64,
+    /// ε_D on the dataset.
+    pub eps_d: f64,
+    /// Closed loop from the reference initial state (nominal plant, no noise).
+    pub run: Run,
+}
+
+/// The seed study: for `closed_loop.seeds` seeds starting at `training.seed`, both nets
+/// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
+/// the reference initial state. Returned per seed: [nominal, regularized]. `progress`
+/// draws a bar over the (seed, net) jobs.
+pub fn seed_study(
+    cfg: &ProblemConfig,
+    data: &Dataset,
+    validation: &Dataset,
+    dataset_hash: &str,
+    own: &[Model; 2],
+    progress: bool,
+) -> Vec<[SeedRun; 2]> {
+    let n = cfg.closed_loop.seeds.max(1) as u64;
+    let base = cfg.training.seed;
+    let (set, vset) = (
+        TrainSet::from_dataset(data),
+        TrainSet::from_dataset(validation),
+    );
+    let jobs: Vec<(u64, bool)> = (0..n)
+        .flat_map(|k| [(base + k, true), (base + k, false)])
+        .collect();
+    let x0 = initial_states(cfg).swap_remove(0);
+    let s = SimSettings {
+        steps: cfg.closed_loop.steps,
+        noise: vec![],
+        seed: 0,
+        mass_mismatch: 0.0,
+        disturbance: Default::default(),
+    };
+    let bar = if progress {
+        let b = indicatif::ProgressBar::new(jobs.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let runs: Vec<SeedRun> = jobs
+        .par_iter()
+        .map(|&(seed, nominal)| {
+            let trained;
+            let m = if seed == base {
+                &own[usize::from(!nominal)]
+            } else {
+                let mut st = cfg.training.clone();
+                st.seed = seed;
+                trained = train(
+                    &st,
+                    &TrainOptions {
+                        nominal,
+                        progress: None,
+                    },
+                    &set,
+                    &vset,
+                    (&cfg.domain.lo, &cfg.domain.hi),
+                    (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                    &data.header.problem_hash,
+                    dataset_hash,
+                );
+                &trained
+            };
+            let mut law = MpcLaw::new(cfg);
+            // No certificate for the extra seeds: the band check is off (ε = ∞) for all.
+            let run = simulate(
+                cfg,
+                &mut law,
+                &Controller::Net(&m.mlp, f64::INFINITY, None),
+                &x0,
+                &s,
+            );
+            bar.inc(1);
+            SeedRun {
+                seed,
+                kind: if nominal { "nominal" } else { "regularized" }.into(),
+                r2_validation: m.validation_stats.r2,
+                eps_d: m.train_stats.max,
+                run,
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut it = runs.into_iter();
+    let mut out = Vec::new();
+    while let (Some(a), Some(b)) = (it.next(), it.next()) {
+        out.push([a, b]);
+    }
+    out
+}
