@@ -13,13 +13,16 @@
 //!
 //! Imports only `problem` (and the leaf modules `io`, `rng`).
 
-#[cfg(test)]
-mod fixtures;
 pub mod kkt;
 pub mod law;
 pub mod ocp;
 pub mod qp;
 pub mod sensitivity;
 pub mod sqp;
+
+// Tests only: the pendulum's IPOPT reference labels, and the law checked against independent
+// computations (finite differences, the condensed QP, first-order optimality, infeasibility).
 #[cfg(test)]
-mod verification;
+mod cross_checks;
+#[cfg(test)]
+mod ipopt_labels;

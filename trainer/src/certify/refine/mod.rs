@@ -1,0 +1,291 @@
+//! Adaptive refinement ("sparsification"): the dataset, the network and the local
+//! certificate grown together until every cell of X meets a target ε.
+//!
+//! X is partitioned into boxes (cells) by a k-d tree of bisections on a dyadic lattice:
+//! every cell's 2ⁿ corners are labelled points (κ, ∂κ/∂x and the active set), so each
+//! solve becomes a corner and splits reuse the existing points. A round:
+//! 1. label the new points (in parallel, cold starts: independent of the thread count);
+//! 2. train the network (the first round from its seeded weights, later rounds warm-started
+//!    for `round_epochs`), with the points of large error repeated (`emphasis`);
+//! 3. bound every leaf cell ([`crate::certify::local::cell_bound`]); the certified ε is max_C ε_C;
+//! 4. split each cell with ε_C > target (worst first, until the budget of solves is spent)
+//!    along the axis with the largest remainder term (the axis whose halving shrinks the
+//!    bound most; ties: the longest side relative to X). A cell whose corner error alone
+//!    exceeds the target is split too (its new corners become training data there).
+//!
+//! The state after each round is checkpointed (`refine_state.bin`, atomic), so a killed
+//! run resumes at its last completed round.
+//!
+//! Files: this one owns the lattice, the points and cells and the checkpointed state;
+//! [`rounds`] the refinement loop ([`refine`]); [`outputs`] the local certificate and the
+//! files of a run; [`check`] the certificate against fresh MPC solves.
+
+mod check;
+mod outputs;
+mod rounds;
+
+pub use check::{check, Check, Offender};
+pub use outputs::{
+    cell_views, certificate, dataset, pretty, write_outputs, CellView, LocalCertificate,
+    LocalSummary,
+};
+pub use rounds::{refine, RefineOptions, Refined};
+
+use crate::certify::local::CellBound;
+use crate::certify::Model;
+use crate::data::dataset::DatasetError;
+use crate::mpc::law::{Label, MpcLaw};
+use crate::mpc::sqp::SqpStatus;
+use crate::problem::ProblemConfig;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+/// Lattice levels below the initial grid spacing (cells can be halved this many times
+/// per axis).
+pub const LEVELS: u32 = 40;
+
+/// Refinement failures, naming the file or the point at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum RefineError {
+    /// A file could not be read or written.
+    #[error(transparent)]
+    File(#[from] DatasetError),
+    /// The checkpoint file is not a refinement checkpoint of this version.
+    #[error("{path}: not a refinement checkpoint of this trainer version ({reason}); delete it or use another --out")]
+    Corrupt {
+        /// The checkpoint.
+        path: PathBuf,
+        /// The decoder's message.
+        reason: String,
+    },
+    /// The checkpoint belongs to another problem or settings.
+    #[error("checkpoint {path} was made for another problem or settings (delete it or use another --out)")]
+    Mismatch {
+        /// The checkpoint.
+        path: PathBuf,
+    },
+}
+
+impl From<crate::io::FileError> for RefineError {
+    fn from(e: crate::io::FileError) -> Self {
+        RefineError::File(e.into())
+    }
+}
+
+/// A labelled lattice point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Point {
+    /// Lattice coordinates.
+    pub key: Vec<u64>,
+    /// The state.
+    pub x: Vec<f64>,
+    /// κ(x) (NaN until labelled or if the solve failed).
+    pub u: Vec<f64>,
+    /// ∂κ/∂x (row-major nu × nx).
+    pub du: Vec<f64>,
+    /// Solve status.
+    pub status: Option<SqpStatus>,
+    /// Regular hard solution (converged, not degenerate, no slack).
+    pub regular: bool,
+    /// Hash of the strongly active set.
+    pub piece: u64,
+    /// Optimal cost.
+    pub cost: f64,
+    /// Sensitivity degeneracy, if any.
+    pub degeneracy: Option<crate::mpc::sensitivity::Degeneracy>,
+    /// Largest slack (soft labels).
+    pub max_slack: f64,
+}
+
+impl Point {
+    fn labelled(&self) -> bool {
+        self.u.iter().all(|v| v.is_finite()) && self.du.iter().all(|v| v.is_finite())
+    }
+}
+
+/// A node of the k-d tree of cells.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Node {
+    /// Lower lattice corner.
+    pub lo: Vec<u64>,
+    /// Lattice size per axis.
+    pub size: Vec<u64>,
+    /// Corner point indices (corner c: upper on axis k iff bit k of c is set).
+    pub corners: Vec<usize>,
+    /// Children (lower half, upper half) and the split axis, if split.
+    pub split: Option<(usize, usize, usize)>,
+}
+
+/// Statistics of one round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoundLog {
+    /// Round number (0 = initial grid).
+    pub round: usize,
+    /// OCP solves so far.
+    pub solves: usize,
+    /// Leaf cells.
+    pub cells: usize,
+    /// Cells meeting the target.
+    pub cells_ok: usize,
+    /// Certified ε = max_C ε_C.
+    pub eps: f64,
+    /// Max corner error (ε_D over the data, after the clamp).
+    pub eps_d: f64,
+    /// Cells bounded by the second-order form.
+    pub second_order: usize,
+    /// Wall time of the round (labelling + training + bounding), seconds.
+    pub seconds: f64,
+}
+
+/// Everything a refinement run carries between rounds (the checkpoint).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineState {
+    /// SHA-256 of the problem (labels) and of the refine settings.
+    pub hash: String,
+    /// Points, in creation order.
+    pub points: Vec<Point>,
+    /// The k-d tree's nodes; the roots are the initial grid's cells.
+    pub nodes: Vec<Node>,
+    /// Roots of the tree (the initial grid's cells).
+    pub roots: Vec<usize>,
+    /// Current model, if trained.
+    pub model: Option<Model>,
+    /// The model with the smallest certified ε so far (on the tree of its round).
+    pub best: Option<(f64, Model)>,
+    /// Rounds done.
+    pub log: Vec<RoundLog>,
+    /// Per-leaf bounds of the last round (leaf node index, bound).
+    pub bounds: Vec<(usize, CellBound)>,
+    /// The run ended (target met, or nothing left to split within budget and rounds).
+    pub finished: bool,
+}
+
+/// The geometry of the lattice.
+#[derive(Debug, Clone)]
+struct Lattice {
+    lo: Vec<f64>,
+    step: Vec<f64>,
+    hi: Vec<f64>,
+    max: Vec<u64>,
+}
+
+impl Lattice {
+    fn new(lo: &[f64], hi: &[f64], counts: &[usize]) -> Self {
+        let max: Vec<u64> = counts.iter().map(|&c| (c as u64 - 1) << LEVELS).collect();
+        Lattice {
+            lo: lo.to_vec(),
+            hi: hi.to_vec(),
+            step: lo
+                .iter()
+                .zip(hi)
+                .zip(&max)
+                .map(|((l, h), &m)| (h - l) / m as f64)
+                .collect(),
+            max,
+        }
+    }
+    fn x(&self, key: &[u64]) -> Vec<f64> {
+        key.iter()
+            .enumerate()
+            .map(|(k, &i)| {
+                if i == self.max[k] {
+                    self.hi[k]
+                } else {
+                    self.lo[k] + i as f64 * self.step[k]
+                }
+            })
+            .collect()
+    }
+}
+
+fn fnv(v: &[usize]) -> u64 {
+    let mut h = 0xcbf29ce484222325u64;
+    for &x in v {
+        for b in (x as u64).to_le_bytes() {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x100000001b3);
+        }
+    }
+    h
+}
+
+/// Labels the points `idx` of `points` (parallel, cold starts).
+fn label(cfg: &ProblemConfig, points: &mut [Point], idx: &[usize]) {
+    let xs: Vec<Vec<f64>> = idx.iter().map(|&i| points[i].x.clone()).collect();
+    let labels: Vec<Label> = xs
+        .par_iter()
+        .map_init(|| MpcLaw::new(cfg), |law, x| law.solve(x, None).0)
+        .collect();
+    for (&i, l) in idx.iter().zip(labels) {
+        let p = &mut points[i];
+        p.regular = l.status == SqpStatus::Converged && l.degeneracy.is_none();
+        p.piece = fnv(&l.active);
+        p.u = l.u;
+        p.du = l.du_dx;
+        p.status = Some(l.status);
+        p.cost = l.cost;
+        p.degeneracy = l.degeneracy;
+        p.max_slack = l.max_slack;
+    }
+}
+
+struct Ctx<'a> {
+    cfg: &'a ProblemConfig,
+    lat: Lattice,
+    index: HashMap<Vec<u64>, usize>,
+}
+
+impl Ctx<'_> {
+    fn point(&mut self, st: &mut RefineState, key: Vec<u64>, new: &mut Vec<usize>) -> usize {
+        if let Some(&i) = self.index.get(&key) {
+            return i;
+        }
+        let (nx, nu) = (self.cfg.system.nx(), self.cfg.system.nu());
+        let i = st.points.len();
+        st.points.push(Point {
+            x: self.lat.x(&key),
+            key: key.clone(),
+            u: vec![f64::NAN; nu],
+            du: vec![f64::NAN; nu * nx],
+            status: None,
+            regular: false,
+            piece: 0,
+            cost: f64::NAN,
+            degeneracy: None,
+            max_slack: f64::NAN,
+        });
+        self.index.insert(key, i);
+        new.push(i);
+        i
+    }
+
+    fn node(
+        &mut self,
+        st: &mut RefineState,
+        lo: Vec<u64>,
+        size: Vec<u64>,
+        new: &mut Vec<usize>,
+    ) -> usize {
+        let nx = lo.len();
+        let corners = (0..1usize << nx)
+            .map(|c| {
+                let key: Vec<u64> = (0..nx)
+                    .map(|k| lo[k] + if c & (1 << k) != 0 { size[k] } else { 0 })
+                    .collect();
+                self.point(st, key, new)
+            })
+            .collect();
+        st.nodes.push(Node {
+            lo,
+            size,
+            corners,
+            split: None,
+        });
+        st.nodes.len() - 1
+    }
+}
+
+#[cfg(test)]
+mod tests;

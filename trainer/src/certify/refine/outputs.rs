@@ -1,0 +1,328 @@
+//! What a refinement run leaves: its dataset, the local certificate (ε = max_C ε_C with the
+//! binding term and the worst cell), `certificate.json`, `cells.csv`, and the cells in
+//! physical coordinates for the ε_C map.
+
+use super::rounds::train_set;
+use super::*;
+use crate::certify::local::Form;
+use crate::data::dataset::{Dataset, DatasetError, Header, Record};
+use crate::io::write_atomic;
+use crate::mpc::sqp::SqpStatus;
+use crate::problem::{ProblemConfig, RefineSettings, SamplerKind, SamplingSettings};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The refined points as a dataset file (sampler `adaptive`).
+pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let records = st
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Record {
+            index: i as u64,
+            x: p.x.clone(),
+            u: p.u.clone(),
+            du_dx: p.du.clone(),
+            cost: p.cost,
+            status: p.status.unwrap_or(SqpStatus::NumericalFailure),
+            iterations: 0,
+            kkt: f64::NAN,
+            degeneracy: p.degeneracy,
+            max_slack: p.max_slack,
+        })
+        .collect::<Vec<_>>();
+    Dataset {
+        magic: crate::data::dataset::MAGIC,
+        version: crate::data::dataset::FORMAT_VERSION,
+        header: Header {
+            problem: cfg.name.clone(),
+            problem_hash: cfg.problem_hash(),
+            config_toml: toml::to_string(cfg).unwrap_or_default(),
+            nx: nx as u32,
+            nu: nu as u32,
+            sampling: SamplingSettings {
+                sampler: SamplerKind::Adaptive,
+                counts: vec![],
+                n: records.len(),
+                seed: 0,
+            },
+            total: records.len() as u64,
+            shard: None,
+            chunk: crate::data::dataset::CHUNK as u32,
+        },
+        records,
+    }
+}
+
+/// The local certificate's own figures, next to the design's certificate keys.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocalSummary {
+    /// "local": ε = max_C ε_C over the cells of the k-d tree.
+    pub method: String,
+    /// Target ε of the refinement.
+    pub target_eps: f64,
+    /// Whether every cell meets the target.
+    pub met: bool,
+    /// Leaf cells.
+    pub cells: usize,
+    /// Cells bounded by the second-order (curvature) form.
+    pub cells_second_order: usize,
+    /// Cells whose ε_C is dominated by the corner (fit) error rather than the remainder.
+    pub cells_fit_bound: usize,
+    /// OCP solves (= points = corners).
+    pub solves: usize,
+    /// Refinement rounds.
+    pub rounds: usize,
+    /// Safety factor on the estimated MPC parts.
+    pub safety: f64,
+    /// The largest remainder bound of any cell.
+    pub max_remainder: f64,
+    /// What binds in the cell with the largest ε_C: `corner` (the fit at its corners is the
+    /// larger term), `first_order` or `second_order` (the interpolation remainder).
+    pub binding: String,
+    /// The cell with the largest ε_C: (lower corner, upper corner).
+    pub worst_cell: (Vec<f64>, Vec<f64>),
+    /// Uniform grid solves the global Theorem 1 needs for the same ε with this net's
+    /// ε_D, L_NN and the L_MPC estimate (`null`: no density suffices, ε ≤ ε_D).
+    pub global_grid_solves: Option<f64>,
+    /// global_grid_solves / solves.
+    pub sparsification: Option<f64>,
+    /// What is sound and what is estimated.
+    pub note: String,
+}
+
+/// The certificate JSON of a refinement run: the design's keys plus [`LocalSummary`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocalCertificate {
+    /// The design's keys (`eps` is the local bound max_C ε_C).
+    #[serde(flatten)]
+    pub base: crate::certify::certificate::Certificate,
+    /// The local figures.
+    pub local: LocalSummary,
+}
+
+/// Builds the certificate of a finished refinement.
+pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> LocalCertificate {
+    use crate::certify::certificate::{requirement, Certificate, LnnMethod};
+    use crate::certify::lipschitz;
+    let st = &r.state;
+    let mlp = &r.model.mlp;
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let nx = lo.len();
+    let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+    let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
+    let naive = lipschitz::naive_bound(mlp);
+    let sdp = lipschitz::lipsdp_bound(mlp);
+    let (l_nn, method) = if sdp < naive {
+        (sdp, LnnMethod::LipSdpNeuron)
+    } else {
+        (naive, LnnMethod::Naive)
+    };
+    let lower = lipschitz::sampled_lower_bound(mlp, lo, hi, 20_000, 7);
+    let set = train_set(st, nx, cfg.system.nu(), &[], 1);
+    let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
+    let l_mpc = sl.max(q);
+    let lat = Lattice::new(lo, hi, &rs.initial_counts(nx));
+    let radius = st
+        .bounds
+        .iter()
+        .map(|(n, _)| {
+            let node = &st.nodes[*n];
+            (0..nx)
+                .map(|k| (0.5 * node.size[k] as f64 * lat.step[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(0.0, f64::max);
+    let req = requirement(eps, eps_d, l_mpc, l_nn, lo, hi);
+    let worst = st
+        .bounds
+        .iter()
+        .max_by(|a, b| a.1.eps.total_cmp(&b.1.eps).then(b.0.cmp(&a.0)));
+    let (binding, worst_cell) = match worst {
+        Some((n, b)) => {
+            let node = &st.nodes[*n];
+            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+            let what = if b.corner >= b.remainder {
+                "corner"
+            } else if b.form == Form::SecondOrder {
+                "second_order"
+            } else {
+                "first_order"
+            };
+            (what.to_string(), (lat.x(&node.lo), lat.x(&hi_key)))
+        }
+        None => (String::new(), (vec![], vec![])),
+    };
+    let solves = st.points.len();
+    let base = Certificate {
+        eps,
+        eps_d,
+        l_nn,
+        l_nn_method: method,
+        l_nn_naive: naive,
+        l_nn_lipsdp: sdp,
+        l_nn_vertex: None,
+        l_nn_lower: lower,
+        l_mpc,
+        l_mpc_is_estimate: true,
+        l_mpc_method: format!(
+            "estimate: max ‖∂κ/∂x‖₂ over the data ({sl:.4}) and neighbour difference \
+             quotients ({q:.4}); the local bound uses per-cell estimates instead (see local.note)"
+        ),
+        covering_radius: radius,
+        covering_method: "upper bound: the largest cell half-diagonal (every state is within \
+                          it of a corner of its cell)"
+            .into(),
+        f32_allowance: 0.0,
+        domain_lo: lo.clone(),
+        domain_hi: hi.clone(),
+        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        // The certificate is about sat(κ_NN), the output clamped to U_d (the data's stage-0
+        // input bounds): κ ∈ U_d, so the clamp never increases the error, and U_d lies
+        // inside the design's band U_d ⊕ [−ε, ε] ∩ U.
+        clamp_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        clamp_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        n_points: set.len(),
+        hash: r.model.content_hash(),
+    };
+    let local = LocalSummary {
+        method: "local".into(),
+        target_eps: rs.target_eps,
+        met: r.met,
+        cells: st.bounds.len(),
+        cells_second_order: st
+            .bounds
+            .iter()
+            .filter(|(_, b)| b.form == Form::SecondOrder)
+            .count(),
+        cells_fit_bound: st
+            .bounds
+            .iter()
+            .filter(|(_, b)| b.corner >= b.remainder)
+            .count(),
+        solves,
+        rounds: st.log.len(),
+        safety: rs.safety,
+        max_remainder: st
+            .bounds
+            .iter()
+            .map(|(_, b)| b.remainder)
+            .fold(0.0, f64::max),
+        binding,
+        worst_cell,
+        global_grid_solves: req.solves,
+        sparsification: req.solves.map(|g| g / solves.max(1) as f64),
+        note: format!(
+            "ε = max over cells of max_corners |κ − sat(κ_NN)| + interpolation remainder. \
+             Sound: the corner errors (solved points), the network's value/Jacobian/curvature \
+             enclosures (interval bound propagation), the interpolation inequalities. \
+             Estimated: the range of ∂κ/∂x on each cell (hull of corner sensitivities and edge \
+             secants, widened ×{s}) and |∂²κ/∂x²| where all corners share one active set \
+             (×{s} the edge difference quotients); κ constant where all corners saturate.",
+            s = rs.safety
+        ),
+    };
+    LocalCertificate { base, local }
+}
+
+/// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),
+/// `certificate.json`, `cells.csv` (every leaf: box, ε_C, corner term, remainder, form),
+/// `refine_log.json`. Returns the certificate.
+pub fn write_outputs(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    r: &Refined,
+    dir: &Path,
+) -> Result<LocalCertificate, DatasetError> {
+    let cert = certificate(cfg, rs, r);
+    let mut model = r.model.clone();
+    model.certificate = Some(cert.base.clone());
+    model.save(&dir.join("model.bin"))?;
+    let ds = dataset(cfg, &r.state);
+    ds.save(&dir.join("dataset.bin"))?;
+    write_atomic(&dir.join("dataset.csv"), ds.to_csv().as_bytes())?;
+    write_atomic(&dir.join("certificate.json"), pretty(&cert).as_bytes())?;
+    write_atomic(
+        &dir.join("refine_log.json"),
+        pretty(&r.state.log).as_bytes(),
+    )?;
+    let nx = cfg.system.nx();
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(nx));
+    let mut csv = String::new();
+    for k in 0..nx {
+        csv.push_str(&format!("lo{},", k + 1));
+    }
+    for k in 0..nx {
+        csv.push_str(&format!("hi{},", k + 1));
+    }
+    csv.push_str("eps_c,corner,remainder,form\n");
+    for (n, b) in &r.state.bounds {
+        let node = &r.state.nodes[*n];
+        let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+        for v in lat.x(&node.lo).iter().chain(&lat.x(&hi)) {
+            csv.push_str(&format!("{v},"));
+        }
+        csv.push_str(&format!(
+            "{},{},{},{}\n",
+            b.eps,
+            b.corner,
+            b.remainder,
+            match b.form {
+                Form::FirstOrder => "first_order",
+                Form::SecondOrder => "second_order",
+            }
+        ));
+    }
+    write_atomic(&dir.join("cells.csv"), csv.as_bytes())?;
+    Ok(cert)
+}
+
+/// One cell of a local certificate in physical coordinates (what `study::plots::eps_map`
+/// draws).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellView {
+    /// Lower corner (first two state axes are drawn).
+    pub lo: Vec<f64>,
+    /// Upper corner.
+    pub hi: Vec<f64>,
+    /// ε_C.
+    pub eps: f64,
+    /// 0: the corner (fit) term binds; 1: first-order remainder; 2: second-order remainder.
+    pub binding: u8,
+}
+
+/// The leaf cells with their bounds, for the ε_C map.
+pub fn cell_views(cfg: &ProblemConfig, rs: &RefineSettings, st: &RefineState) -> Vec<CellView> {
+    let lat = Lattice::new(
+        &cfg.domain.lo,
+        &cfg.domain.hi,
+        &rs.initial_counts(cfg.system.nx()),
+    );
+    st.bounds
+        .iter()
+        .map(|(n, b)| {
+            let node = &st.nodes[*n];
+            let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+            CellView {
+                lo: lat.x(&node.lo),
+                hi: lat.x(&hi),
+                eps: b.eps,
+                binding: if b.corner >= b.remainder {
+                    0
+                } else if b.form == Form::SecondOrder {
+                    2
+                } else {
+                    1
+                },
+            }
+        })
+        .collect()
+}
+
+/// Pretty JSON of a serialisable value.
+pub fn pretty<T: Serialize>(v: &T) -> String {
+    serde_json::to_string_pretty(v).unwrap_or_default()
+}

@@ -1,0 +1,420 @@
+//! The refinement loop: label new corners, (re)train, bound every leaf cell, split the cells
+//! above the target — round after round, checkpointed, until the target ε is met or the
+//! budget of solves is spent.
+
+use super::*;
+use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
+use crate::certify::netbounds::NetBounder;
+use crate::certify::Model;
+use crate::data::dataset::DatasetError;
+use crate::io::write_atomic;
+use crate::learn::mlp::{Mlp, Workspace};
+use crate::learn::train::{train_from, TrainOptions, TrainSet};
+use crate::problem::{ProblemConfig, RefineSettings, TrainSettings};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::Instant;
+
+/// Options of a refinement run.
+#[derive(Debug, Clone, Default)]
+pub struct RefineOptions {
+    /// Called after each round.
+    pub on_round: Option<fn(&RoundLog, usize)>,
+}
+
+/// The result of a refinement run.
+#[derive(Debug, Clone)]
+pub struct Refined {
+    /// The final state.
+    pub state: RefineState,
+    /// The final trained model.
+    pub model: Model,
+    /// Whether every cell meets the target.
+    pub met: bool,
+}
+
+/// What a checkpoint must match: the labels (problem), the domain, the initial grid, the
+/// network's shape and the safety factor (the certificate's meaning). Target, budget,
+/// rounds and training rates may change on resume (e.g. a larger budget continues a run).
+fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    h.update(cfg.problem_hash());
+    let nx = cfg.system.nx();
+    let key = (
+        &cfg.domain,
+        rs.initial_counts(nx),
+        &rs.training.hidden,
+        rs.training.activation,
+        rs.safety.to_bits(),
+    );
+    h.update(postcard::to_allocvec(&key).unwrap_or_default());
+    crate::io::hex(&h.finalize())
+}
+
+pub(super) fn train_set(
+    st: &RefineState,
+    nx: usize,
+    nu: usize,
+    extra: &[usize],
+    reps: usize,
+) -> TrainSet {
+    let mut s = TrainSet {
+        nx,
+        nu,
+        ..Default::default()
+    };
+    let mut push = |p: &Point| {
+        s.x.extend(&p.x);
+        s.u.extend(&p.u);
+        s.du.extend(&p.du);
+        s.use_jac.push(p.regular);
+    };
+    for p in st.points.iter().filter(|p| p.labelled()) {
+        push(p);
+    }
+    for _ in 1..reps {
+        for &i in extra {
+            push(&st.points[i]);
+        }
+    }
+    s
+}
+
+/// Bounds every leaf; returns (leaf, bound) in leaf order.
+fn bound_leaves(
+    st: &RefineState,
+    lat: &Lattice,
+    mlp: &Mlp,
+    band: (&[f64], &[f64]),
+    ls: &LocalSettings,
+) -> Vec<(usize, CellBound)> {
+    let nb = NetBounder::new(mlp);
+    let nu = mlp.nu();
+    // Network at every point once.
+    let net_u: Vec<f64> = st
+        .points
+        .par_chunks(256)
+        .flat_map_iter(|ch| {
+            let mut ws = Workspace::default();
+            let mut out = Vec::with_capacity(ch.len() * nu);
+            let mut u = vec![0.0; nu];
+            let mut j = vec![0.0; nu * mlp.nx()];
+            for p in ch {
+                mlp.eval(&p.x, &mut u, &mut j, &mut ws);
+                out.extend_from_slice(&u);
+            }
+            out
+        })
+        .collect();
+    let leaves: Vec<usize> = (0..st.nodes.len())
+        .filter(|&i| st.nodes[i].split.is_none())
+        .collect();
+    leaves
+        .par_iter()
+        .map(|&n| {
+            let node = &st.nodes[n];
+            let lo = lat.x(&node.lo);
+            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
+            let hi = lat.x(&hi_key);
+            let pts: Vec<&Point> = node.corners.iter().map(|&c| &st.points[c]).collect();
+            if !pts.iter().all(|p| p.labelled()) {
+                let b = CellBound {
+                    eps: f64::INFINITY,
+                    corner: f64::INFINITY,
+                    remainder: f64::INFINITY,
+                    form: Form::FirstOrder,
+                    axis_terms: vec![f64::INFINITY; lo.len()],
+                };
+                return (n, b);
+            }
+            let corners: Vec<Corner> = pts
+                .iter()
+                .map(|p| Corner {
+                    u: &p.u,
+                    du: &p.du,
+                    regular: p.regular,
+                    piece: p.piece,
+                })
+                .collect();
+            let nu_c: Vec<f64> = node
+                .corners
+                .iter()
+                .flat_map(|&c| net_u[c * nu..(c + 1) * nu].iter().copied())
+                .collect();
+            (
+                n,
+                cell_bound(&lo, &hi, &corners, &nu_c, &nb.bounds(&lo, &hi), band, ls),
+            )
+        })
+        .collect()
+}
+
+/// Runs (or resumes from `checkpoint`) the refinement of `cfg` to `rs.target_eps`.
+pub fn refine(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    checkpoint: Option<&Path>,
+    opts: &RefineOptions,
+) -> Result<Refined, RefineError> {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let counts = rs.initial_counts(nx);
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
+    let hash = settings_hash(cfg, rs);
+    let band = cfg.ocp.u_bounds(0);
+    let ls = LocalSettings { safety: rs.safety };
+    let mut ctx = Ctx {
+        cfg,
+        lat: lat.clone(),
+        index: HashMap::new(),
+    };
+    let resumed = match checkpoint.filter(|p| p.exists()) {
+        Some(p) => {
+            let bytes = std::fs::read(p).map_err(|e| DatasetError::Io {
+                path: p.display().to_string(),
+                source: e,
+            })?;
+            let st: RefineState =
+                postcard::from_bytes(&bytes).map_err(|e| RefineError::Corrupt {
+                    path: p.to_path_buf(),
+                    reason: e.to_string(),
+                })?;
+            if st.hash != hash {
+                return Err(RefineError::Mismatch {
+                    path: p.to_path_buf(),
+                });
+            }
+            Some(st)
+        }
+        None => None,
+    };
+    let mut pending = Vec::new();
+    if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
+        // A finished run: return its result unless the settings now allow more (a lower
+        // target, a larger budget or more rounds).
+        let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
+        let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
+        if let (false, Some(model)) = (more, st.model.clone()) {
+            return Ok(Refined {
+                met,
+                state: st.clone(),
+                model,
+            });
+        }
+    }
+    let mut st = match resumed {
+        Some(st) => {
+            for (i, p) in st.points.iter().enumerate() {
+                ctx.index.insert(p.key.clone(), i);
+                // Points created by the last checkpointed round's splits, not yet solved.
+                if p.status.is_none() {
+                    pending.push(i);
+                }
+            }
+            st
+        }
+        None => {
+            let mut st = RefineState {
+                hash: hash.clone(),
+                points: Vec::new(),
+                nodes: Vec::new(),
+                roots: Vec::new(),
+                model: None,
+                best: None,
+                log: Vec::new(),
+                bounds: Vec::new(),
+                finished: false,
+            };
+            // The initial grid's cells.
+            let cells: Vec<usize> = counts.iter().map(|c| c - 1).collect();
+            let total: usize = cells.iter().product();
+            for mut r in 0..total {
+                let mut lo = vec![0u64; nx];
+                for k in (0..nx).rev() {
+                    lo[k] = ((r % cells[k]) as u64) << LEVELS;
+                    r /= cells[k];
+                }
+                let n = ctx.node(&mut st, lo, vec![1u64 << LEVELS; nx], &mut pending);
+                st.roots.push(n);
+            }
+            st
+        }
+    };
+    loop {
+        let t0 = Instant::now();
+        let round = st.log.len();
+        label(cfg, &mut st.points, &pending);
+        pending.clear();
+        // Retrain when a failing cell's corner (fit) error is a large part of the target:
+        // splitting cannot help there. Otherwise keep the net and only split (retraining
+        // would move every cell's bound).
+        let fit_bound = st
+            .bounds
+            .iter()
+            .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
+        let retrain = st.model.is_none() || fit_bound;
+        if retrain {
+            // Emphasis: points with a large error under the current net.
+            let mut hard = Vec::new();
+            if let Some(m) = &st.model {
+                let mut ws = Workspace::default();
+                let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+                for (i, p) in st.points.iter().enumerate().filter(|(_, p)| p.labelled()) {
+                    m.mlp.eval(&p.x, &mut u, &mut j, &mut ws);
+                    let e = (0..nu)
+                        .map(|r| (p.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    if e > rs.emphasis_at * rs.target_eps {
+                        hard.push(i);
+                    }
+                }
+            }
+            let set = train_set(&st, nx, nu, &hard, rs.emphasis);
+            let ts = match &st.model {
+                Some(_) => TrainSettings {
+                    epochs: rs.round_epochs,
+                    learning_rate: rs.round_learning_rate,
+                    ..rs.training.clone()
+                },
+                None => rs.training.clone(),
+            };
+            st.model = Some(train_from(
+                st.model.as_ref().map(|m| m.mlp.clone()),
+                &ts,
+                &TrainOptions {
+                    nominal: false,
+                    progress: None,
+                },
+                &set,
+                &TrainSet::default(),
+                (&cfg.domain.lo, &cfg.domain.hi),
+                band,
+                &cfg.problem_hash(),
+                &hash,
+            ));
+        }
+        let model = st.model.clone().expect("trained above");
+        st.bounds = bound_leaves(&st, &lat, &model.mlp, band, &ls);
+        let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+        let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
+        let ok = st
+            .bounds
+            .iter()
+            .filter(|(_, b)| b.eps <= rs.target_eps)
+            .count();
+        let second = st
+            .bounds
+            .iter()
+            .filter(|(_, b)| b.form == Form::SecondOrder)
+            .count();
+        let solves = st.points.len();
+        let log = RoundLog {
+            round,
+            solves,
+            cells: st.bounds.len(),
+            cells_ok: ok,
+            eps,
+            eps_d,
+            second_order: second,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        st.log.push(log.clone());
+        if st.best.as_ref().is_none_or(|(e, _)| eps < *e) {
+            st.best = Some((eps, model.clone()));
+        }
+        if let Some(f) = opts.on_round {
+            f(&log, rs.budget);
+        }
+        let met = ok == st.bounds.len();
+        // Split the failing cells, worst first, within the budget.
+        let mut bad: Vec<(usize, CellBound)> = st
+            .bounds
+            .iter()
+            .filter(|(_, b)| b.eps > rs.target_eps)
+            .cloned()
+            .collect();
+        bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
+        let mut split_any = false;
+        if !met && round + 1 < rs.max_rounds {
+            for (n, b) in bad {
+                let node = st.nodes[n].clone();
+                // Axis: the largest remainder term; ties and infinite terms: longest side
+                // relative to X.
+                let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
+                // A corner without an MPC label (failed solve): splitting cannot help; the
+                // cell stays uncertified (ε_C = ∞) and is reported.
+                if !b.corner.is_finite() {
+                    continue;
+                }
+                let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width;
+                let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
+                let Some(&first) = cand.first() else {
+                    continue;
+                };
+                // Axis: the largest remainder term; ties and infinite terms: longest side
+                // relative to X. Where the fit at the corners dominates: the longest side
+                // (more data there).
+                let mut axis = first;
+                for &k in &cand[1..] {
+                    let (tk, ta) = (b.axis_terms[k], b.axis_terms[axis]);
+                    if tk > ta || (tk == ta && rel(k) > rel(axis)) {
+                        axis = k;
+                    }
+                }
+                if b.remainder < 0.25 * b.corner || !b.axis_terms[axis].is_finite() {
+                    axis = cand
+                        .iter()
+                        .copied()
+                        .max_by(|&a, &c| rel(a).total_cmp(&rel(c)).then(c.cmp(&a)))
+                        .unwrap_or(first);
+                }
+                // New points are pushed onto `st.points` as they are created.
+                let needed = 1usize << (nx - 1);
+                if st.points.len() + needed > rs.budget {
+                    break;
+                }
+                let half = node.size[axis] / 2;
+                let mut size = node.size.clone();
+                size[axis] = half;
+                let a = ctx.node(&mut st, node.lo.clone(), size.clone(), &mut pending);
+                let mut lo2 = node.lo.clone();
+                lo2[axis] += half;
+                let b2 = ctx.node(&mut st, lo2, size, &mut pending);
+                st.nodes[n].split = Some((a, b2, axis));
+                split_any = true;
+            }
+        }
+        let done = met || !split_any;
+        let mut model = model;
+        if done && !met {
+            // Not met: the best model so far, bounded on the final (finer) tree, may do
+            // better than the last one.
+            if let Some((_, best)) = st.best.clone() {
+                let b = bound_leaves(&st, &lat, &best.mlp, band, &ls);
+                let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+                if e < eps {
+                    st.bounds = b;
+                    model = best;
+                }
+            }
+            st.model = Some(model.clone());
+        }
+        st.finished = done;
+        if let Some(p) = checkpoint {
+            // The checkpoint holds the tree with the new (unlabelled) points: on resume,
+            // they are the ones labelled first.
+            let bytes = postcard::to_allocvec(&st).unwrap_or_default();
+            write_atomic(p, &bytes)?;
+        }
+        if done {
+            let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
+            return Ok(Refined {
+                met,
+                state: st,
+                model,
+            });
+        }
+    }
+}
