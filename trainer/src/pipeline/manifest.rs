@@ -1,0 +1,142 @@
+//! Skip-if-unchanged: a stage's manifest (`manifest_<stage>.json`) records the SHA-256 of
+//! its inputs (files of earlier stages, settings serialised as JSON), its outputs, the trainer
+//! version and its wall time; a stage whose recorded inputs equal the current ones, built by
+//! the same version, with every output present, is not run again.
+
+use super::{fail, PipelineError, RunOptions, StageReport};
+use crate::io::{hex, write_atomic};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// A stage's manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Stage name.
+    pub stage: String,
+    /// trainer version.
+    pub version: String,
+    /// Input name → SHA-256 (files) or settings hash.
+    pub inputs: BTreeMap<String, String>,
+    /// Output files (relative to the run directory).
+    pub outputs: Vec<String>,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+pub(super) fn sha_file(p: &Path) -> Result<String, std::io::Error> {
+    Ok(hex(&Sha256::digest(std::fs::read(p)?)))
+}
+
+fn sha_str(s: &str) -> String {
+    hex(&Sha256::digest(s.as_bytes()))
+}
+
+/// The hash of a settings value (its JSON serialisation).
+pub(super) fn settings_hash<T: Serialize>(v: &T) -> String {
+    sha_str(&serde_json::to_string(v).unwrap_or_default())
+}
+
+/// The run directory and what happened so far.
+pub(super) struct Ctx<'a> {
+    pub(super) dir: PathBuf,
+    pub(super) opts: &'a RunOptions,
+    pub(super) reports: Vec<StageReport>,
+}
+
+impl Ctx<'_> {
+    /// Runs `body` unless the manifest says its inputs are unchanged.
+    pub(super) fn stage(
+        &mut self,
+        name: &str,
+        inputs: BTreeMap<String, String>,
+        outputs: &[&str],
+        body: impl FnOnce(&Path) -> Result<String, PipelineError>,
+    ) -> Result<(), PipelineError> {
+        let mpath = self.dir.join(format!("manifest_{name}.json"));
+        let forced = self.opts.force.iter().any(|f| f == name);
+        if !forced {
+            if let Some(m) = self.unchanged(&mpath, &inputs, outputs) {
+                let r = StageReport {
+                    stage: name.into(),
+                    skipped: true,
+                    seconds: m.seconds,
+                    summary: "unchanged inputs, skipped".into(),
+                    inputs: m.inputs,
+                    outputs: m.outputs,
+                };
+                self.report(r);
+                return Ok(());
+            }
+        }
+        let t = Instant::now();
+        // Labelling and seed stages draw their own progress bar; the others show a spinner.
+        let spinner = if self.opts.progress && !["sample", "validate", "seeds"].contains(&name) {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} [{prefix:>11}] {elapsed}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+            );
+            b.set_prefix(name.to_string());
+            b.enable_steady_tick(std::time::Duration::from_millis(100));
+            Some(b)
+        } else {
+            None
+        };
+        let summary = body(&self.dir);
+        if let Some(b) = spinner {
+            b.finish_and_clear();
+        }
+        let summary = summary?;
+        let seconds = t.elapsed().as_secs_f64();
+        let m = Manifest {
+            stage: name.into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+            inputs: inputs.clone(),
+            outputs: outputs.iter().map(|s| s.to_string()).collect(),
+            seconds,
+        };
+        let json = serde_json::to_string_pretty(&m).map_err(|e| fail(name, e))?;
+        write_atomic(&mpath, json.as_bytes()).map_err(|e| fail(name, e))?;
+        self.report(StageReport {
+            stage: name.into(),
+            skipped: false,
+            seconds,
+            summary,
+            inputs,
+            outputs: m.outputs,
+        });
+        Ok(())
+    }
+
+    /// The manifest at `mpath` if it records these inputs, this version, and every output
+    /// exists.
+    fn unchanged(
+        &self,
+        mpath: &Path,
+        inputs: &BTreeMap<String, String>,
+        outputs: &[&str],
+    ) -> Option<Manifest> {
+        let text = std::fs::read_to_string(mpath).ok()?;
+        let m = serde_json::from_str::<Manifest>(&text).ok()?;
+        (m.inputs == *inputs
+            && m.version == env!("CARGO_PKG_VERSION")
+            && outputs.iter().all(|o| self.dir.join(o).exists()))
+        .then_some(m)
+    }
+
+    fn report(&mut self, r: StageReport) {
+        if let Some(f) = self.opts.on_stage {
+            f(&r);
+        }
+        self.reports.push(r);
+    }
+
+    /// SHA-256 of a file of the run directory (the error names the stage and the file).
+    pub(super) fn hash(&self, stage: &str, file: &str) -> Result<String, PipelineError> {
+        let p = self.dir.join(file);
+        sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
+    }
+}

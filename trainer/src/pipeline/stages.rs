@@ -1,0 +1,510 @@
+//! The stages of `trainer run`, in order, each a value: its name, the inputs it hashes
+//! (files of earlier stages and the settings it reads), the files it writes, and its body.
+//!
+//! ```text
+//! sample → validate → train → certify → export → closed_loop → seeds → plots → report
+//! ```
+
+use super::manifest::{settings_hash, sha_file, Ctx};
+use super::{fail, PipelineError};
+use crate::certify::certificate::{certify, Certificate, CertifyOptions};
+use crate::certify::Model;
+use crate::data::dataset::{generate, Dataset, GenerateOptions};
+use crate::io::write_atomic;
+use crate::learn::train::{train, TrainOptions, TrainSet};
+use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
+use crate::study::plots::{FigureEntry, PLOTS};
+use crate::study::report::Timing;
+use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop};
+use crate::study::seeds::seed_study;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What a stage's body sees: the problem, whether to draw progress bars, and the timings of
+/// the stages before it (for the report).
+pub(super) struct Env<'a> {
+    pub(super) cfg: &'a ProblemConfig,
+    pub(super) progress: bool,
+    pub(super) timings: Vec<Timing>,
+}
+
+type Inputs = BTreeMap<String, String>;
+
+/// One stage of the pipeline.
+pub(super) struct Stage {
+    /// Its name (`manifest_<name>.json`, `--force <name>`).
+    pub(super) name: &'static str,
+    /// Input name → hash.
+    pub(super) inputs: fn(&Ctx, &ProblemConfig) -> Result<Inputs, PipelineError>,
+    /// The files it writes, relative to the run directory.
+    pub(super) outputs: fn() -> Vec<String>,
+    /// Does the work in the run directory; returns a one-line summary.
+    pub(super) body: fn(&Env, &Path) -> Result<String, PipelineError>,
+}
+
+/// The stages in order (their names are [`super::STAGES`]).
+pub(super) const ALL: [Stage; 9] = [
+    Stage {
+        name: "sample",
+        inputs: sample_inputs,
+        outputs: || files(&["dataset.bin", "dataset.csv"]),
+        body: sample,
+    },
+    Stage {
+        name: "validate",
+        inputs: validate_inputs,
+        outputs: || files(&["validation.bin"]),
+        body: validate,
+    },
+    Stage {
+        name: "train",
+        inputs: train_inputs,
+        outputs: || files(&["model_nominal.bin", "model_regularized.bin"]),
+        body: train_both,
+    },
+    Stage {
+        name: "certify",
+        inputs: certify_inputs,
+        outputs: || files(&["certificate.json", "certificate_nominal.json"]),
+        body: certify_both,
+    },
+    Stage {
+        name: "export",
+        inputs: export_inputs,
+        outputs: || files(&["weights.rs", "weights.bin", "export_report.json"]),
+        body: export,
+    },
+    Stage {
+        name: "closed_loop",
+        inputs: closed_loop_inputs,
+        outputs: || files(&["closed_loop.json"]),
+        body: closed_loop_study,
+    },
+    Stage {
+        name: "seeds",
+        inputs: seeds_inputs,
+        outputs: || files(&["seeds.json"]),
+        body: seeds,
+    },
+    Stage {
+        name: "plots",
+        inputs: plots_inputs,
+        outputs: plot_files,
+        body: plots,
+    },
+    Stage {
+        name: "report",
+        inputs: report_inputs,
+        outputs: || files(&["report.md", "report.html"]),
+        body: report,
+    },
+];
+
+fn files(names: &[&str]) -> Vec<String> {
+    names.iter().map(|s| s.to_string()).collect()
+}
+
+/// Hashes of the named files of the run directory.
+fn hashes(cx: &Ctx, stage: &str, names: &[&str]) -> Result<Inputs, PipelineError> {
+    let mut inputs = BTreeMap::new();
+    for f in names {
+        inputs.insert(f.to_string(), cx.hash(stage, f)?);
+    }
+    Ok(inputs)
+}
+
+fn load_dataset(stage: &str, p: &Path) -> Result<Dataset, PipelineError> {
+    Dataset::load(p).map_err(|e| fail(stage, e))
+}
+
+fn load_model(stage: &str, p: &Path) -> Result<Model, PipelineError> {
+    Model::load(p).map_err(|e| fail(stage, e))
+}
+
+fn load_json<T: serde::de::DeserializeOwned>(stage: &str, p: &Path) -> Result<T, PipelineError> {
+    let text =
+        std::fs::read_to_string(p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
+    serde_json::from_str(&text).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
+}
+
+// ---- sample: the labelled sampling plan -------------------------------------------------
+
+fn sample_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = BTreeMap::new();
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("sampling".into(), settings_hash(&cfg.sampling));
+    Ok(inputs)
+}
+
+fn sample(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let g = GenerateOptions {
+        shard: None,
+        progress: env.progress,
+    };
+    let ds = generate(env.cfg, &d.join("dataset.bin"), &g).map_err(|e| fail("sample", e))?;
+    let c = ds.counts();
+    Ok(format!(
+        "{} states: {} converged, {} soft, {} infeasible, {} failed, {} degenerate",
+        c.total, c.converged, c.soft, c.infeasible, c.failed, c.degenerate
+    ))
+}
+
+// ---- validate: MPC labels of random states (R², L_MPC estimate) ------------------------
+
+/// The problem whose sampling plan is the validation set.
+fn validation_config(cfg: &ProblemConfig) -> ProblemConfig {
+    let mut vcfg = cfg.clone();
+    vcfg.sampling = SamplingSettings {
+        sampler: SamplerKind::Random,
+        n: cfg.training.validation_n.max(1),
+        seed: cfg.training.validation_seed,
+        counts: vec![],
+    };
+    vcfg
+}
+
+fn validate_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = BTreeMap::new();
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert(
+        "sampling".into(),
+        settings_hash(&validation_config(cfg).sampling),
+    );
+    Ok(inputs)
+}
+
+fn validate(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let g = GenerateOptions {
+        shard: None,
+        progress: env.progress,
+    };
+    let vcfg = validation_config(env.cfg);
+    let ds = generate(&vcfg, &d.join("validation.bin"), &g).map_err(|e| fail("validate", e))?;
+    Ok(format!(
+        "{} random validation states labelled",
+        ds.records.len()
+    ))
+}
+
+// ---- train: nominal and regularized nets from the same initial weights -----------------
+
+fn train_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = BTreeMap::new();
+    inputs.insert("dataset".into(), cx.hash("train", "dataset.bin")?);
+    inputs.insert("validation".into(), cx.hash("train", "validation.bin")?);
+    inputs.insert("training".into(), settings_hash(&cfg.training));
+    Ok(inputs)
+}
+
+fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let cfg = env.cfg;
+    let data = load_dataset("train", &d.join("dataset.bin"))?;
+    let val = load_dataset("train", &d.join("validation.bin"))?;
+    let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("train", e))?;
+    let (set, vset) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+    if set.is_empty() {
+        return Err(fail("train", "the dataset has no labelled points"));
+    }
+    let one = |nominal: bool| -> Model {
+        train(
+            &cfg.training,
+            &TrainOptions {
+                nominal,
+                progress: None,
+            },
+            &set,
+            &vset,
+            (&cfg.domain.lo, &cfg.domain.hi),
+            (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+            &data.header.problem_hash,
+            &dh,
+        )
+    };
+    let (n, r) = rayon::join(|| one(true), || one(false));
+    n.save(&d.join("model_nominal.bin"))
+        .map_err(|e| fail("train", e))?;
+    r.save(&d.join("model_regularized.bin"))
+        .map_err(|e| fail("train", e))?;
+    Ok(format!(
+        "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}",
+        n.train_stats.max, n.validation_stats.r2, r.train_stats.max, r.validation_stats.r2
+    ))
+}
+
+// ---- certify: Theorem 1 for both nets --------------------------------------------------
+
+fn certify_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    hashes(
+        cx,
+        "certify",
+        &[
+            "dataset.bin",
+            "validation.bin",
+            "model_nominal.bin",
+            "model_regularized.bin",
+        ],
+    )
+}
+
+fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let data = load_dataset("certify", &d.join("dataset.bin"))?;
+    let val = load_dataset("certify", &d.join("validation.bin"))?;
+    let extra = Some(TrainSet::from_dataset(&val));
+    let mut out = String::new();
+    for (file, json) in [
+        ("model_regularized.bin", "certificate.json"),
+        ("model_nominal.bin", "certificate_nominal.json"),
+    ] {
+        let m = load_model("certify", &d.join(file))?;
+        let c = certify(
+            &m,
+            &data,
+            env.cfg,
+            &CertifyOptions {
+                extra: extra.clone(),
+                ..Default::default()
+            },
+        );
+        let text = serde_json::to_string_pretty(&c).map_err(|e| fail("certify", e))?;
+        write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
+        out += &format!(
+            "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
+            c.eps, c.eps_d, c.l_nn, c.covering_radius
+        );
+    }
+    Ok(out)
+}
+
+// ---- export: the regularized net for controller-core -----------------------------------
+
+fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    hashes(cx, "export", &["model_regularized.bin", "certificate.json"])
+}
+
+fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let m = load_model("export", &d.join("model_regularized.bin"))?;
+    let c: Certificate = load_json("export", &d.join("certificate.json"))?;
+    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c)
+        .map_err(|e| fail("export", e))?;
+    let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
+        .map_err(|e| fail("export", e))?;
+    let json = serde_json::json!({
+        "f32_allowance_libm": r.f32_allowance[0],
+        "f32_allowance_fast_tanh": r.f32_allowance[1],
+        "f32_observed_libm": r.f32_observed[0],
+        "f32_observed_fast_tanh": r.f32_observed[1],
+        "samples": r.samples,
+        "eps_f64": c.eps,
+        "eps_device_libm": c.eps + r.f32_allowance[0],
+    });
+    write_atomic(&d.join("export_report.json"), json.to_string().as_bytes())
+        .map_err(|e| fail("export", e))?;
+    Ok(format!(
+        "weights.rs + weights.bin; f32 allowance {:.3e} (observed {:.3e} on {} states)",
+        r.f32_allowance[0], r.f32_observed[0], r.samples
+    ))
+}
+
+// ---- closed_loop: MPC and both nets in the loop ----------------------------------------
+
+fn closed_loop_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        "closed_loop",
+        &[
+            "model_nominal.bin",
+            "model_regularized.bin",
+            "certificate.json",
+            "certificate_nominal.json",
+        ],
+    )?;
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("settings".into(), settings_hash(&cfg.closed_loop));
+    Ok(inputs)
+}
+
+fn closed_loop_study(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let load = |f: &str, c: &str| -> Result<Model, PipelineError> {
+        let mut m = load_model("closed_loop", &d.join(f))?;
+        m.certificate = Some(load_json("closed_loop", &d.join(c))?);
+        Ok(m)
+    };
+    let (n, r) = (
+        load("model_nominal.bin", "certificate_nominal.json")?,
+        load("model_regularized.bin", "certificate.json")?,
+    );
+    let cl = closed_loop(env.cfg, &n, &r);
+    let text = serde_json::to_string(&cl).map_err(|e| fail("closed_loop", e))?;
+    write_atomic(&d.join("closed_loop.json"), text.as_bytes())
+        .map_err(|e| fail("closed_loop", e))?;
+    let first = |k: &str| cl.get(k).and_then(|v| v.first()).cloned();
+    let mut s = String::new();
+    for k in ["mpc", "nominal", "regularized"] {
+        if let Some(r) = first(k) {
+            s += &format!(
+                "{k}: {:.1} % violating, max {:.3}, divergence {:.3}; ",
+                r.violation_percent, r.max_violation, r.max_input_divergence
+            );
+        }
+    }
+    Ok(s)
+}
+
+// ---- seeds: the nets from other seeds' initial weights, in the closed loop -------------
+
+fn seeds_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        "seeds",
+        &[
+            "dataset.bin",
+            "validation.bin",
+            "model_nominal.bin",
+            "model_regularized.bin",
+        ],
+    )?;
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("training".into(), settings_hash(&cfg.training));
+    inputs.insert("settings".into(), settings_hash(&cfg.closed_loop));
+    Ok(inputs)
+}
+
+fn seeds(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let data = load_dataset("seeds", &d.join("dataset.bin"))?;
+    let val = load_dataset("seeds", &d.join("validation.bin"))?;
+    let own = [
+        load_model("seeds", &d.join("model_nominal.bin"))?,
+        load_model("seeds", &d.join("model_regularized.bin"))?,
+    ];
+    let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
+    let study = seed_study(env.cfg, &data, &val, &dh, &own, env.progress);
+    let text = serde_json::to_string(&study).map_err(|e| fail("seeds", e))?;
+    write_atomic(&d.join("seeds.json"), text.as_bytes()).map_err(|e| fail("seeds", e))?;
+    Ok(format!(
+        "{} seeds × 2 nets from x₀ = {:?}",
+        study.len(),
+        initial_states(env.cfg)[0]
+    ))
+}
+
+// ---- plots: the figures, SVG and PNG ---------------------------------------------------
+
+fn plot_files() -> Vec<String> {
+    PLOTS
+        .iter()
+        .flat_map(|n| [format!("plots/{n}.svg"), format!("plots/{n}.png")])
+        .chain(["plots/figures.json".to_string()])
+        .collect()
+}
+
+fn plots_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        "plots",
+        &[
+            "dataset.bin",
+            "validation.bin",
+            "model_nominal.bin",
+            "model_regularized.bin",
+            "closed_loop.json",
+        ],
+    )?;
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("settings".into(), settings_hash(&cfg.plots));
+    Ok(inputs)
+}
+
+fn plots(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let cfg = env.cfg;
+    let figs = make_plots(cfg, d)?;
+    let pdir = d.join("plots");
+    std::fs::create_dir_all(&pdir)
+        .map_err(|e| fail("plots", format!("{}: {e}", pdir.display())))?;
+    let pngs: Vec<Result<Vec<u8>, crate::study::plots::PlotError>> = figs
+        .par_iter()
+        .map(|f| crate::study::plots::to_png(f.name, &f.svg, cfg.plots.png_scale as f32))
+        .collect();
+    let mut index = Vec::new();
+    for (f, png) in figs.iter().zip(pngs) {
+        let png = png.map_err(|e| fail("plots", e))?;
+        index.push(FigureEntry {
+            name: f.name.to_string(),
+            caption: f.caption.clone(),
+            svg: format!("plots/{}.svg", f.name),
+            png: format!("plots/{}.png", f.name),
+        });
+        write_atomic(&pdir.join(format!("{}.svg", f.name)), f.svg.as_bytes())
+            .map_err(|e| fail("plots", e))?;
+        write_atomic(&pdir.join(format!("{}.png", f.name)), &png).map_err(|e| fail("plots", e))?;
+    }
+    let json = serde_json::to_string_pretty(&index).map_err(|e| fail("plots", e))?;
+    write_atomic(&pdir.join("figures.json"), json.as_bytes()).map_err(|e| fail("plots", e))?;
+    Ok(format!(
+        "{} figures (SVG + PNG) in {}",
+        figs.len(),
+        pdir.display()
+    ))
+}
+
+/// Renders the figures of the run in `dir` (labels the error-map grid with the MPC).
+fn make_plots(
+    cfg: &ProblemConfig,
+    d: &Path,
+) -> Result<Vec<crate::study::plots::Figure>, PipelineError> {
+    let data = load_dataset("plots", &d.join("dataset.bin"))?;
+    let val = load_dataset("plots", &d.join("validation.bin"))?;
+    let nom = load_model("plots", &d.join("model_nominal.bin"))?;
+    let reg = load_model("plots", &d.join("model_regularized.bin"))?;
+    let cl: ClosedLoop = load_json("plots", &d.join("closed_loop.json"))?;
+    let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid);
+    let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+    let inputs = crate::study::plots::PlotInputs {
+        cfg,
+        train: &train,
+        validation: &validation,
+        nominal: &nom,
+        regularized: &reg,
+        closed_loop: &cl,
+        grid: &grid,
+    };
+    let figs = crate::study::plots::all(&inputs).map_err(|e| fail("plots", e))?;
+    debug_assert_eq!(figs.len(), PLOTS.len());
+    Ok(figs)
+}
+
+// ---- report: everything in one page, Markdown and HTML ---------------------------------
+
+// Timings change from run to run: they are shown, not hashed (a skipped report keeps the
+// timings of the run that wrote it).
+fn report_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        "report",
+        &[
+            "export_report.json",
+            "dataset.bin",
+            "certificate.json",
+            "certificate_nominal.json",
+            "closed_loop.json",
+            "model_nominal.bin",
+            "model_regularized.bin",
+            "seeds.json",
+        ],
+    )?;
+    for f in plot_files() {
+        let h = cx.hash("report", &f)?;
+        inputs.insert(f, h);
+    }
+    Ok(inputs)
+}
+
+fn report(env: &Env, d: &Path) -> Result<String, PipelineError> {
+    let rep =
+        crate::study::report::build(env.cfg, d, &env.timings).map_err(|e| fail("report", e))?;
+    write_atomic(&d.join("report.md"), rep.to_markdown().as_bytes())
+        .map_err(|e| fail("report", e))?;
+    let html = rep.to_html(d).map_err(|e| fail("report", e))?;
+    write_atomic(&d.join("report.html"), html.as_bytes()).map_err(|e| fail("report", e))?;
+    Ok(format!("{} + report.html", d.join("report.md").display()))
+}
