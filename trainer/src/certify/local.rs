@@ -22,7 +22,7 @@
 //! in the 2-norm.
 //!
 //! **Network parts (sound).** ∂_k κ_NN, ∂²_kk κ_NN and κ_NN over C are enclosed by
-//! [`crate::netbounds`]. The clamp: if the enclosure of κ_NN,i lies inside the band, sat is
+//! [`crate::certify::netbounds`]. The clamp: if the enclosure of κ_NN,i lies inside the band, sat is
 //! the identity on C; if it lies beyond one bound, sat∘κ_NN,i is constant on C (derivatives
 //! 0); otherwise the clamp may kink inside C, ∂_k sat(κ_NN) ∈ hull(J_k ∪ {0}) and only the
 //! first-order form applies.
