@@ -1,0 +1,263 @@
+//! The Lipschitz bounds: sampled ≤ vertex ≤ LipSDP ≤ naive on random nets, closed forms
+//! (one layer, one neuron, decoupled nets), the vertex enumeration against brute force,
+//! LipSDP against an independent solve; the MPC estimates of a linear law.
+
+use super::*;
+use crate::learn::mlp::Activation;
+
+fn net(seed: u64, widths: &[usize]) -> Mlp {
+    let nx = widths[0];
+    let nu = *widths.last().unwrap();
+    Mlp::new(
+        widths,
+        Activation::Tanh,
+        seed,
+        &vec![-2.0; nx],
+        &vec![3.0; nx],
+        &vec![-4.0; nu],
+        &vec![4.0; nu],
+    )
+}
+
+#[test]
+fn bounds_are_ordered_on_random_nets() {
+    for seed in 0..12 {
+        for widths in [[2usize, 10, 10, 1].as_slice(), &[2, 6, 1], &[3, 5, 4, 2]] {
+            let m = net(seed, widths);
+            let naive = naive_bound(&m);
+            let sdp = lipsdp_bound(&m);
+            let vert = vertex_bound(&m, 20).unwrap();
+            let lower = sampled_lower_bound(
+                &m,
+                &vec![-2.0; widths[0]],
+                &vec![3.0; widths[0]],
+                2000,
+                seed,
+            );
+            assert!(
+                lower <= vert * (1.0 + 1e-9),
+                "{seed} {widths:?}: lower {lower} > vertex {vert}"
+            );
+            assert!(
+                vert <= sdp * (1.0 + 1e-6),
+                "{seed} {widths:?}: vertex {vert} > lipsdp {sdp}"
+            );
+            assert!(
+                sdp <= naive * (1.0 + 1e-9),
+                "{seed} {widths:?}: lipsdp {sdp} > naive {naive}"
+            );
+        }
+    }
+}
+
+#[test]
+fn single_linear_layer_all_bounds_equal_the_norm() {
+    let m = net(3, &[3, 2]);
+    let w = DMatrix::from_row_slice(2, 3, &m.physical_layers()[0].w);
+    let n = spectral_norm(&w);
+    assert!((naive_bound(&m) - n).abs() < 1e-12);
+    assert!((lipsdp_bound(&m) - n).abs() < 1e-12);
+    assert!((vertex_bound(&m, 20).unwrap() - n).abs() < 1e-12);
+    let lower = sampled_lower_bound(&m, &[-2.0; 3], &[3.0; 3], 10, 1);
+    assert!((lower - n).abs() < 1e-9);
+}
+
+/// One hidden neuron: LipSDP-Neuron is exact, |w₂·w₁|.
+#[test]
+fn lipsdp_is_exact_for_one_neuron() {
+    let mut m = net(1, &[1, 1, 1]);
+    m.layers[0].w = vec![0.7];
+    m.layers[1].w = vec![-1.9];
+    let exact = naive_bound(&m);
+    assert!((lipsdp_bound(&m) - exact).abs() <= 1e-6 * exact);
+}
+
+/// The original enumeration: the plain product for every slope pattern.
+fn vertex_brute_force(mlp: &Mlp) -> f64 {
+    let w: Vec<DMatrix<f64>> = mlp.physical_layers().iter().map(mat).collect();
+    let hidden: usize = w[..w.len() - 1].iter().map(|m| m.nrows()).sum();
+    let mut best = 0.0f64;
+    for mask in 0u64..1 << hidden {
+        let mut bit = 0;
+        let mut p = DMatrix::zeros(0, 0);
+        for (j, wj) in w.iter().enumerate() {
+            p = if j == 0 { wj.clone() } else { wj * &p };
+            if j + 1 < w.len() {
+                for r in 0..wj.nrows() {
+                    if mask >> bit & 1 == 0 {
+                        p.row_mut(r).fill(0.0);
+                    }
+                    bit += 1;
+                }
+            }
+        }
+        best = best.max(spectral_norm(&p));
+    }
+    best
+}
+
+#[test]
+fn vertex_enumeration_matches_brute_force() {
+    for (seed, widths) in [
+        (1u64, [2usize, 6, 5, 1].as_slice()),
+        (2, &[2, 4, 7, 2]),
+        (3, &[3, 5, 3]),
+        (4, &[3, 3, 4, 3, 3]),
+        (5, &[1, 6, 2]),
+        (6, &[4, 2, 3, 5]),
+    ] {
+        let m = net(seed, widths);
+        let (fast, brute) = (vertex_bound(&m, 22).unwrap(), vertex_brute_force(&m));
+        assert!(
+            (fast - brute).abs() <= 1e-12 * brute,
+            "{widths:?}: {fast} vs {brute}"
+        );
+    }
+}
+
+/// Diagonal (unit-wise decoupled) nets: x_i ↦ w₃ᵢ σ(w₂ᵢ σ(w₁ᵢ xᵢ)), whose Lipschitz
+/// constant, LipSDP-Neuron optimum included, is maxᵢ |w₁ᵢ w₂ᵢ w₃ᵢ| (scaling removed).
+#[test]
+fn lipsdp_reaches_the_known_optimum_of_decoupled_nets() {
+    let n = 4;
+    let mut m = Mlp::new(
+        &[n, n, n, n],
+        Activation::Tanh,
+        0,
+        &vec![-1.0; n],
+        &vec![1.0; n],
+        &vec![-1.0; n],
+        &vec![1.0; n],
+    );
+    let w: [[f64; 4]; 3] = [
+        [0.7, -1.9, 2.5, 0.3],
+        [1.4, 0.8, -0.6, 3.0],
+        [-2.2, 1.1, 0.9, 0.5],
+    ];
+    let mut exact = 0.0f64;
+    for i in 0..n {
+        exact = exact.max((w[0][i] * w[1][i] * w[2][i]).abs());
+    }
+    for (l, wl) in m.layers.iter_mut().zip(&w) {
+        l.w.fill(0.0);
+        for i in 0..n {
+            l.w[i * n + i] = wl[i];
+        }
+    }
+    let sdp = lipsdp_bound(&m);
+    assert!(
+        sdp >= exact * (1.0 - 1e-12),
+        "{sdp} below the true constant {exact}"
+    );
+    assert!(sdp <= exact * (1.0 + 1e-5), "{sdp} vs optimum {exact}");
+    assert!((vertex_bound(&m, 22).unwrap() - exact).abs() <= 1e-12 * exact);
+}
+
+/// An independent LipSDP-Neuron solve: for fixed T, the least ρ with −M(ρ, T) ⪰ 0 by
+/// bisection on Cholesky factorisations of the full matrix (no Schur complement, no
+/// eigenvalues, no gradients), minimised over T by a derivative-free pattern search in
+/// log T (coordinate and random directions, shrinking steps).
+fn lipsdp_reference(mlp: &Mlp) -> f64 {
+    let sdp = LipSdp::new(mlp);
+    let least_rho = |t: &[f64]| -> f64 {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        let mut k = 0;
+        while !sdp.certify(hi, t) {
+            hi *= 4.0;
+            k += 1;
+            if k > 200 {
+                return f64::INFINITY;
+            }
+        }
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if sdp.certify(mid, t) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+            if hi - lo <= 1e-13 * hi {
+                break;
+            }
+        }
+        hi
+    };
+    let mut th = vec![0.0; sdp.nh];
+    let eval = |th: &[f64]| least_rho(&th.iter().map(|v| v.exp()).collect::<Vec<_>>());
+    // A feasible start: T = 2^k I with K(T) ≻ 0.
+    let mut f = eval(&th);
+    while !f.is_finite() {
+        th.iter_mut().for_each(|v| *v += std::f64::consts::LN_2);
+        f = eval(&th);
+    }
+    let mut step = 1.0;
+    let mut it = 0u64;
+    while step > 1e-8 {
+        let mut improved = false;
+        let ndir = 2 * sdp.nh + 6 * sdp.nh;
+        for d in 0..ndir {
+            let dir: Vec<f64> = if d < 2 * sdp.nh {
+                let s = if d % 2 == 0 { 1.0 } else { -1.0 };
+                (0..sdp.nh)
+                    .map(|k| if k == d / 2 { s } else { 0.0 })
+                    .collect()
+            } else {
+                it += 1;
+                (0..sdp.nh)
+                    .map(|k| 2.0 * crate::rng::uniform(77, it, k as u64) - 1.0)
+                    .collect()
+            };
+            let cand: Vec<f64> = th.iter().zip(&dir).map(|(a, b)| a + step * b).collect();
+            let fc = eval(&cand);
+            if fc < f {
+                f = fc;
+                th = cand;
+                improved = true;
+            }
+        }
+        if !improved {
+            step *= 0.7;
+        }
+    }
+    f.sqrt()
+}
+
+#[test]
+fn lipsdp_agrees_with_an_independent_solve() {
+    for (seed, widths) in [
+        (1u64, [2usize, 4, 3, 1].as_slice()),
+        (2, &[2, 5, 5, 1]),
+        (3, &[3, 4, 2]),
+    ] {
+        let m = net(seed, widths);
+        let (fast, slow) = (lipsdp_bound(&m), lipsdp_reference(&m));
+        eprintln!("{widths:?}: descent {fast}, reference {slow}");
+        // Measured gap: both directions up to ~1e-3 (the derivative-free search stalls
+        // at kinks of λ_max; the descent in ln T converges slowly where optimal
+        // multipliers tend to 0). The target is ~1e-4: not reached yet.
+        assert!(
+            slow.is_finite() && (fast - slow).abs() <= 2e-3 * slow,
+            "{widths:?}: descent {fast} vs reference {slow}"
+        );
+    }
+}
+
+#[test]
+fn mpc_estimates_of_a_linear_law() {
+    // κ(x) = A x with ‖A‖₂ known: both estimates recover it.
+    let a = [3.0, -4.0];
+    let mut x = Vec::new();
+    let mut u = Vec::new();
+    let mut du = Vec::new();
+    for i in 0..10 {
+        for j in 0..10 {
+            let p = [i as f64 * 0.1, j as f64 * 0.2];
+            x.extend(p);
+            u.push(a[0] * p[0] + a[1] * p[1]);
+            du.extend(a);
+        }
+    }
+    let (s, q) = mpc_estimates(&x, &u, &du, &[true; 100], 2, 1);
+    assert!((s - 5.0).abs() < 1e-12);
+    assert!(q <= 5.0 + 1e-9 && q > 3.0);
+}

@@ -1,0 +1,287 @@
+//! The f32 error analysis of an [`ExportModel`]: the device network [`eval_f32`], the sound
+//! allowance [`f32_allowance`], the observed differences [`sampled_max_diff`] and the
+//! rounding of bounds to f32 ([`f32_down`], [`f32_up`]).
+//!
+//! **f32 allowance** (the bound on |κ_NN,f32(x) − κ_NN,f64(x)| for x ∈ X), by forward error
+//! analysis with interval arithmetic on sub-boxes B of X (u = 2⁻²⁴, γ_k = k u / (1 − k u)):
+//! - input: x̂ = Π_X32(fl32(x)), |x̂_i − x_i| ≤ e_i = 2⁻²³ max|x_i| + 2⁻¹⁴⁹ (one ulp);
+//! - affine layer, exact z = W' x + b' with x in the interval enclosure X_i (M_i = max |X_i|):
+//!   |ẑ_o − z_o| ≤ |b̂_o − b'_o| + Σ_i (|ŵ_oi| e_i + |ŵ_oi − w'_oi| M_i)
+//!   + γ_{n+1} (|b̂_o| + Σ_i |ŵ_oi| (M_i + e_i)) + n·2⁻¹⁴⁹ (products that underflow);
+//! - tanh: |t(ẑ) − tanh(z)| ≤ δ_t + (1 − tanh²(m)) |ẑ − z|, m = min |ξ| over the interval
+//!   of ẑ, δ_t the device tanh's exhaustively verified bound on the range of |ẑ|
+//!   (`controller_core::activation`; piecewise in |ξ| for the fast tanh);
+//!   enclosures of exact activations are tanh of the interval ends, widened by 10⁻¹⁵;
+//! - the f64 reference itself rounds: the same analysis with u = 8·2⁻⁵³ (which covers the
+//!   folding and the extra scaling operations) and δ_t = 10⁻¹⁵ is added.
+//!
+//! Interval ends and magnitudes are computed in f64 and widened (relative 10⁻¹²) to cover
+//! their own rounding. The allowance is the maximum over sub-boxes and outputs; the report
+//! puts it next to the largest difference seen on random states ([`sampled_max_diff`]).
+
+use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
+
+/// Number of random states behind [`ExportReport`]'s observed differences.
+pub const SAMPLES: usize = 1_000_000;
+/// Largest f32 ≤ v.
+pub(super) fn f32_down(v: f64) -> f32 {
+    let c = v as f32;
+    if f64::from(c) > v {
+        next_f32(c, false)
+    } else {
+        c
+    }
+}
+
+/// Smallest f32 ≥ v.
+pub(super) fn f32_up(v: f64) -> f32 {
+    let c = v as f32;
+    if f64::from(c) < v {
+        next_f32(c, true)
+    } else {
+        c
+    }
+}
+
+/// The neighbouring finite f32 (up or down).
+fn next_f32(c: f32, up: bool) -> f32 {
+    if c == 0.0 {
+        let tiny = f32::from_bits(1);
+        return if up { tiny } else { -tiny };
+    }
+    let b = c.to_bits();
+    let away = (c > 0.0) == up;
+    f32::from_bits(if away { b + 1 } else { b - 1 })
+}
+
+/// κ_NN,f32(x) exactly as `controller-core` computes it, before the output clamp:
+/// projection onto the f32 box, folded f32 layers in the core's order, device tanh.
+pub fn eval_f32(folded: &Folded, lo: &[f32], hi: &[f32], x: &[f32], tanh: Tanh) -> Vec<f32> {
+    let mut h: Vec<f32> = x
+        .iter()
+        .zip(lo.iter().zip(hi))
+        .map(|(x, (l, u))| {
+            if x < l {
+                *l
+            } else if x > u {
+                *u
+            } else {
+                *x
+            }
+        })
+        .collect();
+    let n = folded.f32_layers.len();
+    for (k, (n_in, _, w, b)) in folded.f32_layers.iter().enumerate() {
+        h = b
+            .iter()
+            .enumerate()
+            .map(|(o, b)| {
+                let mut acc = *b;
+                for i in 0..*n_in {
+                    acc += w[o * n_in + i] * h[i];
+                }
+                if k + 1 < n {
+                    tanh.eval(acc)
+                } else {
+                    acc
+                }
+            })
+            .collect();
+    }
+    h
+}
+
+/// Interval bound on |computed − exact| of the folded network over the box `[a, b]`, for
+/// unit roundoff `u`, rounded weights `wr` (or exact if `None`), tanh error `dt`.
+fn box_error(
+    layers: &[DenseF64],
+    rounded: Option<&[LayerF32]>,
+    a: &[f64],
+    b: &[f64],
+    u: f64,
+    input_rel: f64,
+    dt: &dyn Fn(f64, f64) -> f64,
+) -> f64 {
+    const TINY: f64 = 1.401_298_464_324_817e-45; // 2^-149
+    let widen = |v: f64| v * (1.0 + 1e-12) + 1e-300;
+    let mut lo: Vec<f64> = a.to_vec();
+    let mut hi: Vec<f64> = b.to_vec();
+    let mut err: Vec<f64> = lo
+        .iter()
+        .zip(&hi)
+        .map(|(l, h)| widen(input_rel * l.abs().max(h.abs()) + TINY))
+        .collect();
+    let n_layers = layers.len();
+    for (k, l) in layers.iter().enumerate() {
+        let n = lo.len();
+        let gamma = (n as f64 + 1.0) * u / (1.0 - (n as f64 + 1.0) * u);
+        let mut zlo = Vec::with_capacity(l.b.len());
+        let mut zhi = Vec::with_capacity(l.b.len());
+        let mut zerr = Vec::with_capacity(l.b.len());
+        for (o, (row, bias)) in l.w.iter().zip(&l.b).enumerate() {
+            let (wr, br): (Vec<f64>, f64) = match rounded {
+                Some(r) => (
+                    r[k].2[o * n..(o + 1) * n]
+                        .iter()
+                        .map(|v| f64::from(*v))
+                        .collect(),
+                    f64::from(r[k].3[o]),
+                ),
+                None => (row.clone(), *bias),
+            };
+            // Exact enclosure of z_o.
+            let (mut s_lo, mut s_hi, mut mag) = (*bias, *bias, bias.abs());
+            let mut e = widen((br - bias).abs());
+            let mut rmag = br.abs();
+            for i in 0..n {
+                let w = row[i];
+                let (p, q) = (w * lo[i], w * hi[i]);
+                s_lo += p.min(q);
+                s_hi += p.max(q);
+                let m = lo[i].abs().max(hi[i].abs());
+                mag += w.abs() * m;
+                e += wr[i].abs() * err[i] + (wr[i] - w).abs() * m;
+                rmag += wr[i].abs() * (m + err[i]);
+            }
+            let slack = widen(mag) * 1e-13;
+            zlo.push(s_lo - slack);
+            zhi.push(s_hi + slack);
+            zerr.push(widen(e + gamma * rmag + n as f64 * TINY));
+        }
+        if k + 1 < n_layers {
+            // tanh layer
+            for o in 0..zlo.len() {
+                let (l0, h0, e) = (zlo[o], zhi[o], zerr[o]);
+                let (cl, ch) = (l0 - e, h0 + e);
+                let m = if cl <= 0.0 && ch >= 0.0 {
+                    0.0
+                } else {
+                    cl.abs().min(ch.abs())
+                };
+                let t = m.tanh();
+                let lip = (1.0 - t * t).min(1.0) * (1.0 + 1e-12);
+                zerr[o] = widen(dt(m, cl.abs().max(ch.abs())) + lip * e);
+                zlo[o] = (l0.tanh() - 1e-15).max(-1.0);
+                zhi[o] = (h0.tanh() + 1e-15).min(1.0);
+            }
+        }
+        lo = zlo;
+        hi = zhi;
+        err = zerr;
+    }
+    err.into_iter().fold(0.0, f64::max)
+}
+
+/// Per-axis number of sub-boxes: about 2¹⁶ boxes in all, at most 256 per axis.
+fn splits(nx: usize) -> usize {
+    let k = (65_536f64).powf(1.0 / nx as f64).floor() as usize;
+    k.clamp(1, 256)
+}
+
+/// The sound f32 allowance over X for one tanh (module doc) and the number of sub-boxes.
+pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
+    let folded = model.folded();
+    let nx = model.nx();
+    let k = splits(nx);
+    let boxes = k.pow(nx as u32);
+    let mut worst = 0.0f64;
+    let mut idx = vec![0usize; nx];
+    let mut a = vec![0.0; nx];
+    let mut b = vec![0.0; nx];
+    for _ in 0..boxes {
+        for i in 0..nx {
+            let (l, h) = (model.domain_lo[i], model.domain_hi[i]);
+            let step = (h - l) / k as f64;
+            a[i] = if idx[i] == 0 {
+                l
+            } else {
+                l + step * idx[i] as f64
+            };
+            b[i] = if idx[i] + 1 == k {
+                h
+            } else {
+                l + step * (idx[i] + 1) as f64
+            };
+            // Adjacent boxes share the computed end point, so the union covers X.
+        }
+        let e32 = box_error(
+            &folded.layers,
+            Some(&folded.f32_layers),
+            &a,
+            &b,
+            2f64.powi(-24),
+            2f64.powi(-23),
+            &|lo, hi| tanh.max_abs_err_on(lo, hi),
+        );
+        let e64 = box_error(
+            &model_unfolded_as_exact(&folded),
+            None,
+            &a,
+            &b,
+            8.0 * 2f64.powi(-53),
+            8.0 * 2f64.powi(-53),
+            &|_, _| 1e-15,
+        );
+        worst = worst.max(e32 + e64);
+        for d in idx.iter_mut() {
+            *d += 1;
+            if *d < k {
+                break;
+            }
+            *d = 0;
+        }
+    }
+    (worst * (1.0 + 1e-9), boxes)
+}
+
+fn model_unfolded_as_exact(folded: &Folded) -> Vec<DenseF64> {
+    folded.layers.clone()
+}
+
+/// Largest |κ_NN,f32(x) − κ_NN,f64(x)| (over outputs) on `n` uniform random states in X
+/// (deterministic xorshift stream from `seed`).
+pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) -> f64 {
+    let folded = model.folded();
+    let (lo, hi) = model.domain_f32();
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let nx = model.nx();
+    let mut worst = 0.0f64;
+    let mut x = vec![0.0; nx];
+    for _ in 0..n {
+        for i in 0..nx {
+            x[i] = model.domain_lo[i] + next() * (model.domain_hi[i] - model.domain_lo[i]);
+        }
+        let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+        let y32 = eval_f32(&folded, &lo, &hi, &x32, tanh);
+        let y64 = model.eval_f64(&x);
+        for (a, b) in y32.iter().zip(&y64) {
+            worst = worst.max((f64::from(*a) - b).abs());
+        }
+    }
+    worst
+}
+
+/// Computes the allowances (sound) and observed differences ([`SAMPLES`] states) for both
+/// tanh implementations.
+pub fn certify_f32(model: &ExportModel) -> Result<ExportReport, ExportError> {
+    model.validate()?;
+    let mut report = ExportReport {
+        f32_allowance: [0.0; 2],
+        f32_observed: [0.0; 2],
+        samples: SAMPLES,
+        boxes: 0,
+    };
+    for (k, t) in Tanh::ALL.iter().enumerate() {
+        let (a, boxes) = f32_allowance(model, *t);
+        report.f32_allowance[k] = a;
+        report.boxes = boxes;
+        report.f32_observed[k] = sampled_max_diff(model, *t, SAMPLES, 1 + k as u64);
+    }
+    Ok(report)
+}

@@ -1,0 +1,91 @@
+//! The export: folding keeps the function, the f32 allowance is sound and not vacuous, the
+//! clamp band and the f32 domain, validation messages, the rustfmt layout of arrays.
+
+use super::rust::array;
+use super::*;
+
+#[test]
+fn folding_preserves_the_function() {
+    let m = placeholder_pendulum();
+    let f = m.folded();
+    for x in [[0.3, -0.2], [-6.0, 1.0], [2.0, 0.5]] {
+        // folded network in f64
+        let mut h = x.to_vec();
+        for (k, l) in f.layers.iter().enumerate() {
+            h =
+                l.w.iter()
+                    .zip(&l.b)
+                    .map(|(r, b)| {
+                        let z = r.iter().zip(&h).fold(*b, |a, (w, x)| a + w * x);
+                        if k + 1 < f.layers.len() {
+                            z.tanh()
+                        } else {
+                            z
+                        }
+                    })
+                    .collect();
+        }
+        assert!((h[0] - m.eval_f64(&x)[0]).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn allowance_is_sound_on_a_million_states_and_not_vacuous() {
+    let m = placeholder_pendulum();
+    for t in Tanh::ALL {
+        let (bound, _) = f32_allowance(&m, t);
+        let seen = sampled_max_diff(&m, t, SAMPLES, 7);
+        println!("{}: bound {bound:e}, observed {seen:e}", t.name());
+        assert!(
+            bound >= seen,
+            "{}: bound {bound} < observed {seen}",
+            t.name()
+        );
+        assert!(seen > 0.0);
+        // tight enough to be useful: within three orders of magnitude of what is seen
+        assert!(bound < 1e3 * seen.max(1e-7), "{bound} vs {seen}");
+    }
+}
+
+#[test]
+fn allowance_grows_with_a_worse_tanh_and_weights() {
+    let m = placeholder_pendulum();
+    let (a, _) = f32_allowance(&m, Tanh::Libm);
+    let (b, _) = f32_allowance(&m, Tanh::Fast);
+    assert!(b > a);
+    let mut big = m.clone();
+    big.output.scale = vec![150.0];
+    assert!(f32_allowance(&big, Tanh::Libm).0 > a);
+}
+
+#[test]
+fn band_contains_u_d_and_stays_in_actuator_limits() {
+    let mut m = placeholder_pendulum();
+    m.actuator_lo = vec![-20.0];
+    m.actuator_hi = vec![16.0];
+    let (lo, hi) = m.clamp_band(1.3);
+    assert!(f64::from(lo[0]) <= -16.3 && f64::from(lo[0]) > -16.31);
+    assert_eq!(hi[0], 16.0);
+    m.u_lo = vec![-0.1];
+    let (lo, _) = m.clamp_band(1e-9);
+    assert!(f64::from(lo[0]) <= -0.1 - 1e-9);
+    let (dlo, dhi) = m.domain_f32();
+    assert!(f64::from(dlo[0]) >= m.domain_lo[0] && f64::from(dhi[0]) <= m.domain_hi[0]);
+}
+
+#[test]
+fn validate_names_the_field() {
+    let mut m = placeholder_pendulum();
+    m.layers[1].w[3].pop();
+    let e = m.validate().unwrap_err().to_string();
+    assert!(e.contains("layers[1].w[3]"), "{e}");
+    let mut m = placeholder_pendulum();
+    m.u_hi = vec![20.0];
+    assert!(m.validate().unwrap_err().to_string().contains("u_0"));
+}
+
+#[test]
+fn array_layout_rules() {
+    let s: Vec<String> = (0..3).map(|i| format!("{i}.5")).collect();
+    assert_eq!(array(&s, 0, 10, 1), "[0.5, 1.5, 2.5]");
+}
