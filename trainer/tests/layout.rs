@@ -36,7 +36,12 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 /// The top-level module a source file belongs to (`None` for lib.rs, main.rs and cli/).
 fn module_of(p: &Path) -> Option<String> {
     let rel = p.strip_prefix(src()).unwrap();
-    let first = rel.components().next()?.as_os_str().to_string_lossy().to_string();
+    let first = rel
+        .components()
+        .next()?
+        .as_os_str()
+        .to_string_lossy()
+        .to_string();
     let name = first.trim_end_matches(".rs").to_string();
     ORDER.contains(&name.as_str()).then_some(name)
 }
@@ -82,7 +87,11 @@ fn stages_import_only_earlier_stages() {
             }
         }
     }
-    assert!(bad.is_empty(), "imports against the data flow:\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "imports against the data flow:\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
@@ -100,8 +109,13 @@ fn source_files_are_small_enough_to_read() {
         .filter_map(|f| {
             let text = std::fs::read_to_string(f).unwrap();
             let n = text.lines().count();
-            (n > MAX_LINES && !text.contains("@generated")).then(|| format!("{}: {n} lines", f.display()))
+            (n > MAX_LINES && !text.contains("@generated"))
+                .then(|| format!("{}: {n} lines", f.display()))
         })
         .collect();
-    assert!(long.is_empty(), "files over {MAX_LINES} lines:\n{}", long.join("\n"));
+    assert!(
+        long.is_empty(),
+        "files over {MAX_LINES} lines:\n{}",
+        long.join("\n")
+    );
 }

@@ -13,7 +13,7 @@
 //! everything downstream). Dataset generation resumes from its checkpoint when killed.
 
 //!
-//! Files: [`stages`] (each stage as a value: name, inputs, outputs, body), [`manifest`]
+//! Files: `stages` (each stage as a value: name, inputs, outputs, body), [`manifest`]
 //! (skip-if-unchanged), [`robust`] (the Corollary 1 design loop, which runs these stages on
 //! the tightened problem). `pipeline` and the CLI are the only places that know every stage.
 

@@ -74,7 +74,7 @@ impl RobustSettings {
     pub fn enabled(&self) -> bool {
         self.eps > 0.0
     }
-    /// Validation (called by [`ProblemConfig::validate`]); errors name the key.
+    /// Validation (called by [`ProblemConfig::validate`](super::ProblemConfig::validate)); errors name the key.
     pub fn validate(&self, nx: usize, _nu: usize) -> Result<(), ConfigError> {
         if !(self.eps.is_finite() && self.eps >= 0.0) {
             return Err(invalid(

@@ -56,7 +56,7 @@
 //! (`mpc_soft_steps` counts the steps where the robust MPC had become infeasible).
 //!
 //! Files: [`jacobians`] (the family of (A, B) and how its sup is bounded), [`tube`] (ρ, w̄,
-//! the radii s_k and the tightening), [`design`] (the LQR choice, the tightened problem, the
+//! the radii s_k and the tightening), [`design`](mod@design) (the LQR choice, the tightened problem, the
 //! verdict of a certificate against the design ε). The robust closed-loop study is
 //! `study::robust`; the design loop that runs the pipeline on the tightened problem is
 //! `pipeline::robust`. Imports `problem`, `mpc` and `certify`.

@@ -17,8 +17,8 @@
 //! run resumes at its last completed round.
 //!
 //! Files: this one owns the lattice, the points and cells and the checkpointed state;
-//! [`rounds`] the refinement loop ([`refine`]); [`outputs`] the local certificate and the
-//! files of a run; [`check`] the certificate against fresh MPC solves.
+//! `rounds` the refinement loop ([`refine`]); `outputs` the local certificate and the
+//! files of a run; `check` the certificate against fresh MPC solves.
 
 mod check;
 mod outputs;
