@@ -1,0 +1,130 @@
+//! Helpers shared by the subcommands: the problem file, the states CSV (`solve`, `eval`),
+//! the CSV columns of inputs and Jacobians, number formatting for tables, file hashes.
+
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+use trainer::problem::ProblemConfig;
+
+/// The problem file of `--config`, or the embedded pendulum.
+pub(super) fn load_config(path: Option<&Path>) -> Result<ProblemConfig> {
+    Ok(match path {
+        Some(p) => ProblemConfig::load(p)?,
+        None => ProblemConfig::default(),
+    })
+}
+
+/// Reads a states CSV: header `x1,…,xn`, one finite state per row.
+pub(super) fn read_states(path: &Path, nx: usize) -> Result<Vec<Vec<f64>>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read states file {}", path.display()))?;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines.next().with_context(|| {
+        format!(
+            "{}: empty file (expected a header x1,…,x{nx})",
+            path.display()
+        )
+    })?;
+    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+    let expected: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
+    if cols != expected {
+        bail!(
+            "{}:1: header must be `{}` for this problem ({} states), got `{}`",
+            path.display(),
+            expected.join(","),
+            nx,
+            header.trim()
+        );
+    }
+    let mut out = Vec::new();
+    for (ln, line) in lines {
+        let vals: Vec<&str> = line.split(',').map(str::trim).collect();
+        if vals.len() != nx {
+            bail!(
+                "{}:{}: expected {nx} columns, got {}",
+                path.display(),
+                ln + 1,
+                vals.len()
+            );
+        }
+        let mut x = Vec::with_capacity(nx);
+        for (i, v) in vals.iter().enumerate() {
+            let f: f64 = v.parse().with_context(|| {
+                format!(
+                    "{}:{}: x{} = `{v}` is not a number",
+                    path.display(),
+                    ln + 1,
+                    i + 1
+                )
+            })?;
+            if !f.is_finite() {
+                bail!(
+                    "{}:{}: x{} = {v} is not finite",
+                    path.display(),
+                    ln + 1,
+                    i + 1
+                );
+            }
+            x.push(f);
+        }
+        out.push(x);
+    }
+    Ok(out)
+}
+
+/// The CSV columns `x1..xn,u1..um,du1_dx1,…,dum_dxn` (state, inputs, row-major Jacobian).
+pub(super) fn jacobian_header(nx: usize, nu: usize) -> Vec<String> {
+    let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
+    head.extend((1..=nu).map(|j| format!("u{j}")));
+    for j in 1..=nu {
+        head.extend((1..=nx).map(|i| format!("du{j}_dx{i}")));
+    }
+    head
+}
+
+/// The numbers as CSV fields, in `{:?}` form (round-trips every f64 exactly).
+pub(super) fn csv_numbers<'a>(values: impl Iterator<Item = &'a f64>) -> String {
+    values
+        .map(|v| format!("{v:?}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// `median [min, max]` of the values, each formatted by [`fmt_num`].
+pub(super) fn med_range(v: &[f64]) -> String {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let med = if s.is_empty() {
+        f64::NAN
+    } else if s.len() % 2 == 1 {
+        s[s.len() / 2]
+    } else {
+        0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
+    };
+    format!(
+        "{} [{}, {}]",
+        fmt_num(med),
+        fmt_num(s.first().copied().unwrap_or(f64::NAN)),
+        fmt_num(s.last().copied().unwrap_or(f64::NAN))
+    )
+}
+
+/// A table entry: one decimal from 100 on, four in [0.9, 1) (R² near 1), three otherwise.
+fn fmt_num(v: f64) -> String {
+    if v.abs() >= 100.0 {
+        format!("{v:.1}")
+    } else if v.abs() >= 0.9 && v.abs() < 1.0 {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+/// The SHA-256 of a file's bytes, in hex.
+pub(super) fn sha256_file(path: &Path) -> Result<String> {
+    use sha2::{Digest, Sha256};
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(trainer::io::hex(&Sha256::digest(&bytes)))
+}

@@ -1,0 +1,296 @@
+//! The `trainer` command line: the clap definitions of every subcommand (their doc
+//! comments are the help text) and `dispatch`, which runs the chosen one.
+//!
+//! Each subcommand lives in its own file (`run`, `solve`, `sample`, `train`, `certify`,
+//! `eval`, `compare`, `export`, `refine`, `merge`); `common` holds what they share.
+
+mod certify;
+mod common;
+mod compare;
+mod eval;
+mod export;
+mod merge;
+mod refine;
+mod run;
+mod sample;
+mod solve;
+mod train;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use trainer::data::dataset::Shard;
+
+#[derive(Parser)]
+#[command(
+    name = "trainer",
+    version,
+    about = "Certified approximate MPC: solve, sample, merge, train, certify, eval"
+)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// The whole pipeline: sample → validate → train (nominal + regularized) → certify →
+    /// export → closed loop → seeds → plots → report (Markdown + HTML), each stage skipped
+    /// when its inputs are unchanged.
+    Run {
+        /// Problem file (default: the embedded pendulum).
+        config: Option<PathBuf>,
+        /// Root directory of runs; the run goes to `<out>/<name>/`.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Redo a stage even if its inputs are unchanged (repeatable).
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(trainer::pipeline::STAGES))]
+        force: Vec<String>,
+        /// No progress bars or stage lines.
+        #[arg(long, short, conflicts_with = "verbose")]
+        quiet: bool,
+        /// Robust design for this input error ε (overrides `robust.eps`): tightened MPC,
+        /// data, training, certificate and the robust closed-loop study in `<out>/<name>/robust/`.
+        #[arg(long)]
+        robust_eps: Option<f64>,
+        /// Also list each stage's input hashes and output files.
+        #[arg(long, short)]
+        verbose: bool,
+    },
+    /// Solve the OCP at the states of a CSV file (header x1,…,xn) and write u, ∂u/∂x, cost.
+    Solve {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Input CSV with header `x1,…,xn`.
+        #[arg(long)]
+        states: PathBuf,
+        /// Output CSV: `x1..xn,u1..um,du1_dx1,…,dum_dxn,cost,status,iterations`.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Generate the labelled dataset of a problem's sampling plan (resumes if interrupted).
+    Sample {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Output dataset file (postcard); a CSV export is written beside it.
+        #[arg(long)]
+        out: PathBuf,
+        /// Compute only shard K of N (`K/N`, 0 ≤ K < N).
+        #[arg(long)]
+        shard: Option<Shard>,
+        /// No progress bar or summary.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Train a network on a dataset (sensitivity-regularized by default).
+    Train {
+        /// Problem file (default: the embedded pendulum); its `[training]` table applies.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Dataset file from `trainer sample`.
+        #[arg(long)]
+        data: PathBuf,
+        /// Output model file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Nominal training (λ₂ = λ₃ = 0).
+        #[arg(long)]
+        nominal: bool,
+        /// Override the seed of the initial weights and shuffling.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// A labelled validation dataset (e.g. a run's validation.bin); default: label
+        /// `training.validation_n` random states now.
+        #[arg(long)]
+        validation: Option<PathBuf>,
+        /// No progress or summary.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Certify a trained model: ε = ε_D + (L_MPC + L_NN)·r with every term.
+    Certify {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Model file from `trainer train`.
+        #[arg(long)]
+        model: PathBuf,
+        /// The dataset the model was trained on.
+        #[arg(long)]
+        data: PathBuf,
+        /// Also report the data density a target ε requires.
+        #[arg(long)]
+        target_eps: Option<f64>,
+        /// A proven Lipschitz constant of the MPC law (otherwise an estimate is used).
+        #[arg(long)]
+        l_mpc: Option<f64>,
+        /// Print JSON (the certificate record) instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
+    Eval {
+        /// Model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// Input CSV with header `x1,…,xn`.
+        #[arg(long)]
+        states: PathBuf,
+        /// Output CSV `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// The paper's Table I over seeds: nominal and regularized nets from the same initial
+    /// weights, median [min, max] of R², ε_D and the Lipschitz bounds.
+    Compare {
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Dataset file.
+        #[arg(long)]
+        data: PathBuf,
+        /// Number of seeds (0..seeds).
+        #[arg(long, default_value_t = 10)]
+        seeds: u64,
+        /// Write the per-seed results as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Export a trained model for controller-core: a generated Rust file and a postcard blob,
+    /// with the certificate's f32 allowance.
+    Export {
+        /// Model file from `trainer train`.
+        #[arg(long)]
+        model: PathBuf,
+        /// Certificate JSON (default: the one stored in the model by `trainer train`).
+        #[arg(long)]
+        certificate: Option<PathBuf>,
+        /// Output Rust file.
+        #[arg(long)]
+        rust: PathBuf,
+        /// Output postcard blob.
+        #[arg(long)]
+        postcard: PathBuf,
+        /// Name used in the generated file (default: pendulum).
+        #[arg(long, default_value = "pendulum")]
+        name: String,
+    },
+    /// Adaptive refinement with local certificates: grow the data and the net until every
+    /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
+    Refine {
+        /// Problem file (default: the embedded pendulum); its `[refine]` table applies.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Target certified ε (overrides `refine.target_eps`).
+        #[arg(long)]
+        target_eps: Option<f64>,
+        /// Budget of OCP solves (overrides `refine.budget`).
+        #[arg(long)]
+        budget: Option<usize>,
+        /// Output directory (default: runs/<name>/refine).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// After refining, check the certificate at this many random states solved by the
+        /// MPC (writes check.json).
+        #[arg(long)]
+        check: Option<usize>,
+        /// Seed of the check's states.
+        #[arg(long, default_value_t = 2024)]
+        check_seed: u64,
+        /// No progress lines.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Merge shard files into one dataset, identical to an unsharded run.
+    Merge {
+        /// Output dataset file.
+        out: PathBuf,
+        /// Shard files.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+    },
+}
+
+/// Runs the subcommand of `cli`.
+pub(crate) fn dispatch(cli: Cli) -> Result<()> {
+    match cli.cmd {
+        Cmd::Run {
+            config,
+            out,
+            force,
+            quiet,
+            verbose,
+            robust_eps,
+        } => run::execute(config.as_deref(), &out, &force, quiet, verbose, robust_eps),
+        Cmd::Solve {
+            config,
+            states,
+            out,
+        } => solve::execute(config.as_deref(), &states, &out),
+        Cmd::Sample {
+            config,
+            out,
+            shard,
+            quiet,
+        } => sample::execute(config.as_deref(), &out, shard, quiet),
+        Cmd::Train {
+            config,
+            data,
+            out,
+            nominal,
+            seed,
+            validation,
+            quiet,
+        } => train::execute(
+            config.as_deref(),
+            &data,
+            &out,
+            nominal,
+            seed,
+            validation.as_deref(),
+            quiet,
+        ),
+        Cmd::Certify {
+            config,
+            model,
+            data,
+            target_eps,
+            l_mpc,
+            json,
+        } => certify::execute(config.as_deref(), &model, &data, target_eps, l_mpc, json),
+        Cmd::Eval { model, states, out } => eval::execute(&model, &states, &out),
+        Cmd::Compare {
+            config,
+            data,
+            seeds,
+            json,
+        } => compare::execute(config.as_deref(), &data, seeds, json.as_deref()),
+        Cmd::Export {
+            model,
+            certificate,
+            rust,
+            postcard,
+            name,
+        } => export::execute(&model, certificate.as_deref(), &rust, &postcard, &name),
+        Cmd::Refine {
+            config,
+            target_eps,
+            budget,
+            out,
+            check,
+            check_seed,
+            quiet,
+        } => refine::execute(
+            config.as_deref(),
+            target_eps,
+            budget,
+            out.as_deref(),
+            check,
+            check_seed,
+            quiet,
+        ),
+        Cmd::Merge { out, inputs } => merge::execute(&out, &inputs),
+    }
+}

@@ -1,0 +1,192 @@
+//! `trainer refine`: adaptive refinement with local certificates for the problem file's
+//! `[refine]` table (`--config`; a robust design refines the tightened MPC). Resumes from
+//! `<out>/refine_state.bin` and writes the model, dataset, certificate, cells and log into
+//! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
+//! more states and, with `--check`, `check.json`. Fails if the target ε is not met.
+
+use super::common::load_config;
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
+use trainer::problem::{ProblemConfig, RefineSettings};
+
+pub(super) fn execute(
+    config: Option<&Path>,
+    target_eps: Option<f64>,
+    budget: Option<usize>,
+    out: Option<&Path>,
+    check: Option<usize>,
+    check_seed: u64,
+    quiet: bool,
+) -> Result<()> {
+    let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let rs = cfg.refine.clone();
+    let dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| Path::new("runs").join(&cfg.name).join("refine"));
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let t0 = std::time::Instant::now();
+    let opts = refine::RefineOptions {
+        on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
+    };
+    let checkpoint = dir.join("refine_state.bin");
+    let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
+    let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    if cfg.system.nx() >= 2 {
+        write_eps_map(&cfg, &rs, &r, &dir)?;
+    }
+    if !quiet {
+        print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
+    }
+    if let Some(n) = check {
+        check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
+    }
+    if let Some(design) = robust_design {
+        let v = trainer::robust::verdict(design, cert.base.eps);
+        if !quiet {
+            println!("robust design: {}", v.message);
+        }
+    }
+    if !r.met {
+        bail!(
+            "target ε {} not met within {} solves / {} rounds: certified ε {:.4} (outputs in {})",
+            rs.target_eps,
+            rs.budget,
+            rs.max_rounds,
+            cert.base.eps,
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// The problem to refine, with `--target-eps` and `--budget` applied, and the design ε of
+/// a robust design (`[robust] eps > 0`), whose tightened MPC is then the problem.
+fn refine_config(
+    config: Option<&Path>,
+    target_eps: Option<f64>,
+    budget: Option<usize>,
+) -> Result<(ProblemConfig, Option<f64>)> {
+    let mut cfg = load_config(config)?;
+    // A robust design (`[robust] eps > 0`): refine the data of the tightened MPC, with the
+    // design ε as the default target (Corollary 1 needs certified ε ≤ design ε).
+    let mut robust_note = None;
+    if cfg.robust.enabled() {
+        let design = trainer::robust::design(&cfg)?;
+        let eps = cfg.robust.eps;
+        let mut rcfg = trainer::robust::robust_config(&cfg, &design);
+        if !cfg.name.ends_with("robust") {
+            rcfg.name = format!("{}_robust", cfg.name);
+        } else {
+            rcfg.name = cfg.name.clone();
+        }
+        if target_eps.is_none() {
+            rcfg.refine.target_eps = eps;
+        }
+        robust_note = Some(eps);
+        cfg = rcfg;
+    }
+    if let Some(e) = target_eps {
+        cfg.refine.target_eps = e;
+    }
+    if let Some(b) = budget {
+        cfg.refine.budget = b;
+    }
+    cfg.refine
+        .validate(cfg.system.nx())
+        .context("invalid --target-eps / --budget")?;
+    Ok((cfg, robust_note))
+}
+
+/// One progress line per refinement round (stderr).
+fn print_round(l: &RoundLog, budget: usize) {
+    eprintln!(
+        "round {:>2}: cells {}/{} ok, certified ε {:.4} (corner max {:.4}), {} second-order, \
+         solves {}/{budget}, {:.1} s",
+        l.round, l.cells_ok, l.cells, l.eps, l.eps_d, l.second_order, l.solves, l.seconds
+    );
+}
+
+/// The map of the cells' ε_C: `eps_map.svg` and `eps_map.png` in `dir`.
+fn write_eps_map(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, dir: &Path) -> Result<()> {
+    let fig =
+        trainer::study::plots::eps_map(cfg, &refine::cell_views(cfg, rs, &r.state), rs.target_eps)?;
+    let png = trainer::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
+    trainer::io::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
+    trainer::io::write_atomic(&dir.join("eps_map.png"), &png)?;
+    Ok(())
+}
+
+/// The result line (stdout): certified ε against the target, solves, cells, and the global
+/// Theorem 1 grid the same ε would need.
+fn print_summary(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    cert: &LocalCertificate,
+    seconds: f64,
+    dir: &Path,
+) {
+    let l = &cert.local;
+    println!(
+        "{}: certified ε {:.4} (target {}{}) with {} solves, {} cells ({} second-order), \
+         max corner error {:.4}; global Theorem 1 grid for this ε: {}; {:.1} s -> {}",
+        cfg.name,
+        cert.base.eps,
+        rs.target_eps,
+        if l.met { ", met" } else { ", NOT met" },
+        l.solves,
+        l.cells,
+        l.cells_second_order,
+        cert.base.eps_d,
+        match (l.global_grid_solves, l.sparsification) {
+            (Some(g), Some(s)) => format!("{g:.3e} solves ({s:.0}× more)"),
+            _ => "none suffices (ε ≤ ε_D)".into(),
+        },
+        seconds,
+        dir.display()
+    );
+}
+
+/// `--check`: the certificate at `n` random states (seeded) solved by the MPC, written to
+/// `check.json` in `dir`; fails if a state is above ε or above its cell's ε_C.
+fn check_certificate(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    r: &Refined,
+    n: usize,
+    seed: u64,
+    dir: &Path,
+    quiet: bool,
+) -> Result<()> {
+    let c = refine::check(cfg, rs, r, n, seed);
+    trainer::io::write_atomic(&dir.join("check.json"), refine::pretty(&c).as_bytes())?;
+    if !quiet {
+        println!(
+            "check at {} random states ({} labelled): max observed {:.4} vs certified {:.4} \
+             (ratio {:.2}); over ε: {}, over own cell's ε_C: {} (max ratio {:.3}); \
+             slope estimate misses {}/{} (max excess {:.3}); {:.1} s",
+            c.states,
+            c.labelled,
+            c.max_observed,
+            c.certified,
+            c.ratio,
+            c.over_eps,
+            c.over_cell,
+            c.max_cell_ratio,
+            c.slope_misses,
+            c.slope_checks,
+            c.max_slope_excess,
+            c.seconds
+        );
+    }
+    if c.over_eps > 0 || c.over_cell > 0 {
+        bail!(
+            "certificate check failed: {} states above ε, {} above their cell's ε_C (see {})",
+            c.over_eps,
+            c.over_cell,
+            dir.join("check.json").display()
+        );
+    }
+    Ok(())
+}

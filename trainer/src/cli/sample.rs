@@ -1,0 +1,42 @@
+//! `trainer sample`: generates the labelled dataset of the problem file's sampling plan
+//! (`--config`), or one shard of it (`--shard K/N`), into `--out` (postcard) with a CSV
+//! export beside it; resumes an interrupted run.
+
+use super::common::load_config;
+use anyhow::Result;
+use std::io::IsTerminal;
+use std::path::Path;
+use trainer::data::dataset::{self, GenerateOptions, Shard};
+
+pub(super) fn execute(
+    config: Option<&Path>,
+    out: &Path,
+    shard: Option<Shard>,
+    quiet: bool,
+) -> Result<()> {
+    let cfg = load_config(config)?;
+    let t = std::time::Instant::now();
+    let opts = GenerateOptions {
+        shard,
+        progress: !quiet && std::io::stderr().is_terminal(),
+    };
+    let d = dataset::generate(&cfg, out, &opts)?;
+    if !quiet {
+        let c = d.counts();
+        eprintln!(
+            "{}: {} states{} in {:.2} s: {} converged, {} soft, {} infeasible, {} failed, {} degenerate -> {} (+ {})",
+            cfg.name,
+            c.total,
+            shard.map(|s| format!(" (shard {}/{})", s.index, s.count)).unwrap_or_default(),
+            t.elapsed().as_secs_f64(),
+            c.converged,
+            c.soft,
+            c.infeasible,
+            c.failed,
+            c.degenerate,
+            out.display(),
+            dataset::csv_path(out).display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,37 @@
+//! `trainer solve`: solves the OCP of the problem file (`--config`) at every state of a
+//! states CSV (`--states`, header `x1,…,xn`) and writes one CSV row per state (`--out`:
+//! state, u, ∂u/∂x, cost, solver status, iterations).
+
+use super::common::{csv_numbers, jacobian_header, load_config, read_states};
+use anyhow::Result;
+use rayon::prelude::*;
+use std::path::Path;
+use trainer::mpc::law::MpcLaw;
+
+pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Result<()> {
+    let cfg = load_config(config)?;
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let xs = read_states(states, nx)?;
+    // Each state is solved from a cold start: the answer does not depend on the order.
+    let labels: Vec<_> = xs
+        .par_iter()
+        .map_init(|| MpcLaw::new(&cfg), |law, x| law.solve(x, None).0)
+        .collect();
+    let mut head = jacobian_header(nx, nu);
+    head.extend(["cost", "status", "iterations"].map(String::from));
+    let mut s = head.join(",");
+    s.push('\n');
+    for l in &labels {
+        let nums = csv_numbers(l.x.iter().chain(&l.u).chain(&l.du_dx).chain([&l.cost]));
+        s += &format!("{nums},{},{}\n", l.status.as_str(), l.info.iterations);
+    }
+    trainer::io::write_atomic(out, s.as_bytes())?;
+    let bad = labels.iter().filter(|l| !l.status.is_labelled()).count();
+    eprintln!(
+        "solved {} states ({} without a label) -> {}",
+        labels.len(),
+        bad,
+        out.display()
+    );
+    Ok(())
+}
