@@ -1,0 +1,201 @@
+//! The dataset: file round trip and CSV, corrupt files, the decoder under mutation, and
+//! the determinism of generation (thread count, resume after interruption, shards and
+//! their merge, warm vs cold starts).
+
+use super::*;
+use proptest::prelude::*;
+
+fn small_cfg() -> ProblemConfig {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/double_integrator.toml"
+    );
+    let mut cfg = ProblemConfig::load(Path::new(path)).unwrap();
+    cfg.sampling.counts = vec![9, 7];
+    cfg
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ampc-dataset-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d.join("d.bin")
+}
+
+#[test]
+fn file_round_trip_and_csv() {
+    let out = tmp("rt");
+    let d = generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+    let bytes = std::fs::read(&out).unwrap();
+    let back = Dataset::load(&out).unwrap();
+    assert_eq!(back, d);
+    assert_eq!(back.to_bytes(), bytes);
+    assert_eq!(d.records.len(), 63);
+    assert_eq!(d.counts().converged, 63);
+    let csv = std::fs::read_to_string(csv_path(&out)).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 64);
+    assert!(lines[0].starts_with("index,x1,x2,u1,du1_dx1,du1_dx2,cost,status"));
+    let f: Vec<&str> = lines[1].split(',').collect();
+    assert_eq!(f[1].parse::<f64>().unwrap(), d.records[0].x[0]);
+    assert_eq!(f[3].parse::<f64>().unwrap(), d.records[0].u[0]);
+    assert!(!partial_path(&out).exists());
+}
+
+#[test]
+fn corrupt_files_are_errors_naming_the_file() {
+    let out = tmp("corrupt");
+    generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+    let bytes = std::fs::read(&out).unwrap();
+    let e = Dataset::from_bytes(&bytes[..bytes.len() / 2], "f.bin")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("f.bin"), "{e}");
+    let mut bad = bytes.clone();
+    bad[0] = b'X';
+    assert!(Dataset::from_bytes(&bad, "f.bin")
+        .unwrap_err()
+        .to_string()
+        .contains("magic"));
+    let mut v = Dataset::from_bytes(&bytes, "f").unwrap();
+    v.version = 99;
+    assert!(Dataset::from_bytes(&v.to_bytes(), "f")
+        .unwrap_err()
+        .to_string()
+        .contains("version"));
+    let e = Dataset::load(Path::new("/nonexistent/x.bin"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/nonexistent/x.bin"), "{e}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+    #[test]
+    fn decoder_never_panics_on_mutated_blobs(flips in proptest::collection::vec((0usize..4096, any::<u8>()), 1..8), cut in 0usize..5000) {
+        let d = Dataset {
+            magic: MAGIC,
+            version: FORMAT_VERSION,
+            header: Header {
+                problem: "p".into(), problem_hash: "h".into(), config_toml: String::new(),
+                nx: 2, nu: 1, sampling: SamplingSettings::default(), total: 10, shard: None, chunk: CHUNK as u32,
+            },
+            records: (0..5).map(|i| Record {
+                index: i, x: vec![0.5, 1.0], u: vec![2.0], du_dx: vec![1.0, 2.0], cost: 1.0,
+                status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0,
+            }).collect(),
+        };
+        let mut b = d.to_bytes();
+        for (i, v) in flips { let n = b.len(); b[i % n] = v; }
+        b.truncate(cut);
+        let _ = Dataset::from_bytes(&b, "fuzz");
+    }
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let cfg = small_cfg();
+    let run = |threads: usize| {
+        let out = tmp(&format!("threads{threads}"));
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| generate(&cfg, &out, &GenerateOptions::default()).unwrap());
+        std::fs::read(&out).unwrap()
+    };
+    assert_eq!(run(1), run(3));
+}
+
+#[test]
+fn an_interrupted_run_resumes_to_the_same_file() {
+    let cfg = small_cfg();
+    let out = tmp("resume");
+    let full = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    let reference = std::fs::read(&out).unwrap();
+    std::fs::remove_file(&out).unwrap();
+    // A checkpoint holding chunks 0 and 2 only, as a killed run leaves behind; one of
+    // its labels is altered so that we can see it was reused, not recomputed.
+    let mut ck = full.clone();
+    ck.records
+        .retain(|r| matches!(r.index as usize / CHUNK, 0 | 2));
+    ck.records[0].iterations = 999;
+    write_atomic(&partial_path(&out), &ck.to_bytes()).unwrap();
+    let resumed = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    assert_eq!(resumed.records[0].iterations, 999);
+    let mut fixed = resumed.clone();
+    fixed.records[0].iterations = full.records[0].iterations;
+    assert_eq!(fixed.to_bytes(), reference);
+    assert!(!partial_path(&out).exists());
+    // A checkpoint of another plan is ignored.
+    let mut other = ck.clone();
+    other.header.problem_hash = "other".into();
+    write_atomic(&partial_path(&out), &other.to_bytes()).unwrap();
+    generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    assert_eq!(std::fs::read(&out).unwrap(), reference);
+}
+
+#[test]
+fn shards_merge_to_the_single_run_and_bad_sets_are_refused() {
+    let cfg = small_cfg();
+    let out = tmp("shards");
+    generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    let single = std::fs::read(&out).unwrap();
+    let shards: Vec<Dataset> = (0..3)
+        .map(|k| {
+            let p = out.with_file_name(format!("s{k}.bin"));
+            let opts = GenerateOptions {
+                shard: Some(Shard { index: k, count: 3 }),
+                progress: false,
+            };
+            generate(&cfg, &p, &opts).unwrap()
+        })
+        .collect();
+    assert_eq!(merge(&shards).unwrap().to_bytes(), single);
+    assert_eq!(
+        merge(&[shards[2].clone(), shards[0].clone(), shards[1].clone()])
+            .unwrap()
+            .to_bytes(),
+        single
+    );
+    let e = merge(&shards[..2]).unwrap_err().to_string();
+    assert!(e.contains("missing shards: 2/3"), "{e}");
+    let e = merge(&[shards[0].clone(), shards[0].clone(), shards[1].clone()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("given twice"), "{e}");
+    let mut alien = shards[1].clone();
+    alien.header.problem_hash = "x".into();
+    assert!(merge(&[shards[0].clone(), alien, shards[2].clone()]).is_err());
+    assert!(
+        "3/3".parse::<Shard>().is_err()
+            && "a/b".parse::<Shard>().is_err()
+            && "1/0".parse::<Shard>().is_err()
+    );
+    assert_eq!(
+        "1/4".parse::<Shard>().unwrap(),
+        Shard { index: 1, count: 4 }
+    );
+}
+
+/// Warm starts change the path, not the answer: on the paper's grid every label equals
+/// the cold-start label.
+#[test]
+fn warm_and_cold_starts_give_the_same_pendulum_labels() {
+    let mut cfg = ProblemConfig::default();
+    let sampler = Sampler::new(&cfg.sampling, &cfg.domain);
+    let mut law = MpcLaw::new(&cfg);
+    let warm = label_chunk(&mut law, &sampler, 0, sampler.len(), true);
+    cfg.solver.warm_start = false;
+    let cold = label_chunk(&mut law, &sampler, 0, sampler.len(), false);
+    for (w, c) in warm.iter().zip(&cold) {
+        assert_eq!(w.status, c.status, "{:?}", w.x);
+        assert!(
+            (w.u[0] - c.u[0]).abs() <= 1e-6,
+            "{:?}: {} vs {}",
+            w.x,
+            w.u[0],
+            c.u[0]
+        );
+    }
+}

@@ -1,0 +1,175 @@
+//! The run report: one structured document ([`Report`]) built from a run directory's
+//! artifacts, rendered as Markdown (`report.md`) and as a self-contained HTML page
+//! (`report.html`, the figures inlined as SVG).
+//!
+//! Content: the problem, the dataset's counts (failures, soft labels, degenerate points),
+//! Table I and Table II for both nets beside the paper's figures, every term of the
+//! certificate and which ones are estimates, the closed-loop distributions (initial states,
+//! robustness runs, training seeds as median [min, max]), the figures, the per-stage
+//! timings and the command that reproduces the run. Every number is read from the run's
+//! files; the only constants are the paper's published figures.
+//!
+//! This file owns the document ([`Report`], [`Block`]), its inputs (the run's artifacts,
+//! [`Timing`]) and [`build`], the list of sections; `sections.rs` builds each section's
+//! blocks, `render.rs` turns the document into Markdown and HTML.
+
+mod render;
+mod sections;
+
+pub use render::{esc, inline};
+
+use crate::certify::certificate::Certificate;
+use crate::certify::Model;
+use crate::data::dataset::Dataset;
+use crate::problem::ProblemConfig;
+use crate::study::scenarios::ClosedLoop;
+use crate::study::seeds::SeedRun;
+use std::path::Path;
+
+/// A report that cannot be built (names the file at fault).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ReportError(pub String);
+
+/// The paper's Table I (R², ε_D, L_NN) for the nominal and the regularized net.
+pub const PAPER_TABLE_I: [(&str, [f64; 3]); 2] = [
+    ("nominal", [0.985, 3.231, 384.01]),
+    ("regularized", [0.992, 1.823, 207.66]),
+];
+/// The paper's Table II (violating steps %, max violation, max input divergence).
+pub const PAPER_TABLE_II: [(&str, [f64; 3]); 2] = [
+    ("nominal", [46.534, 1.113, 2.975]),
+    ("regularized", [39.604, 1.032, 0.649]),
+];
+
+/// Median, minimum and maximum (NaN entries ignored).
+pub fn med_min_max(v: &[f64]) -> (f64, f64, f64) {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    if s.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    let med = if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    };
+    (med, s[0], s[n - 1])
+}
+
+/// Timing of one stage, for the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timing {
+    /// Stage name.
+    pub stage: String,
+    /// Wall time in seconds (of the run that produced the artifacts when skipped).
+    pub seconds: f64,
+    /// Skipped in this run.
+    pub skipped: bool,
+}
+
+/// A block of the report.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Block {
+    /// A section heading (level 2 or 3).
+    Heading(u8, String),
+    /// A paragraph; `**bold**` and `` `code` `` are the only inline markup.
+    Para(String),
+    /// A table.
+    Table {
+        /// Column headers.
+        head: Vec<String>,
+        /// Rows of cells (inline markup as in paragraphs).
+        rows: Vec<Vec<String>>,
+    },
+    /// A shell command block.
+    Code(String),
+    /// A figure `plots/<stem>.svg|png` with its caption.
+    Figure {
+        /// File stem.
+        stem: String,
+        /// Caption.
+        caption: String,
+    },
+}
+
+/// The report: a title and blocks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    /// Title.
+    pub title: String,
+    /// Content in order.
+    pub blocks: Vec<Block>,
+}
+
+/// The run's artifacts the sections read (all but the figure index, which the figures
+/// section reads itself).
+struct Artifacts {
+    /// `dataset.bin`.
+    data: Dataset,
+    /// `model_nominal.bin`.
+    nom: Model,
+    /// `model_regularized.bin`.
+    reg: Model,
+    /// `certificate.json` (the regularized net's).
+    cert: Certificate,
+    /// `certificate_nominal.json`.
+    cert_n: Certificate,
+    /// `closed_loop.json`.
+    cl: ClosedLoop,
+    /// `seeds.json`: per training seed, the nominal and the regularized net.
+    seeds: Vec<[SeedRun; 2]>,
+    /// `export_report.json`.
+    export: serde_json::Value,
+}
+
+impl Artifacts {
+    /// Reads the artifacts of the run in `dir`; the first missing or unreadable file is the
+    /// error.
+    fn load(dir: &Path) -> Result<Self, ReportError> {
+        let e = |e: crate::data::dataset::DatasetError| ReportError(e.to_string());
+        Ok(Artifacts {
+            data: Dataset::load(&dir.join("dataset.bin")).map_err(e)?,
+            nom: Model::load(&dir.join("model_nominal.bin")).map_err(e)?,
+            reg: Model::load(&dir.join("model_regularized.bin")).map_err(e)?,
+            cert: load(&dir.join("certificate.json"))?,
+            cert_n: load(&dir.join("certificate_nominal.json"))?,
+            cl: load(&dir.join("closed_loop.json"))?,
+            seeds: load(&dir.join("seeds.json"))?,
+            export: load(&dir.join("export_report.json"))?,
+        })
+    }
+}
+
+/// Reads a JSON file.
+fn load<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T, ReportError> {
+    let t = std::fs::read_to_string(p).map_err(|e| ReportError(format!("{}: {e}", p.display())))?;
+    serde_json::from_str(&t).map_err(|e| ReportError(format!("{}: {e}", p.display())))
+}
+
+/// Builds the report of the run in `dir` from its artifacts.
+pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Report, ReportError> {
+    let a = Artifacts::load(dir)?;
+    let blocks = [
+        sections::problem(cfg),
+        sections::dataset(&a),
+        sections::table_i(&a),
+        sections::training_seeds(cfg, &a),
+        sections::certificate(&a),
+        sections::table_ii(cfg, &a),
+        sections::closed_loop_seeds(&a),
+        sections::all_runs(cfg, &a),
+        sections::figures(dir)?,
+        sections::timings(timings),
+        sections::reproduce(dir),
+    ]
+    .concat();
+    Ok(Report {
+        title: format!("ampc run: {}", cfg.name),
+        blocks,
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,456 @@
+//! The sections of the report, in report order: each function returns one section's
+//! blocks (heading, paragraphs, tables) from the run's artifacts; plus the number and
+//! table-cell formatting they share.
+
+use super::{
+    load, med_min_max, Artifacts, Block, ReportError, Timing, PAPER_TABLE_I, PAPER_TABLE_II,
+};
+use crate::certify::certificate::Certificate;
+use crate::problem::ProblemConfig;
+use crate::study::closed_loop::Run;
+use crate::study::plots::{FigureEntry, PLOTS};
+use crate::study::seeds::SeedRun;
+use std::path::Path;
+
+/// The problem: system, OCP, bounds, certified domain.
+pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
+    vec![
+        Block::Heading(2, "Problem".into()),
+        Block::Para(format!(
+            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.",
+            cfg.system.name(),
+            cfg.system.nx(),
+            cfg.system.nu(),
+            cfg.ocp.ts,
+            cfg.ocp.horizon,
+            cfg.ocp.rk4_substeps,
+            json(&cfg.ocp.q),
+            json(&cfg.ocp.r),
+            json(&cfg.ocp.p),
+            boxed(&cfg.ocp.x_lo, &cfg.ocp.x_hi),
+            boxed(&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+            boxed(&cfg.domain.lo, &cfg.domain.hi),
+        )),
+    ]
+}
+
+/// The dataset: counts by label status, training and validation sizes.
+pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
+    let c = a.data.counts();
+    vec![
+        Block::Heading(2, "Dataset".into()),
+        Block::Table {
+            head: strs(&[
+                "states",
+                "sampler",
+                "converged",
+                "soft (exact-penalty label)",
+                "infeasible",
+                "failed",
+                "degenerate sensitivity",
+            ]),
+            rows: vec![row([
+                c.total.to_string(),
+                format!(
+                    "{:?} {:?}",
+                    a.data.header.sampling.sampler, a.data.header.sampling.counts
+                ),
+                c.converged.to_string(),
+                c.soft.to_string(),
+                c.infeasible.to_string(),
+                c.failed.to_string(),
+                c.degenerate.to_string(),
+            ])],
+        },
+        Block::Para(format!(
+            "Soft: the hard OCP is infeasible at the state and the label is the exact-penalty optimum; infeasible and failed states have no label and are not trained on; degenerate points keep their value term and drop the Jacobian term. {} labelled training points; R² is measured on {} MPC-labelled random states of X.",
+            a.nom.train_stats.n, a.nom.validation_stats.n
+        )),
+    ]
+}
+
+/// Table I: both nets after training (R², ε_D, the Lipschitz bounds) beside the paper's.
+pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
+    let mut rows = Vec::new();
+    for ((name, m, ce), (_, paper)) in [
+        ("nominal", &a.nom, &a.cert_n),
+        ("regularized", &a.reg, &a.cert),
+    ]
+    .into_iter()
+    .zip(PAPER_TABLE_I)
+    {
+        rows.push(row([
+            name.to_string(),
+            format!("{:.4}", m.validation_stats.r2),
+            format!("{:.3}", ce.eps_d),
+            format!("{:.2} ({:?})", ce.l_nn, ce.l_nn_method),
+            format!("{:.2}", ce.l_nn_lipsdp),
+            format!("{:.2}", ce.l_nn_naive),
+            format!("{:.2}", ce.l_nn_lower),
+            format!("{:.3}", m.train_stats.median),
+            format!("{} / {} / {}", paper[0], paper[1], paper[2]),
+        ]));
+    }
+    vec![
+        Block::Heading(2, "Table I: networks after training".into()),
+        Block::Table {
+            head: strs(&[
+                "net",
+                "validation R²",
+                "ε_D",
+                "L_NN (sound, method)",
+                "LipSDP-Neuron",
+                "naive",
+                "sampled lower",
+                "median error",
+                "paper R² / ε_D / L_NN",
+            ]),
+            rows,
+        },
+    ]
+}
+
+/// The end of Table I's section: R² and ε_D of both nets over the training seeds.
+pub(super) fn training_seeds(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let seeds = &a.seeds;
+    vec![
+        Block::Para(format!(
+            "Training seed {} (initial weights and shuffling, the same for both nets). Over {} seeds ({}), median [min, max]:",
+            cfg.training.seed,
+            seeds.len(),
+            seed_range(seeds)
+        )),
+        Block::Table {
+            head: strs(&["net", "validation R²", "ε_D"]),
+            rows: ["nominal", "regularized"]
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    row([
+                        name.to_string(),
+                        mmm(&seed_list(seeds, k, |s| s.r2_validation)),
+                        mmm(&seed_list(seeds, k, |s| s.eps_d)),
+                    ])
+                })
+                .collect(),
+        },
+    ]
+}
+
+/// The certificate (Theorem 1): every term for both nets, how it was obtained and whether
+/// it is an estimate; the f32 allowance of the exported controller and its clamp band.
+pub(super) fn certificate(a: &Artifacts) -> Vec<Block> {
+    let (cert, cert_n) = (&a.cert, &a.cert_n);
+    let f32a = a.export["f32_allowance_libm"].as_f64().unwrap_or(f64::NAN);
+    let cert_rows = |name: &str, f: &dyn Fn(&Certificate) -> String, how: String| {
+        row([name.to_string(), f(cert), f(cert_n), how])
+    };
+    let mut rows = vec![
+        cert_rows(
+            "ε_D",
+            &|c| format!("{:.6}", c.eps_d),
+            format!("max ‖κ − κ_NN‖ over {} labelled points (computed)", cert.n_points),
+        ),
+        cert_rows(
+            "L_NN",
+            &|c| format!("{:.4}", c.l_nn),
+            format!("{:?}: a sound upper bound (naive product of norms {:.2}, sampled lower bound {:.2})", cert.l_nn_method, cert.l_nn_naive, cert.l_nn_lower),
+        ),
+        cert_rows(
+            "L_MPC",
+            &|c| format!("{:.4}", c.l_mpc),
+            format!(
+                "{}{}",
+                cert.l_mpc_method,
+                if cert.l_mpc_is_estimate { " — **an estimate**, not a proven bound" } else { " — supplied as proven" }
+            ),
+        ),
+        cert_rows(
+            "r",
+            &|c| format!("{:.6}", c.covering_radius),
+            cert.covering_method.clone(),
+        ),
+        cert_rows(
+            "**ε**",
+            &|c| format!("**{:.4}**", c.eps),
+            format!(
+                "ε_D + (L_MPC + L_NN)·r{}",
+                if cert.l_mpc_is_estimate { "; L_MPC is an estimate, so ε is too" } else { "" }
+            ),
+        ),
+    ];
+    rows.push(row([
+        "f32 allowance".to_string(),
+        format!("{f32a:.3e}"),
+        "—".into(),
+        "sound bound on |κ_NN,f32 − κ_NN,f64| over X for the exported controller (libm tanh); added to ε on the device".into(),
+    ]));
+    rows.push(row([
+        "ε on the device".to_string(),
+        format!("{:.4}", cert.eps + f32a),
+        "—".into(),
+        "ε + f32 allowance".into(),
+    ]));
+    vec![
+        Block::Heading(2, "Certificate (Theorem 1)".into()),
+        Block::Table {
+            head: strs(&["term", "regularized", "nominal", "how"]),
+            rows,
+        },
+        Block::Para(format!(
+            "Output clamp band U ⊕ [−ε, ε] of the exported (regularized) controller: u ∈ {}.",
+            boxed(&cert.clamp_lo, &cert.clamp_hi)
+        )),
+    ]
+}
+
+/// Table II: the closed loop of the MPC and both nets from the reference initial state,
+/// beside the paper's.
+pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let first = |k: &str| a.cl.get(k).and_then(|v| v.first());
+    let x0: Vec<String> = first("mpc")
+        .map(|r| r.x0.iter().map(|v| num(*v)).collect())
+        .unwrap_or_default();
+    let steps = first("mpc").map_or(0, |r| r.steps);
+    let mut rows = Vec::new();
+    for k in ["mpc", "nominal", "regularized"] {
+        let paper = PAPER_TABLE_II
+            .iter()
+            .find(|(n, _)| *n == k)
+            .map_or("—".to_string(), |(_, p)| {
+                format!("{} / {} / {}", p[0], p[1], p[2])
+            });
+        if let Some(r) = first(k) {
+            rows.push(row([
+                k.to_string(),
+                format!("{:.3}", r.violation_percent),
+                format!("{:.4}", r.max_violation),
+                format!("{:.4}", r.max_input_divergence),
+                format!("{:.1}", r.cost),
+                r.settling_step.map_or("never".into(), |v| v.to_string()),
+                r.left_band.to_string(),
+                paper,
+            ]));
+        }
+    }
+    vec![
+        Block::Heading(2, "Table II: closed loop".into()),
+        Block::Para(format!(
+            "From x₀ = ({}) ({steps} steps = {} s, nominal plant, no noise), training seed {}:",
+            x0.join(", "),
+            steps as f64 * cfg.ocp.ts,
+            cfg.training.seed
+        )),
+        Block::Table {
+            head: strs(&[
+                "controller",
+                "violating steps %",
+                "max violation",
+                "max input divergence",
+                "cost",
+                "settling step",
+                "left certified band",
+                "paper % / max / divergence",
+            ]),
+            rows,
+        },
+    ]
+}
+
+/// Table II's closed loop of both nets over the training seeds.
+pub(super) fn closed_loop_seeds(a: &Artifacts) -> Vec<Block> {
+    let seeds = &a.seeds;
+    vec![
+        Block::Para(format!(
+            "Over {} training seeds ({}), same x₀, median [min, max]:",
+            seeds.len(),
+            seed_range(seeds)
+        )),
+        Block::Table {
+            head: strs(&[
+                "net",
+                "violating steps %",
+                "max violation",
+                "max input divergence",
+                "cost",
+            ]),
+            rows: ["nominal", "regularized"]
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    row([
+                        name.to_string(),
+                        mmm(&seed_list(seeds, k, |s| s.run.violation_percent)),
+                        mmm(&seed_list(seeds, k, |s| s.run.max_violation)),
+                        mmm(&seed_list(seeds, k, |s| s.run.max_input_divergence)),
+                        mmm(&seed_list(seeds, k, |s| s.run.cost)),
+                    ])
+                })
+                .collect(),
+        },
+    ]
+}
+
+/// Every set of closed-loop runs (all initial states, the robustness runs).
+pub(super) fn all_runs(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let mut rows = Vec::new();
+    for (k, runs) in &a.cl {
+        let col = |f: fn(&Run) -> f64| mmm(&runs.iter().map(f).collect::<Vec<_>>());
+        rows.push(row([
+            k.clone(),
+            runs.len().to_string(),
+            col(|r| r.violation_percent),
+            col(|r| r.max_violation),
+            col(|r| r.max_input_divergence),
+            col(|r| r.cost),
+        ]));
+    }
+    vec![
+        Block::Para(format!(
+            "Over all initial states (x₀ and {} random states of X) and the robustness runs (`_noise`: measurement noise {} of the domain half-width, {} seeds; `_mass±`: plant mass ±{} %), training seed {}, median [min, max]:",
+            cfg.closed_loop.random_initial_states,
+            cfg.closed_loop.noise_fraction,
+            cfg.closed_loop.noise_runs,
+            100.0 * cfg.closed_loop.mass_mismatch,
+            cfg.training.seed
+        )),
+        Block::Table {
+            head: strs(&[
+                "runs",
+                "n",
+                "violating steps %",
+                "max violation",
+                "max input divergence",
+                "cost",
+            ]),
+            rows,
+        },
+    ]
+}
+
+/// The figures of [`PLOTS`] with their captions from `plots/figures.json`.
+pub(super) fn figures(dir: &Path) -> Result<Vec<Block>, ReportError> {
+    let mut b = vec![Block::Heading(2, "Figures".into())];
+    let figures: Vec<FigureEntry> = load(&dir.join("plots/figures.json"))?;
+    for stem in PLOTS {
+        let caption = figures
+            .iter()
+            .find(|f| f.name == stem)
+            .map(|f| f.caption.clone())
+            .ok_or_else(|| ReportError(format!("plots/figures.json lists no figure `{stem}`")))?;
+        b.push(Block::Figure {
+            stem: stem.to_string(),
+            caption,
+        });
+    }
+    Ok(b)
+}
+
+/// The stage timings and their total.
+pub(super) fn timings(timings: &[Timing]) -> Vec<Block> {
+    let total: f64 = timings
+        .iter()
+        .filter(|t| !t.skipped)
+        .map(|t| t.seconds)
+        .sum();
+    let mut rows: Vec<Vec<String>> = timings
+        .iter()
+        .map(|t| {
+            row([
+                t.stage.clone(),
+                format!("{:.3}", t.seconds),
+                if t.skipped {
+                    "skipped (time of the run that made it)".into()
+                } else {
+                    "ran".into()
+                },
+            ])
+        })
+        .collect();
+    rows.push(row([
+        "stages run before the report".to_string(),
+        format!("{total:.3}"),
+        String::new(),
+    ]));
+    vec![
+        Block::Heading(2, "Stage timings".into()),
+        Block::Table {
+            head: strs(&["stage", "seconds", "this run"]),
+            rows,
+        },
+        Block::Para(format!(
+            "Wall-clock times on this machine ({} threads available to rayon).",
+            rayon::current_num_threads()
+        )),
+    ]
+}
+
+/// The command that reproduces the run.
+pub(super) fn reproduce(dir: &Path) -> Vec<Block> {
+    vec![
+        Block::Heading(2, "Reproduce".into()),
+        Block::Code(format!(
+            "cargo run --release -p trainer -- run {} --out {}",
+            dir.join("problem.toml").display(),
+            dir.parent().map_or(".".into(), |p| p.display().to_string())
+        )),
+    ]
+}
+
+/// Values of `f` for net `k` (0: nominal, 1: regularized) over the training seeds.
+fn seed_list(seeds: &[[SeedRun; 2]], k: usize, f: fn(&SeedRun) -> f64) -> Vec<f64> {
+    seeds.iter().map(|s| f(&s[k])).collect()
+}
+
+/// The training seeds as `first..=last`.
+fn seed_range(seeds: &[[SeedRun; 2]]) -> String {
+    match (seeds.first(), seeds.last()) {
+        (Some(a), Some(z)) => format!("{}..={}", a[0].seed, z[0].seed),
+        _ => "none".into(),
+    }
+}
+
+/// Median [min, max] with three decimals.
+fn mmm(v: &[f64]) -> String {
+    let (a, b, c) = med_min_max(v);
+    format!("{a:.3} [{b:.3}, {c:.3}]")
+}
+
+/// Compact JSON of a value, for the problem summary.
+fn json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).unwrap_or_default()
+}
+
+/// A table row.
+fn row(cells: impl IntoIterator<Item = String>) -> Vec<String> {
+    cells.into_iter().collect()
+}
+
+/// Owned strings.
+pub(super) fn strs(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+/// A number with at most 6 significant digits.
+pub(super) fn num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (5 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// A box `[lo₁, hi₁] × [lo₂, hi₂] × …`.
+pub(super) fn boxed(lo: &[f64], hi: &[f64]) -> String {
+    let parts: Vec<String> = lo
+        .iter()
+        .zip(hi)
+        .map(|(l, h)| format!("[{}, {}]", num(*l), num(*h)))
+        .collect();
+    parts.join(" × ")
+}
