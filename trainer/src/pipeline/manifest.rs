@@ -1,7 +1,9 @@
 //! Skip-if-unchanged: a stage's manifest (`manifest_<stage>.json`) records the SHA-256 of
-//! its inputs (files of earlier stages, settings serialised as JSON), its outputs, the trainer
-//! version and its wall time; a stage whose recorded inputs equal the current ones, built by
-//! the same version, with every output present, is not run again.
+//! its inputs (files of earlier stages, settings serialised as JSON), of its outputs, the
+//! trainer version and its wall time; a stage whose recorded inputs equal the current ones,
+//! built by the same version, whose every output is present with the recorded hash, is not
+//! run again. An output modified or corrupted since the stage wrote it makes the stage run
+//! again, and its summary says which file.
 
 use super::{fail, PipelineError, RunOptions, StageReport};
 use crate::io::{hex, write_atomic};
@@ -22,8 +24,50 @@ pub struct Manifest {
     pub inputs: BTreeMap<String, String>,
     /// Output files (relative to the run directory).
     pub outputs: Vec<String>,
+    /// Output file → SHA-256 of what the stage wrote (a manifest without it is not trusted).
+    #[serde(default)]
+    pub output_hashes: BTreeMap<String, String>,
     /// Wall time in seconds.
     pub seconds: f64,
+}
+
+/// Why a stage cannot be skipped.
+enum Stale {
+    /// No manifest, other inputs or another trainer version: run it.
+    Inputs,
+    /// Inputs unchanged, but an output is missing or differs from what the stage wrote.
+    Output(String),
+}
+
+/// SHA-256 of each output file of a run directory.
+fn output_hashes(
+    dir: &Path,
+    stage: &str,
+    outputs: &[&str],
+) -> Result<BTreeMap<String, String>, PipelineError> {
+    outputs
+        .iter()
+        .map(|o| {
+            let p = dir.join(o);
+            let h = sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
+            Ok((o.to_string(), h))
+        })
+        .collect()
+}
+
+/// Records the current hash of `file` in `stage`'s manifest, after a later step of the
+/// same run legitimately rewrote it (the robust loop adds its runs to `closed_loop.json`).
+pub fn reseal(dir: &Path, stage: &str, file: &str) -> Result<(), PipelineError> {
+    let mpath = dir.join(format!("manifest_{stage}.json"));
+    let text = std::fs::read_to_string(&mpath)
+        .map_err(|e| fail(stage, format!("{}: {e}", mpath.display())))?;
+    let mut m: Manifest = serde_json::from_str(&text)
+        .map_err(|e| fail(stage, format!("{}: {e}", mpath.display())))?;
+    let p = dir.join(file);
+    let h = sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
+    m.output_hashes.insert(file.to_string(), h);
+    let json = serde_json::to_string_pretty(&m).map_err(|e| fail(stage, e))?;
+    write_atomic(&mpath, json.as_bytes()).map_err(|e| fail(stage, e))
 }
 
 pub(super) fn sha_file(p: &Path) -> Result<String, std::io::Error> {
@@ -57,18 +101,23 @@ impl Ctx<'_> {
     ) -> Result<(), PipelineError> {
         let mpath = self.dir.join(format!("manifest_{name}.json"));
         let forced = self.opts.force.iter().any(|f| f == name);
+        let mut note = None;
         if !forced {
-            if let Some(m) = self.unchanged(&mpath, &inputs, outputs) {
-                let r = StageReport {
-                    stage: name.into(),
-                    skipped: true,
-                    seconds: m.seconds,
-                    summary: "unchanged inputs, skipped".into(),
-                    inputs: m.inputs,
-                    outputs: m.outputs,
-                };
-                self.report(r);
-                return Ok(());
+            match self.unchanged(&mpath, &inputs, outputs) {
+                Ok(m) => {
+                    let r = StageReport {
+                        stage: name.into(),
+                        skipped: true,
+                        seconds: m.seconds,
+                        summary: "unchanged inputs, skipped".into(),
+                        inputs: m.inputs,
+                        outputs: m.outputs,
+                    };
+                    self.report(r);
+                    return Ok(());
+                }
+                Err(Stale::Output(why)) => note = Some(why),
+                Err(Stale::Inputs) => {}
             }
         }
         let t = Instant::now();
@@ -89,13 +138,17 @@ impl Ctx<'_> {
         if let Some(b) = spinner {
             b.finish_and_clear();
         }
-        let summary = summary?;
+        let mut summary = summary?;
+        if let Some(why) = note {
+            summary = format!("{why}: redone; {summary}");
+        }
         let seconds = t.elapsed().as_secs_f64();
         let m = Manifest {
             stage: name.into(),
             version: env!("CARGO_PKG_VERSION").into(),
             inputs: inputs.clone(),
             outputs: outputs.iter().map(|s| s.to_string()).collect(),
+            output_hashes: output_hashes(&self.dir, name, outputs)?,
             seconds,
         };
         let json = serde_json::to_string_pretty(&m).map_err(|e| fail(name, e))?;
@@ -111,20 +164,32 @@ impl Ctx<'_> {
         Ok(())
     }
 
-    /// The manifest at `mpath` if it records these inputs, this version, and every output
-    /// exists.
+    /// The manifest at `mpath` if it records these inputs and this version, and every
+    /// output is present with the hash it was written with.
     fn unchanged(
         &self,
         mpath: &Path,
         inputs: &BTreeMap<String, String>,
         outputs: &[&str],
-    ) -> Option<Manifest> {
-        let text = std::fs::read_to_string(mpath).ok()?;
-        let m = serde_json::from_str::<Manifest>(&text).ok()?;
-        (m.inputs == *inputs
-            && m.version == env!("CARGO_PKG_VERSION")
-            && outputs.iter().all(|o| self.dir.join(o).exists()))
-        .then_some(m)
+    ) -> Result<Manifest, Stale> {
+        let text = std::fs::read_to_string(mpath).map_err(|_| Stale::Inputs)?;
+        let m = serde_json::from_str::<Manifest>(&text).map_err(|_| Stale::Inputs)?;
+        if m.inputs != *inputs || m.version != env!("CARGO_PKG_VERSION") {
+            return Err(Stale::Inputs);
+        }
+        for o in outputs {
+            let p = self.dir.join(o);
+            let Ok(h) = sha_file(&p) else {
+                return Err(Stale::Output(format!("{} is missing", p.display())));
+            };
+            if m.output_hashes.get(*o) != Some(&h) {
+                return Err(Stale::Output(format!(
+                    "{} differs from what this stage wrote",
+                    p.display()
+                )));
+            }
+        }
+        Ok(m)
     }
 
     fn report(&mut self, r: StageReport) {

@@ -98,6 +98,7 @@ pub fn run(
 ) -> Result<Vec<StageReport>, PipelineError> {
     let dir = opts.root.join(&cfg.name);
     std::fs::create_dir_all(&dir).map_err(|e| fail("setup", format!("{}: {e}", dir.display())))?;
+    let _lock = lock(&dir)?;
     write_atomic(&dir.join("problem.toml"), config_text.as_bytes())
         .map_err(|e| fail("setup", e))?;
     let mut cx = Ctx {
@@ -130,11 +131,53 @@ pub fn run(
     Ok(cx.reports)
 }
 
+/// Takes the run directory's lock (`.lock`, an advisory `flock` that the kernel releases
+/// when the process ends, even by `kill -9`): a second `trainer run` into the same directory
+/// fails at once instead of interleaving its files with the first.
+fn lock(dir: &std::path::Path) -> Result<std::fs::File, PipelineError> {
+    let p = dir.join(".lock");
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&p)
+        .map_err(|e| fail("setup", format!("{}: {e}", p.display())))?;
+    match f.try_lock() {
+        Ok(()) => Ok(f),
+        Err(std::fs::TryLockError::WouldBlock) => Err(fail(
+            "setup",
+            format!(
+                "{} is in use by another `trainer run` (lock {}); wait for it to finish or use another --out",
+                dir.display(),
+                p.display()
+            ),
+        )),
+        Err(std::fs::TryLockError::Error(e)) => {
+            Err(fail("setup", format!("{}: {e}", p.display())))
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
     fn the_stage_list_is_the_documented_order() {
         let names: Vec<&str> = super::stages::ALL.iter().map(|s| s.name).collect();
         assert_eq!(names, super::STAGES);
+    }
+
+    #[test]
+    fn a_second_run_into_a_locked_directory_fails_at_once() {
+        let dir = std::env::temp_dir().join(format!("ampc_lock_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let held = super::lock(&dir).unwrap();
+        let e = super::lock(&dir).unwrap_err().to_string();
+        assert!(e.contains("in use by another `trainer run`"), "{e}");
+        drop(held);
+        assert!(
+            super::lock(&dir).is_ok(),
+            "the lock is released with its file"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -187,6 +187,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     }
     let text = serde_json::to_string(&cl).map_err(|e| io(&clpath, e))?;
     write_atomic(&clpath, text.as_bytes()).map_err(|e| io(&clpath, e))?;
+    super::manifest::reseal(&dir, "closed_loop", "closed_loop.json")?;
     let json = serde_json::to_string_pretty(&rep).map_err(|e| io(&dir, e))?;
     write_atomic(&dir.join("robust.json"), json.as_bytes()).map_err(|e| io(&dir, e))?;
     write_atomic(&dir.join("robust.md"), markdown(&rep).as_bytes()).map_err(|e| io(&dir, e))?;

@@ -35,6 +35,13 @@ fn err_key(edit: impl Fn(&mut ProblemConfig)) -> String {
 #[test]
 fn validation_names_the_key_at_fault() {
     assert_eq!(err_key(|c| c.ocp.horizon = 0), "ocp.horizon");
+    // `validation_n = 0` used to be accepted and hung the plots stage on R² = NaN.
+    for n in [0, 1] {
+        assert_eq!(
+            err_key(|c| c.training.validation_n = n),
+            "training.validation_n"
+        );
+    }
     assert_eq!(
         err_key(|c| c.ocp.q = MatrixSpec::Diagonal(vec![1.0])),
         "ocp.q"

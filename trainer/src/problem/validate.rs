@@ -215,6 +215,15 @@ impl ProblemConfig {
         if t.log_every == 0 {
             return Err(invalid("training.log_every", "must be at least 1"));
         }
+        if t.validation_n < 2 {
+            return Err(invalid(
+                "training.validation_n",
+                format!(
+                    "must be at least 2 (R² and the L_MPC estimate need validation states), got {}",
+                    t.validation_n
+                ),
+            ));
+        }
         let c = &self.closed_loop;
         if c.steps == 0 {
             return Err(invalid("closed_loop.steps", "must be at least 1"));
