@@ -187,6 +187,107 @@ pub struct Certificate {
     pub n_points: usize,
     /// Content hash (SHA-256 of the model file the certificate is about).
     pub hash: String,
+    /// [`ProblemConfig::problem_hash`](crate::problem::ProblemConfig::problem_hash) of the
+    /// problem whose MPC the bound is about (empty in certificates of older versions).
+    #[serde(default)]
+    pub problem_hash: String,
+    /// SHA-256 of the dataset (its file bytes) the bound was computed on (empty in
+    /// certificates of older versions).
+    #[serde(default)]
+    pub dataset_hash: String,
+}
+
+/// Inputs that do not belong together: certifying them would bound the wrong thing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MismatchError {
+    /// The model and the data have different state or input dimensions.
+    #[error("the model maps {model_nx} states to {model_nu} inputs but the dataset has {data_nx} states and {data_nu} inputs")]
+    Dimensions {
+        /// The model's n_x.
+        model_nx: usize,
+        /// The model's n_u.
+        model_nu: usize,
+        /// The dataset's n_x.
+        data_nx: usize,
+        /// The dataset's n_u.
+        data_nu: usize,
+    },
+    /// The model was trained on labels of another problem.
+    #[error("the model was trained on labels of problem hash {model}, the dataset holds labels of problem hash {data}")]
+    ModelProblem {
+        /// The model's problem hash.
+        model: String,
+        /// The dataset's.
+        data: String,
+    },
+    /// The dataset was labelled for another problem than the one certified for.
+    #[error("the dataset was labelled for problem `{data_name}` (hash {data}), not for `{cfg_name}` (hash {cfg}): certify it with its own problem (omit --config) or relabel")]
+    DataProblem {
+        /// The dataset's problem name.
+        data_name: String,
+        /// Its problem hash.
+        data: String,
+        /// The problem certified for.
+        cfg_name: String,
+        /// Its hash.
+        cfg: String,
+    },
+    /// The dataset covers another domain X or sampling plan than the problem certified for.
+    #[error("the dataset's {what} differs from the problem's ({data} vs {cfg}): the covering radius would be computed for the wrong points")]
+    Coverage {
+        /// `domain X` or `sampling plan`.
+        what: String,
+        /// The dataset's value.
+        data: String,
+        /// The problem's value.
+        cfg: String,
+    },
+}
+
+/// Checks that a model, a dataset and a problem belong together before they are certified:
+/// equal dimensions, the model trained on labels of the dataset's problem, the dataset
+/// labelled for this problem (same problem hash) over this domain X with this sampling plan.
+pub fn check_inputs(
+    model: &crate::certify::Model,
+    data: &crate::data::dataset::Dataset,
+    cfg: &crate::problem::ProblemConfig,
+) -> Result<(), MismatchError> {
+    let (mx, mu) = (model.mlp.widths()[0], model.mlp.nu());
+    let (dx, du) = (data.header.nx as usize, data.header.nu as usize);
+    if (mx, mu) != (dx, du) || (dx, du) != (cfg.system.nx(), cfg.system.nu()) {
+        return Err(MismatchError::Dimensions {
+            model_nx: mx,
+            model_nu: mu,
+            data_nx: dx,
+            data_nu: du,
+        });
+    }
+    if !model.problem_hash.is_empty() && model.problem_hash != data.header.problem_hash {
+        return Err(MismatchError::ModelProblem {
+            model: model.problem_hash.clone(),
+            data: data.header.problem_hash.clone(),
+        });
+    }
+    if data.header.problem_hash != cfg.problem_hash() {
+        return Err(MismatchError::DataProblem {
+            data_name: data.header.problem.clone(),
+            data: data.header.problem_hash.clone(),
+            cfg_name: cfg.name.clone(),
+            cfg: cfg.problem_hash(),
+        });
+    }
+    if let Ok(own) =
+        crate::problem::ProblemConfig::from_toml_str(&data.header.config_toml, "dataset header")
+    {
+        if own.domain != cfg.domain {
+            return Err(MismatchError::Coverage {
+                what: "domain X".into(),
+                data: format!("{:?} … {:?}", own.domain.lo, own.domain.hi),
+                cfg: format!("{:?} … {:?}", cfg.domain.lo, cfg.domain.hi),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// What a target ε requires.
@@ -232,6 +333,109 @@ pub fn requirement(
         spacing: Some(h),
         solves: Some(solves),
     }
+}
+
+/// Inputs of a certificate beyond the model and the data.
+#[derive(Debug, Clone, Default)]
+pub struct CertifyOptions {
+    /// A proven L_MPC supplied by the user (replaces the estimate).
+    pub l_mpc: Option<f64>,
+    /// Largest number of hidden units for the exact slope-vertex bound (default 22).
+    pub vertex_max_hidden: Option<usize>,
+    /// Extra states labelled by the MPC (e.g. the validation set) for the L_MPC estimate.
+    pub extra: Option<crate::learn::train::TrainSet>,
+}
+
+/// Computes the certificate of `model` on `data` (Theorem 1) with every term.
+pub fn certify(
+    model: &crate::certify::Model,
+    data: &crate::data::dataset::Dataset,
+    cfg: &crate::problem::ProblemConfig,
+    opts: &CertifyOptions,
+) -> Result<Certificate, MismatchError> {
+    use crate::certify::lipschitz;
+    check_inputs(model, data, cfg)?;
+    let set = crate::learn::train::TrainSet::from_dataset(data);
+    let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let naive = lipschitz::naive_bound(&model.mlp);
+    let sdp = lipschitz::lipsdp_bound(&model.mlp);
+    let vertex = lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22));
+    let lower = lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7);
+    let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
+    if sdp < l_nn {
+        (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);
+    }
+    if let Some(v) = vertex.filter(|v| *v < l_nn) {
+        (l_nn, method) = (v, LnnMethod::SlopeVertices);
+    }
+    let (nx, nu) = (set.nx, set.nu);
+    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match opts.l_mpc {
+        Some(v) => (v, false, "user-supplied proven value".to_string()),
+        None => {
+            let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
+            let (mut s2, mut q2) = (0.0f64, 0.0f64);
+            if let Some(e) = &opts.extra {
+                (s2, q2) = lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu);
+            }
+            (
+                s.max(q).max(s2).max(q2),
+                true,
+                format!(
+                    "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \
+                     max neighbour difference quotient ({q:.4}, {q2:.4})"
+                ),
+            )
+        }
+    };
+    let all_labelled = set.len() == data.records.len();
+    let (covering_radius, covering_method) = if data.header.sampling.sampler
+        == crate::problem::SamplerKind::Grid
+        && all_labelled
+        && data.header.shard.is_none()
+    {
+        (
+            grid_covering_radius(lo, hi, &data.header.sampling.counts),
+            "exact: half the grid cell diagonal".to_string(),
+        )
+    } else {
+        let (ub, lb) = scattered_covering_radius(
+            &set.x,
+            lo,
+            hi,
+            1e-4 * lo.iter().zip(hi).map(|(a, b)| b - a).fold(0.0, f64::max),
+        );
+        (ub, format!("sound upper bound by branch and bound over X (lower {lb:.6}); labelled points only"))
+    };
+    let eps = stats.max + (l_mpc + l_nn) * covering_radius;
+    Ok(Certificate {
+        eps,
+        eps_d: stats.max,
+        l_nn,
+        l_nn_method: method,
+        l_nn_naive: naive,
+        l_nn_lipsdp: sdp,
+        l_nn_vertex: vertex,
+        l_nn_lower: lower,
+        l_mpc,
+        l_mpc_is_estimate,
+        l_mpc_method,
+        covering_radius,
+        covering_method,
+        f32_allowance: 0.0,
+        domain_lo: lo.clone(),
+        domain_hi: hi.clone(),
+        // U_d, the input bounds of the data: the stage-0 bounds (tightened by the design ε
+        // in a robust design; the problem's U otherwise).
+        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
+        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
+        clamp_lo: cfg.ocp.u_bounds(0).0.iter().map(|u| u - eps).collect(),
+        clamp_hi: cfg.ocp.u_bounds(0).1.iter().map(|u| u + eps).collect(),
+        n_points: set.len(),
+        hash: model.content_hash(),
+        problem_hash: cfg.problem_hash(),
+        dataset_hash: crate::io::sha256_hex(&data.to_bytes()),
+    })
 }
 
 #[cfg(test)]
@@ -293,104 +497,98 @@ mod tests {
         assert!(grid_covering_radius(&lo, &hi, &[c, c]) <= delta + 1e-12);
         assert!(requirement(0.1, 0.2, 3.0, 5.0, &lo, &hi).delta.is_none());
     }
-}
 
-/// Inputs of a certificate beyond the model and the data.
-#[derive(Debug, Clone, Default)]
-pub struct CertifyOptions {
-    /// A proven L_MPC supplied by the user (replaces the estimate).
-    pub l_mpc: Option<f64>,
-    /// Largest number of hidden units for the exact slope-vertex bound (default 22).
-    pub vertex_max_hidden: Option<usize>,
-    /// Extra states labelled by the MPC (e.g. the validation set) for the L_MPC estimate.
-    pub extra: Option<crate::learn::train::TrainSet>,
-}
-
-/// Computes the certificate of `model` on `data` (Theorem 1) with every term.
-pub fn certify(
-    model: &crate::certify::Model,
-    data: &crate::data::dataset::Dataset,
-    cfg: &crate::problem::ProblemConfig,
-    opts: &CertifyOptions,
-) -> Certificate {
-    use crate::certify::lipschitz;
-    let set = crate::learn::train::TrainSet::from_dataset(data);
-    let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
-    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
-    let naive = lipschitz::naive_bound(&model.mlp);
-    let sdp = lipschitz::lipsdp_bound(&model.mlp);
-    let vertex = lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22));
-    let lower = lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7);
-    let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
-    if sdp < l_nn {
-        (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);
-    }
-    if let Some(v) = vertex.filter(|v| *v < l_nn) {
-        (l_nn, method) = (v, LnnMethod::SlopeVertices);
-    }
-    let (nx, nu) = (set.nx, set.nu);
-    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match opts.l_mpc {
-        Some(v) => (v, false, "user-supplied proven value".to_string()),
-        None => {
-            let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
-            let (mut s2, mut q2) = (0.0f64, 0.0f64);
-            if let Some(e) = &opts.extra {
-                (s2, q2) = lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu);
-            }
-            (
-                s.max(q).max(s2).max(q2),
-                true,
-                format!(
-                    "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \
-                     max neighbour difference quotient ({q:.4}, {q2:.4})"
-                ),
-            )
-        }
-    };
-    let all_labelled = set.len() == data.records.len();
-    let (covering_radius, covering_method) = if data.header.sampling.sampler
-        == crate::problem::SamplerKind::Grid
-        && all_labelled
-        && data.header.shard.is_none()
-    {
-        (
-            grid_covering_radius(lo, hi, &data.header.sampling.counts),
-            "exact: half the grid cell diagonal".to_string(),
-        )
-    } else {
-        let (ub, lb) = scattered_covering_radius(
-            &set.x,
-            lo,
-            hi,
-            1e-4 * lo.iter().zip(hi).map(|(a, b)| b - a).fold(0.0, f64::max),
+    /// Two small problems with equal dimensions (the pendulum near upright and the double
+    /// integrator), their datasets (written by `generate`, headers included) and a briefly
+    /// trained net of each.
+    fn two_problems(
+        dir: &std::path::Path,
+    ) -> [(
+        crate::problem::ProblemConfig,
+        crate::data::dataset::Dataset,
+        crate::certify::Model,
+    ); 2] {
+        use crate::data::dataset::{generate, GenerateOptions};
+        use crate::learn::train::{train, TrainOptions, TrainSet};
+        use crate::problem::ProblemConfig;
+        let mut pend = ProblemConfig::default();
+        pend.domain.lo = vec![-0.5, -0.5];
+        pend.domain.hi = vec![0.5, 0.5];
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
         );
-        (ub, format!("sound upper bound by branch and bound over X (lower {lb:.6}); labelled points only"))
-    };
-    let eps = stats.max + (l_mpc + l_nn) * covering_radius;
-    Certificate {
-        eps,
-        eps_d: stats.max,
-        l_nn,
-        l_nn_method: method,
-        l_nn_naive: naive,
-        l_nn_lipsdp: sdp,
-        l_nn_vertex: vertex,
-        l_nn_lower: lower,
-        l_mpc,
-        l_mpc_is_estimate,
-        l_mpc_method,
-        covering_radius,
-        covering_method,
-        f32_allowance: 0.0,
-        domain_lo: lo.clone(),
-        domain_hi: hi.clone(),
-        // U_d, the input bounds of the data: the stage-0 bounds (tightened by the design ε
-        // in a robust design; the problem's U otherwise).
-        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
-        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
-        clamp_lo: cfg.ocp.u_bounds(0).0.iter().map(|u| u - eps).collect(),
-        clamp_hi: cfg.ocp.u_bounds(0).1.iter().map(|u| u + eps).collect(),
-        n_points: set.len(),
-        hash: model.content_hash(),
+        let di = ProblemConfig::load(std::path::Path::new(path)).unwrap();
+        [pend, di].map(|mut cfg| {
+            cfg.sampling.counts = vec![4, 3];
+            cfg.training.epochs = 3;
+            cfg.training.hidden = vec![4];
+            // The header stores the problem file: the serialised config stands for it.
+            let file = dir.join(format!("{}.bin", cfg.name));
+            let opts = GenerateOptions {
+                shard: None,
+                progress: false,
+            };
+            let data = generate(&cfg, &file, &opts).unwrap();
+            let set = TrainSet::from_dataset(&data);
+            let model = train(
+                &cfg.training,
+                &TrainOptions {
+                    nominal: false,
+                    progress: None,
+                },
+                &set,
+                &set,
+                (&cfg.domain.lo, &cfg.domain.hi),
+                (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                &data.header.problem_hash,
+                "d",
+            );
+            (cfg, data, model)
+        })
+    }
+
+    /// The inputs of a certificate must belong together: a pendulum net on double-integrator
+    /// data, data certified for another problem or another domain X are refused (they used
+    /// to be certified with exit 0), and export refuses a certificate of another model.
+    #[test]
+    fn mismatched_inputs_are_refused_and_certificates_bind_their_inputs() {
+        let dir = std::env::temp_dir().join(format!("ampc_mismatch_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let [(pcfg, pdata, pmodel), (dcfg, ddata, dmodel)] = two_problems(&dir);
+        let o = CertifyOptions::default();
+        let c = certify(&dmodel, &ddata, &dcfg, &o).unwrap();
+        assert_eq!(c.problem_hash, dcfg.problem_hash());
+        let file = std::fs::read(dir.join(format!("{}.bin", dcfg.name))).unwrap();
+        assert_eq!(c.dataset_hash, crate::io::sha256_hex(&file));
+        assert_eq!(c.hash, dmodel.content_hash());
+        assert!(certify(&pmodel, &pdata, &pcfg, &o).is_ok());
+        assert!(matches!(
+            certify(&pmodel, &ddata, &dcfg, &o),
+            Err(MismatchError::ModelProblem { .. })
+        ));
+        let e = certify(&dmodel, &ddata, &pcfg, &o).unwrap_err();
+        assert!(matches!(e, MismatchError::DataProblem { .. }), "{e}");
+        assert!(e.to_string().contains(&dcfg.name), "{e}");
+        let mut wide = dcfg.clone();
+        wide.domain.hi[1] *= 10.0;
+        assert!(matches!(
+            certify(&dmodel, &ddata, &wide, &o),
+            Err(MismatchError::Coverage { .. })
+        ));
+        // Export: the certificate must be about this model and name its problem.
+        use crate::deploy::export::ExportModel;
+        assert!(ExportModel::from_trained("di", &dmodel, &c).is_ok());
+        let e = ExportModel::from_trained("p", &pmodel, &c)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not this model"), "{e}");
+        let mut old = c.clone();
+        old.problem_hash.clear();
+        let e = ExportModel::from_trained("di", &dmodel, &old)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("names no problem"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

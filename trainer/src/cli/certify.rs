@@ -3,8 +3,8 @@
 //! term, and optionally the data density a target ε needs. Prints text or JSON to stdout;
 //! writes no file.
 
-use super::common::load_config;
-use anyhow::{bail, Result};
+use super::common::problem_for_data;
+use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOptions};
 use trainer::certify::Model;
@@ -18,9 +18,9 @@ pub(super) fn execute(
     l_mpc: Option<f64>,
     json: bool,
 ) -> Result<()> {
-    let cfg = load_config(config)?;
     let m = Model::load(model)?;
     let d = Dataset::load(data)?;
+    let cfg = problem_for_data(config, data, &d)?;
     if let Some(v) = l_mpc {
         if !(v.is_finite() && v >= 0.0) {
             bail!("--l-mpc must be a finite number ≥ 0, got {v}");
@@ -39,7 +39,8 @@ pub(super) fn execute(
             l_mpc,
             ..Default::default()
         },
-    );
+    )
+    .with_context(|| format!("cannot certify {} on {}", model.display(), data.display()))?;
     let req =
         target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
     if json {

@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
+use trainer::data::dataset::Dataset;
 use trainer::problem::ProblemConfig;
 
 /// The problem file of `--config`, or the embedded pendulum.
@@ -11,6 +12,29 @@ pub(super) fn load_config(path: Option<&Path>) -> Result<ProblemConfig> {
         Some(p) => ProblemConfig::load(p)?,
         None => ProblemConfig::default(),
     })
+}
+
+/// The problem a dataset is used with: `--config` if given (the caller checks that the data
+/// belongs to it), else the problem file stored in the dataset's header — never the embedded
+/// pendulum for data of another problem. Says on stderr which problem it took.
+pub(super) fn problem_for_data(
+    config: Option<&Path>,
+    data_path: &Path,
+    data: &Dataset,
+) -> Result<ProblemConfig> {
+    match config {
+        Some(p) => Ok(ProblemConfig::load(p)?),
+        None => {
+            let origin = format!("{} (its stored problem file)", data_path.display());
+            let cfg = ProblemConfig::from_toml_str(&data.header.config_toml, &origin)?;
+            eprintln!(
+                "problem `{}` from {} (no --config given)",
+                cfg.name,
+                data_path.display()
+            );
+            Ok(cfg)
+        }
+    }
 }
 
 /// Reads a states CSV: header `x1,…,xn`, one finite state per row.

@@ -3,8 +3,8 @@
 //! Markdown table of median [min, max] to stdout and, with `--json`, writes the per-seed
 //! results there.
 
-use super::common::{load_config, med_range, sha256_file};
-use anyhow::{bail, Result};
+use super::common::{med_range, problem_for_data, sha256_file};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::path::Path;
 use trainer::certify::certificate::{certify, CertifyOptions};
@@ -43,8 +43,8 @@ pub(super) fn execute(
     seeds: u64,
     json: Option<&Path>,
 ) -> Result<()> {
-    let cfg = load_config(config)?;
     let d = Dataset::load(data)?;
+    let cfg = problem_for_data(config, data, &d)?;
     if d.header.problem_hash != cfg.problem_hash() {
         bail!(
             "{} was labelled for another problem than the config's {}",
@@ -73,7 +73,8 @@ pub(super) fn execute(
     let results: Vec<SeedResult> = jobs
         .par_iter()
         .map(|&(seed, nominal)| train_seed(&shared, seed, nominal))
-        .collect();
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("cannot certify the nets trained on {}", data.display()))?;
     print_table(&results);
     println!(
         "median [min, max] over seeds 0..{}; {} labelled training points, {} validation states",
@@ -88,7 +89,11 @@ pub(super) fn execute(
 }
 
 /// Trains the nominal or the regularized net of one seed and certifies it.
-fn train_seed(shared: &Shared, seed: u64, nominal: bool) -> SeedResult {
+fn train_seed(
+    shared: &Shared,
+    seed: u64,
+    nominal: bool,
+) -> Result<SeedResult, trainer::certify::certificate::MismatchError> {
     let Shared {
         cfg,
         d,
@@ -119,8 +124,8 @@ fn train_seed(shared: &Shared, seed: u64, nominal: bool) -> SeedResult {
             extra: Some(val.clone()),
             ..Default::default()
         },
-    );
-    SeedResult {
+    )?;
+    Ok(SeedResult {
         seed,
         kind: if nominal { "nominal" } else { "regularized" },
         r2_validation: m.validation_stats.r2,
@@ -131,7 +136,7 @@ fn train_seed(shared: &Shared, seed: u64, nominal: bool) -> SeedResult {
         l_nn_naive: c.l_nn_naive,
         l_nn_lower: c.l_nn_lower,
         eps: c.eps,
-    }
+    })
 }
 
 /// The Markdown table: one row per kind of net (median [min, max] over the seeds) beside

@@ -3,7 +3,7 @@
 //! freshly labelled random states), certifies it and writes the model with its
 //! certificate (`--out`).
 
-use super::common::{load_config, sha256_file};
+use super::common::{problem_for_data, sha256_file};
 use anyhow::{bail, Result};
 use std::path::Path;
 use trainer::certify::certificate::{certify, Certificate, CertifyOptions};
@@ -21,11 +21,11 @@ pub(super) fn execute(
     validation: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
-    let mut cfg = load_config(config)?;
+    let d = Dataset::load(data)?;
+    let mut cfg = problem_for_data(config, data, &d)?;
     if let Some(s) = seed {
         cfg.training.seed = s;
     }
-    let d = Dataset::load(data)?;
     if d.header.problem_hash != cfg.problem_hash() {
         bail!(
             "{} was labelled for another problem (hash {}…) than the config's {} ({}…)",
@@ -66,7 +66,7 @@ pub(super) fn execute(
             extra: Some(val),
             ..Default::default()
         },
-    );
+    )?;
     model.certificate = Some(cert.clone());
     model.save(out)?;
     if !quiet {

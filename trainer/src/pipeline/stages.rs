@@ -265,7 +265,8 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
                 extra: extra.clone(),
                 ..Default::default()
             },
-        );
+        )
+        .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
         let text = serde_json::to_string_pretty(&c).map_err(|e| fail("certify", e))?;
         write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
         out += &format!(

@@ -187,6 +187,8 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         clamp_hi: cfg.ocp.u_bounds(0).1.to_vec(),
         n_points: set.len(),
         hash: r.model.content_hash(),
+        problem_hash: cfg.problem_hash(),
+        dataset_hash: crate::io::sha256_hex(&dataset(cfg, st).to_bytes()),
     };
     let local = LocalSummary {
         method: "local".into(),

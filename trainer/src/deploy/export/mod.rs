@@ -467,6 +467,28 @@ impl ExportModel {
         cert: &crate::certify::certificate::Certificate,
     ) -> Result<Self, ExportError> {
         let m = &model.mlp;
+        let own = model.content_hash();
+        if cert.hash != own {
+            return Err(ExportError::Invalid(format!(
+                "the certificate is about the model with hash {}, not this model (hash {own}): \
+                 certify this model (`trainer certify`) and export with that certificate",
+                cert.hash
+            )));
+        }
+        if cert.problem_hash.is_empty() {
+            return Err(ExportError::Invalid(
+                "the certificate names no problem (made by an older trainer): certify the model \
+                 again"
+                    .into(),
+            ));
+        }
+        if !model.problem_hash.is_empty() && cert.problem_hash != model.problem_hash {
+            return Err(ExportError::Invalid(format!(
+                "the certificate is for problem hash {}, the model was trained on labels of \
+                 problem hash {}",
+                cert.problem_hash, model.problem_hash
+            )));
+        }
         if m.activation != crate::learn::mlp::Activation::Tanh {
             return Err(ExportError::Invalid(format!(
                 "activation {:?}: the device supports tanh only",
