@@ -37,6 +37,43 @@ pub(super) fn problem_for_data(
     }
 }
 
+/// Whether two paths name the same file (the same path, a symbolic or a hard link).
+fn same_file(a: &Path, b: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    if a.as_os_str().is_empty() || b.as_os_str().is_empty() {
+        return false;
+    }
+    if a == b {
+        return true;
+    }
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+        _ => false,
+    }
+}
+
+/// Refuses a command whose output would replace one of its inputs (or another of its
+/// outputs): nothing is read or written then.
+pub(super) fn refuse_overwrite(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
+    for (k, o) in outputs.iter().enumerate() {
+        if let Some(i) = inputs.iter().find(|i| same_file(o, i)) {
+            bail!(
+                "refusing to write {}: it is the input {} (choose another output path)",
+                o.display(),
+                i.display()
+            );
+        }
+        if let Some(p) = outputs[..k].iter().find(|p| same_file(o, p)) {
+            bail!(
+                "refusing to write {} twice (it is also the output {})",
+                o.display(),
+                p.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Reads a states CSV: header `x1,…,xn`, one finite state per row.
 pub(super) fn read_states(path: &Path, nx: usize) -> Result<Vec<Vec<f64>>> {
     let text = std::fs::read_to_string(path)

@@ -18,7 +18,8 @@ mod train;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use trainer::data::dataset::csv_path;
 use trainer::data::dataset::Shard;
 
 #[derive(Parser)]
@@ -228,13 +229,20 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             config,
             states,
             out,
-        } => solve::execute(config.as_deref(), &states, &out),
+        } => {
+            common::refuse_overwrite(&[&out], &[&states, opt(&config)])?;
+            solve::execute(config.as_deref(), &states, &out)
+        }
         Cmd::Sample {
             config,
             out,
             shard,
             quiet,
-        } => sample::execute(config.as_deref(), &out, shard, quiet),
+        } => {
+            let csv = csv_path(&out);
+            common::refuse_overwrite(&[&out, &csv], &[opt(&config)])?;
+            sample::execute(config.as_deref(), &out, shard, quiet)
+        }
         Cmd::Train {
             config,
             data,
@@ -243,15 +251,18 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             seed,
             validation,
             quiet,
-        } => train::execute(
-            config.as_deref(),
-            &data,
-            &out,
-            nominal,
-            seed,
-            validation.as_deref(),
-            quiet,
-        ),
+        } => {
+            common::refuse_overwrite(&[&out], &[&data, opt(&config), opt(&validation)])?;
+            train::execute(
+                config.as_deref(),
+                &data,
+                &out,
+                nominal,
+                seed,
+                validation.as_deref(),
+                quiet,
+            )
+        }
         Cmd::Certify {
             config,
             model,
@@ -260,20 +271,29 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             l_mpc,
             json,
         } => certify::execute(config.as_deref(), &model, &data, target_eps, l_mpc, json),
-        Cmd::Eval { model, states, out } => eval::execute(&model, &states, &out),
+        Cmd::Eval { model, states, out } => {
+            common::refuse_overwrite(&[&out], &[&model, &states])?;
+            eval::execute(&model, &states, &out)
+        }
         Cmd::Compare {
             config,
             data,
             seeds,
             json,
-        } => compare::execute(config.as_deref(), &data, seeds, json.as_deref()),
+        } => {
+            common::refuse_overwrite(&[opt(&json)], &[&data, opt(&config)])?;
+            compare::execute(config.as_deref(), &data, seeds, json.as_deref())
+        }
         Cmd::Export {
             model,
             certificate,
             rust,
             postcard,
             name,
-        } => export::execute(&model, certificate.as_deref(), &rust, &postcard, &name),
+        } => {
+            common::refuse_overwrite(&[&rust, &postcard], &[&model, opt(&certificate)])?;
+            export::execute(&model, certificate.as_deref(), &rust, &postcard, &name)
+        }
         Cmd::Refine {
             config,
             target_eps,
@@ -291,6 +311,16 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             check_seed,
             quiet,
         ),
-        Cmd::Merge { out, inputs } => merge::execute(&out, &inputs),
+        Cmd::Merge { out, inputs } => {
+            let csv = csv_path(&out);
+            let ins: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+            common::refuse_overwrite(&[&out, &csv], &ins)?;
+            merge::execute(&out, &inputs)
+        }
     }
+}
+
+/// An optional path as a path (the empty path, which names no file, when absent).
+fn opt(p: &Option<PathBuf>) -> &Path {
+    p.as_deref().unwrap_or(Path::new(""))
 }
