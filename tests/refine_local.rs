@@ -195,7 +195,8 @@ fn killed_refine_resumes_to_the_same_model() {
     // The rounds done before the kill, with their wall times: a resumed run keeps them,
     // a restart would measure them anew.
     let ck: trainer::certify::refine::RefineState =
-        postcard::from_bytes(&std::fs::read(&state).unwrap()).unwrap();
+        postcard::from_bytes(trainer::io::unseal(&std::fs::read(&state).unwrap()).unwrap())
+            .unwrap();
     assert!(!ck.log.is_empty() && !ck.finished);
     ok(&trainer(&[
         "refine",

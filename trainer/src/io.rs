@@ -2,8 +2,10 @@
 //!
 //! - `write_atomic(path, bytes)`: a temporary file in the same directory, fsync, rename, so
 //!   a reader (or a resumed run) sees either the old file or the whole new one.
-//! - `decode_checked`: `magic (8 bytes) ‖ postcard(T)` with a format version inside `T`;
-//!   a wrong magic, a decode error or another version is a [`FileError::Format`] naming the file.
+//! - `seal` / `decode_checked`: `magic (8 bytes) ‖ postcard(T) ‖ SHA-256(everything before)`
+//!   with a format version inside `T`; a wrong magic, a checksum that does not match (one
+//!   flipped byte anywhere), a decode error or another version is a [`FileError::Format`]
+//!   naming the file and the fault.
 //! - `hex(SHA-256(bytes))`: the content hashes that manifests and certificates record.
 //!
 //! A leaf module: it imports nothing of the crate, and every stage may use it.
@@ -32,8 +34,28 @@ pub enum FileError {
     },
 }
 
-/// Checks the 8 magic bytes, decodes a postcard file and checks its format version;
-/// errors name `origin` (shared by the dataset and model files).
+/// Length of the checksum that [`seal`] appends.
+pub const CHECKSUM_LEN: usize = 32;
+
+/// Appends the SHA-256 of `body` to it: the file's integrity check.
+pub fn seal(mut body: Vec<u8>) -> Vec<u8> {
+    use sha2::{Digest, Sha256};
+    let h = Sha256::digest(&body);
+    body.extend_from_slice(&h);
+    body
+}
+
+/// The body of a [`seal`]ed byte string, or `None` if its checksum does not match.
+pub fn unseal(bytes: &[u8]) -> Option<&[u8]> {
+    use sha2::{Digest, Sha256};
+    let n = bytes.len().checked_sub(CHECKSUM_LEN)?;
+    let (body, sum) = bytes.split_at(n);
+    (Sha256::digest(body).as_slice() == sum).then_some(body)
+}
+
+/// Checks the 8 magic bytes and the checksum of a [`seal`]ed postcard file, decodes it and
+/// checks its format version; errors name `origin` and the fault (shared by the dataset,
+/// checkpoint and model files).
 pub fn decode_checked<T: serde::de::DeserializeOwned>(
     bytes: &[u8],
     origin: &str,
@@ -51,7 +73,21 @@ pub fn decode_checked<T: serde::de::DeserializeOwned>(
             "not an ampc {what} file (missing magic bytes)"
         )));
     }
-    let v: T = postcard::from_bytes(bytes).map_err(|e| fmt(format!("decode error: {e}")))?;
+    let Some(body) = unseal(bytes) else {
+        // A file of an older format (no checksum) still names its version.
+        if let Ok(v) = postcard::from_bytes::<T>(bytes) {
+            if version_of(&v) != expected {
+                return Err(fmt(format!(
+                    "format version {} (this build reads {expected})",
+                    version_of(&v)
+                )));
+            }
+        }
+        return Err(fmt(format!(
+            "checksum mismatch: the {what} file is corrupt or was modified after it was written"
+        )));
+    };
+    let v: T = postcard::from_bytes(body).map_err(|e| fmt(format!("decode error: {e}")))?;
     if version_of(&v) != expected {
         return Err(fmt(format!(
             "format version {} (this build reads {expected})",
@@ -119,8 +155,7 @@ mod tests {
     #[test]
     fn decode_checked_names_the_file_and_the_fault() {
         let magic = *b"AMPCTEST";
-        let mut bytes = magic.to_vec();
-        bytes.extend(postcard::to_allocvec(&(magic, 3u32)).unwrap()[8..].iter());
+        let bytes = seal(postcard::to_allocvec(&(magic, 3u32)).unwrap());
         let ok = decode_checked::<([u8; 8], u32)>(&bytes, "t.bin", &magic, "test", |v| v.1, 3);
         assert_eq!(ok.unwrap().1, 3);
         let e = decode_checked::<([u8; 8], u32)>(&bytes, "t.bin", &magic, "test", |v| v.1, 4)
@@ -131,6 +166,30 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("u.bin") && e.contains("missing magic"), "{e}");
+        // Every single flipped bit is caught by the checksum.
+        for i in 0..bytes.len() * 8 {
+            let mut b = bytes.clone();
+            b[i / 8] ^= 1 << (i % 8);
+            assert!(
+                decode_checked::<([u8; 8], u32)>(&b, "f.bin", &magic, "test", |v| v.1, 3).is_err(),
+                "bit {i}"
+            );
+        }
+        let mut b = bytes.clone();
+        b[9] ^= 1;
+        let e = decode_checked::<([u8; 8], u32)>(&b, "f.bin", &magic, "test", |v| v.1, 3)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("f.bin") && e.contains("checksum mismatch"),
+            "{e}"
+        );
+        // A file of the previous, unsealed format names its version.
+        let old = postcard::to_allocvec(&(magic, 2u32)).unwrap();
+        let e = decode_checked::<([u8; 8], u32)>(&old, "o.bin", &magic, "test", |v| v.1, 3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("format version 2 (this build reads 3)"), "{e}");
     }
 
     #[test]

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Model file format version.
-pub const MODEL_VERSION: u32 = 2;
+pub const MODEL_VERSION: u32 = 3;
 /// Magic bytes of a model file.
 pub const MODEL_MAGIC: [u8; 8] = *b"AMPCMODL";
 
@@ -219,7 +219,7 @@ pub struct TrainedModel<C> {
 impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
     /// Encodes the model.
     pub fn to_bytes(&self) -> Vec<u8> {
-        postcard::to_allocvec(self).unwrap_or_default()
+        crate::io::seal(postcard::to_allocvec(self).unwrap_or_default())
     }
     /// Writes the model atomically.
     pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
@@ -633,6 +633,15 @@ mod tests {
                 .to_string()
                 .contains("m.bin")
         );
+        // One flipped byte anywhere is an error (it used to evaluate to other u silently).
+        for i in 0..bytes.len() {
+            let mut b = bytes.clone();
+            b[i] ^= 0x04;
+            assert!(
+                TrainedModel::<()>::from_bytes(&b, "m.bin").is_err(),
+                "byte {i}"
+            );
+        }
         let mut bad = m.clone();
         bad.mlp.layers[1].w.pop();
         assert!(TrainedModel::<()>::from_bytes(&bad.to_bytes(), "m")

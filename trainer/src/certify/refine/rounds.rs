@@ -175,11 +175,14 @@ pub fn refine(
                 path: p.display().to_string(),
                 source: e,
             })?;
-            let st: RefineState =
-                postcard::from_bytes(&bytes).map_err(|e| RefineError::Corrupt {
-                    path: p.to_path_buf(),
-                    reason: e.to_string(),
-                })?;
+            let body = crate::io::unseal(&bytes).ok_or_else(|| RefineError::Corrupt {
+                path: p.to_path_buf(),
+                reason: "checksum mismatch: corrupt, modified or of an older version".into(),
+            })?;
+            let st: RefineState = postcard::from_bytes(body).map_err(|e| RefineError::Corrupt {
+                path: p.to_path_buf(),
+                reason: e.to_string(),
+            })?;
             if st.hash != hash {
                 return Err(RefineError::Mismatch {
                     path: p.to_path_buf(),
@@ -405,7 +408,7 @@ pub fn refine(
         if let Some(p) = checkpoint {
             // The checkpoint holds the tree with the new (unlabelled) points: on resume,
             // they are the ones labelled first.
-            let bytes = postcard::to_allocvec(&st).unwrap_or_default();
+            let bytes = crate::io::seal(postcard::to_allocvec(&st).unwrap_or_default());
             write_atomic(p, &bytes)?;
         }
         if done {

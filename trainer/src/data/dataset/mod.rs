@@ -8,7 +8,8 @@
 //! chunks c with c mod N = K) merge into exactly the single-run dataset.
 //!
 //! **File format** (version [`FORMAT_VERSION`]): the postcard encoding of [`Dataset`]
-//! (magic, version, header, records sorted by index). Written atomically (temporary file +
+//! (magic, version, header, records sorted by index) followed by its SHA-256
+//! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run writes a checkpoint `<out>.partial` after each batch of chunks and resumes
 //! from it when restarted with the same problem, sampler and shard.
 //!
@@ -26,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Dataset file format version.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Magic bytes at the start of a dataset file.
 pub const MAGIC: [u8; 8] = *b"AMPCDSET";
 /// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
@@ -253,9 +254,9 @@ impl Dataset {
         Ok(d)
     }
 
-    /// Encodes the dataset.
+    /// Encodes the dataset (postcard, sealed with its checksum).
     pub fn to_bytes(&self) -> Vec<u8> {
-        postcard::to_allocvec(self).unwrap_or_default()
+        crate::io::seal(postcard::to_allocvec(self).unwrap_or_default())
     }
 
     /// Writes the dataset atomically.

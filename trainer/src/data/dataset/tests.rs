@@ -135,6 +135,33 @@ fn an_interrupted_run_resumes_to_the_same_file() {
     assert_eq!(std::fs::read(&out).unwrap(), reference);
 }
 
+/// One flipped byte anywhere in a dataset is an error naming the file (it used to decode
+/// into other labels and move ε_D silently); a flipped checkpoint is not resumed from.
+#[test]
+fn every_flipped_byte_is_caught() {
+    let cfg = small_cfg();
+    let out = tmp("flip");
+    let full = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    let bytes = std::fs::read(&out).unwrap();
+    for i in 0..bytes.len() {
+        let mut b = bytes.clone();
+        b[i] ^= 0x10;
+        let e = Dataset::from_bytes(&b, "f.bin").unwrap_err().to_string();
+        assert!(e.contains("f.bin"), "byte {i}: {e}");
+    }
+    // A checkpoint with one altered sensitivity, then a flipped byte: the run labels afresh.
+    std::fs::remove_file(&out).unwrap();
+    let mut ck = full.clone();
+    ck.records.retain(|r| r.index as usize / CHUNK == 0);
+    ck.records[0].du_dx[0] += 1.0;
+    let mut b = ck.to_bytes();
+    let n = b.len();
+    b[n / 2] ^= 0x01;
+    write_atomic(&partial_path(&out), &b).unwrap();
+    generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    assert_eq!(std::fs::read(&out).unwrap(), bytes);
+}
+
 #[test]
 fn shards_merge_to_the_single_run_and_bad_sets_are_refused() {
     let cfg = small_cfg();
