@@ -16,6 +16,7 @@
 
 mod cartpole;
 mod double_integrator;
+pub mod expr;
 mod pendulum;
 
 pub use cartpole::CartPole;
