@@ -175,6 +175,34 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     quiet.push("--quiet");
     let o = trainer(&quiet);
     assert!(o.status.success() && o.stderr.is_empty());
+    // A deliverable overwritten after the run is not trusted: its stage is redone, saying
+    // which file, and the deliverable is rebuilt (it used to skip every stage and exit 0).
+    let weights = std::fs::read(run.join("weights.bin")).unwrap();
+    std::fs::write(run.join("weights.bin"), "garbage").unwrap();
+    let o = trainer(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("weights.bin differs from what this stage wrote: redone"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(run.join("weights.bin")).unwrap(), weights);
+    // A corrupted dataset is not reused either: labelled again, the same bytes.
+    let data = std::fs::read(run.join("dataset.bin")).unwrap();
+    let mut bad = data.clone();
+    bad[data.len() / 2] ^= 1;
+    std::fs::write(run.join("dataset.bin"), bad).unwrap();
+    let o = trainer(&args);
+    assert!(o.status.success());
+    assert_eq!(std::fs::read(run.join("dataset.bin")).unwrap(), data);
+    // Another problem under the same name does not silently replace the run.
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(&cfg, text.replacen("horizon = ", "horizon = 1", 1)).unwrap();
+    let o = trainer(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("holds a run of another problem"), "{err}");
+    std::fs::write(&cfg, text).unwrap();
     // A usage error exits 2; a broken problem file exits 1 naming the key.
     assert_eq!(
         trainer(&["run", "--force", "nonsense"]).status.code(),

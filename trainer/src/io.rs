@@ -125,6 +125,58 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     res.map_err(io)
 }
 
+/// Writes several files as one set: every file is first written in full to a temporary file
+/// beside it (fsync); only when all are written are they renamed into place, in order. A
+/// failure while writing (disk full, a read-only directory) leaves every previous file as it
+/// was — never the new dataset beside the old CSV.
+pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<(), FileError> {
+    let mut tmps = Vec::with_capacity(files.len());
+    let cleanup = |tmps: &[std::path::PathBuf]| {
+        for t in tmps {
+            let _ = std::fs::remove_file(t);
+        }
+    };
+    for (path, bytes) in files {
+        let io = |source| FileError::Io {
+            path: path.display().to_string(),
+            source,
+        };
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            cleanup(&tmps);
+            return Err(io(e));
+        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+        tmps.push(tmp.clone());
+        let res = (|| {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(bytes)?;
+            f.sync_all()
+        })();
+        if let Err(e) = res {
+            cleanup(&tmps);
+            return Err(io(e));
+        }
+    }
+    for (k, ((path, _), tmp)) in files.iter().zip(&tmps).enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            cleanup(&tmps[k..]);
+            return Err(FileError::Io {
+                path: path.display().to_string(),
+                source: e,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Lower-case hex of a byte string.
 pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
@@ -190,6 +242,24 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("format version 2 (this build reads 3)"), "{e}");
+    }
+
+    #[test]
+    fn a_set_is_written_whole_or_not_at_all() {
+        let dir = std::env::temp_dir().join(format!("ampc_io_set_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("d.bin"), dir.join("d.csv"));
+        write_atomic_all(&[(&a, b"old bin"), (&b, b"old csv")]).unwrap();
+        // The second file cannot be written (its "directory" is a file): nothing changes.
+        let bad = dir.join("d.bin").join("x.csv");
+        assert!(write_atomic_all(&[(&a, b"new bin"), (&bad, b"new csv")]).is_err());
+        assert_eq!(std::fs::read(&a).unwrap(), b"old bin");
+        assert_eq!(std::fs::read(&b).unwrap(), b"old csv");
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert_eq!(left.len(), 2, "no temporary file is left behind");
+        write_atomic_all(&[(&a, b"new bin"), (&b, b"new csv")]).unwrap();
+        assert_eq!(std::fs::read(&b).unwrap(), b"new csv");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

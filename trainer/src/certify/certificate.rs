@@ -378,14 +378,18 @@ pub fn certify(
             if let Some(e) = &opts.extra {
                 (s2, q2) = lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu);
             }
-            (
-                s.max(q).max(s2).max(q2),
-                true,
+            let method = if opts.extra.is_some() {
                 format!(
                     "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \
                      max neighbour difference quotient ({q:.4}, {q2:.4})"
-                ),
-            )
+                )
+            } else {
+                format!(
+                    "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the largest \
+                     neighbour difference quotient ({q:.4})"
+                )
+            };
+            (s.max(q).max(s2).max(q2), true, method)
         }
     };
     let all_labelled = set.len() == data.records.len();

@@ -10,9 +10,16 @@ pub(super) fn execute(out: &Path, inputs: &[PathBuf]) -> Result<()> {
         .iter()
         .map(|p| Dataset::load(p))
         .collect::<Result<Vec<_>, _>>()?;
-    let d = dataset::merge(&ds)?;
-    d.save(out)?;
-    trainer::io::write_atomic(&dataset::csv_path(out), d.to_csv().as_bytes())?;
+    // The library names inputs by position: name them by path.
+    let d = dataset::merge(&ds).map_err(|e| {
+        let mut msg = e.to_string();
+        for (i, p) in inputs.iter().enumerate().rev() {
+            msg = msg.replace(&format!("input {}", i + 1), &p.display().to_string());
+        }
+        anyhow::anyhow!(msg)
+    })?;
+    let csv = dataset::csv_path(out);
+    trainer::io::write_atomic_all(&[(&csv, d.to_csv().as_bytes()), (out, &d.to_bytes())])?;
     eprintln!(
         "merged {} shards ({} records) -> {}",
         inputs.len(),

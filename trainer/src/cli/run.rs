@@ -72,13 +72,17 @@ fn read_problem(config: Option<&Path>) -> Result<(ProblemConfig, String)> {
 
 /// One line per stage: name, done or skipped, seconds, summary.
 fn print_stage(r: &StageReport) {
-    eprintln!(
-        "[{:>11}] {} {:.2} s  {}",
-        r.stage,
-        if r.skipped { "skipped" } else { "done   " },
-        r.seconds,
-        r.summary
-    );
+    if r.skipped {
+        eprintln!(
+            "[{:>11}] skipped  {}  (took {:.2} s when it ran)",
+            r.stage, r.summary, r.seconds
+        );
+    } else {
+        eprintln!(
+            "[{:>11}] done    {:.2} s  {}",
+            r.stage, r.seconds, r.summary
+        );
+    }
 }
 
 /// The stage line, then the stage's input hashes and output files.

@@ -99,6 +99,7 @@ pub fn run(
     let dir = opts.root.join(&cfg.name);
     std::fs::create_dir_all(&dir).map_err(|e| fail("setup", format!("{}: {e}", dir.display())))?;
     let _lock = lock(&dir)?;
+    same_problem(&dir, cfg, opts)?;
     write_atomic(&dir.join("problem.toml"), config_text.as_bytes())
         .map_err(|e| fail("setup", e))?;
     let mut cx = Ctx {
@@ -129,6 +130,34 @@ pub fn run(
         }
     }
     Ok(cx.reports)
+}
+
+/// Refuses to replace a run of another problem (other labels: system, OCP or solver) that
+/// has the same name, unless `--force sample` asks for it: the old run would be lost.
+fn same_problem(
+    dir: &std::path::Path,
+    cfg: &ProblemConfig,
+    opts: &RunOptions,
+) -> Result<(), PipelineError> {
+    let p = dir.join("problem.toml");
+    let Ok(text) = std::fs::read_to_string(&p) else {
+        return Ok(());
+    };
+    let Ok(old) = ProblemConfig::from_toml_str(&text, &p.display().to_string()) else {
+        return Ok(()); // not a problem of this version: the stages' hashes decide
+    };
+    if old.problem_hash() != cfg.problem_hash() && !opts.force.iter().any(|f| f == "sample") {
+        return Err(fail(
+            "setup",
+            format!(
+                "{} holds a run of another problem named `{}` (other system, OCP or solver): \
+                 use another name or --out, or pass --force sample to replace it",
+                dir.display(),
+                cfg.name
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Takes the run directory's lock (`.lock`, an advisory `flock` that the kernel releases

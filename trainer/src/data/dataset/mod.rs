@@ -45,7 +45,7 @@ pub enum DatasetError {
         source: std::io::Error,
     },
     /// A file is not a dataset of this version, or is corrupt.
-    #[error("{path}: not a valid ampc dataset: {reason}")]
+    #[error("{path}: {reason}")]
     Format {
         /// The file.
         path: String,
@@ -435,8 +435,9 @@ pub fn generate(
         header,
         records,
     };
-    d.save(out)?;
-    write_atomic(&csv_path(out), d.to_csv().as_bytes())?;
+    // The dataset and its CSV as one set: a failure leaves the previous pair.
+    let csv = csv_path(out);
+    crate::io::write_atomic_all(&[(&csv, d.to_csv().as_bytes()), (out, &d.to_bytes())])?;
     let _ = std::fs::remove_file(&partial);
     Ok(d)
 }
