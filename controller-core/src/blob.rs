@@ -42,6 +42,9 @@ pub enum DecodeError {
     Malformed,
     /// The decoded parameters are unusable (NaN weight, empty box, fallback outside band).
     Invalid(InvalidController),
+    /// The blob holds another model than the certificate it is to run under (their content
+    /// hashes differ): running it would not be covered by that certificate.
+    CertificateMismatch,
 }
 
 /// CRC-32 (IEEE), bitwise: small and table-free.
@@ -190,6 +193,35 @@ where
     let controller = Controller::new(net, x_lo, x_hi, clamp_lo, clamp_hi, fallback);
     controller.validate().map_err(DecodeError::Invalid)?;
     Ok(Decoded { controller, hash })
+}
+
+/// [`decode`], then checks that the blob holds the model `cert` is about (equal content
+/// hashes): a controller is only loaded under the certificate that covers it.
+///
+/// ```
+/// use controller_core::{blob, generated::weights, CERTIFICATE};
+/// let d = blob::decode_for::<2, 1, weights::Net>(controller_core::WEIGHTS_BLOB, &CERTIFICATE);
+/// assert!(d.is_ok());
+/// let mut other = CERTIFICATE;
+/// other.hash = "another model";
+/// assert_eq!(
+///     blob::decode_for::<2, 1, weights::Net>(controller_core::WEIGHTS_BLOB, &other).err(),
+///     Some(blob::DecodeError::CertificateMismatch)
+/// );
+/// ```
+#[cfg_attr(feature = "no-panic", no_panic::no_panic)]
+pub fn decode_for<'a, const NX: usize, const NU: usize, N>(
+    blob: &'a [u8],
+    cert: &crate::certificate::Certificate<NX, NU>,
+) -> Result<Decoded<'a, NX, NU, N>, DecodeError>
+where
+    N: Decode<NX> + Network<NX, Output = [f32; NU]>,
+{
+    let d = decode::<NX, NU, N>(blob)?;
+    if d.hash != cert.hash {
+        return Err(DecodeError::CertificateMismatch);
+    }
+    Ok(d)
 }
 
 #[cfg(test)]
