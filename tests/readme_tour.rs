@@ -66,9 +66,35 @@ fn main_job_and_tour() {
             .unwrap();
     assert!(text.contains(&format!("{:.6}", cert["eps"].as_f64().unwrap())));
 
-    // solve and eval on the same states.
+    // solve and eval on states of the dataset's grid: `solve` (cold starts) reproduces the
+    // dataset's labels (warm-started chains), and the net's error there is at most the
+    // certificate's ε_D — the maximum over exactly these points, so a wrong net, scaling or
+    // ε_D fails (the bound ε ≈ 31 N·m against |u| ≤ 15 could not).
+    let csv = std::fs::read_to_string(run.join("dataset.csv")).unwrap();
+    let mut rows = csv.lines();
+    let head: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let at = |name: &str| head.iter().position(|c| *c == name).unwrap();
+    let (ix1, ix2, iu, ist) = (at("x1"), at("x2"), at("u1"), at("status"));
+    let grid: Vec<(String, String, f64)> = rows
+        .map(|r| r.split(',').collect::<Vec<_>>())
+        .filter(|f| f[ist] == "converged")
+        .step_by(7)
+        .take(40)
+        .map(|f| {
+            (
+                f[ix1].to_string(),
+                f[ix2].to_string(),
+                f[iu].parse().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(grid.len(), 40);
     let states = d.join("in.csv");
-    std::fs::write(&states, "x1,x2\n-3.141592653589793,0\n0.5,-0.2\n").unwrap();
+    let mut text = "x1,x2\n".to_string();
+    for (a, b, _) in &grid {
+        text += &format!("{a},{b}\n");
+    }
+    std::fs::write(&states, text).unwrap();
     let (labels, outs) = (d.join("labels.csv"), d.join("outs.csv"));
     let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
     let o = trainer(&["solve", "--states", &s(&states), "--out", &s(&labels)]);
@@ -83,7 +109,6 @@ fn main_job_and_tour() {
         &s(&outs),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // |κ − κ_NN| at these states is within the certified ε.
     let col = |f: &std::path::Path, name: &str| -> Vec<f64> {
         let t = std::fs::read_to_string(f).unwrap();
         let mut l = t.lines();
@@ -96,8 +121,19 @@ fn main_job_and_tour() {
         l.map(|r| r.split(',').nth(i).unwrap().parse().unwrap())
             .collect()
     };
-    for (a, b) in col(&labels, "u1").iter().zip(col(&outs, "u1")) {
-        assert!((a - b).abs() <= cert["eps"].as_f64().unwrap());
+    let eps_d = cert["eps_d"].as_f64().unwrap();
+    let (solved, net) = (col(&labels, "u1"), col(&outs, "u1"));
+    for (k, (_, _, u_data)) in grid.iter().enumerate() {
+        assert!(
+            (solved[k] - u_data).abs() <= 1e-6 * (1.0 + u_data.abs()),
+            "state {k}: solve {} vs dataset {u_data}",
+            solved[k]
+        );
+        assert!(
+            (u_data - net[k]).abs() <= eps_d * (1.0 + 1e-12),
+            "state {k}: |κ − κ_NN| = {} > ε_D = {eps_d}",
+            (u_data - net[k]).abs()
+        );
     }
 
     let o = trainer(&["compare", "--data", &p("dataset.bin"), "--seeds", "2"]);
