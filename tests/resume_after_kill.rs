@@ -46,11 +46,13 @@ fn killed_run_resumes_to_the_same_dataset() {
     );
     assert!(!out.exists(), "killed before the end, no final file");
     assert!(partial.exists());
-    let ck = trainer::data::dataset::Dataset::load(&partial).unwrap();
+    let (_, records) = trainer::data::dataset::checkpoint::load(&partial)
+        .unwrap()
+        .expect("a checkpoint");
     assert!(
-        !ck.records.is_empty() && ck.records.len() < 3000,
+        !records.is_empty() && records.len() < 3000,
         "{} records",
-        ck.records.len()
+        records.len()
     );
     let o = trainer(&[
         "sample",

@@ -10,13 +10,16 @@
 //! **File format** (version [`FORMAT_VERSION`]): the postcard encoding of [`Dataset`]
 //! (magic, version, header, records sorted by index) followed by its SHA-256
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
-//! rename). A run writes a checkpoint `<out>.partial` after each batch of chunks and resumes
-//! from it when restarted with the same problem, sampler and shard.
+//! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
+//! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
+//! problem, sampler and shard.
 //!
 //! **CSV export** (for Python users): `index,x1..xn,u1..um,du1_dx1,…,dum_dxn,cost,status,
 //! iterations,kkt,degenerate,max_slack`, one row per record; unlabelled states have `NaN`s.
 
 use crate::data::sampling::Sampler;
+pub mod checkpoint;
+
 use crate::io::{decode_checked, write_atomic};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::mpc::sensitivity::Degeneracy;
@@ -376,11 +379,17 @@ pub fn generate(
     let partial = partial_path(out);
     let mut records: Vec<Record> = Vec::new();
     if let Ok(bytes) = std::fs::read(&partial) {
-        match Dataset::from_bytes(&bytes, &partial.display().to_string()) {
-            Ok(d) if d.header == header => records = d.records,
-            _ => {} // a checkpoint of another plan or a torn file: start afresh
+        // A checkpoint of another plan or of another format: start afresh; a damaged tail
+        // costs its batches only.
+        if let Some((h, r)) = checkpoint::read(&bytes) {
+            if h == header {
+                records = r;
+            }
         }
     }
+    // The first batch rewrites the checkpoint with the resumed records (dropping a damaged
+    // tail, after which appended frames would be unreadable); later batches are appended.
+    let mut fresh = true;
     let done: std::collections::HashSet<usize> =
         records.iter().map(|r| r.index as usize / CHUNK).collect();
     let todo: Vec<usize> = mine.iter().copied().filter(|c| !done.contains(c)).collect();
@@ -417,15 +426,15 @@ pub fn generate(
                 },
             )
             .collect();
-        records.extend(new.into_iter().flatten());
-        records.sort_by_key(|r| r.index);
-        let ck = Dataset {
-            magic: MAGIC,
-            version: FORMAT_VERSION,
-            header: header.clone(),
-            records: records.clone(),
-        };
-        write_atomic(&partial, &ck.to_bytes())?;
+        let new: Vec<Record> = new.into_iter().flatten().collect();
+        if fresh {
+            records.extend(new);
+            checkpoint::create(&partial, &header, &records)?;
+            fresh = false;
+        } else {
+            checkpoint::append(&partial, &new)?;
+            records.extend(new);
+        }
     }
     bar.finish_and_clear();
     records.sort_by_key(|r| r.index);

@@ -2,6 +2,7 @@
 //! the determinism of generation (thread count, resume after interruption, shards and
 //! their merge, warm vs cold starts).
 
+use super::checkpoint;
 use super::*;
 use proptest::prelude::*;
 
@@ -120,7 +121,7 @@ fn an_interrupted_run_resumes_to_the_same_file() {
     ck.records
         .retain(|r| matches!(r.index as usize / CHUNK, 0 | 2));
     ck.records[0].iterations = 999;
-    write_atomic(&partial_path(&out), &ck.to_bytes()).unwrap();
+    checkpoint::create(&partial_path(&out), &ck.header, &ck.records).unwrap();
     let resumed = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
     assert_eq!(resumed.records[0].iterations, 999);
     let mut fixed = resumed.clone();
@@ -130,7 +131,7 @@ fn an_interrupted_run_resumes_to_the_same_file() {
     // A checkpoint of another plan is ignored.
     let mut other = ck.clone();
     other.header.problem_hash = "other".into();
-    write_atomic(&partial_path(&out), &other.to_bytes()).unwrap();
+    checkpoint::create(&partial_path(&out), &other.header, &other.records).unwrap();
     generate(&cfg, &out, &GenerateOptions::default()).unwrap();
     assert_eq!(std::fs::read(&out).unwrap(), reference);
 }
@@ -154,12 +155,46 @@ fn every_flipped_byte_is_caught() {
     let mut ck = full.clone();
     ck.records.retain(|r| r.index as usize / CHUNK == 0);
     ck.records[0].du_dx[0] += 1.0;
-    let mut b = ck.to_bytes();
+    let mut b = checkpoint::encode(&ck.header, &ck.records);
     let n = b.len();
-    b[n / 2] ^= 0x01;
+    b[n - 40] ^= 0x01;
     write_atomic(&partial_path(&out), &b).unwrap();
+    assert!(
+        checkpoint::read(&b).unwrap().1.is_empty(),
+        "the damaged batch is dropped"
+    );
     generate(&cfg, &out, &GenerateOptions::default()).unwrap();
     assert_eq!(std::fs::read(&out).unwrap(), bytes);
+}
+
+/// The checkpoint is a log: each batch appends a frame; a torn or damaged frame drops itself
+/// and every later one, never earlier ones; appending after a resumed, cleaned log works.
+#[test]
+fn the_checkpoint_log_keeps_its_good_prefix() {
+    let cfg = small_cfg();
+    let out = tmp("log");
+    let full = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    let p = partial_path(&out);
+    let (a, rest) = full.records.split_at(10);
+    let (b, c) = rest.split_at(20);
+    checkpoint::create(&p, &full.header, a).unwrap();
+    let n_a = std::fs::metadata(&p).unwrap().len() as usize;
+    checkpoint::append(&p, b).unwrap();
+    let n_ab = std::fs::metadata(&p).unwrap().len() as usize;
+    checkpoint::append(&p, c).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    assert_eq!(checkpoint::read(&bytes).unwrap().1, full.records);
+    // Torn anywhere in the last frame: the first two batches survive.
+    for cut in n_ab..bytes.len() {
+        let (_, r) = checkpoint::read(&bytes[..cut]).unwrap();
+        assert_eq!(r.len(), 30, "cut at {cut}");
+    }
+    // A damaged middle frame drops itself and the rest.
+    let mut bad = bytes.clone();
+    bad[(n_a + n_ab) / 2] ^= 0x80;
+    assert_eq!(checkpoint::read(&bad).unwrap().1.len(), 10);
+    // Not a checkpoint: nothing.
+    assert!(checkpoint::read(b"garbage").is_none());
 }
 
 #[test]
@@ -225,4 +260,48 @@ fn warm_and_cold_starts_give_the_same_pendulum_labels() {
             c.u[0]
         );
     }
+}
+
+/// Checkpoint cost per batch stays flat as the log grows (append-only): prints the median
+/// time of appending a batch of 256 records at 10⁴ and at 10⁶ records already written.
+/// `cargo test -p trainer --release --lib checkpoint_throughput -- --ignored --nocapture`
+#[test]
+#[ignore = "a measurement: writes 10⁶ records (~150 MB); see BENCHMARKS.md"]
+fn checkpoint_throughput_is_flat() {
+    let cfg = small_cfg();
+    let out = tmp("throughput");
+    let d = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    let proto = d.records[0].clone();
+    let batch: Vec<Record> = (0..256u64)
+        .map(|i| Record {
+            index: i,
+            ..proto.clone()
+        })
+        .collect();
+    let p = partial_path(&out);
+    checkpoint::create(&p, &d.header, &batch).unwrap();
+    let mut written = batch.len();
+    let mut median_at = |target: usize, written: &mut usize| -> f64 {
+        let mut times = Vec::new();
+        while *written < target {
+            let t = std::time::Instant::now();
+            checkpoint::append(&p, &batch).unwrap();
+            times.push(t.elapsed().as_secs_f64());
+            *written += batch.len();
+        }
+        times.sort_by(f64::total_cmp);
+        let tail = &times[times.len().saturating_sub(40)..];
+        tail[tail.len() / 2]
+    };
+    let t4 = median_at(10_000, &mut written);
+    let t6 = median_at(1_000_000, &mut written);
+    eprintln!(
+        "append 256 records: {:.3} ms at 10^4, {:.3} ms at 10^6 records ({:.0} vs {:.0} records/s), ratio {:.2}",
+        t4 * 1e3,
+        t6 * 1e3,
+        256.0 / t4,
+        256.0 / t6,
+        t6 / t4
+    );
+    let _ = std::fs::remove_file(&p);
 }

@@ -89,3 +89,25 @@ fn array_layout_rules() {
     let s: Vec<String> = (0..3).map(|i| format!("{i}.5")).collect();
     assert_eq!(array(&s, 0, 10, 1), "[0.5, 1.5, 2.5]");
 }
+
+/// Export refuses a certificate of another model, and one that names no problem.
+#[test]
+fn a_certificate_of_another_model_or_no_problem_is_refused() {
+    use crate::certify::certificate::{certify, tests::two_problems, CertifyOptions};
+    let dir = std::env::temp_dir().join(format!("ampc_export_cert_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let [(_, _, pmodel), (dcfg, ddata, dmodel)] = two_problems(&dir);
+    let c = certify(&dmodel, &ddata, &dcfg, &CertifyOptions::default()).unwrap();
+    assert!(ExportModel::from_trained("di", &dmodel, &c).is_ok());
+    let e = ExportModel::from_trained("p", &pmodel, &c)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not this model"), "{e}");
+    let mut old = c.clone();
+    old.problem_hash.clear();
+    let e = ExportModel::from_trained("di", &dmodel, &old)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("names no problem"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,112 @@
+//! The labelling checkpoint `<out>.partial`: an append-only log, so that checkpointing costs
+//! O(new work) per batch instead of rewriting everything labelled so far.
+//!
+//! ```text
+//! file    = frame(opening) frame(batch)*
+//! frame   = len: u64 LE ‖ seal(postcard(payload))        (seal: payload ‖ SHA-256)
+//! opening = (CHECKPOINT_MAGIC, CHECKPOINT_VERSION, Header)
+//! batch   = Vec<Record>                                   (the records of one batch of chunks)
+//! ```
+//! The first frame and the first batch are written together atomically (so the file exists
+//! only with work in it); every later batch is appended and synced. A reader keeps the frames
+//! up to the first incomplete or damaged one (a run killed mid-append) and drops the rest: a
+//! damaged frame costs its batch, never a wrong label.
+
+use super::{DatasetError, Header, Record};
+use crate::io::{seal, unseal, write_atomic};
+use std::io::Write;
+use std::path::Path;
+
+/// Magic bytes of a checkpoint's opening frame.
+pub const CHECKPOINT_MAGIC: [u8; 8] = *b"AMPCCKPT";
+/// Checkpoint format version.
+pub const CHECKPOINT_VERSION: u32 = 1;
+
+fn frame(payload: Vec<u8>) -> Vec<u8> {
+    let body = seal(payload);
+    let mut out = (body.len() as u64).to_le_bytes().to_vec();
+    out.extend_from_slice(&body);
+    out
+}
+
+/// The bytes of a checkpoint holding `records` (the opening frame and one batch).
+pub fn encode(header: &Header, records: &[Record]) -> Vec<u8> {
+    let mut out = frame(
+        postcard::to_allocvec(&(CHECKPOINT_MAGIC, CHECKPOINT_VERSION, header)).unwrap_or_default(),
+    );
+    out.extend(frame(postcard::to_allocvec(records).unwrap_or_default()));
+    out
+}
+
+/// Writes a new checkpoint holding `records` (atomically).
+pub fn create(path: &Path, header: &Header, records: &[Record]) -> Result<(), DatasetError> {
+    Ok(write_atomic(path, &encode(header, records))?)
+}
+
+/// Appends one batch of records to the checkpoint and syncs it.
+pub fn append(path: &Path, records: &[Record]) -> Result<(), DatasetError> {
+    let io = |source| DatasetError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .map_err(io)?;
+    f.write_all(&frame(postcard::to_allocvec(records).unwrap_or_default()))
+        .map_err(io)?;
+    f.sync_data().map_err(io)
+}
+
+/// The header and records of a checkpoint, keeping the frames before the first incomplete or
+/// damaged one; `None` if the opening frame itself is unreadable (not a checkpoint of this
+/// format).
+pub fn read(bytes: &[u8]) -> Option<(Header, Vec<Record>)> {
+    let mut frames = Frames { rest: bytes };
+    let (magic, version, header): ([u8; 8], u32, Header) =
+        postcard::from_bytes(frames.next()?).ok()?;
+    if magic != CHECKPOINT_MAGIC || version != CHECKPOINT_VERSION {
+        return None;
+    }
+    let mut records = Vec::new();
+    for f in frames {
+        match postcard::from_bytes::<Vec<Record>>(f) {
+            Ok(batch) => records.extend(batch),
+            Err(_) => break,
+        }
+    }
+    Some((header, records))
+}
+
+/// Reads the checkpoint file at `path` (see [`read`]).
+pub fn load(path: &Path) -> Result<Option<(Header, Vec<Record>)>, DatasetError> {
+    let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    Ok(read(&bytes))
+}
+
+/// The verified payloads of the frames, in order, up to the first bad one.
+struct Frames<'a> {
+    rest: &'a [u8],
+}
+
+impl<'a> Iterator for Frames<'a> {
+    type Item = &'a [u8];
+    fn next(&mut self) -> Option<&'a [u8]> {
+        let (len, rest) = self.rest.split_first_chunk::<8>()?;
+        let len = usize::try_from(u64::from_le_bytes(*len)).ok()?;
+        if rest.len() < len {
+            self.rest = &[];
+            return None;
+        }
+        let (body, rest) = rest.split_at(len);
+        let Some(payload) = unseal(body) else {
+            self.rest = &[];
+            return None;
+        };
+        self.rest = rest;
+        Some(payload)
+    }
+}
