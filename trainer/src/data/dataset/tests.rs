@@ -281,7 +281,7 @@ fn checkpoint_throughput_is_flat() {
     let p = partial_path(&out);
     checkpoint::create(&p, &d.header, &batch).unwrap();
     let mut written = batch.len();
-    let mut median_at = |target: usize, written: &mut usize| -> f64 {
+    let median_at = |target: usize, written: &mut usize| -> f64 {
         let mut times = Vec::new();
         while *written < target {
             let t = std::time::Instant::now();
