@@ -24,6 +24,8 @@ mod double_integrator;
 pub mod expr;
 mod pendulum;
 mod plant;
+#[cfg(test)]
+pub(crate) mod test_plants;
 
 pub use cartpole::CartPole;
 pub use double_integrator::DoubleIntegrator;
@@ -372,8 +374,33 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// An expression plant from the text of its `[system]` table without `kind`.
+    fn expr_system(discrete: bool, table: &str) -> System {
+        let spec: expr::SystemSpec = toml::from_str(table).unwrap_or_else(|e| panic!("{e}"));
+        if discrete {
+            System::Discrete(DiscretePlant::try_from(spec).unwrap_or_else(|e| panic!("{e}")))
+        } else {
+            System::Ode(OdePlant::try_from(spec).unwrap_or_else(|e| panic!("{e}")))
+        }
+    }
+
     fn systems() -> Vec<Discrete> {
+        let pend = r#"
+            states = ["theta", "omega"]
+            inputs = ["u"]
+            parameters = { m = 0.7, l = 1.3, g = 9.81, c = 0.1 }
+            definitions = ["tau = u - c*omega*abs(omega) + 0.1*u^3"]
+            rhs = ["omega", "tau/(m*l^2) - g/l*sin(theta + pi)"]
+        "#;
+        let disc = r#"
+            states = ["a", "b", "c"]
+            inputs = ["u"]
+            next = ["a + 0.1*b*cos(c)", "0.9*b + 0.1*tanh(u)*exp(-a^2/4)", "c + 0.05*a*b - 0.01*u^2"]
+        "#;
         vec![
+            Discrete::new(expr_system(false, pend), 0.05, 2),
+            Discrete::new(expr_system(true, disc), 0.05, 3),
+            Discrete::new(test_plants::chain12(), 0.1, 2),
             Discrete::new(System::Pendulum(Pendulum::default()), 0.05, 1),
             Discrete::new(System::CartPole(CartPole::default()), 0.05, 2),
             Discrete::new(
@@ -468,13 +495,13 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(64))]
         #[test]
         fn ad_derivatives_match_finite_differences(
-            x in proptest::collection::vec(-3.0f64..3.0, 4),
-            u in -10.0f64..10.0,
-            lam in proptest::collection::vec(-5.0f64..5.0, 4),
+            x in proptest::collection::vec(-3.0f64..3.0, 12),
+            u in proptest::collection::vec(-10.0f64..10.0, 4),
+            lam in proptest::collection::vec(-5.0f64..5.0, 12),
         ) {
             for sys in systems() {
-                let nx = sys.nx();
-                check_derivatives(&sys, &x[..nx], &[u], &lam[..nx]);
+                let (nx, nu) = (sys.nx(), sys.nu());
+                check_derivatives(&sys, &x[..nx], &u[..nu], &lam[..nx]);
             }
         }
     }

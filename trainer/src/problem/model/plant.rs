@@ -328,3 +328,81 @@ impl<const DISCRETE: bool> ExprPlant<DISCRETE> {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Discrete, Pendulum, System};
+    use super::*;
+
+    const PENDULUM: &str = r#"
+        states = ["theta", "omega"]
+        inputs = ["u"]
+        parameters = { m = 1.0, l = 1.0, g = 9.81 }
+        rhs = ["omega", "u/(m*l^2) - g/l*sin(theta + pi)"]
+    "#;
+
+    fn pair(substeps: usize) -> (Discrete, Discrete) {
+        let spec: SystemSpec = toml::from_str(PENDULUM).unwrap();
+        let ode = System::Ode(OdePlant::try_from(spec).unwrap());
+        (
+            Discrete::new(System::Pendulum(Pendulum::default()), 0.05, substeps),
+            Discrete::new(ode, 0.05, substeps),
+        )
+    }
+
+    /// The paper's pendulum written as expressions: F, ∂F and ∇²λᵀF bit-identical to the
+    /// built-in (same formula, same RK4 operations).
+    #[test]
+    fn pendulum_ode_is_bit_identical_to_the_built_in() {
+        for substeps in [1, 3] {
+            let (a, b) = pair(substeps);
+            for k in 0..200 {
+                let t = k as f64 * 0.37;
+                let (x, u, lam) = (
+                    [t.sin() * 6.0, t.cos()],
+                    [15.0 * (1.3 * t).sin()],
+                    [0.3, -t],
+                );
+                let run = |d: &Discrete| {
+                    let (mut f, mut jx, mut ju, mut h, mut s) = (
+                        vec![0.0; 2],
+                        vec![0.0; 4],
+                        vec![0.0; 2],
+                        vec![0.0; 9],
+                        vec![0.0; 2],
+                    );
+                    d.linearize(&x, &u, &mut f, &mut jx, &mut ju);
+                    d.lagrangian_hessian(&x, &u, &lam, &mut h);
+                    d.step(&x, &u, &mut s);
+                    [f, jx, ju, h, s]
+                        .concat()
+                        .into_iter()
+                        .map(f64::to_bits)
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(run(&a), run(&b), "x {x:?} u {u:?}");
+            }
+        }
+    }
+
+    /// Timing of `Discrete::linearize`: built-in pendulum vs the same plant as expressions
+    /// (`cargo test --release -p trainer --lib linearize_timing -- --ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn linearize_timing() {
+        let (a, b) = pair(1);
+        let n = 1_000_000;
+        for (name, d) in [("built-in pendulum", &a), ("pendulum_ode", &b)] {
+            let (mut f, mut jx, mut ju) = ([0.0; 2], [0.0; 4], [0.0; 2]);
+            let t0 = std::time::Instant::now();
+            let mut acc = 0.0;
+            for k in 0..n {
+                let x = [k as f64 * 1e-6, 0.5];
+                d.linearize(&x, &[1.0], &mut f, &mut jx, &mut ju);
+                acc += jx[2];
+            }
+            let ns = t0.elapsed().as_nanos() as f64 / n as f64;
+            eprintln!("{name}: {ns:.1} ns per linearize ({acc:.3})");
+        }
+    }
+}
