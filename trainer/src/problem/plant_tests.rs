@@ -131,3 +131,13 @@ fn mass_is_the_parameter_mass_or_m() {
     let d = ProblemConfig::from_toml_str(DISCRETE, "d.toml").unwrap();
     assert!(d.system.with_mass_scaled(2.0).is_none());
 }
+
+#[test]
+fn default_refine_grid_fits_the_budget_for_many_states() {
+    let r = RefineSettings::default();
+    assert_eq!(r.initial_counts(2), vec![9; 2]);
+    assert_eq!(r.initial_counts(4), vec![9; 4]);
+    assert_eq!(r.initial_counts(5), vec![8; 5]);
+    assert_eq!(r.initial_counts(12), vec![2; 12]);
+    assert!(r.validate(12).is_ok());
+}
