@@ -404,5 +404,20 @@ mod tests {
             let ns = t0.elapsed().as_nanos() as f64 / n as f64;
             eprintln!("{name}: {ns:.1} ns per linearize ({acc:.3})");
         }
+        let chain = Discrete::new(super::super::test_plants::chain12(), 0.1, 1);
+        let (x, u, lam) = ([0.1; 12], [0.2; 4], [1.0; 12]);
+        let (mut f, mut jx, mut ju, mut h) = ([0.0; 12], [0.0; 144], [0.0; 48], [0.0; 256]);
+        let n = 20_000;
+        let t0 = std::time::Instant::now();
+        for _ in 0..n {
+            chain.linearize(&x, &u, &mut f, &mut jx, &mut ju);
+        }
+        let lin = t0.elapsed().as_nanos() as f64 / n as f64 / 1e3;
+        let t0 = std::time::Instant::now();
+        for _ in 0..n / 10 {
+            chain.lagrangian_hessian(&x, &u, &lam, &mut h);
+        }
+        let hess = t0.elapsed().as_nanos() as f64 / (n / 10) as f64 / 1e3;
+        eprintln!("12-state chain: linearize {lin:.1} µs, lagrangian_hessian {hess:.1} µs");
     }
 }
