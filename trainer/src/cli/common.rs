@@ -9,9 +9,18 @@ use trainer::problem::ProblemConfig;
 /// The problem file of `--config`, or the embedded pendulum.
 pub(super) fn load_config(path: Option<&Path>) -> Result<ProblemConfig> {
     Ok(match path {
-        Some(p) => ProblemConfig::load(p)?,
+        Some(p) => warn_plant(ProblemConfig::load(p)?),
         None => ProblemConfig::default(),
     })
+}
+
+/// Shows the plant compiler's warnings (an expression plant's non-smooth functions and
+/// unused names) on stderr, and passes the problem on.
+pub(super) fn warn_plant(cfg: ProblemConfig) -> ProblemConfig {
+    for w in cfg.system.warnings() {
+        eprintln!("warning: [system] of problem `{}`: {w}", cfg.name);
+    }
+    cfg
 }
 
 /// The problem a dataset is used with: `--config` if given (the caller checks that the data
@@ -23,7 +32,7 @@ pub(super) fn problem_for_data(
     data: &Dataset,
 ) -> Result<ProblemConfig> {
     match config {
-        Some(p) => Ok(ProblemConfig::load(p)?),
+        Some(p) => Ok(warn_plant(ProblemConfig::load(p)?)),
         None => {
             let origin = format!("{} (its stored problem file)", data_path.display());
             let cfg = ProblemConfig::from_toml_str(&data.header.config_toml, &origin)?;

@@ -59,7 +59,10 @@ fn read_problem(config: Option<&Path>) -> Result<(ProblemConfig, String)> {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("cannot read problem file {}", p.display()))?;
             (
-                ProblemConfig::from_toml_str(&text, &p.display().to_string())?,
+                super::common::warn_plant(ProblemConfig::from_toml_str(
+                    &text,
+                    &p.display().to_string(),
+                )?),
                 text,
             )
         }

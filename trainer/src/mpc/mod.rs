@@ -26,3 +26,5 @@ pub mod sqp;
 mod cross_checks;
 #[cfg(test)]
 mod ipopt_labels;
+#[cfg(test)]
+mod plant_checks;

@@ -180,4 +180,6 @@ impl ProblemConfig {
 }
 
 #[cfg(test)]
+mod plant_tests;
+#[cfg(test)]
 mod tests;

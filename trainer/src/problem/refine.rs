@@ -12,7 +12,8 @@ pub struct RefineSettings {
     pub target_eps: f64,
     /// Budget of OCP solves (default 50 000; `--budget` overrides).
     pub budget: usize,
-    /// Points per axis of the initial grid (default: 9 per axis).
+    /// Points per axis of the initial grid (default: 9 per axis for up to 4 states, else
+    /// the largest count per axis whose grid has at most 50 000 points, at least 2).
     pub initial: Vec<usize>,
     /// Largest number of refinement rounds (default 80).
     pub max_rounds: usize,
@@ -142,7 +143,11 @@ impl RefineSettings {
     /// Initial grid counts for an `nx`-dimensional domain.
     pub fn initial_counts(&self, nx: usize) -> Vec<usize> {
         if self.initial.is_empty() {
-            vec![9; nx]
+            // 9 per axis up to nx = 4 (as always); for larger nx the largest count whose
+            // grid has at most 50 000 points (the default budget), at least 2.
+            let fits = |c: usize| (c as f64).powi(nx as i32) <= 50_000.0;
+            let c = (2..=9).rev().find(|&c| fits(c)).unwrap_or(2);
+            vec![c; nx]
         } else {
             self.initial.clone()
         }

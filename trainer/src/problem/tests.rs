@@ -12,6 +12,8 @@ fn shipped_configs_parse_and_validate() {
         "cartpole.toml",
         "double_integrator.toml",
         "pendulum_robust.toml",
+        "pendulum_ode.toml",
+        "double_integrator_ode.toml",
     ] {
         let path = std::path::PathBuf::from(DIR).join(f);
         ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{f}: {e}"));

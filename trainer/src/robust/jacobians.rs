@@ -102,6 +102,9 @@ pub fn jacobian_set(cfg: &ProblemConfig) -> JacobianSet {
                 bound: JacobianBound::Vertices,
             }
         }
+        // The cart-pole, the pendulum with more sub-steps, and every plant written as
+        // expressions (`ode`/`discrete`, even a linear one: its linearity is not detected):
+        // sampled Jacobians at random points of X × U, flagged as an estimate.
         _ => {
             let s = &cfg.robust;
             let (mut av, mut bv) = (Vec::new(), Vec::new());

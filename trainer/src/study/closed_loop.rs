@@ -17,7 +17,7 @@
 use crate::learn::mlp::Mlp;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::PrimalDual;
-use crate::problem::model::{Discrete, System};
+use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
 use serde::{Deserialize, Serialize};
@@ -179,13 +179,18 @@ fn is_zero(v: &usize) -> bool {
     *v == 0
 }
 
+/// The simulated plant: the problem's, with its mass scaled by `1 + mismatch`
+/// ([`with_mass_scaled`](crate::problem::model::System::with_mass_scaled)). An expression plant without a parameter `mass` or `m`
+/// has no mass to perturb: it is simulated unchanged (the scenarios make no mismatch runs
+/// for it).
 fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
-    let mut sys = cfg.system.clone();
-    match &mut sys {
-        System::Pendulum(p) => p.m *= 1.0 + mismatch,
-        System::CartPole(p) => p.m_pole *= 1.0 + mismatch,
-        System::DoubleIntegrator(p) => p.mass *= 1.0 + mismatch,
-    }
+    let sys = if mismatch == 0.0 {
+        cfg.system.clone()
+    } else {
+        cfg.system
+            .with_mass_scaled(1.0 + mismatch)
+            .unwrap_or_else(|| cfg.system.clone())
+    };
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
 }
 

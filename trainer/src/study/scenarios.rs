@@ -89,7 +89,8 @@ pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) ->
             };
             jobs.push((format!("{name}_noise"), m, x0s[0].clone(), s));
         }
-        if st.mass_mismatch > 0.0 {
+        // An expression plant without a parameter `mass` or `m` has no mass to perturb.
+        if st.mass_mismatch > 0.0 && cfg.system.with_mass_scaled(1.0).is_some() {
             for (tag, mm) in [("mass+", st.mass_mismatch), ("mass-", -st.mass_mismatch)] {
                 let s = SimSettings {
                     mass_mismatch: mm,

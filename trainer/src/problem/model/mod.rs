@@ -13,21 +13,34 @@
 //! | F(x, u) | [`Discrete::step`] |
 //! | ∂F/∂x, ∂F/∂u | [`Discrete::linearize`] |
 //! | ∇²_{(x,u)} λᵀF | [`Discrete::lagrangian_hessian`] |
+//!
+//! Besides the built-in plants, a plant may be written in the problem file as expressions
+//! (`kind = "ode"`: ẋ = f(x, u) with the same RK4; `kind = "discrete"`: x⁺ = F(x, u) with no
+//! RK4) — [`expr`] compiles them, [`ExprPlant`] differentiates them the same way, for
+//! `nx + nu ≤` [`MAX_NZ`].
 
 mod cartpole;
 mod double_integrator;
 pub mod expr;
 mod pendulum;
+mod plant;
+#[cfg(test)]
+pub(crate) mod test_plants;
 
 pub use cartpole::CartPole;
 pub use double_integrator::DoubleIntegrator;
 pub use pendulum::Pendulum;
+pub use plant::{DiscretePlant, ExprPlant, OdePlant, MAX_NZ};
 
 use num_dual::{Dual2SVec64, DualNum, DualSVec64};
 use serde::{Deserialize, Serialize};
 
-/// Largest state dimension of a built-in system (fixed-size scratch buffers use it).
-pub const MAX_NX: usize = 4;
+/// Largest state dimension of a built-in system (the built-ins' RK4 buffers use it).
+const BUILTIN_MAX_NX: usize = 4;
+
+/// Largest state dimension of any system (callers may size state buffers by it): an
+/// expression plant has `nx + nu ≤ MAX_NZ` and at least one input.
+pub const MAX_NX: usize = MAX_NZ - 1;
 
 /// A continuous-time control system `ẋ = f(x, u)` written once, generically over the number
 /// type so that it can be evaluated in `f64` and differentiated by `num-dual`.
@@ -40,7 +53,8 @@ pub trait Dynamics {
     fn rhs<D: DualNum<Primitive = f64> + Copy>(&self, x: &[D], u: &[D], dx: &mut [D]);
 }
 
-/// One built-in system with its physical parameters (the `[system]` table of a problem file).
+/// The plant: a built-in system with its physical parameters, or a plant written as
+/// expressions (the `[system]` table of a problem file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum System {
@@ -50,6 +64,10 @@ pub enum System {
     CartPole(CartPole),
     /// A linear double integrator (2 states, 1 input); its MPC is a QP.
     DoubleIntegrator(DoubleIntegrator),
+    /// ẋ = f(x, u) written as expressions (`rhs = [...]`), discretised by RK4.
+    Ode(OdePlant),
+    /// x⁺ = F(x, u) written as expressions (`next = [...]`); no RK4.
+    Discrete(DiscretePlant),
 }
 
 impl System {
@@ -59,6 +77,8 @@ impl System {
             System::Pendulum(_) => Pendulum::NX,
             System::CartPole(_) => CartPole::NX,
             System::DoubleIntegrator(_) => DoubleIntegrator::NX,
+            System::Ode(p) => p.nx(),
+            System::Discrete(p) => p.nx(),
         }
     }
     /// Input dimension.
@@ -67,6 +87,8 @@ impl System {
             System::Pendulum(_) => Pendulum::NU,
             System::CartPole(_) => CartPole::NU,
             System::DoubleIntegrator(_) => DoubleIntegrator::NU,
+            System::Ode(p) => p.nu(),
+            System::Discrete(p) => p.nu(),
         }
     }
     /// Name used in files and reports.
@@ -75,7 +97,45 @@ impl System {
             System::Pendulum(_) => "pendulum",
             System::CartPole(_) => "cart_pole",
             System::DoubleIntegrator(_) => "double_integrator",
+            System::Ode(_) => "ode",
+            System::Discrete(_) => "discrete",
         }
+    }
+    /// The expression model of an `ode` / `discrete` plant (`None` for a built-in).
+    pub fn expr_model(&self) -> Option<&expr::ExprModel> {
+        match self {
+            System::Ode(p) => Some(p.model()),
+            System::Discrete(p) => Some(p.model()),
+            _ => None,
+        }
+    }
+    /// The compiler's warnings of an expression plant (non-smooth functions, unused names;
+    /// empty for a built-in). `problem` prints nothing: the caller shows them.
+    pub fn warnings(&self) -> &[String] {
+        self.expr_model().map_or(&[], |m| m.warnings())
+    }
+    /// The plant with its mass scaled by `factor` (model mismatch in closed-loop studies):
+    /// the pendulum's `m`, the cart-pole's `m_pole`, the double integrator's `mass`; for an
+    /// expression plant the parameter `mass`, else the parameter `m`. `None` when an
+    /// expression plant has neither parameter (or the scaled one does not compile): it has
+    /// no mass the study could perturb, and no mismatch runs are made for it.
+    pub fn with_mass_scaled(&self, factor: f64) -> Option<System> {
+        fn scaled<const D: bool>(p: &ExprPlant<D>, factor: f64) -> Option<ExprPlant<D>> {
+            let params = &p.spec().parameters;
+            let name = ["mass", "m"]
+                .into_iter()
+                .find(|n| params.contains_key(*n))?;
+            p.with_parameter(name, params[name] * factor).ok()
+        }
+        let mut sys = self.clone();
+        match &mut sys {
+            System::Pendulum(p) => p.m *= factor,
+            System::CartPole(p) => p.m_pole *= factor,
+            System::DoubleIntegrator(p) => p.mass *= factor,
+            System::Ode(p) => *p = scaled(p, factor)?,
+            System::Discrete(p) => *p = scaled(p, factor)?,
+        }
+        Some(sys)
     }
     /// Checks the physical parameters; returns the offending key and reason.
     pub fn validate(&self) -> Result<(), (String, String)> {
@@ -102,14 +162,36 @@ impl System {
                 check("g", p.g)
             }
             System::DoubleIntegrator(p) => check("mass", p.mass),
+            System::Ode(_) | System::Discrete(_) => {
+                // Compiled (and so checked) when read; here only the sizes.
+                let (nx, nu) = (self.nx(), self.nu());
+                if nu == 0 {
+                    return Err((
+                        "system.inputs".into(),
+                        "a plant needs at least one input".into(),
+                    ));
+                }
+                if nx + nu > MAX_NZ {
+                    return Err((
+                        "system.states".into(),
+                        format!(
+                            "{nx} states and {nu} inputs: at most {MAX_NZ} states and inputs together"
+                        ),
+                    ));
+                }
+                Ok(())
+            }
         }
     }
-    /// Continuous right-hand side in f64 (used by tests and simulations).
+    /// Continuous right-hand side in f64 (used by tests and simulations). A `discrete`
+    /// plant has none: `dx` is filled with NaN.
     pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         match self {
             System::Pendulum(s) => s.rhs(x, u, dx),
             System::CartPole(s) => s.rhs(x, u, dx),
             System::DoubleIntegrator(s) => s.rhs(x, u, dx),
+            System::Ode(p) => p.eval(x, u, dx),
+            System::Discrete(_) => dx.fill(f64::NAN),
         }
     }
 }
@@ -136,11 +218,11 @@ fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
     let n = S::NX;
     let h = ts / substeps as f64;
     let zero = D::from(0.0);
-    let mut k1 = [zero; MAX_NX];
-    let mut k2 = [zero; MAX_NX];
-    let mut k3 = [zero; MAX_NX];
-    let mut k4 = [zero; MAX_NX];
-    let mut tmp = [zero; MAX_NX];
+    let mut k1 = [zero; BUILTIN_MAX_NX];
+    let mut k2 = [zero; BUILTIN_MAX_NX];
+    let mut k3 = [zero; BUILTIN_MAX_NX];
+    let mut k4 = [zero; BUILTIN_MAX_NX];
+    let mut tmp = [zero; BUILTIN_MAX_NX];
     for _ in 0..substeps {
         sys.rhs(&x[..n], u, &mut k1[..n]);
         for i in 0..n {
@@ -176,8 +258,8 @@ fn ad_linearize<S: Dynamics, const NZ: usize>(
     let (nx, nu) = (S::NX, S::NU);
     debug_assert_eq!(NZ, nx + nu);
     let zero = DualSVec64::<NZ>::from(0.0);
-    let mut xd = [zero; MAX_NX];
-    let mut ud = [zero; MAX_NX];
+    let mut xd = [zero; BUILTIN_MAX_NX];
+    let mut ud = [zero; BUILTIN_MAX_NX];
     for i in 0..nx {
         xd[i] = DualSVec64::<NZ>::from(x[i]).derivative(i);
     }
@@ -211,8 +293,8 @@ fn ad_hessian<S: Dynamics, const NZ: usize>(
 ) {
     let (nx, nu) = (S::NX, S::NU);
     let zero = Dual2SVec64::<NZ>::from(0.0);
-    let mut xd = [zero; MAX_NX];
-    let mut ud = [zero; MAX_NX];
+    let mut xd = [zero; BUILTIN_MAX_NX];
+    let mut ud = [zero; BUILTIN_MAX_NX];
     for i in 0..nx {
         xd[i] = Dual2SVec64::<NZ>::from(x[i]).derivative(i);
     }
@@ -259,6 +341,8 @@ impl Discrete {
             System::Pendulum(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
             System::CartPole(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
             System::DoubleIntegrator(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
+            System::Ode(p) => p.step(self.ts, self.substeps, x, u, out),
+            System::Discrete(p) => p.step(self.ts, self.substeps, x, u, out),
         }
     }
     /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
@@ -268,6 +352,8 @@ impl Discrete {
             System::Pendulum(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
             System::CartPole(s) => ad_linearize::<_, 5>(s, ts, m, x, u, f, jx, ju),
             System::DoubleIntegrator(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
+            System::Ode(p) => p.linearize(ts, m, x, u, f, jx, ju),
+            System::Discrete(p) => p.linearize(ts, m, x, u, f, jx, ju),
         }
     }
     /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu).
@@ -277,6 +363,8 @@ impl Discrete {
             System::Pendulum(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
             System::CartPole(s) => ad_hessian::<_, 5>(s, ts, m, x, u, lam, hess),
             System::DoubleIntegrator(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
+            System::Ode(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
+            System::Discrete(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
         }
     }
 }
@@ -286,8 +374,33 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// An expression plant from the text of its `[system]` table without `kind`.
+    fn expr_system(discrete: bool, table: &str) -> System {
+        let spec: expr::SystemSpec = toml::from_str(table).unwrap_or_else(|e| panic!("{e}"));
+        if discrete {
+            System::Discrete(DiscretePlant::try_from(spec).unwrap_or_else(|e| panic!("{e}")))
+        } else {
+            System::Ode(OdePlant::try_from(spec).unwrap_or_else(|e| panic!("{e}")))
+        }
+    }
+
     fn systems() -> Vec<Discrete> {
+        let pend = r#"
+            states = ["theta", "omega"]
+            inputs = ["u"]
+            parameters = { m = 0.7, l = 1.3, g = 9.81, c = 0.1 }
+            definitions = ["tau = u - c*omega*abs(omega) + 0.1*u^3"]
+            rhs = ["omega", "tau/(m*l^2) - g/l*sin(theta + pi)"]
+        "#;
+        let disc = r#"
+            states = ["a", "b", "c"]
+            inputs = ["u"]
+            next = ["a + 0.1*b*cos(c)", "0.9*b + 0.1*tanh(u)*exp(-a^2/4)", "c + 0.05*a*b - 0.01*u^2"]
+        "#;
         vec![
+            Discrete::new(expr_system(false, pend), 0.05, 2),
+            Discrete::new(expr_system(true, disc), 0.05, 3),
+            Discrete::new(test_plants::chain12(), 0.1, 2),
             Discrete::new(System::Pendulum(Pendulum::default()), 0.05, 1),
             Discrete::new(System::CartPole(CartPole::default()), 0.05, 2),
             Discrete::new(
@@ -382,13 +495,13 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(64))]
         #[test]
         fn ad_derivatives_match_finite_differences(
-            x in proptest::collection::vec(-3.0f64..3.0, 4),
-            u in -10.0f64..10.0,
-            lam in proptest::collection::vec(-5.0f64..5.0, 4),
+            x in proptest::collection::vec(-3.0f64..3.0, 12),
+            u in proptest::collection::vec(-10.0f64..10.0, 4),
+            lam in proptest::collection::vec(-5.0f64..5.0, 12),
         ) {
             for sys in systems() {
-                let nx = sys.nx();
-                check_derivatives(&sys, &x[..nx], &[u], &lam[..nx]);
+                let (nx, nu) = (sys.nx(), sys.nu());
+                check_derivatives(&sys, &x[..nx], &u[..nu], &lam[..nx]);
             }
         }
     }

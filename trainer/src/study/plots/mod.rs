@@ -202,6 +202,18 @@ pub fn axis_names(sys: &System) -> (Vec<String>, Vec<String>) {
             v(&["F [N]"]),
         ),
         System::DoubleIntegrator(_) => (v(&["position [m]", "velocity [m/s]"]), v(&["u [N]"])),
+        System::Ode(_) | System::Discrete(_) => {
+            // The names of the problem file, with their units where given.
+            let m = sys.expr_model().expect("an expression plant");
+            let label = |n: &String| match m.unit(n) {
+                Some(unit) => format!("{n} [{unit}]"),
+                None => n.clone(),
+            };
+            (
+                m.state_names().iter().map(label).collect(),
+                m.input_names().iter().map(label).collect(),
+            )
+        }
     }
 }
 

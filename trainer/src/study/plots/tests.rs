@@ -1,5 +1,5 @@
 //! The plot helpers: box-plot quartiles, tick labels, the viridis map, and PNG
-//! rasterisation with the embedded font.
+//! rasterisation with the embedded font, the axis names of an expression plant.
 
 use super::*;
 
@@ -41,4 +41,14 @@ fn text_renders_with_the_embedded_font() {
     let dark = pix.pixels().iter().filter(|p| p.red() < 100).count();
     assert!(dark > 200, "{dark} dark pixels: no text drawn");
     assert!(to_png("t", "<svg", 1.0).is_err());
+}
+
+#[test]
+fn axis_names_of_expression_plants_are_their_names_with_units() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/pendulum_ode.toml");
+    let cfg = crate::problem::ProblemConfig::load(std::path::Path::new(path)).unwrap();
+    let (x, u) = axis_names(&cfg.system);
+    assert_eq!(x, ["theta [rad]", "omega [rad/s]"]);
+    assert_eq!(u, ["u [N*m]"]);
+    assert_eq!(input_unit(&cfg.system), "[N*m]");
 }
