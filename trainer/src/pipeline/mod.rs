@@ -99,6 +99,7 @@ pub fn run(
     let dir = opts.root.join(&cfg.name);
     std::fs::create_dir_all(&dir).map_err(|e| fail("setup", format!("{}: {e}", dir.display())))?;
     let _lock = lock(&dir)?;
+    remove_stale_temporaries(&dir);
     same_problem(&dir, cfg, opts)?;
     write_atomic(&dir.join("problem.toml"), config_text.as_bytes())
         .map_err(|e| fail("setup", e))?;
@@ -130,6 +131,23 @@ pub fn run(
         }
     }
     Ok(cx.reports)
+}
+
+/// Removes the temporary files (`.<name>.<pid>.tmp`, see `io::write_atomic`) that a run
+/// killed mid-write left in the run directory or its `plots/`: with the lock held, no other
+/// process is writing them.
+fn remove_stale_temporaries(dir: &std::path::Path) {
+    for d in [dir.to_path_buf(), dir.join("plots")] {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with('.') && name.ends_with(".tmp") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
 }
 
 /// Refuses to replace a run of another problem (other labels: system, OCP or solver) that
@@ -193,6 +211,25 @@ mod tests {
     fn the_stage_list_is_the_documented_order() {
         let names: Vec<&str> = super::stages::ALL.iter().map(|s| s.name).collect();
         assert_eq!(names, super::STAGES);
+    }
+
+    #[test]
+    fn stale_temporaries_are_removed_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("ampc_stale_{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("plots")).unwrap();
+        for f in [
+            ".dataset.bin.77.tmp",
+            "plots/.errors.png.77.tmp",
+            "keep.tmp",
+            ".keep",
+        ] {
+            std::fs::write(dir.join(f), "x").unwrap();
+        }
+        super::remove_stale_temporaries(&dir);
+        assert!(!dir.join(".dataset.bin.77.tmp").exists());
+        assert!(!dir.join("plots/.errors.png.77.tmp").exists());
+        assert!(dir.join("keep.tmp").exists() && dir.join(".keep").exists());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
