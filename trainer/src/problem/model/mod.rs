@@ -267,6 +267,19 @@ fn ad_linearize<S: Dynamics, const NZ: usize>(
         ud[j] = DualSVec64::<NZ>::from(u[j]).derivative(nx + j);
     }
     rk4(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    unpack_jacobian(&xd[..nx], nu, f, jx, ju);
+}
+
+/// Reads F, ∂F/∂x and ∂F/∂u off the first-order duals of F(x, u) seeded with the directions
+/// (x, u): `f[i] = re`, `jx[i][j] = ε_j`, `ju[i][j] = ε_{nx+j}` (row-major).
+pub(crate) fn unpack_jacobian<const NZ: usize>(
+    xd: &[DualSVec64<NZ>],
+    nu: usize,
+    f: &mut [f64],
+    jx: &mut [f64],
+    ju: &mut [f64],
+) {
+    let nx = xd.len();
     for i in 0..nx {
         f[i] = xd[i].re;
         let eps = xd[i]

@@ -262,18 +262,7 @@ impl<const DISCRETE: bool> ExprPlant<DISCRETE> {
             |i, v| DualSVec64::<NZ>::from(v).derivative(i),
             |xd, ud, st, regs| {
                 self.map(ts, substeps, xd, ud, st, regs);
-                for i in 0..nx {
-                    f[i] = xd[i].re;
-                    let eps = xd[i]
-                        .eps
-                        .unwrap_generic(nalgebra::Const::<NZ>, nalgebra::Const::<1>);
-                    for j in 0..nx {
-                        jx[i * nx + j] = eps[j];
-                    }
-                    for j in 0..nu {
-                        ju[i * nu + j] = eps[nx + j];
-                    }
-                }
+                super::unpack_jacobian(&xd[..nx], nu, f, jx, ju);
             },
         )
     }
