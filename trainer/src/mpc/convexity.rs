@@ -99,8 +99,7 @@ impl ReducedHessian {
                 for l in 0..j {
                     d -= rt[j * nu + l] * rt[j * nu + l];
                 }
-                // Also false for NaN.
-                if !(d > PIVOT_TOL * scale) {
+                if d.is_nan() || d <= PIVOT_TOL * scale {
                     return false;
                 }
                 let d = d.sqrt();
