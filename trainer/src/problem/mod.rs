@@ -36,6 +36,7 @@ pub use training::{Activation, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
+use crate::problem::model::expr::{ConstraintSet, ExprError};
 use crate::problem::model::System;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -168,6 +169,21 @@ impl ProblemConfig {
             .p
             .to_dmatrix()
             .unwrap_or_else(|| DMatrix::zeros(0, 0))
+    }
+
+    /// The compiled `[ocp]` path and terminal constraints over the plant's names
+    /// ([`System::names`]); `None` when there are none. Errors name the key and column.
+    pub fn constraint_set(&self) -> Result<Option<ConstraintSet>, ExprError> {
+        let o = &self.ocp;
+        if o.constraints.is_empty() && o.terminal_constraints.is_empty() {
+            return Ok(None);
+        }
+        ConstraintSet::compile(
+            &self.system.names(),
+            &o.constraints,
+            &o.terminal_constraints,
+        )
+        .map(Some)
     }
 
     /// Content hash (SHA-256, hex) of everything that determines a label: system, OCP and

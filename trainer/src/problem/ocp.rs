@@ -1,5 +1,8 @@
 //! `[ocp]`: the optimal control problem's data — sampling time, horizon, weights
-//! ℓ(x, u) = xᵀQx + uᵀRu, V_f(x) = xᵀPx, and the constraint boxes x_k ∈ X_k, u_k ∈ U_k.
+//! ℓ(x, u) = xᵀQx + uᵀRu, V_f(x) = xᵀPx, the constraint boxes x_k ∈ X_k, u_k ∈ U_k, and the
+//! optional path and terminal constraints g(x, u) ≤ 0 written as expressions
+//! (`constraints`, `terminal_constraints`; compiled by
+//! [`ConstraintSet`](crate::problem::model::expr::ConstraintSet)).
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -65,6 +68,14 @@ pub struct OcpSettings {
     /// unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stages: Option<StageBounds>,
+    /// Path constraints `lhs <= rhs` / `lhs >= rhs` in the states and inputs (by name): one in
+    /// states only holds on x₁…x_N, one in inputs only on u₀…u_{N−1}, one in both on
+    /// k = 1…N−1. Empty by default (and then not serialised: existing hashes unchanged).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub constraints: Vec<String>,
+    /// Terminal constraints in the states, on x_N only (a terminal region).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub terminal_constraints: Vec<String>,
 }
 
 /// Per-stage bounds of a tightened OCP: `x_lo[k−1]`, `x_hi[k−1]` bound x_k (k = 1..N),

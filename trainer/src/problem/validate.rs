@@ -148,6 +148,8 @@ impl ProblemConfig {
                 )?;
             }
         }
+        self.constraint_set()
+            .map_err(|e| invalid(e.key.clone(), e.reason()))?;
         check_vec("domain.lo", &self.domain.lo, nx, false)?;
         check_vec("domain.hi", &self.domain.hi, nx, false)?;
         check_bounds(

@@ -20,6 +20,7 @@
 //! `nx + nu ≤` [`MAX_NZ`].
 
 mod cartpole;
+mod constraint_eval;
 mod double_integrator;
 pub mod expr;
 mod pendulum;
@@ -109,6 +110,29 @@ impl System {
             _ => None,
         }
     }
+    /// The names expressions about this plant may use (the `[ocp]` constraints): an
+    /// expression plant's own table (states, inputs, parameters, definitions; no
+    /// equations), a built-in's fixed names — pendulum `theta`, `omega`, `u`; cart-pole `p`,
+    /// `theta`, `p_dot`, `theta_dot`, `force`; double integrator `position`, `velocity`,
+    /// `force`.
+    pub fn names(&self) -> expr::SystemSpec {
+        let named = |states: &[&str], inputs: &[&str]| expr::SystemSpec {
+            states: states.iter().map(|s| s.to_string()).collect(),
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
+            parameters: Default::default(),
+            definitions: Vec::new(),
+            rhs: None,
+            next: None,
+            units: Default::default(),
+        };
+        match self {
+            System::Pendulum(_) => named(&["theta", "omega"], &["u"]),
+            System::CartPole(_) => named(&["p", "theta", "p_dot", "theta_dot"], &["force"]),
+            System::DoubleIntegrator(_) => named(&["position", "velocity"], &["force"]),
+            System::Ode(p) => without_equations(p.spec()),
+            System::Discrete(p) => without_equations(p.spec()),
+        }
+    }
     /// The compiler's warnings of an expression plant (non-smooth functions, unused names;
     /// empty for a built-in). `problem` prints nothing: the caller shows them.
     pub fn warnings(&self) -> &[String] {
@@ -193,6 +217,15 @@ impl System {
             System::Ode(p) => p.eval(x, u, dx),
             System::Discrete(_) => dx.fill(f64::NAN),
         }
+    }
+}
+
+/// `spec` without its equations (names, parameters, definitions and units only).
+fn without_equations(spec: &expr::SystemSpec) -> expr::SystemSpec {
+    expr::SystemSpec {
+        rhs: None,
+        next: None,
+        ..spec.clone()
     }
 }
 
