@@ -23,6 +23,8 @@ pub mod sqp;
 // Tests only: the pendulum's IPOPT reference labels, and the law checked against independent
 // computations (finite differences, the condensed QP, first-order optimality, infeasibility).
 #[cfg(test)]
+mod constraint_checks;
+#[cfg(test)]
 mod cross_checks;
 #[cfg(test)]
 mod ipopt_labels;

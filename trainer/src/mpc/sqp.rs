@@ -250,16 +250,27 @@ impl SqpSolver {
 
     /// Evaluates the KKT residual of a point (used by tests and by callers that verify).
     pub fn kkt_residual(&self, xs: &[f64], p: &PrimalDual) -> KktResidual {
-        let mut ev = Evals::new(&self.ocp);
-        ev.first_order(&self.ocp, &p.z, xs);
-        residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu)
+        let relinearized;
+        let ocp = if self.ocp.has_nonlinear_rows() {
+            let mut o = self.ocp.clone();
+            o.relinearize(&p.z);
+            relinearized = o;
+            &relinearized
+        } else {
+            &self.ocp
+        };
+        let mut ev = Evals::new(ocp);
+        ev.first_order(ocp, &p.z, xs);
+        residual(ocp, &p.z, &ev, &p.lam, &p.nu)
     }
 
     /// The factorised active-set KKT matrix at a point (exact Hessian), for sensitivities.
+    /// `p` is the result of the last [`solve`](Self::solve): nonlinear rows are linearised
+    /// there.
     pub fn active_set_kkt(&self, xs: &[f64], p: &PrimalDual, active: Vec<usize>) -> ActiveSetKkt {
         let mut ev = Evals::new(&self.ocp);
         ev.first_order(&self.ocp, &p.z, xs);
-        self.ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+        self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
         ActiveSetKkt::new(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active)
     }
 
@@ -269,7 +280,7 @@ impl SqpSolver {
     /// QP returns ν_r ≈ slack_r ≈ √(gap) and the guess is a coin toss, so if it fails the
     /// polish is retried with the ambiguous rows (ν_r and slack_r both ≤ 1e-4, scaled)
     /// added, then removed.
-    fn polish(&self, xs: &[f64], start: &PrimalDual, info: &mut SqpInfo) -> Option<PrimalDual> {
+    fn polish(&mut self, xs: &[f64], start: &PrimalDual, info: &mut SqpInfo) -> Option<PrimalDual> {
         let ocp = &self.ocp;
         let nu_scale = start.nu.iter().fold(1.0f64, |m, v| m.max(v.abs()));
         let guess: Vec<usize> = (0..ocp.rows.len())
@@ -281,7 +292,12 @@ impl SqpSolver {
                     && ocp.rows[r].slack(&start.z).abs() <= 1e-4 * (1.0 + ocp.rows[r].rhs.abs())
             })
             .collect();
-        if let Some(p) = self.polish_on(xs, start, guess.clone(), info) {
+        let found = self.polish_on(xs, start, guess.clone(), info);
+        if found.is_none() {
+            // The failed Newton iterates moved the linearisation of nonlinear rows.
+            self.ocp.relinearize(&start.z);
+        }
+        if let Some(p) = found {
             return Some(p);
         }
         if ambiguous.is_empty() {
@@ -294,6 +310,7 @@ impl SqpSolver {
             if let Some(p) = self.polish_on(xs, start, with, info) {
                 return Some(p);
             }
+            self.ocp.relinearize(&start.z);
         }
         let without: Vec<usize> = guess
             .iter()
@@ -301,26 +318,31 @@ impl SqpSolver {
             .filter(|r| !ambiguous.contains(r))
             .collect();
         if without != guess {
-            return self.polish_on(xs, start, without, info);
+            let p = self.polish_on(xs, start, without, info);
+            if p.is_none() {
+                self.ocp.relinearize(&start.z);
+            }
+            return p;
         }
         None
     }
 
     /// Newton's method on the KKT conditions with the active set `active`.
     fn polish_on(
-        &self,
+        &mut self,
         xs: &[f64],
         start: &PrimalDual,
         mut active: Vec<usize>,
         info: &mut SqpInfo,
     ) -> Option<PrimalDual> {
-        let ocp = &self.ocp;
         let mut p = start.clone();
-        let mut ev = Evals::new(ocp);
+        let mut ev = Evals::new(&self.ocp);
         let mut last = f64::INFINITY;
         let mut drops = 0;
         let mut it = 0;
         while it < 8 {
+            self.ocp.relinearize(&p.z);
+            let ocp = &self.ocp;
             ev.first_order(ocp, &p.z, xs);
             let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
             if res.max() <= self.settings.tol {
@@ -334,7 +356,7 @@ impl SqpSolver {
                 return None;
             }
             last = res.max();
-            ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+            ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             let kkt = ActiveSetKkt::new(ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active.clone());
             let (nv, ne) = (ocp.n_var, ocp.n_eq);
             let mut rhs = DVector::zeros(nv + ne + active.len());
@@ -376,8 +398,9 @@ impl SqpSolver {
                 p.nu[r] = sol[nv + ne + t];
             }
         }
-        ev.first_order(ocp, &p.z, xs);
-        let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
+        self.ocp.relinearize(&p.z);
+        ev.first_order(&self.ocp, &p.z, xs);
+        let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
         if res.max() <= self.settings.tol {
             info.kkt = res;
             info.polished = true;
@@ -408,6 +431,7 @@ impl SqpSolver {
         let mut stable_active = false;
         let mut prev_active: Vec<usize> = Vec::new();
         let status = loop {
+            self.ocp.relinearize(&p.z);
             ev.first_order(&self.ocp, &p.z, xs);
             let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
             info.kkt = res;
@@ -426,11 +450,11 @@ impl SqpSolver {
             if info.iterations >= self.settings.max_iter {
                 break SqpStatus::MaxIterations;
             }
-            self.ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+            self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
-            self.ocp.hessian_blocks(&p.z, &zero_lam, &mut gn);
+            self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
             convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
             let data = QpData {
                 z: &p.z,
@@ -451,9 +475,17 @@ impl SqpSolver {
                 QpStatus::Failed => break SqpStatus::NumericalFailure,
             }
             // ℓ1 merit line search.
+            // Inequalities enter the merit by their violation Σ max(0, g): the penalty must
+            // exceed the multipliers of the rows that can be violated along the step — the
+            // nonlinear ones and those violated now (a linear row satisfied now stays
+            // satisfied on the whole step, which satisfies its linearisation).
             let lam_max = lam_qp.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            mu = mu.max(1.1 * lam_max + 1e-6);
-            let c1: f64 = ev.c.iter().map(|v| v.abs()).sum();
+            let nu_max = (0..nu_qp.len())
+                .filter(|&r| self.ocp.is_nonlinear_row(r) || self.ocp.rows[r].slack(&p.z) < 0.0)
+                .fold(0.0f64, |m, r| m.max(nu_qp[r].abs()));
+            mu = mu.max(1.1 * lam_max.max(nu_max) + 1e-6);
+            let c1: f64 =
+                ev.c.iter().map(|v| v.abs()).sum::<f64>() + self.ocp.inequality_violation(&p.z);
             let f0 = self.ocp.objective(&p.z);
             let phi0 = f0 + mu * c1;
             let dd: f64 = ev.grad.iter().zip(&d).map(|(g, d)| g * d).sum::<f64>() - mu * c1;
@@ -464,7 +496,8 @@ impl SqpSolver {
                 }
                 self.ocp.constraint_values(&z_trial, xs, &mut c_trial);
                 let phi = self.ocp.objective(&z_trial)
-                    + mu * c_trial.iter().map(|v| v.abs()).sum::<f64>();
+                    + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
+                        + self.ocp.inequality_violation(&z_trial));
                 if phi.is_finite() && phi <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs()
                 {
                     break true;
@@ -491,6 +524,8 @@ impl SqpSolver {
                 *l += alpha * (q - *l);
             }
         };
+        // Leave the rows linearised at the returned point (for sensitivities).
+        self.ocp.relinearize(&p.z);
         SqpResult {
             status,
             point: p,

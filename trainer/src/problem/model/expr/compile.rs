@@ -160,7 +160,7 @@ pub(super) fn definitions(
         let key = format!("system.definitions[{i}]");
         let (name, col, ast) =
             parse::parse_definition(text).map_err(|(c, k)| ExprError::at(&key, text, c, k))?;
-        if let Some(first) = clash(&table, &name) {
+        if let Some(first) = clash(table, &name) {
             let kind = ErrorKind::Duplicate { name, first };
             return Err(ExprError::at(key, text, col, kind));
         }

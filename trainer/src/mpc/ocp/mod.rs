@@ -6,6 +6,8 @@
 //!        F(x_k, u_k) − x_{k+1} = 0,      k = 0..N−1     (RK4 dynamics)
 //!        x_lo,k ≤ x_k ≤ x_hi,k,          k = 1..N       (hard, or x_lo,k − s ≤ x_k ≤ x_hi,k + s, s ≥ 0)
 //!        u_lo,k ≤ u_k ≤ u_hi,k,          k = 0..N−1
+//!        g_i(x_k, u_k) ≤ 0  [− s]         path constraints (`ocp.constraints`), stages by kind
+//!        g_i(x_N) ≤ 0  [− s]              terminal constraints (`ocp.terminal_constraints`)
 //! ```
 //! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
 //! `ocp.stages` of a tightened (robust) design ([`crate::problem::OcpSettings::x_bounds`]);
@@ -14,36 +16,22 @@
 //! Variables are ordered by stage, `z = (x_0, u_0, x_1, u_1, …, x_N, s…)`, so stage k's
 //! `(x_k, u_k)` is the contiguous block at `k·(nx+nu)`; the slacks of the soft problem
 //! follow. Equalities `c(z) = 0` are numbered `c_0` (initial state) then `c_{k+1}` (the
-//! dynamics from stage k). All inequalities are linear rows `aᵀz ≤ h` with one or two
-//! nonzeros ([`LinRow`]). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`, ν ≥ 0.
+//! dynamics from stage k). All inequalities are rows `aᵀz ≤ h` ([`LinRow`], in `rows.rs`):
+//! the boxes and affine constraints with constant coefficients, a nonlinear constraint
+//! `g(x_k, u_k) ≤ 0` as its linearisation at the current iterate z̄,
+//! `∇g(z̄)ᵀz ≤ ∇g(z̄)ᵀz̄ − g(z̄)`, refreshed by [`Ocp::relinearize`] whenever z moves (so a
+//! row's slack `h − aᵀz̄` is always −g(z̄)). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`,
+//! ν ≥ 0, and its Hessian includes `Σ ν_r ∇²g_r` ([`Ocp::hessian_blocks`]).
 
+mod rows;
+
+pub use rows::{LinRow, MAX_ROW};
+
+use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use nalgebra::DMatrix;
-
-/// One linear inequality row `Σ coef·z[idx] ≤ rhs` (one or two entries).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LinRow {
-    /// Variable indices (the second is meaningful only when `len == 2`).
-    pub idx: [usize; 2],
-    /// Coefficients.
-    pub coef: [f64; 2],
-    /// Number of entries (1 or 2).
-    pub len: usize,
-    /// Right-hand side h.
-    pub rhs: f64,
-}
-
-impl LinRow {
-    /// `aᵀz`.
-    pub fn dot(&self, z: &[f64]) -> f64 {
-        (0..self.len).map(|j| self.coef[j] * z[self.idx[j]]).sum()
-    }
-    /// Slack `h − aᵀz` (≥ 0 when satisfied).
-    pub fn slack(&self, z: &[f64]) -> f64 {
-        self.rhs - self.dot(z)
-    }
-}
+use rows::NlRow;
 
 /// Exact-penalty weights of the soft problem.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,8 +64,15 @@ pub struct Ocp {
     pub n_slack: usize,
     /// Number of equality constraints, (N+1)·nx.
     pub n_eq: usize,
-    /// Inequality rows `Gz ≤ h`.
+    /// Inequality rows `Gz ≤ h` (nonlinear ones linearised at the last
+    /// [`relinearize`](Ocp::relinearize) point).
     pub rows: Vec<LinRow>,
+    /// The compiled path and terminal constraints, if any.
+    constraints: Option<ConstraintSet>,
+    /// The rows of nonlinear constraints, by stage.
+    nl_rows: Vec<NlRow>,
+    /// The rows of all `[ocp]` constraints.
+    constraint_rows: Vec<usize>,
 }
 
 impl Ocp {
@@ -86,66 +81,13 @@ impl Ocp {
         let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
         let (nx, nu, n) = (model.nx(), model.nu(), cfg.ocp.horizon);
         let nw = n * (nx + nu) + nx;
-        let o = &cfg.ocp;
-        let mut rows = Vec::new();
-        let mut n_slack = 0;
-        let one = |i: usize, c: f64, rhs: f64| LinRow {
-            idx: [i, 0],
-            coef: [c, 0.0],
-            len: 1,
-            rhs,
-        };
-        for k in 0..=n {
-            let off = k * (nx + nu);
-            if k >= 1 {
-                let (x_lo, x_hi) = o.x_bounds(k);
-                for i in 0..nx {
-                    let (lo, hi) = (x_lo[i], x_hi[i]);
-                    if !lo.is_finite() && !hi.is_finite() {
-                        continue;
-                    }
-                    if soft {
-                        let s = nw + n_slack;
-                        n_slack += 1;
-                        if hi.is_finite() {
-                            rows.push(LinRow {
-                                idx: [off + i, s],
-                                coef: [1.0, -1.0],
-                                len: 2,
-                                rhs: hi,
-                            });
-                        }
-                        if lo.is_finite() {
-                            rows.push(LinRow {
-                                idx: [off + i, s],
-                                coef: [-1.0, -1.0],
-                                len: 2,
-                                rhs: -lo,
-                            });
-                        }
-                        rows.push(one(s, -1.0, 0.0));
-                    } else {
-                        if hi.is_finite() {
-                            rows.push(one(off + i, 1.0, hi));
-                        }
-                        if lo.is_finite() {
-                            rows.push(one(off + i, -1.0, -lo));
-                        }
-                    }
-                }
-            }
-            if k < n {
-                let (u_lo, u_hi) = o.u_bounds(k);
-                for j in 0..nu {
-                    if u_hi[j].is_finite() {
-                        rows.push(one(off + nx + j, 1.0, u_hi[j]));
-                    }
-                    if u_lo[j].is_finite() {
-                        rows.push(one(off + nx + j, -1.0, -u_lo[j]));
-                    }
-                }
-            }
-        }
+        let constraints = cfg.constraint_set().ok().flatten();
+        let rows::Built {
+            rows,
+            nl: nl_rows,
+            constraint_rows,
+            n_slack,
+        } = rows::build(cfg, constraints.as_ref(), nx, nu, nw, soft);
         Ocp {
             model,
             horizon: n,
@@ -162,6 +104,9 @@ impl Ocp {
             n_slack,
             n_eq: (n + 1) * nx,
             rows,
+            constraints,
+            nl_rows,
+            constraint_rows,
         }
     }
 
@@ -278,8 +223,10 @@ impl Ocp {
 
     /// Hessian of the Lagrangian, as stage blocks: `blocks[k]` (k < N) is the row-major
     /// (nx+nu)² block of stage k, `blocks[N]` the nx² terminal block (stored in a
-    /// (nx+nu)² slot). Slack curvature (2·l2) is diagonal and not stored here.
-    pub fn hessian_blocks(&self, z: &[f64], lam: &[f64], blocks: &mut [f64]) {
+    /// (nx+nu)² slot). Slack curvature (2·l2) is diagonal and not stored here. `mult` are the
+    /// inequality multipliers ν (one per row) for the curvature `Σ ν_r ∇²g_r` of nonlinear
+    /// constraints; an empty `mult` means ν = 0 (the objective and dynamics part only).
+    pub fn hessian_blocks(&self, z: &[f64], lam: &[f64], mult: &[f64], blocks: &mut [f64]) {
         let (nx, nu) = (self.nx, self.nu);
         let nz = nx + nu;
         let bs = nz * nz;
@@ -308,6 +255,9 @@ impl Ocp {
             for j in 0..nx {
                 blk[i * nz + j] = 2.0 * self.p[(i, j)];
             }
+        }
+        if !mult.is_empty() {
+            self.add_constraint_curvature(z, mult, blocks);
         }
     }
 
