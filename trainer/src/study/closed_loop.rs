@@ -17,6 +17,7 @@
 use crate::learn::mlp::Mlp;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::PrimalDual;
+use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
@@ -150,11 +151,12 @@ pub struct Run {
     pub x: Vec<Vec<f64>>,
     /// Inputs applied u_0..u_{steps−1}.
     pub u: Vec<Vec<f64>>,
-    /// Steps (of x_1..x_steps) with a state-bound violation > 1e-6.
+    /// Steps with a violation > 1e-6 of a state bound (x_1..x_steps) or a path constraint
+    /// ([`step_violation`]).
     pub violation_steps: usize,
     /// Share of violating steps in %.
     pub violation_percent: f64,
-    /// Largest state-bound violation.
+    /// Largest violation ([`step_violation`]).
     pub max_violation: f64,
     /// Largest ‖κ(x_k) − κ_NN(x_k)‖ along the trajectory (0 for the MPC).
     pub max_input_divergence: f64,
@@ -194,6 +196,51 @@ fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
 }
 
+/// The violation of step k of a closed loop: the largest of the state-bound violations of
+/// x_{k+1} and the `[ocp]` path constraints as the OCP places them — one in states only at
+/// x_{k+1}, one in inputs only at u_k, one in both at (x_k, u_k) for k ≥ 1 (the measured
+/// x₀ is never constrained). Terminal constraints shape the prediction only and are not
+/// checked along the closed loop. A non-finite constraint value counts as infinite.
+pub fn step_violation(
+    cfg: &ProblemConfig,
+    constraints: Option<&ConstraintSet>,
+    k: usize,
+    x: &[f64],
+    u: &[f64],
+    next: &[f64],
+) -> f64 {
+    let mut viol = (0..next.len())
+        .map(|i| {
+            (next[i] - cfg.ocp.x_hi[i])
+                .max(cfg.ocp.x_lo[i] - next[i])
+                .max(0.0)
+        })
+        .fold(0.0f64, f64::max);
+    let Some(cs) = constraints else {
+        return viol;
+    };
+    let nx = x.len();
+    let mut g = vec![0.0; cs.len()];
+    let mut g_next = vec![0.0; cs.len()];
+    cs.values(x, u, &mut g);
+    cs.values(next, u, &mut g_next);
+    for (i, c) in cs.items.iter().enumerate() {
+        let v = match (c.terminal, c.uses_states(nx), c.uses_inputs(nx)) {
+            (true, ..) => continue,
+            (false, true, false) => g_next[i],
+            (false, false, true) => g[i],
+            _ if k >= 1 => g[i],
+            _ => continue,
+        };
+        viol = viol.max(if v.is_nan() {
+            f64::INFINITY
+        } else {
+            v.max(0.0)
+        });
+    }
+    viol
+}
+
 /// Simulates `ctrl` from `x0`. `law` is used for the MPC and for the input divergence.
 pub fn simulate(
     cfg: &ProblemConfig,
@@ -224,6 +271,7 @@ pub fn simulate(
         mpc_failures: 0,
         mpc_soft_steps: 0,
     };
+    let constraints = cfg.constraint_set().ok().flatten();
     let mut warm: Option<PrimalDual> = None;
     let mut last_u = vec![0.0; nu];
     let mut next = vec![0.0; nx];
@@ -310,14 +358,8 @@ pub fn simulate(
             }
         }
         model.step(&x, &u, &mut next);
+        let viol = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
         x.copy_from_slice(&next);
-        let viol = (0..nx)
-            .map(|i| {
-                (x[i] - cfg.ocp.x_hi[i])
-                    .max(cfg.ocp.x_lo[i] - x[i])
-                    .max(0.0)
-            })
-            .fold(0.0f64, f64::max);
         if viol > VIOLATION_TOL {
             run.violation_steps += 1;
         }
@@ -334,6 +376,37 @@ pub fn simulate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each kind of constraint is checked where the OCP places it: states only at x_{k+1},
+    /// inputs only at u_k, both at (x_k, u_k) from k = 1, terminal never; boxes as before.
+    #[test]
+    fn step_violation_places_each_constraint() {
+        let mut cfg = ProblemConfig::default();
+        cfg.ocp.constraints = vec![
+            "omega <= 0.5".into(),
+            "u <= 2".into(),
+            "theta + u <= 1".into(),
+        ];
+        cfg.ocp.terminal_constraints = vec!["theta^2 <= 0.01".into()];
+        cfg.validate().unwrap();
+        let cs = cfg.constraint_set().unwrap();
+        let v = |k: usize, x: [f64; 2], u: f64, next: [f64; 2]| {
+            step_violation(&cfg, cs.as_ref(), k, &x, &[u], &next)
+        };
+        let ok = [0.0, 0.0];
+        assert_eq!(v(3, ok, 0.0, ok), 0.0);
+        // ω only counts at the next state; the measured state is not constrained.
+        assert_eq!(v(3, [0.0, 0.9], 0.0, ok), 0.0);
+        assert!((v(3, ok, 0.0, [0.0, 0.9]) - 0.4).abs() < 1e-12);
+        // input-only at every step, including the first.
+        assert!((v(0, ok, 2.5, ok) - 0.5).abs() < 1e-12);
+        // mixed: θ_k + u_k ≤ 1 from k = 1 on.
+        assert_eq!(v(0, [0.8, 0.0], 1.0, ok), 0.0);
+        assert!((v(1, [0.8, 0.0], 1.0, ok) - 0.8).abs() < 1e-12);
+        // the terminal region is not a closed-loop constraint; boxes still are.
+        assert_eq!(v(5, ok, 0.0, [0.5, 0.0]), 0.0);
+        assert!((v(5, ok, 0.0, [7.0, 0.0]) - (7.0 - 2.0 * std::f64::consts::PI)).abs() < 1e-12);
+    }
 
     #[test]
     fn mpc_swings_the_pendulum_up_and_respects_bounds() {
