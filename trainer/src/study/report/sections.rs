@@ -297,7 +297,7 @@ fn final_offsets(cfg: &ProblemConfig, a: &Artifacts) -> Block {
     let held: Vec<String> = [("nominal", &a.nom), ("regularized", &a.reg)]
         .iter()
         .filter(|(_, m)| m.settings.hold_setpoint)
-        .map(|(k, m)| format!("{k} {}", tuple(&m.mlp.predict(&x_ref))))
+        .map(|(k, m)| format!("{k} {}", sci(&m.mlp.predict(&x_ref))))
         .collect();
     if !held.is_empty() {
         s += &format!(
