@@ -540,6 +540,7 @@ pub(crate) mod tests {
                 &TrainOptions {
                     nominal: false,
                     progress: None,
+                    hold: None,
                 },
                 &set,
                 &set,

@@ -427,6 +427,16 @@ impl SqpSolver {
         let mut c_trial = vec![0.0; self.ocp.n_eq];
         let mut z_trial = vec![0.0; n_var];
         let mut mu = 1.0f64;
+        // Rounding floor of the merit function near a setpoint (x_ref, u_ref) ≠ 0: there the
+        // constraint residuals c carry an absolute rounding of about ε·|x_ref| per entry
+        // (ε·|u_ref|-sized terms inside F), which a cost near its zero minimum cannot
+        // resolve; without it the line search rejects every step there. 0 at the origin.
+        let floor_scale = 8.0
+            * f64::EPSILON
+            * self.ocp.horizon as f64
+            * (self.ocp.x_ref.iter().chain(&self.ocp.u_ref))
+                .map(|v| v.abs())
+                .sum::<f64>();
         let mut full_step = false;
         let mut stable_active = false;
         let mut prev_active: Vec<usize> = Vec::new();
@@ -498,7 +508,9 @@ impl SqpSolver {
                 let phi = self.ocp.objective(&z_trial)
                     + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
                         + self.ocp.inequality_violation(&z_trial));
-                if phi.is_finite() && phi <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs()
+                if phi.is_finite()
+                    && phi
+                        <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
                 {
                     break true;
                 }

@@ -140,6 +140,30 @@ impl ProblemConfig {
         Ok(cfg)
     }
 
+    /// Parses and validates a problem file that this program stored (the copy in a
+    /// dataset's header, `toml::to_string` of a config). There a missing
+    /// `training.hold_setpoint` means off: it is written only when on, and copies stored
+    /// before it existed come from runs without the hold. (In a file a user writes, a
+    /// missing key means the default, on.) The same for `refine.training` when `[refine]`
+    /// was stored.
+    pub fn from_stored_toml(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let mut cfg = Self::from_toml_str(text, origin)?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        let hold = |t: Option<&toml::Value>| {
+            t.and_then(|t| t.get("hold_setpoint"))
+                .and_then(toml::Value::as_bool)
+                .unwrap_or(false)
+        };
+        cfg.training.hold_setpoint = hold(table.get("training"));
+        if let Some(r) = table.get("refine") {
+            cfg.refine.training.hold_setpoint = hold(r.get("training"));
+        }
+        Ok(cfg)
+    }
+
     /// Reads, parses and validates a problem file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {

@@ -12,7 +12,9 @@
 //! than 1e-6 (the MPC rides x₂ = 1 during the upswing; solver tolerances must not count),
 //! the largest violation, the largest input divergence ‖κ(x) − κ_NN(x)‖ along the network's
 //! own trajectory (the MPC solved at each visited state), the quadratic cost
-//! Σ x_kᵀQx_k + u_kᵀRu_k, and the settling step (first k after which ‖x‖∞ stays ≤ 0.05).
+//! Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref), the settling step (first k
+//! after which ‖x − x_ref‖∞ stays ≤ 0.05) and the final offset |x_steps − x_ref| per state
+//! (x_ref, u_ref: the OCP's setpoint, the origin unless `ocp.x_ref`, `ocp.u_ref` say).
 
 use crate::learn::mlp::Mlp;
 use crate::mpc::law::MpcLaw;
@@ -162,10 +164,14 @@ pub struct Run {
     pub max_input_divergence: f64,
     /// Input divergence at each step (empty for the MPC).
     pub divergence: Vec<f64>,
-    /// Σ x_kᵀQx_k + u_kᵀRu_k.
+    /// Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref).
     pub cost: f64,
-    /// First step after which ‖x‖∞ ≤ 0.05 for good (None: never).
+    /// First step after which ‖x − x_ref‖∞ ≤ 0.05 for good (None: never).
     pub settling_step: Option<usize>,
+    /// |x_steps − x_ref| per state: the offset from the setpoint where the run ends (a
+    /// steady-state offset if the run has settled). Empty in files written before it existed.
+    #[serde(default)]
+    pub final_offset: Vec<f64>,
     /// Whether the network's raw output ever left the certified band U ⊕ [−ε, ε].
     pub left_band: bool,
     /// Steps where the MPC found no label (its input then held at the last one).
@@ -253,6 +259,7 @@ pub fn simulate(
     let nu = cfg.system.nu();
     let model = plant(cfg, s.mass_mismatch);
     let (q, r) = (cfg.q(), cfg.r());
+    let (x_ref, u_ref) = (cfg.ocp.x_ref_or_origin(nx), cfg.ocp.u_ref_or_zero(nu));
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
     let mut x = x0.to_vec();
     let mut run = Run {
@@ -267,6 +274,7 @@ pub fn simulate(
         divergence: Vec::new(),
         cost: 0.0,
         settling_step: None,
+        final_offset: Vec::new(),
         left_band: false,
         mpc_failures: 0,
         mpc_soft_steps: 0,
@@ -349,12 +357,12 @@ pub fn simulate(
         last_u = u.clone();
         for i in 0..nx {
             for j in 0..nx {
-                run.cost += x[i] * q[(i, j)] * x[j];
+                run.cost += (x[i] - x_ref[i]) * q[(i, j)] * (x[j] - x_ref[j]);
             }
         }
         for i in 0..nu {
             for j in 0..nu {
-                run.cost += u[i] * r[(i, j)] * u[j];
+                run.cost += (u[i] - u_ref[i]) * r[(i, j)] * (u[j] - u_ref[j]);
             }
         }
         model.step(&x, &u, &mut next);
@@ -368,8 +376,9 @@ pub fn simulate(
         run.x.push(x.clone());
     }
     run.violation_percent = 100.0 * run.violation_steps as f64 / s.steps.max(1) as f64;
-    let settled = |v: &Vec<f64>| v.iter().all(|c| c.abs() <= 0.05);
+    let settled = |v: &Vec<f64>| v.iter().zip(&x_ref).all(|(c, r)| (c - r).abs() <= 0.05);
     run.settling_step = (0..run.x.len()).find(|&k| run.x[k..].iter().all(settled));
+    run.final_offset = x.iter().zip(&x_ref).map(|(v, r)| (v - r).abs()).collect();
     run
 }
 

@@ -1,7 +1,8 @@
 //! The optimal control problem OCP(x_s) transcribed by multiple shooting into an NLP.
 //!
 //! ```text
-//! min_z  Σ_{k<N} x_kᵀQx_k + u_kᵀRu_k + x_NᵀPx_N  [+ Σ l1·s + l2·s²  (soft)]
+//! min_z  Σ_{k<N} (x_k − x_r)ᵀQ(x_k − x_r) + (u_k − u_r)ᵀR(u_k − u_r) + (x_N − x_r)ᵀP(x_N − x_r)
+//!                                                      [+ Σ l1·s + l2·s²  (soft)]
 //! s.t.   x_0 − x_s = 0                                 (parameter, an equality: LICQ-safe)
 //!        F(x_k, u_k) − x_{k+1} = 0,      k = 0..N−1     (RK4 dynamics)
 //!        x_lo,k ≤ x_k ≤ x_hi,k,          k = 1..N       (hard, or x_lo,k − s ≤ x_k ≤ x_hi,k + s, s ≥ 0)
@@ -9,6 +10,9 @@
 //!        g_i(x_k, u_k) ≤ 0  [− s]         path constraints (`ocp.constraints`), stages by kind
 //!        g_i(x_N) ≤ 0  [− s]              terminal constraints (`ocp.terminal_constraints`)
 //! ```
+//! The setpoint (x_r, u_r) is `ocp.x_ref`, `ocp.u_ref` (default the origin: then the cost is
+//! today's xᵀQx + uᵀRu bit for bit, since v − 0 = v). It enters the objective and its
+//! gradient only; the Hessian 2·diag(Q, R), P does not depend on it.
 //! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
 //! `ocp.stages` of a tightened (robust) design ([`crate::problem::OcpSettings::x_bounds`]);
 //! every consumer (SQP, QP, sensitivities) sees them only through the rows built here.
@@ -56,6 +60,10 @@ pub struct Ocp {
     q: DMatrix<f64>,
     r: DMatrix<f64>,
     p: DMatrix<f64>,
+    /// Setpoint state x_ref of the costs (the origin unless `ocp.x_ref` is given).
+    pub x_ref: Vec<f64>,
+    /// Setpoint input u_ref of the stage cost (0 unless `ocp.u_ref` is given).
+    pub u_ref: Vec<f64>,
     /// Soft-constraint penalty, if this is the soft problem.
     pub soft: Option<SoftPenalty>,
     /// Number of variables (states, inputs, slacks).
@@ -96,6 +104,8 @@ impl Ocp {
             q: cfg.q(),
             r: cfg.r(),
             p: cfg.p(),
+            x_ref: cfg.ocp.x_ref_or_origin(nx),
+            u_ref: cfg.ocp.u_ref_or_zero(nu),
             soft: soft.then_some(SoftPenalty {
                 l1: cfg.solver.soft_l1,
                 l2: cfg.solver.soft_l2,
@@ -123,22 +133,29 @@ impl Ocp {
         self.n_var - self.n_slack
     }
 
-    /// Objective f(z).
+    /// Objective f(z) (with the k = 0 state term, which is constant in the OCP but part of
+    /// the reported cost).
     pub fn objective(&self, z: &[f64]) -> f64 {
-        let quad = |m: &DMatrix<f64>, v: &[f64]| -> f64 {
+        // (v − c)ᵀM(v − c); with c = 0 exactly today's vᵀMv.
+        let quad = |m: &DMatrix<f64>, v: &[f64], c: &[f64]| -> f64 {
             let n = v.len();
             (0..n)
-                .map(|i| (0..n).map(|j| v[i] * m[(i, j)] * v[j]).sum::<f64>())
+                .map(|i| {
+                    (0..n)
+                        .map(|j| (v[i] - c[i]) * m[(i, j)] * (v[j] - c[j]))
+                        .sum::<f64>()
+                })
                 .sum()
         };
         let (nx, nu) = (self.nx, self.nu);
+        let (xr, ur) = (&self.x_ref[..], &self.u_ref[..]);
         let mut f = 0.0;
         for k in 0..self.horizon {
-            f += quad(&self.q, &z[self.ix(k)..self.ix(k) + nx]);
-            f += quad(&self.r, &z[self.iu(k)..self.iu(k) + nu]);
+            f += quad(&self.q, &z[self.ix(k)..self.ix(k) + nx], xr);
+            f += quad(&self.r, &z[self.iu(k)..self.iu(k) + nu], ur);
         }
         let xn = self.ix(self.horizon);
-        f += quad(&self.p, &z[xn..xn + nx]);
+        f += quad(&self.p, &z[xn..xn + nx], xr);
         if let Some(sp) = self.soft {
             for &s in &z[self.is()..] {
                 f += sp.l1 * s + sp.l2 * s * s;
@@ -151,16 +168,20 @@ impl Ocp {
     pub fn gradient(&self, z: &[f64], g: &mut [f64]) {
         let (nx, nu) = (self.nx, self.nu);
         g.fill(0.0);
-        let add = |m: &DMatrix<f64>, off: usize, n: usize, g: &mut [f64]| {
+        // ∇ (v − c)ᵀM(v − c) = 2M(v − c) for symmetric M.
+        let add = |m: &DMatrix<f64>, off: usize, c: &[f64], g: &mut [f64]| {
+            let n = c.len();
             for i in 0..n {
-                g[off + i] = 2.0 * (0..n).map(|j| m[(i, j)] * z[off + j]).sum::<f64>();
+                g[off + i] = 2.0 * (0..n).map(|j| m[(i, j)] * (z[off + j] - c[j])).sum::<f64>();
             }
         };
+        let (xr, ur) = (&self.x_ref[..], &self.u_ref[..]);
+        debug_assert_eq!((xr.len(), ur.len()), (nx, nu));
         for k in 0..self.horizon {
-            add(&self.q, self.ix(k), nx, g);
-            add(&self.r, self.iu(k), nu, g);
+            add(&self.q, self.ix(k), xr, g);
+            add(&self.r, self.iu(k), ur, g);
         }
-        add(&self.p, self.ix(self.horizon), nx, g);
+        add(&self.p, self.ix(self.horizon), xr, g);
         if let Some(sp) = self.soft {
             for i in self.is()..self.n_var {
                 g[i] = sp.l1 + 2.0 * sp.l2 * z[i];
@@ -266,8 +287,8 @@ impl Ocp {
         self.soft.map_or(0.0, |s| 2.0 * s.l2)
     }
 
-    /// A primal initial guess for a cold start: hold the inputs at the projection of 0 onto
-    /// U and simulate from x_s (multiple shooting tolerates the resulting state-bound
+    /// A primal initial guess for a cold start: hold the inputs at the projection of u_ref
+    /// (0 by default) onto U and simulate from x_s (multiple shooting tolerates the resulting state-bound
     /// violations in the soft problem; the hard problem's states are projected onto the
     /// bounds, which the QP's linearisation then repairs).
     pub fn initial_guess(
@@ -287,7 +308,7 @@ impl Ocp {
         for k in 0..self.horizon {
             let iu = self.iu(k);
             for j in 0..nu {
-                z[iu + j] = 0.0f64.clamp(u_lo[j], u_hi[j]);
+                z[iu + j] = self.u_ref[j].clamp(u_lo[j], u_hi[j]);
             }
             self.model.step(&x[..nx], &z[iu..iu + nu], &mut xn[..nx]);
             let ix = self.ix(k + 1);

@@ -1,5 +1,6 @@
 //! `plots/error_map`: ‖κ − κ_NN‖ of the regularized net on a grid over the first two axes
-//! of X (other coordinates at the centre of X), dataset points overlaid.
+//! of X (other coordinates at the setpoint x_ref if given, else the centre of X), dataset
+//! points overlaid.
 //!
 //! Owns [`ErrorGrid`], the MPC labels of that grid, and the heat map drawn from it.
 
@@ -29,11 +30,15 @@ pub struct ErrorGrid {
 impl ErrorGrid {
     /// Labels a `counts[0] × counts[1]` grid (endpoints included) over the first two axes
     /// of X with the MPC (cold starts, in parallel: the result does not depend on the thread
-    /// count) and evaluates `mlp` there. Other state coordinates sit at the centre of X.
+    /// count) and evaluates `mlp` there. Other state coordinates sit at the setpoint
+    /// `ocp.x_ref` if the problem states one, else at the centre of X.
     pub fn label(cfg: &ProblemConfig, mlp: &crate::learn::mlp::Mlp, counts: [usize; 2]) -> Self {
         use rayon::prelude::*;
         let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
-        let centre: Vec<f64> = lo.iter().zip(hi).map(|(l, h)| 0.5 * (l + h)).collect();
+        let centre: Vec<f64> = match &cfg.ocp.x_ref {
+            Some(r) => r.clone(),
+            None => lo.iter().zip(hi).map(|(l, h)| 0.5 * (l + h)).collect(),
+        };
         let coord = |a: usize, i: usize| {
             if counts[a] <= 1 {
                 0.5 * (lo[a] + hi[a])
@@ -179,10 +184,10 @@ pub fn error_map(p: &PlotInputs) -> Result<Figure, PlotError> {
         root.present().map_err(draw_err(NAME))?;
     }
     let unlabelled = g.err.iter().filter(|v| !v.is_finite()).count();
-    let slice = if p.cfg.system.nx() > 2 {
-        " (a slice: the other state coordinates at the centre of X)"
-    } else {
-        ""
+    let slice = match (p.cfg.system.nx() > 2, &p.cfg.ocp.x_ref) {
+        (false, _) => "",
+        (true, Some(_)) => " (a slice: the other state coordinates at the setpoint x_ref)",
+        (true, None) => " (a slice: the other state coordinates at the centre of X)",
     };
     Ok(Figure {
         name: NAME,

@@ -15,7 +15,8 @@
 //!   the closed-loop trajectories, and of the state-bound violations of the violating steps
 //!   (Fig. 2);
 //! - `error_map`: ‖κ − κ_NN‖ of the regularized net on a grid over the first two axes of X
-//!   (other coordinates at the centre of X), dataset points overlaid;
+//!   (other coordinates at the setpoint x_ref if given, else the centre of X), dataset points
+//!   overlaid;
 //! - `training` (`training_curves.rs`): loss terms, ε_D and validation R² per logged epoch;
 //! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
 //!   axes of X, and which term of ε_C binds there.

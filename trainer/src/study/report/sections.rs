@@ -12,12 +12,22 @@ use crate::study::plots::{FigureEntry, PLOTS};
 use crate::study::seeds::SeedRun;
 use std::path::Path;
 
-/// The problem: system, OCP, bounds, certified domain.
+/// The problem: system, OCP, bounds, certified domain (and the setpoint, when given).
 pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
+    let o = &cfg.ocp;
+    let setpoint = if o.x_ref.is_some() || o.u_ref.is_some() {
+        format!(
+            " Setpoint x_ref = {}, u_ref = {}.",
+            tuple(&o.x_ref_or_origin(cfg.system.nx())),
+            tuple(&o.u_ref_or_zero(cfg.system.nu()))
+        )
+    } else {
+        String::new()
+    };
     vec![
         Block::Heading(2, "Problem".into()),
         Block::Para(format!(
-            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.",
+            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.{setpoint}",
             cfg.system.name(),
             cfg.system.nx(),
             cfg.system.nu(),
@@ -32,6 +42,12 @@ pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
             boxed(&cfg.domain.lo, &cfg.domain.hi),
         )),
     ]
+}
+
+/// `(v₁, v₂, …)` with [`num`].
+fn tuple(v: &[f64]) -> String {
+    let parts: Vec<String> = v.iter().map(|x| num(*x)).collect();
+    format!("({})", parts.join(", "))
 }
 
 /// The dataset: counts by label status, training and validation sizes.
@@ -254,7 +270,42 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             ]),
             rows,
         },
+        final_offsets(cfg, a),
     ]
+}
+
+/// The summary line of the final offsets |x_steps − x_ref| of the runs from x₀, and the
+/// nets' outputs at the setpoint when they hold it.
+fn final_offsets(cfg: &ProblemConfig, a: &Artifacts) -> Block {
+    let x_ref = cfg.ocp.x_ref_or_origin(cfg.system.nx());
+    let sci = |v: &[f64]| {
+        let parts: Vec<String> = v.iter().map(|x| format!("{x:.3e}")).collect();
+        format!("({})", parts.join(", "))
+    };
+    let parts: Vec<String> = ["mpc", "nominal", "regularized"]
+        .iter()
+        .filter_map(|k| {
+            let r = a.cl.get(*k).and_then(|v| v.first())?;
+            Some(format!("{k} {}", sci(&r.final_offset)))
+        })
+        .collect();
+    let mut s = format!(
+        "Final offset |x − x_ref| per state after the last step, x_ref = {}: {}.",
+        tuple(&x_ref),
+        parts.join("; ")
+    );
+    let held: Vec<String> = [("nominal", &a.nom), ("regularized", &a.reg)]
+        .iter()
+        .filter(|(_, m)| m.settings.hold_setpoint)
+        .map(|(k, m)| format!("{k} {}", sci(&m.mlp.predict(&x_ref))))
+        .collect();
+    if !held.is_empty() {
+        s += &format!(
+            " The nets hold the setpoint (`training.hold_setpoint`: κ(x_ref) − κ_NN(x_ref) folded into the last bias); their outputs at x_ref: {}.",
+            held.join("; ")
+        );
+    }
+    Block::Para(s)
 }
 
 /// Table II's closed loop of both nets over the training seeds.
