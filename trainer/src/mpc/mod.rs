@@ -30,3 +30,5 @@ mod cross_checks;
 mod ipopt_labels;
 #[cfg(test)]
 mod plant_checks;
+#[cfg(test)]
+mod public_plants;
