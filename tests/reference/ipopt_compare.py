@@ -21,8 +21,20 @@ The OCP (trainer/src/mpc/ocp.rs, README "Problem files"; issue 12 for the option
 Built-in kinds (pendulum, cart_pole, double_integrator) are written out from their documented
 equations (trainer/src/problem/model/*.rs).
 
-Usage (from the repository root, after `cargo build --release -p trainer --examples`):
+IPOPT options: tol 1e-10, bound_relax_factor 0 (the bounds exactly as stated; IPOPT's default
+relaxes them by 1e-8, which moves u0 by ~2e-7 where a state bound is active), one thread.
+Errors: max |a - b| / max(1, max |b|) over the entries of kappa (resp. dkappa/dx) of a state,
+b = IPOPT's; the maxima over the states where both solvers converge to the same optimum
+(costs equal to 1e-6 relative). Timing: CPU time (process time for IPOPT, thread time for
+ours) and wall clock, median over `--reps` repetitions per state, then over the states; the
+IPOPT figure is the IPOPT call alone (the sensitivity computed here in NumPy is not
+counted), ours is the cold solve + the KKT sensitivity. On a loaded machine trust the CPU
+times: the wall clock of the longer IPOPT calls suffers more from preemption.
+
+Usage (from the repository root, after `cargo build --release -p trainer --bin trainer
+--example solve_timing`):
     python3 tests/reference/ipopt_compare.py configs/planar_quadrotor.toml [--n 100] [--seed 7]
+        [--reps 3] [--json OUT.json] [--markdown] [--ipopt KEY=VALUE ...]
 Needs Python >= 3.11 and `pip install casadi` (CasADi ships IPOPT with MUMPS).
 """
 
@@ -39,8 +51,12 @@ import tempfile
 import time
 import tomllib
 
-import casadi as ca
-import numpy as np
+# One core for IPOPT as for ours (MUMPS/BLAS threads off), set before CasADi loads them.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import casadi as ca  # noqa: E402
+import numpy as np  # noqa: E402
 
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
 
@@ -230,7 +246,7 @@ def split_constraint(text, key):
 
 
 class Ocp:
-    def __init__(self, cfg):
+    def __init__(self, cfg, ipopt_options=None):
         ocp = cfg["ocp"]
         self.plant = pl = Plant(cfg["system"], ocp)
         nx, nu, N = pl.nx, pl.nu, int(ocp["horizon"])
@@ -298,8 +314,8 @@ class Ocp:
         self.lbg, self.ubg = np.array(lbg), np.array(ubg)
         nlp = {"x": self.w, "p": xs, "f": J, "g": ca.vertcat(*g)}
         opts = {"ipopt.tol": 1e-10, "ipopt.print_level": 0, "print_time": False,
-                "ipopt.max_iter": 3000, "ipopt.sb": "yes",
-                "ipopt.bound_relax_factor": 0.0}
+                "ipopt.max_iter": 3000, "ipopt.sb": "yes", "ipopt.bound_relax_factor": 0.0}
+        opts.update({f"ipopt.{k}": v for k, v in (ipopt_options or {}).items()})
         self.solver = ca.nlpsol("S", "ipopt", nlp, opts)
         # The KKT system's parts at a solution (w, lam): Hessian of the Lagrangian
         # L = J + lam'g in w, its mixed derivative in x_s, and the constraint Jacobians.
@@ -327,6 +343,7 @@ class Ocp:
         r = self.solver(x0=w0, p=xs, lbx=self.lbw, ubx=self.ubw, lbg=self.lbg, ubg=self.ubg)
         t = (time.perf_counter() - t0, time.process_time() - c0)
         ok = self.solver.stats()["success"]
+        self.last_status = self.solver.stats()["return_status"]
         w = np.array(r["x"]).ravel()
         lam_g = np.array(r["lam_g"]).ravel()
         lam_x = np.array(r["lam_x"]).ravel()
@@ -340,33 +357,30 @@ class Ocp:
         self.solver(x0=w0, p=xs, lbx=self.lbw, ubx=self.ubw, lbg=self.lbg, ubg=self.ubg)
         return time.perf_counter() - t0, time.process_time() - c0
 
-    def sensitivity(self, xs, w, lam_g, lam_x, tol=1e-7):
+    def sensitivity(self, xs, w, lam_g, lam_x, weak_tol=1e-6):
         """dw*/dxs from the KKT conditions on the active set: with A the Jacobian of the
         equalities and active inequalities and E the rows of the active bounds,
         [H A' E'; A 0 0; E 0 0] d(w, lam_A, nu_A)/dxs = -(H_wx, A_x, 0).
-        A constraint is active when within `tol` of its bound with a multiplier of at least
-        `tol`; one at its bound with a smaller multiplier is weakly active: counted, and
-        treated as inactive (the one-sided derivative, as the trainer's sensitivity)."""
+        An inequality is active when its multiplier exceeds its distance to the bound (at an
+        interior-point solution their product is ~mu, so an active constraint has a
+        multiplier far above its slack and an inactive one the reverse); one with both below
+        `weak_tol` is weakly active: counted, and treated as inactive (the one-sided
+        derivative the trainer returns for weakly active constraints)."""
         H, Hwp, g, Jg, Jgp = (np.array(v) for v in self.kkt_parts(w, xs, lam_g))
         g = g.ravel()
         weak = 0
-        rows = []
-        for i in range(len(g)):
-            if self.lbg[i] == self.ubg[i]:
-                rows.append(i)
-            elif self.ubg[i] - g[i] < tol or g[i] - self.lbg[i] < tol:
-                if abs(lam_g[i]) >= tol:
-                    rows.append(i)
-                else:
-                    weak += 1
-        bounds = []
-        for i in range(len(w)):
-            at = self.ubw[i] - w[i] < tol or w[i] - self.lbw[i] < tol
-            if at:
-                if abs(lam_x[i]) >= tol:
-                    bounds.append(i)
-                else:
-                    weak += 1
+
+        def classify(val, lo, hi, lam):
+            nonlocal weak
+            dist = min(val - lo, hi - val)
+            if abs(lam) < weak_tol and dist < weak_tol:
+                weak += 1
+                return False
+            return abs(lam) > dist
+
+        rows = [i for i in range(len(g)) if self.lbg[i] == self.ubg[i]
+                or classify(g[i], self.lbg[i], self.ubg[i], lam_g[i])]
+        bounds = [i for i in range(len(w)) if classify(w[i], self.lbw[i], self.ubw[i], lam_x[i])]
         n, m, b = len(w), len(rows), len(bounds)
         A = Jg[rows, :]
         E = np.zeros((b, n))
@@ -416,10 +430,20 @@ def main():
                     default=os.path.join(ROOT, "target/release/examples/solve_timing"))
     ap.add_argument("--states", help="CSV of states (header x1,..,xn) instead of random ones")
     ap.add_argument("--json", help="write the per-state results here")
+    ap.add_argument("--markdown", action="store_true", help="also print a table row")
+    ap.add_argument("--ipopt", action="append", default=[], metavar="KEY=VALUE",
+                    help="extra IPOPT option (repeatable), e.g. bound_relax_factor=1e-8")
     args = ap.parse_args()
     with open(args.config, "rb") as f:
         cfg = tomllib.load(f)
-    ocp = Ocp(cfg)
+    extra = {}
+    for kv in args.ipopt:
+        k, v = kv.split("=", 1)
+        try:
+            extra[k] = float(v) if any(c in v for c in ".e") else int(v)
+        except ValueError:
+            extra[k] = v
+    ocp = Ocp(cfg, extra)
     nx, nu = ocp.nx, ocp.nu
     if args.states:
         with open(args.states) as f:
@@ -444,7 +468,8 @@ def main():
         jac_o = np.array([[float(r[f"du{j + 1}_dx{k + 1}"]) for k in range(nx)]
                           for j in range(nu)])
         res.append({
-            "x": xs.tolist(), "ipopt_ok": bool(ok), "status": r["status"], "weak": weak,
+            "x": xs.tolist(), "ipopt_ok": bool(ok), "ipopt_status": ocp.last_status,
+            "status": r["status"], "weak": weak,
             "u_ipopt": u.tolist(), "u_ours": u_o.tolist(),
             "cost_ipopt": f, "cost_ours": float(r["cost"]),
             "err_u": rel(u_o, u), "err_du": rel(jac_o, jac),
@@ -467,6 +492,11 @@ def main():
         "config": args.config, "name": cfg.get("name"), "nx": nx, "nu": nu, "N": ocp.N,
         "states": len(res), "ipopt_failed": sum(not r["ipopt_ok"] for r in res),
         "ours_not_converged": sum(r["status"] != "converged" for r in res),
+        "both_infeasible": sum(not r["ipopt_ok"] and r["ipopt_status"] == "Infeasible_Problem_Detected"
+                               and r["status"] in ("soft", "infeasible") for r in res),
+        "ipopt_failed_ours_converged": sum(not r["ipopt_ok"] and r["status"] == "converged"
+                                           for r in res),
+        "ours_failed_ipopt_ok": sum(r["ipopt_ok"] and r["status"] != "converged" for r in res),
         "compared": len(both), "same_optimum": len(same),
         "different_optimum_ours_lower": lower, "different_optimum_ours_higher": higher,
         "max_rel_err_u": max((r["err_u"] for r in same), default=float("nan")),
@@ -482,6 +512,14 @@ def main():
     summary["speedup_wall"] = summary["median_t_ipopt_ms"] / summary["median_t_ours_ms"]
     summary["speedup_cpu"] = summary["median_cpu_ipopt_ms"] / summary["median_cpu_ours_ms"]
     print(json.dumps(summary, indent=1))
+    if args.markdown:
+        sm = summary
+        print(f"| {sm['name']} | {nx}, {nu}, {ocp.N} | {sm['states']} | {sm['compared']} | "
+              f"{sm['different_optimum_ours_lower']} / {sm['different_optimum_ours_higher']} | "
+              f"{sm['both_infeasible']} | {sm['max_rel_err_u']:.1e} | {sm['max_rel_err_du']:.1e} | "
+              f"{sm['weakly_active_states']} | {sm['median_cpu_ipopt_ms']:.2f} | "
+              f"{sm['median_cpu_ours_ms']:.2f} | {sm['speedup_cpu']:.1f}x | "
+              f"{sm['median_t_ipopt_ms']:.2f} / {sm['median_t_ours_ms']:.2f} |")
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"summary": summary, "states": res}, f, indent=1)

@@ -1,8 +1,8 @@
 //! Per-state timing of the OCP solver (cold start + KKT sensitivity, one thread): solves
 //! every state of a states CSV (header `x1,…,xn`, as `trainer solve --states`) `reps` times
 //! and prints one CSV row per state, `index,median_seconds,median_cpu_seconds,status,
-//! iterations` (wall clock, and the thread's CPU time from `/proc/thread-self/schedstat`
-//! where available, NaN elsewhere: on a loaded machine the CPU time is the fair figure),
+//! iterations` (wall clock, and the thread's CPU time by `clock_gettime(CLOCK_THREAD_CPUTIME_ID)` on
+//! 64-bit Linux, NaN elsewhere: on a loaded machine the CPU time is the fair figure),
 //! then the medians over the states on stderr. Used by `tests/reference/ipopt_compare.py`
 //! to time the same states as IPOPT, side by side.
 //!
@@ -11,12 +11,37 @@ use std::time::Instant;
 use trainer::mpc::law::MpcLaw;
 use trainer::problem::ProblemConfig;
 
-/// CPU time of this thread in seconds (Linux: `/proc/thread-self/schedstat`), else NaN.
+/// CPU time of this thread in seconds (`clock_gettime(CLOCK_THREAD_CPUTIME_ID)`, Linux
+/// x86-64/aarch64), NaN elsewhere.
+#[cfg(all(target_os = "linux", target_pointer_width = "64"))]
 fn thread_cpu() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(f64::NAN, |ns| ns * 1e-9)
+    #[repr(C)]
+    struct Timespec {
+        tv_sec: i64,
+        tv_nsec: i64,
+    }
+    extern "C" {
+        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
+    }
+    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+    let mut t = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `t` is a valid, writable timespec; the clock id is Linux's.
+    #[allow(unsafe_code)]
+    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    if rc == 0 {
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    } else {
+        f64::NAN
+    }
+}
+
+/// CPU time of this thread: not available on this platform.
+#[cfg(not(all(target_os = "linux", target_pointer_width = "64")))]
+fn thread_cpu() -> f64 {
+    f64::NAN
 }
 
 fn median(v: &mut [f64]) -> f64 {
