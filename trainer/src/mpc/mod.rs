@@ -33,3 +33,5 @@ mod ipopt_labels;
 mod plant_checks;
 #[cfg(test)]
 mod setpoint_tests;
+#[cfg(test)]
+mod public_plants;

@@ -464,8 +464,9 @@ fn make_plots(
     let nom = load_model("plots", &d.join("model_nominal.bin"))?;
     let reg = load_model("plots", &d.join("model_regularized.bin"))?;
     let cl: ClosedLoop = load_json("plots", &d.join("closed_loop.json"))?;
-    let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid);
     let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+    let axes = crate::study::plots::slice_axes(cfg, &train);
+    let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid, axes);
     let inputs = crate::study::plots::PlotInputs {
         cfg,
         train: &train,

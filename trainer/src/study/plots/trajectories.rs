@@ -1,7 +1,7 @@
 //! Fig. 1, `plots/trajectories`: x_i(t) and u_j(t) of the MPC and both nets from the
-//! reference initial state, one panel per state and input coordinate, with the state and
-//! input bounds and, when the problem states a setpoint (`ocp.x_ref`, `ocp.u_ref`), the
-//! setpoint as a dotted line.
+//! reference initial state, one panel per state and input coordinate (in two columns when
+//! there are more than 8), with the state and input bounds and, when the problem states a
+//! setpoint (`ocp.x_ref`, `ocp.u_ref`), the setpoint as a dotted line.
 
 use super::{
     axis_names, draw_err, range, register_font, tick_fmt, Figure, PlotError, PlotInputs,
@@ -37,7 +37,10 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
     let o = &cfg.ocp;
     let setpoint = (o.x_ref.is_some() || o.u_ref.is_some())
         .then(|| (o.x_ref_or_origin(nx), o.u_ref_or_zero(nu)));
-    let (w, h) = (900u32, 60 + 230 * panels as u32);
+    // One column of panels; two (in reading order) when there are more than 8.
+    let cols = if panels > 8 { 2 } else { 1 };
+    let rows = panels.div_ceil(cols);
+    let (w, h) = (900 * cols as u32, 60 + 230 * rows as u32);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
@@ -53,8 +56,8 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
                 (FONT, 22),
             )
             .map_err(draw_err(NAME))?;
-        let areas = root.split_evenly((panels, 1));
-        for (row, area) in areas.iter().enumerate() {
+        let areas = root.split_evenly((rows, cols));
+        for (row, area) in areas.iter().enumerate().take(panels) {
             let signal = if row < nx {
                 Signal {
                     input: false,

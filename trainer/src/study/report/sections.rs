@@ -67,10 +67,7 @@ pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
             ]),
             rows: vec![row([
                 c.total.to_string(),
-                format!(
-                    "{:?} {:?}",
-                    a.data.header.sampling.sampler, a.data.header.sampling.counts
-                ),
+                sampler_cell(&a.data.header.sampling),
                 c.converged.to_string(),
                 c.soft.to_string(),
                 c.infeasible.to_string(),
@@ -85,8 +82,38 @@ pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
     ]
 }
 
-/// Table I: both nets after training (R², ε_D, the Lipschitz bounds) beside the paper's.
-pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
+/// The sampler of the dataset table: a grid with its counts per axis, the other samplers
+/// with their number of states and seed.
+fn sampler_cell(s: &crate::problem::SamplingSettings) -> String {
+    match s.sampler {
+        crate::problem::SamplerKind::Grid => format!("{:?} {:?}", s.sampler, s.counts),
+        _ => format!("{:?}, n = {}, seed {}", s.sampler, s.n, s.seed),
+    }
+}
+
+/// Whether this is the paper's problem (the embedded pendulum's dynamics dimensions and OCP:
+/// sampling time, horizon, weights and bounds), whose Tables I and II are shown beside ours.
+/// Other problems get no paper columns: the paper's figures are about another plant.
+pub(super) fn is_paper_problem(cfg: &ProblemConfig) -> bool {
+    let paper = ProblemConfig::default();
+    let (a, b) = (&cfg.ocp, &paper.ocp);
+    cfg.system.nx() == paper.system.nx()
+        && cfg.system.nu() == paper.system.nu()
+        && a.ts == b.ts
+        && a.horizon == b.horizon
+        && a.q == b.q
+        && a.r == b.r
+        && a.p == b.p
+        && a.x_lo == b.x_lo
+        && a.x_hi == b.x_hi
+        && a.u_lo == b.u_lo
+        && a.u_hi == b.u_hi
+}
+
+/// Table I: both nets after training (R², ε_D, the Lipschitz bounds) beside the paper's
+/// (for the paper's problem only, [`is_paper_problem`]).
+pub(super) fn table_i(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let paper_cols = is_paper_problem(cfg);
     let mut rows = Vec::new();
     for ((name, m, ce), (_, paper)) in [
         ("nominal", &a.nom, &a.cert_n),
@@ -95,7 +122,7 @@ pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
     .into_iter()
     .zip(PAPER_TABLE_I)
     {
-        rows.push(row([
+        let mut r = row([
             name.to_string(),
             format!("{:.4}", m.validation_stats.r2),
             format!("{:.3}", ce.eps_d),
@@ -105,24 +132,29 @@ pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
             format!("{:.2}", ce.l_nn_lower),
             format!("{:.3}", m.train_stats.median),
             format!("{} / {} / {}", paper[0], paper[1], paper[2]),
-        ]));
+        ]);
+        if !paper_cols {
+            r.pop();
+        }
+        rows.push(r);
+    }
+    let mut head = strs(&[
+        "net",
+        "validation R²",
+        "ε_D",
+        "L_NN (sound, method)",
+        "LipSDP-Neuron",
+        "naive",
+        "sampled lower",
+        "median error",
+        "paper R² / ε_D / L_NN",
+    ]);
+    if !paper_cols {
+        head.pop();
     }
     vec![
         Block::Heading(2, "Table I: networks after training".into()),
-        Block::Table {
-            head: strs(&[
-                "net",
-                "validation R²",
-                "ε_D",
-                "L_NN (sound, method)",
-                "LipSDP-Neuron",
-                "naive",
-                "sampled lower",
-                "median error",
-                "paper R² / ε_D / L_NN",
-            ]),
-            rows,
-        },
+        Block::Table { head, rows },
     ]
 }
 
@@ -221,13 +253,14 @@ pub(super) fn certificate(a: &Artifacts) -> Vec<Block> {
 }
 
 /// Table II: the closed loop of the MPC and both nets from the reference initial state,
-/// beside the paper's.
+/// beside the paper's (for the paper's problem only, [`is_paper_problem`]).
 pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     let first = |k: &str| a.cl.get(k).and_then(|v| v.first());
     let x0: Vec<String> = first("mpc")
         .map(|r| r.x0.iter().map(|v| num(*v)).collect())
         .unwrap_or_default();
     let steps = first("mpc").map_or(0, |r| r.steps);
+    let paper_cols = is_paper_problem(cfg);
     let mut rows = Vec::new();
     for k in ["mpc", "nominal", "regularized"] {
         let paper = PAPER_TABLE_II
@@ -237,7 +270,7 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
                 format!("{} / {} / {}", p[0], p[1], p[2])
             });
         if let Some(r) = first(k) {
-            rows.push(row([
+            let mut cells = row([
                 k.to_string(),
                 format!("{:.3}", r.violation_percent),
                 format!("{:.4}", r.max_violation),
@@ -246,8 +279,25 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
                 r.settling_step.map_or("never".into(), |v| v.to_string()),
                 r.left_band.to_string(),
                 paper,
-            ]));
+            ]);
+            if !paper_cols {
+                cells.pop();
+            }
+            rows.push(cells);
         }
+    }
+    let mut head = strs(&[
+        "controller",
+        "violating steps %",
+        "max violation",
+        "max input divergence",
+        "cost",
+        "settling step",
+        "left certified band",
+        "paper % / max / divergence",
+    ]);
+    if !paper_cols {
+        head.pop();
     }
     vec![
         Block::Heading(2, "Table II: closed loop".into()),
@@ -257,19 +307,7 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             steps as f64 * cfg.ocp.ts,
             cfg.training.seed
         )),
-        Block::Table {
-            head: strs(&[
-                "controller",
-                "violating steps %",
-                "max violation",
-                "max input divergence",
-                "cost",
-                "settling step",
-                "left certified band",
-                "paper % / max / divergence",
-            ]),
-            rows,
-        },
+        Block::Table { head, rows },
         final_offsets(cfg, a),
     ]
 }
