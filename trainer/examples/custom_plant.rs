@@ -145,7 +145,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     if cert.l_mpc_is_estimate {
         println!(
-            "  L_MPC is an estimate ({}): ε holds under it",
+            "  L_MPC is an estimate ({}): ε bounds the error only as far as it holds",
             cert.l_mpc_method
         );
     }

@@ -116,6 +116,7 @@ fn a_custom_plant_runs_the_pipeline_and_matches_the_built_in() {
         }
         worst = worst.max((ra.cost - rb.cost).abs() / (1.0 + ra.cost.abs()));
     }
+    eprintln!("largest relative difference of the labels (u, ∂u/∂x, cost): {worst:e}");
     assert!(
         worst <= 1e-12,
         "largest relative label difference {worst:e}"

@@ -288,3 +288,51 @@ fn sizes_names_and_the_mass_are_checked() {
     assert_eq!(sys.name(), "my_pendulum");
     assert_eq!(sys.custom_plants().len(), 1);
 }
+
+/// Timing of `Discrete::linearize` and `lagrangian_hessian`: the built-in pendulum vs the
+/// same plant as a custom plant (`Arc<dyn ErasedPlant>` + `by_nz!`), interleaved rounds
+/// (`cargo test --release -p trainer --lib custom_plant_timing -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn custom_plant_timing() {
+    let a = Discrete::new(System::Pendulum(Pendulum::default()), 0.05, 1);
+    let b = Discrete::new(System::Custom(pendulum("1", ONE)), 0.05, 1);
+    let once = |d: &Discrete, hess: bool| {
+        let n = 100_000;
+        let (mut f, mut jx, mut ju, mut h) = ([0.0; 2], [0.0; 4], [0.0; 2], [0.0; 9]);
+        let t0 = std::time::Instant::now();
+        let mut acc = 0.0;
+        for k in 0..n {
+            let x = [k as f64 * 1e-6, 0.5];
+            if hess {
+                d.lagrangian_hessian(&x, &[1.0], &[0.3, -0.2], &mut h);
+                acc += h[4];
+            } else {
+                d.linearize(&x, &[1.0], &mut f, &mut jx, &mut ju);
+                acc += jx[2];
+            }
+        }
+        std::hint::black_box(acc);
+        t0.elapsed().as_nanos() as f64 / n as f64
+    };
+    let rounds = 21;
+    let mut t = vec![vec![]; 4];
+    for _ in 0..rounds {
+        for (i, (d, hess)) in [(&a, false), (&b, false), (&a, true), (&b, true)]
+            .into_iter()
+            .enumerate()
+        {
+            t[i].push(once(d, hess));
+        }
+    }
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let m: Vec<f64> = t.iter_mut().map(med).collect();
+    eprintln!(
+        "linearize: built-in {:.1} ns, custom {:.1} ns; lagrangian_hessian: built-in {:.1} ns, \
+         custom {:.1} ns (medians of {rounds} interleaved rounds of 100k)",
+        m[0], m[1], m[2], m[3]
+    );
+}

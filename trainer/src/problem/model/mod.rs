@@ -273,9 +273,10 @@ fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy, const N: usize>(
     }
 }
 
-/// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions.
+/// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions; `B ≥ NX` sizes the
+/// buffers (the built-ins' `BUILTIN_MAX_NX`, a custom plant's `NZ`).
 #[allow(clippy::too_many_arguments)]
-fn ad_linearize<S: Dynamics, const NZ: usize>(
+fn ad_linearize<S: Dynamics, const NZ: usize, const B: usize>(
     sys: &S,
     ts: f64,
     substeps: usize,
@@ -288,15 +289,15 @@ fn ad_linearize<S: Dynamics, const NZ: usize>(
     let (nx, nu) = (S::NX, S::NU);
     debug_assert_eq!(NZ, nx + nu);
     let zero = DualSVec64::<NZ>::from(0.0);
-    let mut xd = [zero; NZ];
-    let mut ud = [zero; NZ];
+    let mut xd = [zero; B];
+    let mut ud = [zero; B];
     for i in 0..nx {
         xd[i] = DualSVec64::<NZ>::from(x[i]).derivative(i);
     }
     for j in 0..nu {
         ud[j] = DualSVec64::<NZ>::from(u[j]).derivative(nx + j);
     }
-    rk4::<S, _, NZ>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    rk4::<S, _, B>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
     unpack_jacobian(&xd[..nx], nu, f, jx, ju);
 }
 
@@ -324,8 +325,9 @@ pub(crate) fn unpack_jacobian<const NZ: usize>(
     }
 }
 
-/// ∇²_{(x,u)} (λᵀF) by second-order forward-mode AD; row-major `NZ × NZ` into `hess`.
-fn ad_hessian<S: Dynamics, const NZ: usize>(
+/// ∇²_{(x,u)} (λᵀF) by second-order forward-mode AD; row-major `NZ × NZ` into `hess`;
+/// `B ≥ NX` sizes the buffers.
+fn ad_hessian<S: Dynamics, const NZ: usize, const B: usize>(
     sys: &S,
     ts: f64,
     substeps: usize,
@@ -336,15 +338,15 @@ fn ad_hessian<S: Dynamics, const NZ: usize>(
 ) {
     let (nx, nu) = (S::NX, S::NU);
     let zero = Dual2SVec64::<NZ>::from(0.0);
-    let mut xd = [zero; NZ];
-    let mut ud = [zero; NZ];
+    let mut xd = [zero; B];
+    let mut ud = [zero; B];
     for i in 0..nx {
         xd[i] = Dual2SVec64::<NZ>::from(x[i]).derivative(i);
     }
     for j in 0..nu {
         ud[j] = Dual2SVec64::<NZ>::from(u[j]).derivative(nx + j);
     }
-    rk4::<S, _, NZ>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    rk4::<S, _, B>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
     let mut acc = zero;
     for i in 0..nx {
         acc += xd[i] * lam[i];
@@ -399,9 +401,11 @@ impl Discrete {
     pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
-            System::Pendulum(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
-            System::CartPole(s) => ad_linearize::<_, 5>(s, ts, m, x, u, f, jx, ju),
-            System::DoubleIntegrator(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
+            System::Pendulum(s) => ad_linearize::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju),
+            System::CartPole(s) => ad_linearize::<_, 5, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju),
+            System::DoubleIntegrator(s) => {
+                ad_linearize::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju)
+            }
             System::Ode(p) => p.linearize(ts, m, x, u, f, jx, ju),
             System::Discrete(p) => p.linearize(ts, m, x, u, f, jx, ju),
             System::Custom(p) => p.plant().linearize(ts, m, x, u, f, jx, ju),
@@ -411,9 +415,11 @@ impl Discrete {
     pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
-            System::Pendulum(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
-            System::CartPole(s) => ad_hessian::<_, 5>(s, ts, m, x, u, lam, hess),
-            System::DoubleIntegrator(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
+            System::Pendulum(s) => ad_hessian::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess),
+            System::CartPole(s) => ad_hessian::<_, 5, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess),
+            System::DoubleIntegrator(s) => {
+                ad_hessian::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess)
+            }
             System::Ode(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
             System::Discrete(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
             System::Custom(p) => p.plant().lagrangian_hessian(ts, m, x, u, lam, hess),
