@@ -32,6 +32,6 @@ mod ipopt_labels;
 #[cfg(test)]
 mod plant_checks;
 #[cfg(test)]
-mod setpoint_tests;
-#[cfg(test)]
 mod public_plants;
+#[cfg(test)]
+mod setpoint_tests;

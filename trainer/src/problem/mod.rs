@@ -37,7 +37,7 @@ pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
 use crate::problem::model::expr::{ConstraintSet, ExprError};
-use crate::problem::model::System;
+use crate::problem::model::{CustomPlant, System};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -130,12 +130,26 @@ impl Default for ProblemConfig {
 }
 
 impl ProblemConfig {
-    /// Parses and validates a problem file's text; `origin` names it in errors.
+    /// Parses and validates a problem file's text; `origin` names it in errors. A plant of
+    /// `kind = "custom"` is an error naming it: use [`from_toml_str_with`](Self::from_toml_str_with).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let cfg: ProblemConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: origin.to_string(),
-            message: e.to_string(),
-        })?;
+        Self::from_toml_str_with(text, origin, &[])
+    }
+
+    /// Parses and validates a problem file's text whose `[system]` may be one of `plants`,
+    /// plants implemented in Rust by the calling program (`kind = "custom"`, found by
+    /// name; see [`model::custom`] for the checks). A custom plant not among them is an
+    /// error naming it.
+    pub fn from_toml_str_with(
+        text: &str,
+        origin: &str,
+        plants: &[CustomPlant],
+    ) -> Result<Self, ConfigError> {
+        let cfg: ProblemConfig = model::custom::reading_with(plants, || toml::from_str(text))
+            .map_err(|e| ConfigError::Parse {
+                path: origin.to_string(),
+                message: e.to_string(),
+            })?;
         cfg.validate()?;
         Ok(cfg)
     }
@@ -162,6 +176,16 @@ impl ProblemConfig {
             cfg.refine.training.hold_setpoint = hold(r.get("training"));
         }
         Ok(cfg)
+    }
+
+    /// The problem file as text (TOML), as stored in `problem.toml` and in datasets; a
+    /// custom plant is written as its record (name, version, names, parameters,
+    /// fingerprint).
+    pub fn to_toml_string(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| ConfigError::Parse {
+            path: format!("problem `{}`", self.name),
+            message: format!("cannot be written as TOML: {e}"),
+        })
     }
 
     /// Reads, parses and validates a problem file.

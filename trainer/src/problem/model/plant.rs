@@ -109,10 +109,11 @@ macro_rules! by_nz {
     (@ $nz:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
         match $nz {
             $($n => $self.$method::<$n> $args,)*
-            n => panic!("expression plant with nx + nu = {n} > {MAX_NZ} (rejected by validate)"),
+            n => panic!("plant with nx + nu = {n} > {MAX_NZ} (rejected by validate)"),
         }
     };
 }
+/// The same dispatch for the plants implemented in Rust by the library's users (`custom`).
 pub(super) use by_nz;
 
 impl<const DISCRETE: bool> ExprPlant<DISCRETE> {

@@ -215,6 +215,8 @@ pub fn axis_names(sys: &System) -> (Vec<String>, Vec<String>) {
                 m.input_names().iter().map(label).collect(),
             )
         }
+        // The names the plant's program gave (`x1`, …, `u1`, … if none).
+        System::Custom(p) => (p.state_names(), p.input_names()),
     }
 }
 
