@@ -6,11 +6,13 @@
 //! - the exported controller (`weights.bin` decoded and evaluated by `controller-core` in
 //!   f32) within the certified f32 allowance of `export_report.json`;
 //! - the closed loop started at x_ref (`closed_loop.x0`) ends where the linearisation of the
-//!   loop at x_ref puts it given the nets' residual r = κ_NN(x_ref) − κ(x_ref): with
-//!   e_{k+1} = (A + B K) e_k + B r (A, B the plant, K = ∂κ_NN/∂x at x_ref),
-//!   ‖e_N‖∞ ≤ Σ_{j<N} ‖(A + B K)^j B‖∞ |r| (×2 for the second-order terms at this scale);
-//!   `final_offset` must not exceed it (without the hold, r is the net's fit error and the
-//!   first check fails).
+//!   loop at x_ref puts it: e_{k+1} = (A + B K) e_k + B (r + δ_k) + w_k (A, B the plant,
+//!   K = ∂κ_NN/∂x at x_ref, r = κ_NN(x_ref) − u_eq the net's input error at the equilibrium,
+//!   δ_k the f64 rounding of the net's evaluation, |δ_k| ≤ 4ε·scale, w_k that of the plant
+//!   step, |w_k|∞ ≤ 2ε‖x_ref‖∞), so
+//!   ‖e_N‖∞ ≤ Σ_{j<N} ‖M^j B‖∞ (|r| + 4ε·scale) + Σ_{j<N} ‖M^j‖∞ 2ε‖x_ref‖∞, M = A + B K
+//!   (×2 for the second-order terms at this scale); `final_offset` must not exceed it
+//!   (without the hold, r is the net's fit error and the first check fails).
 //!
 //! And the compiled-in pendulum controller at its setpoint (the origin) equals the MPC's
 //! κ(0) within its certificate's f32 allowance.
@@ -33,6 +35,26 @@ fn row(p: &Path) -> std::collections::HashMap<String, f64> {
 
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+/// Σ_{j<n} ‖M^j‖∞ (the induced ∞-norm: largest row sum) for a 2×2 M.
+fn power_sum(m: [[f64; 2]; 2], n: usize) -> f64 {
+    let (mut p, mut sum) = ([[1.0f64, 0.0], [0.0, 1.0]], 0.0);
+    for _ in 0..n {
+        sum += (p[0][0].abs() + p[0][1].abs()).max(p[1][0].abs() + p[1][1].abs());
+        let q = p;
+        p = [
+            [
+                m[0][0] * q[0][0] + m[0][1] * q[1][0],
+                m[0][0] * q[0][1] + m[0][1] * q[1][1],
+            ],
+            [
+                m[1][0] * q[0][0] + m[1][1] * q[1][0],
+                m[1][0] * q[0][1] + m[1][1] * q[1][1],
+            ],
+        ];
+    }
+    sum
 }
 
 /// Σ_{j<n} ‖M^j b‖∞ for a 2×2 M and a 2-vector b.
@@ -129,7 +151,11 @@ fn run_holds_a_nonzero_setpoint_exactly() {
             [a[0][0] + b[0] * k[0], a[0][1] + b[0] * k[1]],
             [a[1][0] + b[1] * k[0], a[1][1] + b[1] * k[1]],
         ];
-        let bound = 2.0 * drift_gain(acl, b, steps) * e["u1"].abs();
+        // u_eq = 0: the double integrator rests at (0.5, 0) with no force.
+        let x_ref_max: f64 = 0.5;
+        let bound = 2.0
+            * (drift_gain(acl, b, steps) * (e["u1"].abs() + 4.0 * f64::EPSILON * scale)
+                + power_sum(acl, steps) * 2.0 * f64::EPSILON * x_ref_max);
         let first = &cl[name][0];
         assert_eq!(first["x0"], serde_json::json!([0.5, 0.0]));
         let off: Vec<f64> = first["final_offset"]
