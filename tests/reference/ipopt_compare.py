@@ -396,6 +396,7 @@ class Ocp:
         rhs[:n] = -Hwp
         rhs[n:n + m] = -Jgp[rows, :]
         d = np.linalg.solve(K, rhs)
+        self.last_active = (sum(self.lbg[i] != self.ubg[i] for i in rows), len(bounds))
         return d[: self.nu, :], weak
 
 
@@ -470,6 +471,7 @@ def main():
         res.append({
             "x": xs.tolist(), "ipopt_ok": bool(ok), "ipopt_status": ocp.last_status,
             "status": r["status"], "weak": weak,
+            "active_constraints": int(ocp.last_active[0]), "active_bounds": ocp.last_active[1],
             "u_ipopt": u.tolist(), "u_ours": u_o.tolist(),
             "cost_ipopt": f, "cost_ours": float(r["cost"]),
             "err_u": rel(u_o, u), "err_du": rel(jac_o, jac),
@@ -504,6 +506,8 @@ def main():
         "median_rel_err_du": med([r["err_du"] for r in same]),
         "states_err_du_above_1e-4": sum(r["err_du"] > 1e-4 for r in same),
         "weakly_active_states": sum(r["weak"] > 0 for r in res),
+        "states_with_active_constraints": sum(r["active_constraints"] > 0 for r in same),
+        "states_with_active_bounds": sum(r["active_bounds"] > 0 for r in same),
         "median_t_ipopt_ms": 1e3 * med([r["t_ipopt"] for r in res]),
         "median_t_ours_ms": 1e3 * med([r["t_ours"] for r in res]),
         "median_cpu_ipopt_ms": 1e3 * med([r["cpu_ipopt"] for r in res]),
