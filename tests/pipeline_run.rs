@@ -62,6 +62,7 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
             "max_violation",
             "max_input_divergence",
             "cost",
+            "final_offset",
         ] {
             assert!(r.get(f).is_some(), "{k} run lacks {f}");
         }

@@ -128,6 +128,7 @@ fn learning(c: &mut Criterion) {
     let opts = TrainOptions {
         nominal: false,
         progress: None,
+        hold: None,
     };
     g.bench_function("pendulum_350_2000ep", |b| {
         b.iter(|| {

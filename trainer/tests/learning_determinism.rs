@@ -1,7 +1,8 @@
 //! Training is single-threaded and fully determined by (data, settings, seed): the same
 //! inputs give bit-identical model files, run twice and inside rayon pools of 1 and 2
-//! threads.
+//! threads (with the setpoint hold, which is part of training).
 use trainer::certify::Model;
+use trainer::learn::setpoint::Hold;
 use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::problem::ProblemConfig;
 
@@ -11,6 +12,7 @@ fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> Mo
         &TrainOptions {
             nominal,
             progress: None,
+            hold: Some(Hold::solve(cfg).expect("κ at the origin")),
         },
         set,
         val,

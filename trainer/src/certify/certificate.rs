@@ -276,9 +276,11 @@ pub fn check_inputs(
             cfg: cfg.problem_hash(),
         });
     }
-    if let Ok(own) =
-        crate::problem::ProblemConfig::from_toml_str(&data.header.config_toml, "dataset header")
-    {
+    if let Ok(own) = crate::problem::ProblemConfig::from_toml_str_with(
+        &data.header.config_toml,
+        "dataset header",
+        cfg.system.custom_plants(),
+    ) {
         if own.domain != cfg.domain {
             return Err(MismatchError::Coverage {
                 what: "domain X".into(),
@@ -540,6 +542,7 @@ pub(crate) mod tests {
                 &TrainOptions {
                     nominal: false,
                     progress: None,
+                    hold: None,
                 },
                 &set,
                 &set,

@@ -35,7 +35,7 @@ pub(super) fn problem_for_data(
         Some(p) => Ok(warn_plant(ProblemConfig::load(p)?)),
         None => {
             let origin = format!("{} (its stored problem file)", data_path.display());
-            let cfg = ProblemConfig::from_toml_str(&data.header.config_toml, &origin)?;
+            let cfg = ProblemConfig::from_stored_toml(&data.header.config_toml, &origin)?;
             eprintln!(
                 "problem `{}` from {} (no --config given)",
                 cfg.name,

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use std::path::Path;
 use trainer::certify::certificate::{certify, CertifyOptions};
 use trainer::data::dataset::Dataset;
+use trainer::learn::setpoint::Hold;
 use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::problem::ProblemConfig;
 
@@ -35,6 +36,7 @@ struct Shared<'a> {
     dhash: &'a str,
     set: &'a TrainSet,
     val: &'a TrainSet,
+    hold: Option<&'a Hold>,
 }
 
 pub(super) fn execute(
@@ -62,12 +64,14 @@ pub(super) fn execute(
         cfg.training.validation_seed,
     );
     let dhash = sha256_file(data)?;
+    let hold = Hold::if_enabled(&cfg, cfg.training.hold_setpoint)?;
     let shared = Shared {
         cfg: &cfg,
         d: &d,
         dhash: &dhash,
         set: &set,
         val: &val,
+        hold: hold.as_ref(),
     };
     let jobs: Vec<(u64, bool)> = (0..seeds).flat_map(|s| [(s, true), (s, false)]).collect();
     let results: Vec<SeedResult> = jobs
@@ -100,6 +104,7 @@ fn train_seed(
         dhash,
         set,
         val,
+        hold,
     } = *shared;
     let mut st = cfg.training.clone();
     st.seed = seed;
@@ -108,6 +113,7 @@ fn train_seed(
         &TrainOptions {
             nominal,
             progress: None,
+            hold: hold.cloned(),
         },
         set,
         val,

@@ -9,6 +9,7 @@ use std::path::Path;
 use trainer::certify::certificate::{certify, Certificate, CertifyOptions};
 use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
+use trainer::learn::setpoint::Hold;
 use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::problem::ProblemConfig;
 
@@ -46,6 +47,7 @@ pub(super) fn execute(
     let opts = TrainOptions {
         nominal,
         progress: None,
+        hold: Hold::if_enabled(&cfg, cfg.training.hold_setpoint)?,
     };
     let mut model = train(
         &cfg.training,

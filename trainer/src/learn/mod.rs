@@ -5,8 +5,13 @@
 //! ```
 //! - [`mlp`]: the multilayer perceptron, its forward, tangent and backward passes, the loss.
 //! - [`train`]: Adam over the loss, learning-rate schedules, early stopping, the model file.
+//! - [`setpoint`]: the setpoint hold κ_NN(x) − κ_NN(x_ref) + κ(x_ref), folded into the
+//!   last bias after training.
+//! - `stored_settings`: the model file's encoding of the training settings.
 //!
 //! Imports `problem`, `mpc` and `data`.
 
 pub mod mlp;
+pub mod setpoint;
+mod stored_settings;
 pub mod train;

@@ -14,6 +14,7 @@
 use crate::data::dataset::{Dataset, DatasetError};
 use crate::io::write_atomic;
 use crate::learn::mlp::{Batch, LossParts, LossWeights, Mlp, Workspace};
+use crate::learn::setpoint::Hold;
 use crate::problem::{Schedule, TrainSettings};
 use crate::rng::splitmix64;
 use serde::{Deserialize, Serialize};
@@ -197,7 +198,9 @@ pub struct TrainedModel<C> {
     pub kind: Kind,
     /// Loss weights used.
     pub lambda: LossWeights,
-    /// Settings used.
+    /// Settings used (`hold_setpoint`: whether the setpoint hold was applied; stored in
+    /// format 3's layout, see `learn::stored_settings`).
+    #[serde(with = "crate::learn::stored_settings")]
     pub settings: TrainSettings,
     /// Problem hash of the dataset's labels.
     pub problem_hash: String,
@@ -292,6 +295,10 @@ pub struct TrainOptions {
     pub nominal: bool,
     /// Called after each logged epoch (progress reporting).
     pub progress: Option<fn(usize, usize)>,
+    /// The setpoint to hold exactly ([`Hold`]: x_ref and κ(x_ref)), when
+    /// `training.hold_setpoint` is on: applied to the trained net before its final
+    /// statistics. The model records `settings.hold_setpoint` = whether it was applied.
+    pub hold: Option<Hold>,
 }
 
 /// Trains a network on `train` from its seeded initial weights; `validation` gives R².
@@ -462,6 +469,11 @@ pub fn train_from<C>(
             }
         }
     }
+    if let Some(h) = &opts.hold {
+        h.apply(&mut mlp);
+    }
+    let mut settings = settings.clone();
+    settings.hold_setpoint = opts.hold.is_some();
     let (_, train_stats) = errors(&mlp, train);
     let (_, validation_stats) = errors(&mlp, validation);
     TrainedModel {
@@ -474,7 +486,7 @@ pub fn train_from<C>(
             Kind::Regularized
         },
         lambda: lam,
-        settings: settings.clone(),
+        settings,
         problem_hash: problem_hash.to_string(),
         dataset_hash: dataset_hash.to_string(),
         epochs_run,
@@ -566,6 +578,7 @@ mod tests {
             &TrainOptions {
                 nominal,
                 progress: None,
+                hold: None,
             },
             set,
             val,

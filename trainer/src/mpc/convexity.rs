@@ -225,7 +225,7 @@ mod tests {
                 );
                 ocp.constraints(&z, &z[..nx], &mut c, &mut jx, &mut ju);
                 let mut hess = vec![0.0; (n + 1) * nz * nz];
-                ocp.hessian_blocks(&z, &lam, &mut hess);
+                ocp.hessian_blocks(&z, &lam, &[], &mut hess);
                 let min = dense_reduced(&ocp, &hess, &jx, &ju)
                     .symmetric_eigen()
                     .eigenvalues

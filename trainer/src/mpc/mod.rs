@@ -23,10 +23,17 @@ pub mod sensitivity;
 pub mod sqp;
 
 // Tests only: the pendulum's IPOPT reference labels, and the law checked against independent
-// computations (finite differences, the condensed QP, first-order optimality, infeasibility).
+// computations (finite differences, the condensed QP, first-order optimality, infeasibility),
+// and the setpoint cost (gradient, equilibrium).
+#[cfg(test)]
+mod constraint_checks;
 #[cfg(test)]
 mod cross_checks;
 #[cfg(test)]
 mod ipopt_labels;
 #[cfg(test)]
 mod plant_checks;
+#[cfg(test)]
+mod public_plants;
+#[cfg(test)]
+mod setpoint_tests;

@@ -119,8 +119,9 @@ pub struct ClarabelQp {
     p_rowval: Vec<usize>,
     a_colptr: Vec<usize>,
     a_rowval: Vec<usize>,
-    /// For each variable, the inequality rows (index into `ocp.rows`, coefficient) it is in.
-    col_rows: Vec<Vec<(usize, f64)>>,
+    /// For each variable, the inequality rows it is in (index into `ocp.rows`, entry of the
+    /// row): coefficients are read at each solve (nonlinear rows change).
+    col_rows: Vec<Vec<(usize, usize)>>,
     p_val: Vec<f64>,
     a_val: Vec<f64>,
     b: Vec<f64>,
@@ -136,7 +137,7 @@ impl ClarabelQp {
         let mut col_rows = vec![Vec::new(); ocp.n_var];
         for (r, row) in ocp.rows.iter().enumerate() {
             for j in 0..row.len {
-                col_rows[row.idx[j]].push((r, row.coef[j]));
+                col_rows[row.idx[j]].push((r, j));
             }
         }
         // P: upper triangle of each stage block, then the slack diagonal.
@@ -280,8 +281,8 @@ impl ClarabelQp {
                     }
                 }
             }
-            for &(_, coef) in &self.col_rows[col] {
-                self.a_val[a] = coef;
+            for &(r, j) in &self.col_rows[col] {
+                self.a_val[a] = ocp.rows[r].coef[j];
                 a += 1;
             }
         }

@@ -49,7 +49,8 @@ pub struct Sensitivity {
     pub degeneracy: Option<Degeneracy>,
 }
 
-/// Computes the sensitivity at a converged point `p` of `solver`'s problem for state `xs`.
+/// Computes the sensitivity at a converged point `p` of `solver`'s problem for state `xs`;
+/// `p` is the result of the solver's last solve (nonlinear rows are linearised there).
 /// `tol` is the degeneracy tolerance (`solver.degeneracy_tol`).
 pub fn sensitivity(solver: &SqpSolver, xs: &[f64], p: &PrimalDual, tol: f64) -> Sensitivity {
     let ocp = &solver.ocp;

@@ -3,17 +3,21 @@
 //! Iteration (Nocedal & Wright, Alg. 18.3 with an ℓ₁ merit function):
 //! 1. At (z, λ, ν) evaluate ∇f, c, ∇c (exact, AD) and the exact Hessian of the Lagrangian
 //!    `∇²L = ∇²f + Σ_k ∇²(λ_{k+1}ᵀ F(x_k, u_k))`, stage block by stage block.
-//! 2. Keep the exact Hessian if the QP is strictly convex with it on the null space of the
-//!    linearised dynamics (`convexity` module: a Riccati recursion, O(N)); otherwise
+//! 2. Keep the exact Hessian if the problem has no nonlinear constraint rows and the QP is
+//!    strictly convex with it on the null space of the linearised dynamics (`convexity`
+//!    module: a Riccati recursion, O(N)); otherwise
 //!    convexify block by block: keep the exact block where it is positive semidefinite, use
 //!    the Gauss–Newton block (the objective's Hessian 2·diag(Q, R)) where it is not. Solve
 //!    the QP subproblem (`qp` module: structured interior point, or clarabel) for the step d
 //!    and multipliers (λ⁺, ν⁺). The exact Hessian gives Newton steps where the blockwise test
 //!    would discard curvature the constraints make harmless (the cart-pole's blocks are
 //!    indefinite at most iterates).
-//! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ‖c(z)‖₁`, with the penalty raised
-//!    only as far as the step needs to be a descent direction (Nocedal & Wright, eq. 18.36):
-//!    `μ ≥ (∇fᵀd + ½ max(dᵀHd, 0)) / ((1 − ρ)‖c‖₁)`, ρ = 0.1, then μ += 1. The classical
+//! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ(‖c(z)‖₁ + Σ_r max(0, g_r(z)))`
+//!    (inequality rows enter by their violation), with the penalty raised only as far as the
+//!    step needs to be a descent direction (Nocedal & Wright, eq. 18.36, with the total
+//!    violation `v = ‖c‖₁ + Σ max(0, g)` in place of ‖c‖₁ — the QP step satisfies the
+//!    linearised rows, so φ's directional derivative is at most ∇fᵀd − μv):
+//!    `μ ≥ (∇fᵀd + ½ max(dᵀHd, 0)) / ((1 − ρ)v)`, ρ = 0.1, then μ += 1. The classical
 //!    `μ ≥ 1.1·‖λ⁺‖_∞` is far larger when λ spans orders of magnitude along the horizon (an
 //!    unstable plant's costates grow backwards in time) and then forces step lengths of
 //!    1/8–1/4 for many iterations.
@@ -286,16 +290,27 @@ impl SqpSolver {
 
     /// Evaluates the KKT residual of a point (used by tests and by callers that verify).
     pub fn kkt_residual(&self, xs: &[f64], p: &PrimalDual) -> KktResidual {
-        let mut ev = Evals::new(&self.ocp);
-        ev.first_order(&self.ocp, &p.z, xs);
-        residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu)
+        let relinearized;
+        let ocp = if self.ocp.has_nonlinear_rows() {
+            let mut o = self.ocp.clone();
+            o.relinearize(&p.z);
+            relinearized = o;
+            &relinearized
+        } else {
+            &self.ocp
+        };
+        let mut ev = Evals::new(ocp);
+        ev.first_order(ocp, &p.z, xs);
+        residual(ocp, &p.z, &ev, &p.lam, &p.nu)
     }
 
     /// The factorised active-set KKT matrix at a point (exact Hessian), for sensitivities.
+    /// `p` is the result of the last [`solve`](Self::solve): nonlinear rows are linearised
+    /// there.
     pub fn active_set_kkt(&self, xs: &[f64], p: &PrimalDual, active: Vec<usize>) -> ActiveSetKkt {
         let mut ev = Evals::new(&self.ocp);
         ev.first_order(&self.ocp, &p.z, xs);
-        self.ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+        self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
         ActiveSetKkt::new(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active)
     }
 
@@ -305,7 +320,7 @@ impl SqpSolver {
     /// QP returns ν_r ≈ slack_r ≈ √(gap) and the guess is a coin toss, so if it fails the
     /// polish is retried with the ambiguous rows (ν_r and slack_r both ≤ 1e-4, scaled)
     /// added, then removed.
-    fn polish(&self, xs: &[f64], start: &PrimalDual, info: &mut SqpInfo) -> Option<PrimalDual> {
+    fn polish(&mut self, xs: &[f64], start: &PrimalDual, info: &mut SqpInfo) -> Option<PrimalDual> {
         let ocp = &self.ocp;
         let nu_scale = start.nu.iter().fold(1.0f64, |m, v| m.max(v.abs()));
         let guess: Vec<usize> = (0..ocp.rows.len())
@@ -317,7 +332,12 @@ impl SqpSolver {
                     && ocp.rows[r].slack(&start.z).abs() <= 1e-4 * (1.0 + ocp.rows[r].rhs.abs())
             })
             .collect();
-        if let Some(p) = self.polish_on(xs, start, guess.clone(), info) {
+        let found = self.polish_on(xs, start, guess.clone(), info);
+        if found.is_none() {
+            // The failed Newton iterates moved the linearisation of nonlinear rows.
+            self.ocp.relinearize(&start.z);
+        }
+        if let Some(p) = found {
             return Some(p);
         }
         if ambiguous.is_empty() {
@@ -330,6 +350,7 @@ impl SqpSolver {
             if let Some(p) = self.polish_on(xs, start, with, info) {
                 return Some(p);
             }
+            self.ocp.relinearize(&start.z);
         }
         let without: Vec<usize> = guess
             .iter()
@@ -337,26 +358,31 @@ impl SqpSolver {
             .filter(|r| !ambiguous.contains(r))
             .collect();
         if without != guess {
-            return self.polish_on(xs, start, without, info);
+            let p = self.polish_on(xs, start, without, info);
+            if p.is_none() {
+                self.ocp.relinearize(&start.z);
+            }
+            return p;
         }
         None
     }
 
     /// Newton's method on the KKT conditions with the active set `active`.
     fn polish_on(
-        &self,
+        &mut self,
         xs: &[f64],
         start: &PrimalDual,
         mut active: Vec<usize>,
         info: &mut SqpInfo,
     ) -> Option<PrimalDual> {
-        let ocp = &self.ocp;
         let mut p = start.clone();
-        let mut ev = Evals::new(ocp);
+        let mut ev = Evals::new(&self.ocp);
         let mut last = f64::INFINITY;
         let mut drops = 0;
         let mut it = 0;
         while it < 8 {
+            self.ocp.relinearize(&p.z);
+            let ocp = &self.ocp;
             ev.first_order(ocp, &p.z, xs);
             let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
             if res.max() <= self.settings.tol {
@@ -370,7 +396,7 @@ impl SqpSolver {
                 return None;
             }
             last = res.max();
-            ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+            ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             let kkt = ActiveSetKkt::new(ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active.clone());
             let (nv, ne) = (ocp.n_var, ocp.n_eq);
             let mut rhs = DVector::zeros(nv + ne + active.len());
@@ -412,8 +438,9 @@ impl SqpSolver {
                 p.nu[r] = sol[nv + ne + t];
             }
         }
-        ev.first_order(ocp, &p.z, xs);
-        let res = residual(ocp, &p.z, &ev, &p.lam, &p.nu);
+        self.ocp.relinearize(&p.z);
+        ev.first_order(&self.ocp, &p.z, xs);
+        let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
         if res.max() <= self.settings.tol {
             info.kkt = res;
             info.polished = true;
@@ -441,10 +468,21 @@ impl SqpSolver {
         let mut c_trial = vec![0.0; self.ocp.n_eq];
         let mut z_trial = vec![0.0; n_var];
         let mut mu = 1.0f64;
+        // Rounding floor of the merit function near a setpoint (x_ref, u_ref) ≠ 0: there the
+        // constraint residuals c carry an absolute rounding of about ε·|x_ref| per entry
+        // (ε·|u_ref|-sized terms inside F), which a cost near its zero minimum cannot
+        // resolve; without it the line search rejects every step there. 0 at the origin.
+        let floor_scale = 8.0
+            * f64::EPSILON
+            * self.ocp.horizon as f64
+            * (self.ocp.x_ref.iter().chain(&self.ocp.u_ref))
+                .map(|v| v.abs())
+                .sum::<f64>();
         let mut full_step = false;
         let mut stable_active = false;
         let mut prev_active: Vec<usize> = Vec::new();
         let status = loop {
+            self.ocp.relinearize(&p.z);
             ev.first_order(&self.ocp, &p.z, xs);
             let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
             info.kkt = res;
@@ -463,19 +501,23 @@ impl SqpSolver {
             if info.iterations >= self.settings.max_iter {
                 break SqpStatus::MaxIterations;
             }
-            self.ocp.hessian_blocks(&p.z, &p.lam, &mut ev.hess);
+            self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
-            if self
-                .convexity
-                .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u)
+            // Nonlinear constraint rows: their curvature Σ ν_r ∇²g_r (ν from the last QP, large
+            // near an infeasible linearisation) made both QP backends fail on exact-Hessian
+            // QPs that pass the test (mpc::constraint_checks), so they keep the blockwise rule.
+            if !self.ocp.has_nonlinear_rows()
+                && self
+                    .convexity
+                    .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u)
             {
                 hreg.copy_from_slice(&ev.hess);
             } else {
                 if !gn_ready {
                     // With zero multipliers only the objective's (constant) Hessian remains.
-                    self.ocp.hessian_blocks(&p.z, &zero_lam, &mut gn);
+                    self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
                     gn_ready = true;
                 }
                 convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
@@ -499,7 +541,12 @@ impl SqpSolver {
                 QpStatus::Failed => break SqpStatus::NumericalFailure,
             }
             // ℓ1 merit line search.
-            let c1: f64 = ev.c.iter().map(|v| v.abs()).sum();
+            // Inequalities enter the merit by their violation Σ max(0, g). A QP step satisfies
+            // the linearised rows, so the merit's directional derivative is at most
+            // ∇fᵀd − μ(‖c‖₁ + Σ max(0, g)) (N&W Thm 18.2 with inequalities): the N&W 18.36
+            // rule applies with the total violation in place of ‖c‖₁.
+            let c1: f64 =
+                ev.c.iter().map(|v| v.abs()).sum::<f64>() + self.ocp.inequality_violation(&p.z);
             let gd: f64 = ev.grad.iter().zip(&d).map(|(g, d)| g * d).sum();
             if c1 > 0.0 {
                 let dhd = quadratic_form(&self.ocp, &hreg, &d);
@@ -518,8 +565,11 @@ impl SqpSolver {
                 }
                 self.ocp.constraint_values(&z_trial, xs, &mut c_trial);
                 let phi = self.ocp.objective(&z_trial)
-                    + mu * c_trial.iter().map(|v| v.abs()).sum::<f64>();
-                if phi.is_finite() && phi <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs()
+                    + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
+                        + self.ocp.inequality_violation(&z_trial));
+                if phi.is_finite()
+                    && phi
+                        <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
                 {
                     break true;
                 }
@@ -545,6 +595,8 @@ impl SqpSolver {
                 *l += alpha * (q - *l);
             }
         };
+        // Leave the rows linearised at the returned point (for sensitivities).
+        self.ocp.relinearize(&p.z);
         SqpResult {
             status,
             point: p,

@@ -16,6 +16,13 @@
 //! Files: `stages` (each stage as a value: name, inputs, outputs, body), [`manifest`]
 //! (skip-if-unchanged), [`robust`] (the Corollary 1 design loop, which runs these stages on
 //! the tightened problem). `pipeline` and the CLI are the only places that know every stage.
+//!
+//! **Library use.** [`run`] takes a problem file's text; [`run_problem`] a problem held in
+//! memory — built in code, or with a plant implemented in Rust by the calling program
+//! (`System::Custom`, see `problem::model::custom`): the same stages, the same files.
+//! `RunOptions::until` stops after a stage (e.g. `export`: dataset → nets → certificates →
+//! weights). The CLI cannot reopen a custom plant's files; the program that has the plant
+//! can ([`ProblemConfig::from_toml_str_with`]).
 
 pub mod manifest;
 pub mod robust;
@@ -90,7 +97,20 @@ pub struct RunOptions {
     pub until: Option<String>,
 }
 
-/// Runs the pipeline for `cfg`; `config_text` is the problem file's text (hashed).
+/// Runs the pipeline for a problem held in memory (built in code, or holding a custom
+/// plant): [`run`] with the problem written out ([`ProblemConfig::to_toml_string`]) as
+/// `problem.toml`. Returns what happened to each stage; the files are in
+/// `opts.root/<cfg.name>/`.
+pub fn run_problem(
+    cfg: &ProblemConfig,
+    opts: &RunOptions,
+) -> Result<Vec<StageReport>, PipelineError> {
+    let text = cfg.to_toml_string().map_err(|e| fail("setup", e))?;
+    run(cfg, &text, opts)
+}
+
+/// Runs the pipeline for `cfg`; `config_text` is the problem file's text (written to
+/// `problem.toml`).
 pub fn run(
     cfg: &ProblemConfig,
     config_text: &str,
@@ -161,21 +181,43 @@ fn same_problem(
     let Ok(text) = std::fs::read_to_string(&p) else {
         return Ok(());
     };
-    let Ok(old) = ProblemConfig::from_toml_str(&text, &p.display().to_string()) else {
-        return Ok(()); // not a problem of this version: the stages' hashes decide
-    };
-    if old.problem_hash() != cfg.problem_hash() && !opts.force.iter().any(|f| f == "sample") {
-        return Err(fail(
+    let forced = opts.force.iter().any(|f| f == "sample");
+    let refuse = |why: String| {
+        fail(
             "setup",
             format!(
-                "{} holds a run of another problem named `{}` (other system, OCP or solver): \
-                 use another name or --out, or pass --force sample to replace it",
+                "{} holds a run of another problem named `{}` ({why}): use another name or \
+                 --out, or pass --force sample to replace it",
                 dir.display(),
                 cfg.name
             ),
-        ));
+        )
+    };
+    let origin = p.display().to_string();
+    match ProblemConfig::from_toml_str_with(&text, &origin, cfg.system.custom_plants()) {
+        Ok(old) if old.problem_hash() != cfg.problem_hash() && !forced => {
+            Err(refuse("other system, OCP or solver".into()))
+        }
+        Ok(_) => Ok(()),
+        // A custom plant on either side that does not read back as this problem's plant
+        // (another plant, version or equations) is another problem.
+        Err(e)
+            if !forced && (cfg.system.custom_plants().len() == 1 || names_custom_plant(&text)) =>
+        {
+            Err(refuse(format!("its plant is not this one: {e}")))
+        }
+        Err(_) => Ok(()), // not a problem of this version: the stages' hashes decide
     }
-    Ok(())
+}
+
+/// Whether a problem file's `[system]` is `kind = "custom"`.
+fn names_custom_plant(text: &str) -> bool {
+    toml::from_str::<toml::Table>(text).is_ok_and(|t| {
+        t.get("system")
+            .and_then(|s| s.get("kind"))
+            .and_then(|k| k.as_str())
+            == Some("custom")
+    })
 }
 
 /// Takes the run directory's lock (`.lock`, an advisory `flock` that the kernel releases

@@ -11,6 +11,7 @@ use crate::certify::certificate::{certify, Certificate, CertifyOptions};
 use crate::certify::Model;
 use crate::data::dataset::{generate, Dataset, GenerateOptions};
 use crate::io::write_atomic;
+use crate::learn::setpoint::Hold;
 use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::plots::{FigureEntry, PLOTS};
@@ -206,12 +207,15 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
     if set.is_empty() {
         return Err(fail("train", "the dataset has no labelled points"));
     }
+    // Both nets hold the setpoint (`training.hold_setpoint`): κ(x_ref) solved once.
+    let hold = Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail("train", e))?;
     let one = |nominal: bool| -> Model {
         train(
             &cfg.training,
             &TrainOptions {
                 nominal,
                 progress: None,
+                hold: hold.clone(),
             },
             &set,
             &vset,
@@ -379,7 +383,9 @@ fn seeds(env: &Env, d: &Path) -> Result<String, PipelineError> {
         load_model("seeds", &d.join("model_regularized.bin"))?,
     ];
     let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
-    let study = seed_study(env.cfg, &data, &val, &dh, &own, env.progress);
+    let hold =
+        Hold::if_enabled(env.cfg, env.cfg.training.hold_setpoint).map_err(|e| fail("seeds", e))?;
+    let study = seed_study(env.cfg, &data, &val, &dh, &own, hold.as_ref(), env.progress);
     let text = serde_json::to_string(&study).map_err(|e| fail("seeds", e))?;
     write_atomic(&d.join("seeds.json"), text.as_bytes()).map_err(|e| fail("seeds", e))?;
     Ok(format!(
@@ -458,8 +464,9 @@ fn make_plots(
     let nom = load_model("plots", &d.join("model_nominal.bin"))?;
     let reg = load_model("plots", &d.join("model_regularized.bin"))?;
     let cl: ClosedLoop = load_json("plots", &d.join("closed_loop.json"))?;
-    let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid);
     let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
+    let axes = crate::study::plots::slice_axes(cfg, &train);
+    let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid, axes);
     let inputs = crate::study::plots::PlotInputs {
         cfg,
         train: &train,

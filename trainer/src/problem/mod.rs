@@ -36,7 +36,8 @@ pub use training::{Activation, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
-use crate::problem::model::System;
+use crate::problem::model::expr::{ConstraintSet, ExprError};
+use crate::problem::model::{CustomPlant, System};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -129,14 +130,62 @@ impl Default for ProblemConfig {
 }
 
 impl ProblemConfig {
-    /// Parses and validates a problem file's text; `origin` names it in errors.
+    /// Parses and validates a problem file's text; `origin` names it in errors. A plant of
+    /// `kind = "custom"` is an error naming it: use [`from_toml_str_with`](Self::from_toml_str_with).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let cfg: ProblemConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        Self::from_toml_str_with(text, origin, &[])
+    }
+
+    /// Parses and validates a problem file's text whose `[system]` may be one of `plants`,
+    /// plants implemented in Rust by the calling program (`kind = "custom"`, found by
+    /// name; see [`model::custom`] for the checks). A custom plant not among them is an
+    /// error naming it.
+    pub fn from_toml_str_with(
+        text: &str,
+        origin: &str,
+        plants: &[CustomPlant],
+    ) -> Result<Self, ConfigError> {
+        let cfg: ProblemConfig = model::custom::reading_with(plants, || toml::from_str(text))
+            .map_err(|e| ConfigError::Parse {
+                path: origin.to_string(),
+                message: e.to_string(),
+            })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Parses and validates a problem file that this program stored (the copy in a
+    /// dataset's header, `toml::to_string` of a config). There a missing
+    /// `training.hold_setpoint` means off: it is written only when on, and copies stored
+    /// before it existed come from runs without the hold. (In a file a user writes, a
+    /// missing key means the default, on.) The same for `refine.training` when `[refine]`
+    /// was stored.
+    pub fn from_stored_toml(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let mut cfg = Self::from_toml_str(text, origin)?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: origin.to_string(),
             message: e.to_string(),
         })?;
-        cfg.validate()?;
+        let hold = |t: Option<&toml::Value>| {
+            t.and_then(|t| t.get("hold_setpoint"))
+                .and_then(toml::Value::as_bool)
+                .unwrap_or(false)
+        };
+        cfg.training.hold_setpoint = hold(table.get("training"));
+        if let Some(r) = table.get("refine") {
+            cfg.refine.training.hold_setpoint = hold(r.get("training"));
+        }
         Ok(cfg)
+    }
+
+    /// The problem file as text (TOML), as stored in `problem.toml` and in datasets; a
+    /// custom plant is written as its record (name, version, names, parameters,
+    /// fingerprint).
+    pub fn to_toml_string(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| ConfigError::Parse {
+            path: format!("problem `{}`", self.name),
+            message: format!("cannot be written as TOML: {e}"),
+        })
     }
 
     /// Reads, parses and validates a problem file.
@@ -168,6 +217,21 @@ impl ProblemConfig {
             .p
             .to_dmatrix()
             .unwrap_or_else(|| DMatrix::zeros(0, 0))
+    }
+
+    /// The compiled `[ocp]` path and terminal constraints over the plant's names
+    /// ([`System::names`]); `None` when there are none. Errors name the key and column.
+    pub fn constraint_set(&self) -> Result<Option<ConstraintSet>, ExprError> {
+        let o = &self.ocp;
+        if o.constraints.is_empty() && o.terminal_constraints.is_empty() {
+            return Ok(None);
+        }
+        ConstraintSet::compile(
+            &self.system.names(),
+            &o.constraints,
+            &o.terminal_constraints,
+        )
+        .map(Some)
     }
 
     /// Content hash (SHA-256, hex) of everything that determines a label: system, OCP and

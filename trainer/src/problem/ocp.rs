@@ -1,5 +1,9 @@
-//! `[ocp]`: the optimal control problem's data — sampling time, horizon, weights
-//! ℓ(x, u) = xᵀQx + uᵀRu, V_f(x) = xᵀPx, and the constraint boxes x_k ∈ X_k, u_k ∈ U_k.
+//! `[ocp]`: the optimal control problem's data — sampling time, horizon, the setpoint
+//! (x_ref, u_ref) and the weights of ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref),
+//! V_f(x) = (x − x_ref)ᵀP(x − x_ref) (x_ref = 0, u_ref = 0 unless given), the constraint
+//! boxes x_k ∈ X_k, u_k ∈ U_k, and the optional path and terminal constraints g(x, u) ≤ 0
+//! written as expressions (`constraints`, `terminal_constraints`; compiled by
+//! [`ConstraintSet`](crate::problem::model::expr::ConstraintSet)).
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -50,6 +54,15 @@ pub struct OcpSettings {
     pub r: MatrixSpec,
     /// Terminal weight P (symmetric PSD).
     pub p: MatrixSpec,
+    /// Setpoint state x_ref of the stage and terminal costs (default: the origin). Must lie
+    /// in the domain and the state bounds. Absent by default, and then not serialised, so
+    /// hashes of existing problems are unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub x_ref: Option<Vec<f64>>,
+    /// Setpoint input u_ref of the stage cost (default: 0). Must lie in the input bounds.
+    /// Not serialised when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_ref: Option<Vec<f64>>,
     /// Lower state bounds on x₁..x_N (`-inf` for none).
     pub x_lo: Vec<f64>,
     /// Upper state bounds on x₁..x_N (`inf` for none).
@@ -65,6 +78,14 @@ pub struct OcpSettings {
     /// unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stages: Option<StageBounds>,
+    /// Path constraints `lhs <= rhs` / `lhs >= rhs` in the states and inputs (by name): one in
+    /// states only holds on x₁…x_N, one in inputs only on u₀…u_{N−1}, one in both on
+    /// k = 1…N−1. Empty by default (and then not serialised: existing hashes unchanged).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub constraints: Vec<String>,
+    /// Terminal constraints in the states, on x_N only (a terminal region).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub terminal_constraints: Vec<String>,
 }
 
 /// Per-stage bounds of a tightened OCP: `x_lo[k−1]`, `x_hi[k−1]` bound x_k (k = 1..N),
@@ -83,6 +104,14 @@ pub struct StageBounds {
 }
 
 impl OcpSettings {
+    /// The setpoint state x_ref (`ocp.x_ref`, else the origin of dimension `nx`).
+    pub fn x_ref_or_origin(&self, nx: usize) -> Vec<f64> {
+        self.x_ref.clone().unwrap_or_else(|| vec![0.0; nx])
+    }
+    /// The setpoint input u_ref (`ocp.u_ref`, else 0 of dimension `nu`).
+    pub fn u_ref_or_zero(&self, nu: usize) -> Vec<f64> {
+        self.u_ref.clone().unwrap_or_else(|| vec![0.0; nu])
+    }
     /// Bounds `(lo, hi)` on the predicted state x_k, k = 1..N (stage-dependent if
     /// [`stages`](Self::stages) is set).
     pub fn x_bounds(&self, k: usize) -> (&[f64], &[f64]) {

@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PlotSettings {
-    /// Grid of MPC-labelled states over the first two axes of X for the error map
-    /// (default [60, 30]; the other coordinates sit at the centre of X).
+    /// Grid of MPC-labelled states over two axes of X for the error map (default [60, 30];
+    /// for nx > 2 a slice, see `study::plots::slice_axes`).
     pub error_map_grid: [usize; 2],
     /// PNG pixels per SVG unit (default 1.5).
     pub png_scale: f64,

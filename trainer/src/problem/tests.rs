@@ -116,3 +116,147 @@ fn problem_hash_tracks_labels_only() {
     b.ocp.horizon = 21;
     assert_ne!(a.problem_hash(), b.problem_hash());
 }
+
+/// The problem hashes of the shipped problem files, pinned (values from `trainer sample`
+/// before `ocp.x_ref`/`ocp.u_ref` existed): optional `[ocp]` keys are not serialised when
+/// absent, so existing files keep their labels' hash and their datasets stay valid.
+#[test]
+fn shipped_problem_hashes_are_pinned() {
+    for (f, want) in [
+        (
+            "pendulum.toml",
+            "9d383effa46fea17409cb19a0bb627808f36a952b9df9e09ca5810db9a939c50",
+        ),
+        (
+            "cartpole.toml",
+            "b858d5e0eb5f54c47dbec2c0f62ca087439f7568c86ceee81ee841af32e90138",
+        ),
+        (
+            "double_integrator.toml",
+            "f4db40c32f7575befab258e182acb080057dabe1bec1260518273e74dae3a14d",
+        ),
+        (
+            "pendulum_robust.toml",
+            "9d383effa46fea17409cb19a0bb627808f36a952b9df9e09ca5810db9a939c50",
+        ),
+        (
+            "pendulum_robust_small.toml",
+            "c32c72ee1695d1e88e6cac438d9f8495198a19395b2d1f1dd540065baaf77553",
+        ),
+        (
+            "pendulum_ode.toml",
+            "e990a7da2a82cb54b36524f84130ce59f360758ee680b0aba6c4dff16cdf12b1",
+        ),
+        (
+            "double_integrator_ode.toml",
+            "47c075af6eb592729077d495fa4bb32142a9a09f361991acedc6963fa8651f5f",
+        ),
+    ] {
+        let path = std::path::PathBuf::from(DIR).join(f);
+        let cfg = ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert_eq!(cfg.problem_hash(), want, "{f}");
+    }
+}
+
+/// A setpoint enters the hash (it changes the labels); the origin stated explicitly is
+/// another problem file but the same OCP, and hashes differently only through the key.
+#[test]
+fn setpoint_keys_enter_the_hash_only_when_given() {
+    let a = ProblemConfig::default();
+    let mut b = a.clone();
+    b.ocp.x_ref = Some(vec![0.5, 0.0]);
+    assert_ne!(a.problem_hash(), b.problem_hash());
+    let mut c = a.clone();
+    c.ocp.u_ref = Some(vec![0.0]);
+    assert_ne!(a.problem_hash(), c.problem_hash());
+    // Round trip through TOML (the dataset header's copy).
+    let back = ProblemConfig::from_toml_str(&toml::to_string(&b).unwrap(), "b").unwrap();
+    assert_eq!(back, b);
+    assert!(!toml::to_string(&a).unwrap().contains("x_ref"));
+}
+
+/// `ocp.x_ref` / `ocp.u_ref`: lengths, finiteness, inside X, the state and the input
+/// bounds; the messages name the key, the index and, for an expression plant, the state.
+#[test]
+fn setpoint_validation_names_key_and_state() {
+    assert_eq!(err_key(|c| c.ocp.x_ref = Some(vec![0.0])), "ocp.x_ref");
+    assert_eq!(err_key(|c| c.ocp.u_ref = Some(vec![0.0, 1.0])), "ocp.u_ref");
+    assert_eq!(
+        err_key(|c| c.ocp.x_ref = Some(vec![0.0, f64::NAN])),
+        "ocp.x_ref[1]"
+    );
+    assert_eq!(
+        err_key(|c| c.ocp.x_ref = Some(vec![0.0, f64::INFINITY])),
+        "ocp.x_ref[1]"
+    );
+    // Outside X = [−2π, 2π] × [−1, 1] of the default.
+    assert_eq!(
+        err_key(|c| c.ocp.x_ref = Some(vec![7.0, 0.0])),
+        "ocp.x_ref[0]"
+    );
+    // Inside X, outside the state bounds.
+    assert_eq!(
+        err_key(|c| {
+            c.domain.hi[1] = 2.0;
+            c.ocp.x_ref = Some(vec![0.0, 1.5]);
+        }),
+        "ocp.x_ref[1]"
+    );
+    assert_eq!(err_key(|c| c.ocp.u_ref = Some(vec![15.5])), "ocp.u_ref[0]");
+    let mut ok = ProblemConfig::default();
+    ok.ocp.x_ref = Some(vec![1.0, -0.5]);
+    ok.ocp.u_ref = Some(vec![-15.0]);
+    ok.validate().unwrap();
+    // Expression plant: the names are in the message.
+    let text =
+        std::fs::read_to_string(std::path::PathBuf::from(DIR).join("double_integrator_ode.toml"))
+            .unwrap()
+            .replace("[domain]", "x_ref = [0.5, 0.0, 1.0]\n[domain]");
+    let e = ProblemConfig::from_toml_str(&text, "f")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ocp.x_ref") && e.contains("position, velocity"),
+        "{e}"
+    );
+    let text = text.replace("x_ref = [0.5, 0.0, 1.0]", "x_ref = [4.5, 0.0]");
+    let e = ProblemConfig::from_toml_str(&text, "f")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ocp.x_ref[0]") && e.contains("(position)") && e.contains("domain.hi[0]"),
+        "{e}"
+    );
+    let text = text.replace("x_ref = [4.5, 0.0]", "x_ref = [0.5, 0.0]\nu_ref = [2.0]");
+    let e = ProblemConfig::from_toml_str(&text, "f")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ocp.u_ref[0]") && e.contains("(force)") && e.contains("ocp.u_hi[0]"),
+        "{e}"
+    );
+}
+
+/// `training.hold_setpoint`: on by default and not written when off (stored copies and
+/// the training hash are as before it existed); a stored copy without it reads as off.
+#[test]
+fn hold_setpoint_is_stored_only_when_on() {
+    let on = ProblemConfig::default();
+    assert!(on.training.hold_setpoint && on.refine.training.hold_setpoint);
+    let text = toml::to_string(&on).unwrap();
+    assert!(text.contains("hold_setpoint = true"), "{text}");
+    assert_eq!(ProblemConfig::from_stored_toml(&text, "s").unwrap(), on);
+    let off_text = format!("{PENDULUM_TOML}\n[training]\nhold_setpoint = false\n");
+    let off = ProblemConfig::from_toml_str(&off_text, "f").unwrap();
+    assert!(!off.training.hold_setpoint);
+    let stored = toml::to_string(&off).unwrap();
+    assert!(!stored.contains("hold_setpoint"), "{stored}");
+    assert_eq!(ProblemConfig::from_stored_toml(&stored, "s").unwrap(), off);
+    // A user's file without the key: on.
+    assert!(
+        ProblemConfig::from_toml_str(&stored, "f")
+            .unwrap()
+            .training
+            .hold_setpoint
+    );
+}

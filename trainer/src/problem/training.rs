@@ -47,6 +47,19 @@ pub struct TrainSettings {
     /// nothing (see `mlp::Batch::band`). Lets the net overshoot where κ saturates instead
     /// of rounding off the saturation kink.
     pub saturation_aware: bool,
+    /// Hold the setpoint exactly (default true): after training, the constant
+    /// c = κ(x_ref) − κ_NN(x_ref) is folded into the last layer's bias, so that the net
+    /// reproduces the MPC's own input at the setpoint, u = κ_NN(x) − κ_NN(x_ref) + κ(x_ref)
+    /// (`learn::setpoint`; L_NN is unchanged, ε_D is that of the corrected net). Written
+    /// into stored copies of the problem file only when on: a stored copy without it
+    /// ([`ProblemConfig::from_stored_toml`](crate::problem::ProblemConfig::from_stored_toml))
+    /// means off, so that runs with it off store, train and hash exactly as before it existed.
+    #[serde(skip_serializing_if = "is_false")]
+    pub hold_setpoint: bool,
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 impl Default for TrainSettings {
@@ -65,6 +78,7 @@ impl Default for TrainSettings {
             validation_seed: 12345,
             log_every: 20,
             saturation_aware: false,
+            hold_setpoint: true,
         }
     }
 }

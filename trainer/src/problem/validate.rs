@@ -81,6 +81,55 @@ pub(crate) fn check_matrix(
     Ok(mat)
 }
 
+/// `ocp.x_ref` / `ocp.u_ref`: one finite entry per state (input), named in the messages for an
+/// expression plant, inside `[lo, hi]` of each box in `within` (keys of lo and hi, lo, hi).
+fn check_setpoint(
+    key: &str,
+    v: &[f64],
+    names: Option<&[String]>,
+    within: &[(&str, &str, &[f64], &[f64])],
+) -> Result<(), ConfigError> {
+    let n = within.first().map_or(v.len(), |w| w.2.len());
+    let what = if key.ends_with("x_ref") {
+        "state"
+    } else {
+        "input"
+    };
+    let name = |i: usize| names.and_then(|n| n.get(i)).map(|s| format!(" ({s})"));
+    if v.len() != n {
+        let list = names.map_or(String::new(), |n| format!(": {}", n.join(", ")));
+        return Err(invalid(
+            key,
+            format!(
+                "expected {n} entries, one per {what}{list}; got {}",
+                v.len()
+            ),
+        ));
+    }
+    for (i, x) in v.iter().enumerate() {
+        let at = format!("{key}[{i}]");
+        let nm = name(i).unwrap_or_default();
+        if !x.is_finite() {
+            return Err(invalid(
+                at,
+                format!("{what}{nm} must be a finite number, got {x}"),
+            ));
+        }
+        for (klo, khi, lo, hi) in within {
+            if !(lo[i] <= *x && *x <= hi[i]) {
+                return Err(invalid(
+                    at,
+                    format!(
+                        "{what}{nm} = {x} lies outside [{klo}[{i}], {khi}[{i}]] = [{}, {}]",
+                        lo[i], hi[i]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 impl ProblemConfig {
     /// Checks every setting once; the error names the key at fault.
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -148,6 +197,8 @@ impl ProblemConfig {
                 )?;
             }
         }
+        self.constraint_set()
+            .map_err(|e| invalid(e.key.clone(), e.reason()))?;
         check_vec("domain.lo", &self.domain.lo, nx, false)?;
         check_vec("domain.hi", &self.domain.hi, nx, false)?;
         check_bounds(
@@ -157,6 +208,28 @@ impl ProblemConfig {
             &self.domain.hi,
             true,
         )?;
+        // The setpoint: inside X (where the net is trained and certified) and the state
+        // bounds (else it cannot be held); u_ref inside the input bounds.
+        let expr = self.system.expr_model();
+        if let Some(xr) = &o.x_ref {
+            check_setpoint(
+                "ocp.x_ref",
+                xr,
+                expr.map(|m| m.state_names()),
+                &[
+                    ("domain.lo", "domain.hi", &self.domain.lo, &self.domain.hi),
+                    ("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi),
+                ],
+            )?;
+        }
+        if let Some(ur) = &o.u_ref {
+            check_setpoint(
+                "ocp.u_ref",
+                ur,
+                expr.map(|m| m.input_names()),
+                &[("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi)],
+            )?;
+        }
         let s = &self.solver;
         if !(s.tol.is_finite() && s.tol > 0.0 && s.tol < 1.0) {
             return Err(invalid(

@@ -81,6 +81,17 @@ pub enum RobustError {
         /// Which bound became empty, with the numbers.
         reason: String,
     },
+    /// The problem has `[ocp]` path or terminal constraints, which the tube does not
+    /// tighten (only the state and input boxes are tightened).
+    #[error(
+        "robust design: `{key}` is not tightened by the tube (only the boxes x_lo/x_hi/u_lo/u_hi \
+         are): a robust guarantee would not cover it. Remove the constraints or use the nominal \
+         design"
+    )]
+    UntightenedConstraints {
+        /// `ocp.constraints` or `ocp.terminal_constraints`.
+        key: String,
+    },
 }
 
 #[cfg(test)]

@@ -287,3 +287,31 @@ fn verdict_compares_certified_with_design_eps() {
     assert!(!v.certified && v.message.contains("NOT certified") && v.message.contains("31"));
     assert!(!verdict(0.5, f64::NAN).certified);
 }
+
+/// Path and terminal constraints are not tightened by the tube: a design is refused, naming
+/// the key, rather than certifying a problem whose constraints it does not cover.
+#[test]
+fn constraints_are_refused_by_the_design() {
+    for (path, terminal, key) in [
+        (
+            vec!["position + velocity <= 3".to_string()],
+            vec![],
+            "ocp.constraints",
+        ),
+        (
+            vec![],
+            vec!["position^2 <= 1".to_string()],
+            "ocp.terminal_constraints",
+        ),
+    ] {
+        let mut cfg = di(0.01);
+        cfg.ocp.constraints = path;
+        cfg.ocp.terminal_constraints = terminal;
+        cfg.validate().unwrap();
+        let e = design::design(&cfg).unwrap_err().to_string();
+        assert!(e.contains(&format!("`{key}`")), "{e}");
+        cfg.ocp.constraints.clear();
+        cfg.ocp.terminal_constraints.clear();
+        assert!(design::design(&cfg).is_ok());
+    }
+}

@@ -12,11 +12,14 @@
 //! than 1e-6 (the MPC rides x₂ = 1 during the upswing; solver tolerances must not count),
 //! the largest violation, the largest input divergence ‖κ(x) − κ_NN(x)‖ along the network's
 //! own trajectory (the MPC solved at each visited state), the quadratic cost
-//! Σ x_kᵀQx_k + u_kᵀRu_k, and the settling step (first k after which ‖x‖∞ stays ≤ 0.05).
+//! Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref), the settling step (first k
+//! after which ‖x − x_ref‖∞ stays ≤ 0.05) and the final offset |x_steps − x_ref| per state
+//! (x_ref, u_ref: the OCP's setpoint, the origin unless `ocp.x_ref`, `ocp.u_ref` say).
 
 use crate::learn::mlp::Mlp;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::PrimalDual;
+use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
@@ -150,20 +153,25 @@ pub struct Run {
     pub x: Vec<Vec<f64>>,
     /// Inputs applied u_0..u_{steps−1}.
     pub u: Vec<Vec<f64>>,
-    /// Steps (of x_1..x_steps) with a state-bound violation > 1e-6.
+    /// Steps with a violation > 1e-6 of a state bound (x_1..x_steps) or a path constraint
+    /// ([`step_violation`]).
     pub violation_steps: usize,
     /// Share of violating steps in %.
     pub violation_percent: f64,
-    /// Largest state-bound violation.
+    /// Largest violation ([`step_violation`]).
     pub max_violation: f64,
     /// Largest ‖κ(x_k) − κ_NN(x_k)‖ along the trajectory (0 for the MPC).
     pub max_input_divergence: f64,
     /// Input divergence at each step (empty for the MPC).
     pub divergence: Vec<f64>,
-    /// Σ x_kᵀQx_k + u_kᵀRu_k.
+    /// Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref).
     pub cost: f64,
-    /// First step after which ‖x‖∞ ≤ 0.05 for good (None: never).
+    /// First step after which ‖x − x_ref‖∞ ≤ 0.05 for good (None: never).
     pub settling_step: Option<usize>,
+    /// |x_steps − x_ref| per state: the offset from the setpoint where the run ends (a
+    /// steady-state offset if the run has settled). Empty in files written before it existed.
+    #[serde(default)]
+    pub final_offset: Vec<f64>,
     /// Whether the network's raw output ever left the certified band U ⊕ [−ε, ε].
     pub left_band: bool,
     /// Steps where the MPC found no label (its input then held at the last one).
@@ -194,6 +202,51 @@ fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
 }
 
+/// The violation of step k of a closed loop: the largest of the state-bound violations of
+/// x_{k+1} and the `[ocp]` path constraints as the OCP places them — one in states only at
+/// x_{k+1}, one in inputs only at u_k, one in both at (x_k, u_k) for k ≥ 1 (the measured
+/// x₀ is never constrained). Terminal constraints shape the prediction only and are not
+/// checked along the closed loop. A non-finite constraint value counts as infinite.
+pub fn step_violation(
+    cfg: &ProblemConfig,
+    constraints: Option<&ConstraintSet>,
+    k: usize,
+    x: &[f64],
+    u: &[f64],
+    next: &[f64],
+) -> f64 {
+    let mut viol = (0..next.len())
+        .map(|i| {
+            (next[i] - cfg.ocp.x_hi[i])
+                .max(cfg.ocp.x_lo[i] - next[i])
+                .max(0.0)
+        })
+        .fold(0.0f64, f64::max);
+    let Some(cs) = constraints else {
+        return viol;
+    };
+    let nx = x.len();
+    let mut g = vec![0.0; cs.len()];
+    let mut g_next = vec![0.0; cs.len()];
+    cs.values(x, u, &mut g);
+    cs.values(next, u, &mut g_next);
+    for (i, c) in cs.items.iter().enumerate() {
+        let v = match (c.terminal, c.uses_states(nx), c.uses_inputs(nx)) {
+            (true, ..) => continue,
+            (false, true, false) => g_next[i],
+            (false, false, true) => g[i],
+            _ if k >= 1 => g[i],
+            _ => continue,
+        };
+        viol = viol.max(if v.is_nan() {
+            f64::INFINITY
+        } else {
+            v.max(0.0)
+        });
+    }
+    viol
+}
+
 /// Simulates `ctrl` from `x0`. `law` is used for the MPC and for the input divergence.
 pub fn simulate(
     cfg: &ProblemConfig,
@@ -206,6 +259,7 @@ pub fn simulate(
     let nu = cfg.system.nu();
     let model = plant(cfg, s.mass_mismatch);
     let (q, r) = (cfg.q(), cfg.r());
+    let (x_ref, u_ref) = (cfg.ocp.x_ref_or_origin(nx), cfg.ocp.u_ref_or_zero(nu));
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
     let mut x = x0.to_vec();
     let mut run = Run {
@@ -220,10 +274,12 @@ pub fn simulate(
         divergence: Vec::new(),
         cost: 0.0,
         settling_step: None,
+        final_offset: Vec::new(),
         left_band: false,
         mpc_failures: 0,
         mpc_soft_steps: 0,
     };
+    let constraints = cfg.constraint_set().ok().flatten();
     let mut warm: Option<PrimalDual> = None;
     let mut last_u = vec![0.0; nu];
     let mut next = vec![0.0; nx];
@@ -301,23 +357,17 @@ pub fn simulate(
         last_u = u.clone();
         for i in 0..nx {
             for j in 0..nx {
-                run.cost += x[i] * q[(i, j)] * x[j];
+                run.cost += (x[i] - x_ref[i]) * q[(i, j)] * (x[j] - x_ref[j]);
             }
         }
         for i in 0..nu {
             for j in 0..nu {
-                run.cost += u[i] * r[(i, j)] * u[j];
+                run.cost += (u[i] - u_ref[i]) * r[(i, j)] * (u[j] - u_ref[j]);
             }
         }
         model.step(&x, &u, &mut next);
+        let viol = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
         x.copy_from_slice(&next);
-        let viol = (0..nx)
-            .map(|i| {
-                (x[i] - cfg.ocp.x_hi[i])
-                    .max(cfg.ocp.x_lo[i] - x[i])
-                    .max(0.0)
-            })
-            .fold(0.0f64, f64::max);
         if viol > VIOLATION_TOL {
             run.violation_steps += 1;
         }
@@ -326,14 +376,46 @@ pub fn simulate(
         run.x.push(x.clone());
     }
     run.violation_percent = 100.0 * run.violation_steps as f64 / s.steps.max(1) as f64;
-    let settled = |v: &Vec<f64>| v.iter().all(|c| c.abs() <= 0.05);
+    let settled = |v: &Vec<f64>| v.iter().zip(&x_ref).all(|(c, r)| (c - r).abs() <= 0.05);
     run.settling_step = (0..run.x.len()).find(|&k| run.x[k..].iter().all(settled));
+    run.final_offset = x.iter().zip(&x_ref).map(|(v, r)| (v - r).abs()).collect();
     run
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each kind of constraint is checked where the OCP places it: states only at x_{k+1},
+    /// inputs only at u_k, both at (x_k, u_k) from k = 1, terminal never; boxes as before.
+    #[test]
+    fn step_violation_places_each_constraint() {
+        let mut cfg = ProblemConfig::default();
+        cfg.ocp.constraints = vec![
+            "omega <= 0.5".into(),
+            "u <= 2".into(),
+            "theta + u <= 1".into(),
+        ];
+        cfg.ocp.terminal_constraints = vec!["theta^2 <= 0.01".into()];
+        cfg.validate().unwrap();
+        let cs = cfg.constraint_set().unwrap();
+        let v = |k: usize, x: [f64; 2], u: f64, next: [f64; 2]| {
+            step_violation(&cfg, cs.as_ref(), k, &x, &[u], &next)
+        };
+        let ok = [0.0, 0.0];
+        assert_eq!(v(3, ok, 0.0, ok), 0.0);
+        // ω only counts at the next state; the measured state is not constrained.
+        assert_eq!(v(3, [0.0, 0.9], 0.0, ok), 0.0);
+        assert!((v(3, ok, 0.0, [0.0, 0.9]) - 0.4).abs() < 1e-12);
+        // input-only at every step, including the first.
+        assert!((v(0, ok, 2.5, ok) - 0.5).abs() < 1e-12);
+        // mixed: θ_k + u_k ≤ 1 from k = 1 on.
+        assert_eq!(v(0, [0.8, 0.0], 1.0, ok), 0.0);
+        assert!((v(1, [0.8, 0.0], 1.0, ok) - 0.8).abs() < 1e-12);
+        // the terminal region is not a closed-loop constraint; boxes still are.
+        assert_eq!(v(5, ok, 0.0, [0.5, 0.0]), 0.0);
+        assert!((v(5, ok, 0.0, [7.0, 0.0]) - (7.0 - 2.0 * std::f64::consts::PI)).abs() < 1e-12);
+    }
 
     #[test]
     fn mpc_swings_the_pendulum_up_and_respects_bounds() {

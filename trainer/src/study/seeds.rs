@@ -4,6 +4,7 @@
 
 use crate::certify::Model;
 use crate::data::dataset::Dataset;
+use crate::learn::setpoint::Hold;
 use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::mpc::law::MpcLaw;
 use crate::problem::ProblemConfig;
@@ -29,14 +30,16 @@ pub struct SeedRun {
 
 /// The seed study: for `closed_loop.seeds` seeds starting at `training.seed`, both nets
 /// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
-/// the reference initial state. Returned per seed: [nominal, regularized]. `progress`
-/// draws a bar over the (seed, net) jobs.
+/// the reference initial state. Returned per seed: [nominal, regularized]. `hold` is the
+/// setpoint hold of the run's nets (`training.hold_setpoint`), applied to the other seeds'
+/// nets too. `progress` draws a bar over the (seed, net) jobs.
 pub fn seed_study(
     cfg: &ProblemConfig,
     data: &Dataset,
     validation: &Dataset,
     dataset_hash: &str,
     own: &[Model; 2],
+    hold: Option<&Hold>,
     progress: bool,
 ) -> Vec<[SeedRun; 2]> {
     let n = cfg.closed_loop.seeds.max(1) as u64;
@@ -83,6 +86,7 @@ pub fn seed_study(
                     &TrainOptions {
                         nominal,
                         progress: None,
+                        hold: hold.cloned(),
                     },
                     &set,
                     &vset,

@@ -66,6 +66,9 @@ pub enum RefineError {
         /// The checkpoint.
         path: PathBuf,
     },
+    /// `refine.training.hold_setpoint` is on and the MPC has no label at the setpoint.
+    #[error(transparent)]
+    Hold(#[from] crate::learn::setpoint::HoldError),
 }
 
 impl From<crate::io::FileError> for RefineError {

@@ -9,6 +9,7 @@ use crate::certify::Model;
 use crate::data::dataset::DatasetError;
 use crate::io::write_atomic;
 use crate::learn::mlp::{Mlp, Workspace};
+use crate::learn::setpoint::Hold;
 use crate::learn::train::{train_from, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, RefineSettings, TrainSettings};
 use rayon::prelude::*;
@@ -164,6 +165,8 @@ pub fn refine(
     let hash = settings_hash(cfg, rs);
     let band = cfg.ocp.u_bounds(0);
     let ls = LocalSettings { safety: rs.safety };
+    // Every retrained net holds the setpoint (`refine.training.hold_setpoint`).
+    let hold = Hold::if_enabled(cfg, rs.training.hold_setpoint)?;
     let mut ctx = Ctx {
         cfg,
         lat: lat.clone(),
@@ -289,6 +292,7 @@ pub fn refine(
                 &TrainOptions {
                     nominal: false,
                     progress: None,
+                    hold: hold.clone(),
                 },
                 &set,
                 &TrainSet::default(),

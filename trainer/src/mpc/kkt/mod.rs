@@ -185,18 +185,17 @@ pub struct KktLayout {
     bw: usize,
 }
 
-/// Stage of each variable of z (slacks: the stage of the state they relax).
+/// Stage of each variable of z (slacks: the stage of the states and inputs of the rows
+/// they relax — every row lies within one stage).
 fn var_stages(ocp: &Ocp) -> Vec<usize> {
     let nz = ocp.nx + ocp.nu;
     let mut st: Vec<usize> = (0..ocp.n_var).map(|v| v / nz).collect();
     let is = ocp.is();
     for row in &ocp.rows {
-        if row.len == 2 {
-            let (a, b) = (row.idx[0], row.idx[1]);
-            if a < is && b >= is {
-                st[b] = a / nz;
-            } else if b < is && a >= is {
-                st[a] = b / nz;
+        let idx = &row.idx[..row.len];
+        if let Some(&v) = idx.iter().find(|&&v| v < is) {
+            for &s in idx.iter().filter(|&&s| s >= is) {
+                st[s] = v / nz;
             }
         }
     }

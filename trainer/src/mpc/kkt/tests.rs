@@ -171,7 +171,7 @@ fn active_set_kkt_matches_dense_at_solutions() {
                 let mut jx = vec![0.0; n * nx * nx];
                 let mut ju = vec![0.0; n * nx * nu];
                 ocp.constraints(&p.z, &xs, &mut c, &mut jx, &mut ju);
-                ocp.hessian_blocks(&p.z, &p.lam, &mut hess);
+                ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut hess);
                 let dense = dense_kkt_matrix(ocp, &hess, &jx, &ju, &active, None);
                 let dim = dense.nrows();
                 let mut rhs = DMatrix::zeros(dim, nx);

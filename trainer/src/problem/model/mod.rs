@@ -18,8 +18,14 @@
 //! (`kind = "ode"`: ẋ = f(x, u) with the same RK4; `kind = "discrete"`: x⁺ = F(x, u) with no
 //! RK4) — [`expr`] compiles them, [`ExprPlant`] differentiates them the same way, for
 //! `nx + nu ≤` [`MAX_NZ`].
+//!
+//! A plant may also be implemented in Rust by a user of the library, in their own crate:
+//! [`CustomPlant`] (`kind = "custom"`) wraps any `serde` struct implementing [`Dynamics`]
+//! and differentiates it the same way (see [`custom`] for what its files record).
 
 mod cartpole;
+mod constraint_eval;
+pub mod custom;
 mod double_integrator;
 pub mod expr;
 mod pendulum;
@@ -28,12 +34,17 @@ mod plant;
 pub(crate) mod test_plants;
 
 pub use cartpole::CartPole;
+pub use custom::{CustomPlant, CustomPlantError, ErasedPlant};
 pub use double_integrator::DoubleIntegrator;
 pub use pendulum::Pendulum;
 pub use plant::{DiscretePlant, ExprPlant, OdePlant, MAX_NZ};
 
-use num_dual::{Dual2SVec64, DualNum, DualSVec64};
+use num_dual::{Dual2SVec64, DualSVec64};
 use serde::{Deserialize, Serialize};
+
+/// The number-type bound of [`Dynamics::rhs`] (re-exported so that a plant's crate needs no
+/// direct `num-dual` dependency).
+pub use num_dual::DualNum;
 
 /// Largest state dimension of a built-in system (the built-ins' RK4 buffers use it).
 const BUILTIN_MAX_NX: usize = 4;
@@ -53,8 +64,9 @@ pub trait Dynamics {
     fn rhs<D: DualNum<Primitive = f64> + Copy>(&self, x: &[D], u: &[D], dx: &mut [D]);
 }
 
-/// The plant: a built-in system with its physical parameters, or a plant written as
-/// expressions (the `[system]` table of a problem file).
+/// The plant: a built-in system with its physical parameters, a plant written as
+/// expressions (the `[system]` table of a problem file), or a plant implemented in Rust by
+/// the library's user.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum System {
@@ -68,6 +80,9 @@ pub enum System {
     Ode(OdePlant),
     /// x⁺ = F(x, u) written as expressions (`next = [...]`); no RK4.
     Discrete(DiscretePlant),
+    /// ẋ = f(x, u) implemented in Rust ([`Dynamics`]) by the program using the library,
+    /// discretised by RK4; only that program can read it back from a file.
+    Custom(CustomPlant),
 }
 
 impl System {
@@ -79,6 +94,7 @@ impl System {
             System::DoubleIntegrator(_) => DoubleIntegrator::NX,
             System::Ode(p) => p.nx(),
             System::Discrete(p) => p.nx(),
+            System::Custom(p) => p.nx(),
         }
     }
     /// Input dimension.
@@ -89,16 +105,27 @@ impl System {
             System::DoubleIntegrator(_) => DoubleIntegrator::NU,
             System::Ode(p) => p.nu(),
             System::Discrete(p) => p.nu(),
+            System::Custom(p) => p.nu(),
         }
     }
-    /// Name used in files and reports.
-    pub fn name(&self) -> &'static str {
+    /// Name used in files and reports (a custom plant's own name).
+    pub fn name(&self) -> &str {
         match self {
             System::Pendulum(_) => "pendulum",
             System::CartPole(_) => "cart_pole",
             System::DoubleIntegrator(_) => "double_integrator",
             System::Ode(_) => "ode",
             System::Discrete(_) => "discrete",
+            System::Custom(p) => p.name(),
+        }
+    }
+    /// The custom plant, as a list of the plants a stored problem of this one may be read
+    /// back with ([`ProblemConfig::from_toml_str_with`](crate::problem::ProblemConfig::from_toml_str_with));
+    /// empty for every other plant.
+    pub fn custom_plants(&self) -> &[CustomPlant] {
+        match self {
+            System::Custom(p) => std::slice::from_ref(p),
+            _ => &[],
         }
     }
     /// The expression model of an `ode` / `discrete` plant (`None` for a built-in).
@@ -109,6 +136,38 @@ impl System {
             _ => None,
         }
     }
+    /// The names expressions about this plant may use (the `[ocp]` constraints): an
+    /// expression plant's own table (states, inputs, parameters, definitions; no
+    /// equations), a custom plant's declared state and input names, a built-in's fixed names — pendulum `theta`, `omega`, `u`; cart-pole `p`,
+    /// `theta`, `p_dot`, `theta_dot`, `force`; double integrator `position`, `velocity`,
+    /// `force`.
+    pub fn names(&self) -> expr::SystemSpec {
+        let named = |states: &[&str], inputs: &[&str]| expr::SystemSpec {
+            states: states.iter().map(|s| s.to_string()).collect(),
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
+            parameters: Default::default(),
+            definitions: Vec::new(),
+            rhs: None,
+            next: None,
+            units: Default::default(),
+        };
+        match self {
+            System::Pendulum(_) => named(&["theta", "omega"], &["u"]),
+            System::CartPole(_) => named(&["p", "theta", "p_dot", "theta_dot"], &["force"]),
+            System::DoubleIntegrator(_) => named(&["position", "velocity"], &["force"]),
+            System::Ode(p) => without_equations(p.spec()),
+            System::Discrete(p) => without_equations(p.spec()),
+            System::Custom(p) => expr::SystemSpec {
+                states: p.state_names(),
+                inputs: p.input_names(),
+                parameters: Default::default(),
+                definitions: Vec::new(),
+                rhs: None,
+                next: None,
+                units: Default::default(),
+            },
+        }
+    }
     /// The compiler's warnings of an expression plant (non-smooth functions, unused names;
     /// empty for a built-in). `problem` prints nothing: the caller shows them.
     pub fn warnings(&self) -> &[String] {
@@ -116,9 +175,9 @@ impl System {
     }
     /// The plant with its mass scaled by `factor` (model mismatch in closed-loop studies):
     /// the pendulum's `m`, the cart-pole's `m_pole`, the double integrator's `mass`; for an
-    /// expression plant the parameter `mass`, else the parameter `m`. `None` when an
-    /// expression plant has neither parameter (or the scaled one does not compile): it has
-    /// no mass the study could perturb, and no mismatch runs are made for it.
+    /// expression or custom plant the parameter `mass`, else the parameter `m`. `None` when
+    /// such a plant has neither parameter (or the scaled one does not compile or rebuild):
+    /// it has no mass the study could perturb, and no mismatch runs are made for it.
     pub fn with_mass_scaled(&self, factor: f64) -> Option<System> {
         fn scaled<const D: bool>(p: &ExprPlant<D>, factor: f64) -> Option<ExprPlant<D>> {
             let params = &p.spec().parameters;
@@ -134,6 +193,7 @@ impl System {
             System::DoubleIntegrator(p) => p.mass *= factor,
             System::Ode(p) => *p = scaled(p, factor)?,
             System::Discrete(p) => *p = scaled(p, factor)?,
+            System::Custom(p) => *p = p.with_mass_scaled(factor)?,
         }
         Some(sys)
     }
@@ -181,6 +241,7 @@ impl System {
                 }
                 Ok(())
             }
+            System::Custom(p) => p.validate().map_err(|e| (e.key, e.reason)),
         }
     }
     /// Continuous right-hand side in f64 (used by tests and simulations). A `discrete`
@@ -192,7 +253,17 @@ impl System {
             System::DoubleIntegrator(s) => s.rhs(x, u, dx),
             System::Ode(p) => p.eval(x, u, dx),
             System::Discrete(_) => dx.fill(f64::NAN),
+            System::Custom(p) => p.plant().rhs_f64(x, u, dx),
         }
+    }
+}
+
+/// `spec` without its equations (names, parameters, definitions and units only).
+fn without_equations(spec: &expr::SystemSpec) -> expr::SystemSpec {
+    expr::SystemSpec {
+        rhs: None,
+        next: None,
+        ..spec.clone()
     }
 }
 
@@ -208,7 +279,8 @@ pub struct Discrete {
 }
 
 /// Generic explicit RK4 over `ts` with `substeps` sub-steps; `x` is overwritten by `F(x, u)`.
-fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
+/// `N ≥ S::NX` sizes the stage buffers.
+fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy, const N: usize>(
     sys: &S,
     x: &mut [D],
     u: &[D],
@@ -218,11 +290,11 @@ fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
     let n = S::NX;
     let h = ts / substeps as f64;
     let zero = D::from(0.0);
-    let mut k1 = [zero; BUILTIN_MAX_NX];
-    let mut k2 = [zero; BUILTIN_MAX_NX];
-    let mut k3 = [zero; BUILTIN_MAX_NX];
-    let mut k4 = [zero; BUILTIN_MAX_NX];
-    let mut tmp = [zero; BUILTIN_MAX_NX];
+    let mut k1 = [zero; N];
+    let mut k2 = [zero; N];
+    let mut k3 = [zero; N];
+    let mut k4 = [zero; N];
+    let mut tmp = [zero; N];
     for _ in 0..substeps {
         sys.rhs(&x[..n], u, &mut k1[..n]);
         for i in 0..n {
@@ -243,9 +315,10 @@ fn rk4<S: Dynamics, D: DualNum<Primitive = f64> + Copy>(
     }
 }
 
-/// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions.
+/// F, ∂F/∂x, ∂F/∂u by forward-mode AD with `NZ = NX + NU` directions; `B ≥ NX` sizes the
+/// buffers (the built-ins' `BUILTIN_MAX_NX`, a custom plant's `NZ`).
 #[allow(clippy::too_many_arguments)]
-fn ad_linearize<S: Dynamics, const NZ: usize>(
+fn ad_linearize<S: Dynamics, const NZ: usize, const B: usize>(
     sys: &S,
     ts: f64,
     substeps: usize,
@@ -258,15 +331,15 @@ fn ad_linearize<S: Dynamics, const NZ: usize>(
     let (nx, nu) = (S::NX, S::NU);
     debug_assert_eq!(NZ, nx + nu);
     let zero = DualSVec64::<NZ>::from(0.0);
-    let mut xd = [zero; BUILTIN_MAX_NX];
-    let mut ud = [zero; BUILTIN_MAX_NX];
+    let mut xd = [zero; B];
+    let mut ud = [zero; B];
     for i in 0..nx {
         xd[i] = DualSVec64::<NZ>::from(x[i]).derivative(i);
     }
     for j in 0..nu {
         ud[j] = DualSVec64::<NZ>::from(u[j]).derivative(nx + j);
     }
-    rk4(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    rk4::<S, _, B>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
     unpack_jacobian(&xd[..nx], nu, f, jx, ju);
 }
 
@@ -294,8 +367,9 @@ pub(crate) fn unpack_jacobian<const NZ: usize>(
     }
 }
 
-/// ∇²_{(x,u)} (λᵀF) by second-order forward-mode AD; row-major `NZ × NZ` into `hess`.
-fn ad_hessian<S: Dynamics, const NZ: usize>(
+/// ∇²_{(x,u)} (λᵀF) by second-order forward-mode AD; row-major `NZ × NZ` into `hess`;
+/// `B ≥ NX` sizes the buffers.
+fn ad_hessian<S: Dynamics, const NZ: usize, const B: usize>(
     sys: &S,
     ts: f64,
     substeps: usize,
@@ -306,15 +380,15 @@ fn ad_hessian<S: Dynamics, const NZ: usize>(
 ) {
     let (nx, nu) = (S::NX, S::NU);
     let zero = Dual2SVec64::<NZ>::from(0.0);
-    let mut xd = [zero; BUILTIN_MAX_NX];
-    let mut ud = [zero; BUILTIN_MAX_NX];
+    let mut xd = [zero; B];
+    let mut ud = [zero; B];
     for i in 0..nx {
         xd[i] = Dual2SVec64::<NZ>::from(x[i]).derivative(i);
     }
     for j in 0..nu {
         ud[j] = Dual2SVec64::<NZ>::from(u[j]).derivative(nx + j);
     }
-    rk4(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
+    rk4::<S, _, B>(sys, &mut xd[..nx], &ud[..nu], ts, substeps);
     let mut acc = zero;
     for i in 0..nx {
         acc += xd[i] * lam[i];
@@ -351,33 +425,46 @@ impl Discrete {
         let nx = self.nx();
         out[..nx].copy_from_slice(&x[..nx]);
         match &self.system {
-            System::Pendulum(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
-            System::CartPole(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
-            System::DoubleIntegrator(s) => rk4(s, &mut out[..nx], u, self.ts, self.substeps),
+            System::Pendulum(s) => {
+                rk4::<_, _, BUILTIN_MAX_NX>(s, &mut out[..nx], u, self.ts, self.substeps)
+            }
+            System::CartPole(s) => {
+                rk4::<_, _, BUILTIN_MAX_NX>(s, &mut out[..nx], u, self.ts, self.substeps)
+            }
+            System::DoubleIntegrator(s) => {
+                rk4::<_, _, BUILTIN_MAX_NX>(s, &mut out[..nx], u, self.ts, self.substeps)
+            }
             System::Ode(p) => p.step(self.ts, self.substeps, x, u, out),
             System::Discrete(p) => p.step(self.ts, self.substeps, x, u, out),
+            System::Custom(p) => p.plant().step(self.ts, self.substeps, x, u, out),
         }
     }
     /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
     pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
-            System::Pendulum(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
-            System::CartPole(s) => ad_linearize::<_, 5>(s, ts, m, x, u, f, jx, ju),
-            System::DoubleIntegrator(s) => ad_linearize::<_, 3>(s, ts, m, x, u, f, jx, ju),
+            System::Pendulum(s) => ad_linearize::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju),
+            System::CartPole(s) => ad_linearize::<_, 5, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju),
+            System::DoubleIntegrator(s) => {
+                ad_linearize::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju)
+            }
             System::Ode(p) => p.linearize(ts, m, x, u, f, jx, ju),
             System::Discrete(p) => p.linearize(ts, m, x, u, f, jx, ju),
+            System::Custom(p) => p.plant().linearize(ts, m, x, u, f, jx, ju),
         }
     }
     /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu).
     pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
-            System::Pendulum(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
-            System::CartPole(s) => ad_hessian::<_, 5>(s, ts, m, x, u, lam, hess),
-            System::DoubleIntegrator(s) => ad_hessian::<_, 3>(s, ts, m, x, u, lam, hess),
+            System::Pendulum(s) => ad_hessian::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess),
+            System::CartPole(s) => ad_hessian::<_, 5, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess),
+            System::DoubleIntegrator(s) => {
+                ad_hessian::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess)
+            }
             System::Ode(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
             System::Discrete(p) => p.lagrangian_hessian(ts, m, x, u, lam, hess),
+            System::Custom(p) => p.plant().lagrangian_hessian(ts, m, x, u, lam, hess),
         }
     }
 }
@@ -414,6 +501,7 @@ mod tests {
             Discrete::new(expr_system(false, pend), 0.05, 2),
             Discrete::new(expr_system(true, disc), 0.05, 3),
             Discrete::new(test_plants::chain12(), 0.1, 2),
+            Discrete::new(test_plants::oscillator(), 0.1, 3),
             Discrete::new(System::Pendulum(Pendulum::default()), 0.05, 1),
             Discrete::new(System::CartPole(CartPole::default()), 0.05, 2),
             Discrete::new(

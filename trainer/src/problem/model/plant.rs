@@ -71,13 +71,14 @@ impl<const DISCRETE: bool> fmt::Debug for ExprPlant<DISCRETE> {
 
 /// Per-thread buffers of one number type: the tape's registers and `8·nx + nu` values
 /// (x, u, RK4 stages k1..k4, the stage argument, the discrete output).
-struct Work<D> {
-    regs: Vec<D>,
-    buf: Vec<D>,
+pub(super) struct Work<D> {
+    pub(super) regs: Vec<D>,
+    pub(super) buf: Vec<D>,
 }
 
 /// A number type with a per-thread [`Work`] buffer.
-trait Scratch: Sized + Copy + 'static {
+pub(super) trait Scratch: Sized + Copy + 'static {
+    /// Runs `f` with this thread's buffers of this number type.
     fn with_work<R>(f: impl FnOnce(&mut Work<Self>) -> R) -> R;
 }
 
@@ -108,10 +109,12 @@ macro_rules! by_nz {
     (@ $nz:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
         match $nz {
             $($n => $self.$method::<$n> $args,)*
-            n => panic!("expression plant with nx + nu = {n} > {MAX_NZ} (rejected by validate)"),
+            n => panic!("plant with nx + nu = {n} > {MAX_NZ} (rejected by validate)"),
         }
     };
 }
+/// The same dispatch for the plants implemented in Rust by the library's users (`custom`).
+pub(super) use by_nz;
 
 impl<const DISCRETE: bool> ExprPlant<DISCRETE> {
     /// The table as written.

@@ -55,3 +55,45 @@ pub(crate) fn chain12() -> System {
             .unwrap_or_else(|e| panic!("{e}"));
     System::Ode(OdePlant::try_from(spec).unwrap_or_else(|e| panic!("{e}")))
 }
+
+/// A plant implemented in Rust for tests of [`CustomPlant`](super::CustomPlant): a damped
+/// hardening oscillator driven through a saturating actuator, with a third state low-pass
+/// filtering the position (3 states, 2 inputs):
+/// `q̇ = v`, `v̇ = −k·q − kc·q³ − c·v + tanh(u₁) + u₂·cos(q)`, `ż = (q − z)/τ`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct Oscillator {
+    pub(crate) k: f64,
+    pub(crate) kc: f64,
+    pub(crate) c: f64,
+    pub(crate) tau: f64,
+}
+
+impl Default for Oscillator {
+    fn default() -> Self {
+        Oscillator {
+            k: 1.5,
+            kc: 0.4,
+            c: 0.2,
+            tau: 0.7,
+        }
+    }
+}
+
+impl super::Dynamics for Oscillator {
+    const NX: usize = 3;
+    const NU: usize = 2;
+    fn rhs<D: super::DualNum<Primitive = f64> + Copy>(&self, x: &[D], u: &[D], dx: &mut [D]) {
+        let (q, v, z) = (x[0], x[1], x[2]);
+        dx[0] = v;
+        dx[1] = -(q * self.k) - q.powi(3) * self.kc - v * self.c + u[0].tanh() + u[1] * q.cos();
+        dx[2] = (q - z) * (1.0 / self.tau);
+    }
+}
+
+/// [`Oscillator`] as a custom plant.
+pub(crate) fn oscillator() -> System {
+    let p = super::CustomPlant::new("oscillator", "1", Oscillator::default())
+        .and_then(|p| p.with_names(&["q", "v", "z"], &["drive", "tilt"]))
+        .unwrap_or_else(|e| panic!("{e}"));
+    System::Custom(p)
+}

@@ -11,7 +11,7 @@ use super::{
 };
 use crate::learn::train::errors;
 use crate::problem::ProblemConfig;
-use crate::study::closed_loop::{Run, VIOLATION_TOL};
+use crate::study::closed_loop::{step_violation, Run, VIOLATION_TOL};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -114,16 +114,11 @@ fn panels(p: &PlotInputs, nets: &[Net]) -> Vec<Panel> {
     ]
 }
 
-/// Per-step violations > tolerance of a run.
+/// Per-step violations > tolerance of a run (as [`step_violation`] counts them).
 fn violations(cfg: &ProblemConfig, r: &Run) -> Vec<f64> {
-    r.x.iter()
-        .skip(1)
-        .map(|x| {
-            x.iter()
-                .enumerate()
-                .map(|(i, v)| (v - cfg.ocp.x_hi[i]).max(cfg.ocp.x_lo[i] - v).max(0.0))
-                .fold(0.0f64, f64::max)
-        })
+    let cs = cfg.constraint_set().ok().flatten();
+    (0..r.u.len())
+        .map(|k| step_violation(cfg, cs.as_ref(), k, &r.x[k], &r.u[k], &r.x[k + 1]))
         .filter(|v| *v > VIOLATION_TOL)
         .collect()
 }

@@ -14,8 +14,9 @@
 //!   dataset and on the validation states, of the input divergence ‖κ(x_k) − κ_NN(x_k)‖ along
 //!   the closed-loop trajectories, and of the state-bound violations of the violating steps
 //!   (Fig. 2);
-//! - `error_map`: ‖κ − κ_NN‖ of the regularized net on a grid over the first two axes of X
-//!   (other coordinates at the centre of X), dataset points overlaid;
+//! - `error_map`: ‖κ − κ_NN‖ of the regularized net on a grid over X (nx = 2) or, for
+//!   nx > 2, over a 2-D slice: the two states along which κ changes most over X, the others
+//!   held at the setpoint (named in the figure and its caption), dataset points overlaid;
 //! - `training` (`training_curves.rs`): loss terms, ε_D and validation R² per logged epoch;
 //! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
 //!   axes of X, and which term of ε_C binds there.
@@ -33,7 +34,7 @@ mod trajectories;
 
 pub use eps_map::eps_map;
 pub use error_boxes::error_boxes;
-pub use error_map::{error_map, ErrorGrid};
+pub use error_map::{error_map, sensitivity_spread, slice_axes, slice_base, ErrorGrid};
 pub use training_curves::training_curves;
 pub use trajectories::trajectories;
 
@@ -214,6 +215,8 @@ pub fn axis_names(sys: &System) -> (Vec<String>, Vec<String>) {
                 m.input_names().iter().map(label).collect(),
             )
         }
+        // The names the plant's program gave (`x1`, …, `u1`, … if none).
+        System::Custom(p) => (p.state_names(), p.input_names()),
     }
 }
 

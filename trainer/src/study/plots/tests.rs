@@ -52,3 +52,86 @@ fn axis_names_of_expression_plants_are_their_names_with_units() {
     assert_eq!(u, ["u [N*m]"]);
     assert_eq!(input_unit(&cfg.system), "[N*m]");
 }
+
+fn load_config(name: &str) -> crate::problem::ProblemConfig {
+    let path =
+        std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/")).join(name);
+    crate::problem::ProblemConfig::load(&path).unwrap()
+}
+
+/// A training set of `nx` states with the same Jacobian `jac` (nu × nx) at every point, one
+/// of them marked degenerate with a huge Jacobian that must be ignored.
+fn train_with_jacobian(nx: usize, nu: usize, jac: &[f64]) -> crate::learn::train::TrainSet {
+    let mut t = crate::learn::train::TrainSet {
+        nx,
+        nu,
+        ..Default::default()
+    };
+    for k in 0..5 {
+        t.x.extend(vec![0.1 * k as f64; nx]);
+        t.u.extend(vec![0.0; nu]);
+        t.du.extend(jac);
+        t.use_jac.push(true);
+    }
+    t.x.extend(vec![0.0; nx]);
+    t.u.extend(vec![0.0; nu]);
+    t.du.extend(vec![1e9; nu * nx]);
+    t.use_jac.push(false);
+    t
+}
+
+#[test]
+fn slice_axes_are_the_two_states_along_which_kappa_changes_most() {
+    // Cart-pole (x, x_dot, theta, theta_dot), X widths (3, 3, 0.3, 2): |∂κ/∂x_i|·width =
+    // (3, 1.5, 6, 2) → theta and x, in increasing order.
+    let cfg = load_config("cartpole_public.toml");
+    let t = train_with_jacobian(4, 1, &[1.0, 0.5, 20.0, 1.0]);
+    let s = sensitivity_spread(&cfg, &t);
+    for (a, b) in s.iter().zip([3.0, 1.5, 6.0, 2.0]) {
+        assert!((a - b).abs() < 1e-12, "{s:?}");
+    }
+    assert_eq!(slice_axes(&cfg, &t), [0, 2]);
+    // Two inputs: the column norms count. Quadrotor widths (2, 2, 1, 2, 2, 2).
+    let cfg = load_config("planar_quadrotor.toml");
+    let mut jac = vec![0.1; 12];
+    jac[4] = 3.0; // ∂u1/∂z_dot
+    jac[6 + 4] = 4.0; // ∂u2/∂z_dot: column norm 5, × 2
+    jac[6 + 2] = 9.0; // ∂u2/∂theta, × 1
+    let t = train_with_jacobian(6, 2, &jac);
+    assert_eq!(slice_axes(&cfg, &t), [2, 4]);
+    // nx = 2: the whole X, whatever the Jacobians.
+    let cfg = load_config("pendulum_ode.toml");
+    assert_eq!(
+        slice_axes(&cfg, &train_with_jacobian(2, 1, &[0.0, 1.0])),
+        [0, 1]
+    );
+}
+
+#[test]
+fn slice_base_is_the_setpoint_clamped_into_x() {
+    let mut cfg = load_config("planar_quadrotor.toml");
+    assert_eq!(slice_base(&cfg), vec![0.0; 6]);
+    cfg.domain.lo[1] = 0.5;
+    cfg.domain.hi[3] = -0.25;
+    assert_eq!(slice_base(&cfg), vec![0.0, 0.5, 0.0, -0.25, 0.0, 0.0]);
+}
+
+#[test]
+fn error_grid_of_a_slice_spans_the_chosen_axes() {
+    let cfg = load_config("cartpole_public.toml");
+    let t = train_with_jacobian(4, 1, &[1.0, 0.5, 20.0, 1.0]);
+    let mlp = crate::learn::mlp::Mlp::new(
+        &[4, 3, 1],
+        crate::learn::mlp::Activation::Tanh,
+        0,
+        &cfg.domain.lo,
+        &cfg.domain.hi,
+        &cfg.ocp.u_lo,
+        &cfg.ocp.u_hi,
+    );
+    let g = ErrorGrid::label(&cfg, &mlp, [3, 2], slice_axes(&cfg, &t));
+    assert_eq!(g.axes, [0, 2]);
+    assert_eq!((g.lo, g.hi), ([-1.5, -0.15], [1.5, 0.15]));
+    assert_eq!(g.err.len(), 6);
+    assert!(g.err.iter().all(|e| e.is_finite()), "{:?}", g.err);
+}

@@ -1,6 +1,7 @@
 //! Fig. 1, `plots/trajectories`: x_i(t) and u_j(t) of the MPC and both nets from the
-//! reference initial state, one panel per state and input coordinate, with the state and
-//! input bounds.
+//! reference initial state, one panel per state and input coordinate (in two columns when
+//! there are more than 8), with the state and input bounds and, when the problem states a
+//! setpoint (`ocp.x_ref`, `ocp.u_ref`), the setpoint as a dotted line.
 
 use super::{
     axis_names, draw_err, range, register_font, tick_fmt, Figure, PlotError, PlotInputs,
@@ -33,7 +34,13 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
     let ts = cfg.ocp.ts;
     let t_end = first.steps as f64 * ts;
     let panels = nx + nu;
-    let (w, h) = (900u32, 60 + 230 * panels as u32);
+    let o = &cfg.ocp;
+    let setpoint = (o.x_ref.is_some() || o.u_ref.is_some())
+        .then(|| (o.x_ref_or_origin(nx), o.u_ref_or_zero(nu)));
+    // One column of panels; two (in reading order) when there are more than 8.
+    let cols = if panels > 8 { 2 } else { 1 };
+    let rows = panels.div_ceil(cols);
+    let (w, h) = (900 * cols as u32, 60 + 230 * rows as u32);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
@@ -49,14 +56,15 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
                 (FONT, 22),
             )
             .map_err(draw_err(NAME))?;
-        let areas = root.split_evenly((panels, 1));
-        for (row, area) in areas.iter().enumerate() {
+        let areas = root.split_evenly((rows, cols));
+        for (row, area) in areas.iter().enumerate().take(panels) {
             let signal = if row < nx {
                 Signal {
                     input: false,
                     idx: row,
                     name: &xnames[row],
                     bounds: [cfg.ocp.x_lo[row], cfg.ocp.x_hi[row]],
+                    reference: setpoint.as_ref().map(|s| s.0[row]),
                 }
             } else {
                 let idx = row - nx;
@@ -65,6 +73,7 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
                     idx,
                     name: &unames[idx],
                     bounds: [cfg.ocp.u_lo[idx], cfg.ocp.u_hi[idx]],
+                    reference: setpoint.as_ref().map(|s| s.1[idx]),
                 }
             };
             draw_panel(area, &signal, &runs, ts, t_end, row == 0)?;
@@ -74,8 +83,13 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
     Ok(Figure {
         name: NAME,
         caption: format!(
-            "Closed-loop trajectories of the MPC and both nets from x₀ = {}; dashed: state and input bounds.",
-            fmt_vec(&first.x0)
+            "Closed-loop trajectories of the MPC and both nets from x₀ = {}; dashed: state and input bounds{}.",
+            fmt_vec(&first.x0),
+            setpoint.as_ref().map_or(String::new(), |(x, u)| format!(
+                "; dotted: the setpoint x_ref = {}, u_ref = {}",
+                fmt_vec(x),
+                fmt_vec(u)
+            ))
         ),
         svg,
     })
@@ -103,6 +117,8 @@ struct Signal<'a> {
     name: &'a str,
     /// Lower and upper bound (drawn dashed where finite).
     bounds: [f64; 2],
+    /// The setpoint's coordinate (drawn dotted), if the problem states one.
+    reference: Option<f64>,
 }
 
 impl Signal<'_> {
@@ -136,7 +152,8 @@ fn draw_panel(
     let (ylo, yhi) = range(
         runs.iter()
             .flat_map(|(_, _, r)| s.series(r, ts).into_iter().map(|p| p.1))
-            .chain([blo, bhi]),
+            .chain([blo, bhi])
+            .chain(s.reference),
     );
     let mut chart = ChartBuilder::on(area)
         .margin(8)
@@ -162,6 +179,16 @@ fn draw_panel(
                 8,
                 5,
                 BOUND_COLOR.stroke_width(2),
+            ))
+            .map_err(draw_err(NAME))?;
+    }
+    if let Some(v) = s.reference {
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(0.0, v), (t_end, v)],
+                2,
+                4,
+                BLACK.stroke_width(1),
             ))
             .map_err(draw_err(NAME))?;
     }

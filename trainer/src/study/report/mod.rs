@@ -154,7 +154,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
     let blocks = [
         sections::problem(cfg),
         sections::dataset(&a),
-        sections::table_i(&a),
+        sections::table_i(cfg, &a),
         sections::training_seeds(cfg, &a),
         sections::certificate(&a),
         sections::table_ii(cfg, &a),

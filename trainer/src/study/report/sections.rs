@@ -12,12 +12,22 @@ use crate::study::plots::{FigureEntry, PLOTS};
 use crate::study::seeds::SeedRun;
 use std::path::Path;
 
-/// The problem: system, OCP, bounds, certified domain.
+/// The problem: system, OCP, bounds, certified domain (and the setpoint, when given).
 pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
+    let o = &cfg.ocp;
+    let setpoint = if o.x_ref.is_some() || o.u_ref.is_some() {
+        format!(
+            " Setpoint x_ref = {}, u_ref = {}.",
+            tuple(&o.x_ref_or_origin(cfg.system.nx())),
+            tuple(&o.u_ref_or_zero(cfg.system.nu()))
+        )
+    } else {
+        String::new()
+    };
     vec![
         Block::Heading(2, "Problem".into()),
         Block::Para(format!(
-            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.",
+            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.{setpoint}",
             cfg.system.name(),
             cfg.system.nx(),
             cfg.system.nu(),
@@ -32,6 +42,12 @@ pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
             boxed(&cfg.domain.lo, &cfg.domain.hi),
         )),
     ]
+}
+
+/// `(v₁, v₂, …)` with [`num`].
+fn tuple(v: &[f64]) -> String {
+    let parts: Vec<String> = v.iter().map(|x| num(*x)).collect();
+    format!("({})", parts.join(", "))
 }
 
 /// The dataset: counts by label status, training and validation sizes.
@@ -51,10 +67,7 @@ pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
             ]),
             rows: vec![row([
                 c.total.to_string(),
-                format!(
-                    "{:?} {:?}",
-                    a.data.header.sampling.sampler, a.data.header.sampling.counts
-                ),
+                sampler_cell(&a.data.header.sampling),
                 c.converged.to_string(),
                 c.soft.to_string(),
                 c.infeasible.to_string(),
@@ -69,8 +82,38 @@ pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
     ]
 }
 
-/// Table I: both nets after training (R², ε_D, the Lipschitz bounds) beside the paper's.
-pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
+/// The sampler of the dataset table: a grid with its counts per axis, the other samplers
+/// with their number of states and seed.
+fn sampler_cell(s: &crate::problem::SamplingSettings) -> String {
+    match s.sampler {
+        crate::problem::SamplerKind::Grid => format!("{:?} {:?}", s.sampler, s.counts),
+        _ => format!("{:?}, n = {}, seed {}", s.sampler, s.n, s.seed),
+    }
+}
+
+/// Whether this is the paper's problem (the embedded pendulum's dynamics dimensions and OCP:
+/// sampling time, horizon, weights and bounds), whose Tables I and II are shown beside ours.
+/// Other problems get no paper columns: the paper's figures are about another plant.
+pub(super) fn is_paper_problem(cfg: &ProblemConfig) -> bool {
+    let paper = ProblemConfig::default();
+    let (a, b) = (&cfg.ocp, &paper.ocp);
+    cfg.system.nx() == paper.system.nx()
+        && cfg.system.nu() == paper.system.nu()
+        && a.ts == b.ts
+        && a.horizon == b.horizon
+        && a.q == b.q
+        && a.r == b.r
+        && a.p == b.p
+        && a.x_lo == b.x_lo
+        && a.x_hi == b.x_hi
+        && a.u_lo == b.u_lo
+        && a.u_hi == b.u_hi
+}
+
+/// Table I: both nets after training (R², ε_D, the Lipschitz bounds) beside the paper's
+/// (for the paper's problem only, [`is_paper_problem`]).
+pub(super) fn table_i(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let paper_cols = is_paper_problem(cfg);
     let mut rows = Vec::new();
     for ((name, m, ce), (_, paper)) in [
         ("nominal", &a.nom, &a.cert_n),
@@ -79,7 +122,7 @@ pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
     .into_iter()
     .zip(PAPER_TABLE_I)
     {
-        rows.push(row([
+        let mut r = row([
             name.to_string(),
             format!("{:.4}", m.validation_stats.r2),
             format!("{:.3}", ce.eps_d),
@@ -89,24 +132,29 @@ pub(super) fn table_i(a: &Artifacts) -> Vec<Block> {
             format!("{:.2}", ce.l_nn_lower),
             format!("{:.3}", m.train_stats.median),
             format!("{} / {} / {}", paper[0], paper[1], paper[2]),
-        ]));
+        ]);
+        if !paper_cols {
+            r.pop();
+        }
+        rows.push(r);
+    }
+    let mut head = strs(&[
+        "net",
+        "validation R²",
+        "ε_D",
+        "L_NN (sound, method)",
+        "LipSDP-Neuron",
+        "naive",
+        "sampled lower",
+        "median error",
+        "paper R² / ε_D / L_NN",
+    ]);
+    if !paper_cols {
+        head.pop();
     }
     vec![
         Block::Heading(2, "Table I: networks after training".into()),
-        Block::Table {
-            head: strs(&[
-                "net",
-                "validation R²",
-                "ε_D",
-                "L_NN (sound, method)",
-                "LipSDP-Neuron",
-                "naive",
-                "sampled lower",
-                "median error",
-                "paper R² / ε_D / L_NN",
-            ]),
-            rows,
-        },
+        Block::Table { head, rows },
     ]
 }
 
@@ -205,13 +253,14 @@ pub(super) fn certificate(a: &Artifacts) -> Vec<Block> {
 }
 
 /// Table II: the closed loop of the MPC and both nets from the reference initial state,
-/// beside the paper's.
+/// beside the paper's (for the paper's problem only, [`is_paper_problem`]).
 pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     let first = |k: &str| a.cl.get(k).and_then(|v| v.first());
     let x0: Vec<String> = first("mpc")
         .map(|r| r.x0.iter().map(|v| num(*v)).collect())
         .unwrap_or_default();
     let steps = first("mpc").map_or(0, |r| r.steps);
+    let paper_cols = is_paper_problem(cfg);
     let mut rows = Vec::new();
     for k in ["mpc", "nominal", "regularized"] {
         let paper = PAPER_TABLE_II
@@ -221,7 +270,7 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
                 format!("{} / {} / {}", p[0], p[1], p[2])
             });
         if let Some(r) = first(k) {
-            rows.push(row([
+            let mut cells = row([
                 k.to_string(),
                 format!("{:.3}", r.violation_percent),
                 format!("{:.4}", r.max_violation),
@@ -230,8 +279,25 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
                 r.settling_step.map_or("never".into(), |v| v.to_string()),
                 r.left_band.to_string(),
                 paper,
-            ]));
+            ]);
+            if !paper_cols {
+                cells.pop();
+            }
+            rows.push(cells);
         }
+    }
+    let mut head = strs(&[
+        "controller",
+        "violating steps %",
+        "max violation",
+        "max input divergence",
+        "cost",
+        "settling step",
+        "left certified band",
+        "paper % / max / divergence",
+    ]);
+    if !paper_cols {
+        head.pop();
     }
     vec![
         Block::Heading(2, "Table II: closed loop".into()),
@@ -241,20 +307,43 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             steps as f64 * cfg.ocp.ts,
             cfg.training.seed
         )),
-        Block::Table {
-            head: strs(&[
-                "controller",
-                "violating steps %",
-                "max violation",
-                "max input divergence",
-                "cost",
-                "settling step",
-                "left certified band",
-                "paper % / max / divergence",
-            ]),
-            rows,
-        },
+        Block::Table { head, rows },
+        final_offsets(cfg, a),
     ]
+}
+
+/// The summary line of the final offsets |x_steps − x_ref| of the runs from x₀, and the
+/// nets' outputs at the setpoint when they hold it.
+fn final_offsets(cfg: &ProblemConfig, a: &Artifacts) -> Block {
+    let x_ref = cfg.ocp.x_ref_or_origin(cfg.system.nx());
+    let sci = |v: &[f64]| {
+        let parts: Vec<String> = v.iter().map(|x| format!("{x:.3e}")).collect();
+        format!("({})", parts.join(", "))
+    };
+    let parts: Vec<String> = ["mpc", "nominal", "regularized"]
+        .iter()
+        .filter_map(|k| {
+            let r = a.cl.get(*k).and_then(|v| v.first())?;
+            Some(format!("{k} {}", sci(&r.final_offset)))
+        })
+        .collect();
+    let mut s = format!(
+        "Final offset |x − x_ref| per state after the last step, x_ref = {}: {}.",
+        tuple(&x_ref),
+        parts.join("; ")
+    );
+    let held: Vec<String> = [("nominal", &a.nom), ("regularized", &a.reg)]
+        .iter()
+        .filter(|(_, m)| m.settings.hold_setpoint)
+        .map(|(k, m)| format!("{k} {}", sci(&m.mlp.predict(&x_ref))))
+        .collect();
+    if !held.is_empty() {
+        s += &format!(
+            " The nets hold the setpoint (`training.hold_setpoint`: κ(x_ref) − κ_NN(x_ref) folded into the last bias); their outputs at x_ref: {}.",
+            held.join("; ")
+        );
+    }
+    Block::Para(s)
 }
 
 /// Table II's closed loop of both nets over the training seeds.

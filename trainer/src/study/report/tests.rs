@@ -58,3 +58,28 @@ fn median_of_even_and_odd_counts() {
     );
     assert!(med_min_max(&[]).0.is_nan());
 }
+
+#[test]
+fn paper_columns_only_for_the_papers_problem() {
+    let load = |name: &str| {
+        let path = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/"))
+            .join(name);
+        ProblemConfig::load(&path).unwrap()
+    };
+    assert!(super::sections::is_paper_problem(&ProblemConfig::default()));
+    assert!(super::sections::is_paper_problem(&load("pendulum.toml")));
+    assert!(super::sections::is_paper_problem(&load(
+        "pendulum_ode.toml"
+    )));
+    for other in [
+        "double_integrator.toml",
+        "cartpole.toml",
+        "cartpole_public.toml",
+        "planar_quadrotor.toml",
+    ] {
+        assert!(!super::sections::is_paper_problem(&load(other)), "{other}");
+    }
+    let mut cfg = ProblemConfig::default();
+    cfg.ocp.horizon = 10;
+    assert!(!super::sections::is_paper_problem(&cfg));
+}

@@ -29,7 +29,7 @@ enum Binding {
 
 /// A name with what it stands for and where it was given.
 #[derive(Debug, Clone)]
-struct Entry {
+pub(super) struct Entry {
     binding: Binding,
     /// What it is, with an article: `a state`, `an input`, `a parameter`, `a definition`.
     what: String,
@@ -40,78 +40,11 @@ struct Entry {
 /// Checks a `[system]` table and compiles its equations (`rhs` when `discrete` is false,
 /// `next` when it is true) into an [`ExprModel`].
 pub fn compile(spec: &SystemSpec, discrete: bool) -> Result<ExprModel, ExprError> {
-    if spec.states.is_empty() {
-        return Err(ExprError::key("system.states", ErrorKind::EmptyStates));
-    }
     let nx = spec.states.len();
-    let mut table: HashMap<String, Entry> = HashMap::new();
-    let lists = [
-        ("states", "a state", &spec.states),
-        ("inputs", "an input", &spec.inputs),
-    ];
-    let mut var = 0u32;
-    for (list, what, names) in lists {
-        for (i, name) in names.iter().enumerate() {
-            let key = format!("system.{list}[{i}]");
-            declare(&mut table, name, Binding::Var(var), what, key)?;
-            var += 1;
-        }
-    }
-    for (name, &value) in &spec.parameters {
-        let key = format!("system.parameters.{name}");
-        if !value.is_finite() {
-            let kind = ErrorKind::NonFiniteParameter {
-                name: name.clone(),
-                value,
-            };
-            return Err(ExprError::key(key, kind));
-        }
-        declare(&mut table, name, Binding::Param(value), "a parameter", key)?;
-    }
+    let mut table = names(spec)?;
     let (eq_name, equations) = equations(spec, discrete)?;
-    let count =
-        |msg: String| ExprError::key(format!("system.{eq_name}"), ErrorKind::EquationCount(msg));
-    if equations.len() < nx {
-        let missing: Vec<&str> = spec.states[equations.len()..]
-            .iter()
-            .map(String::as_str)
-            .collect();
-        return Err(count(format!(
-            "{nx} states but {} equation{}: no equation for {} (one expression per state, in the order of `states`)",
-            equations.len(),
-            if equations.len() == 1 { "" } else { "s" },
-            missing.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", ")
-        )));
-    }
-    if equations.len() > nx {
-        let key = format!("system.{eq_name}[{nx}]");
-        let kind = ErrorKind::EquationCount(format!(
-            "{} equations for {nx} states: this one and any after it have no state",
-            equations.len()
-        ));
-        return Err(ExprError::at(key, &equations[nx], 1, kind));
-    }
-
-    // Definitions: names first (so that a later one used too early is recognised), then bodies.
-    let mut defs: Vec<(String, Ast)> = Vec::new();
-    for (i, text) in spec.definitions.iter().enumerate() {
-        let key = format!("system.definitions[{i}]");
-        let (name, col, ast) =
-            parse::parse_definition(text).map_err(|(c, k)| ExprError::at(&key, text, c, k))?;
-        if let Some(first) = clash(&table, &name) {
-            let kind = ErrorKind::Duplicate { name, first };
-            return Err(ExprError::at(key, text, col, kind));
-        }
-        table.insert(
-            name.clone(),
-            Entry {
-                binding: Binding::Def(i),
-                what: "a definition".into(),
-                key: key.clone(),
-            },
-        );
-        defs.push((key, ast));
-    }
+    check_count(spec, eq_name, equations)?;
+    let defs = definitions(spec, &mut table)?;
     let mut eqs: Vec<(String, &str, Ast)> = Vec::new();
     for (i, text) in equations.iter().enumerate() {
         let key = format!("system.{eq_name}[{i}]");
@@ -120,19 +53,7 @@ pub fn compile(spec: &SystemSpec, discrete: bool) -> Result<ExprModel, ExprError
     }
 
     // Lowering into one graph.
-    let mut low = Lower {
-        table: &table,
-        dag: Dag::new(),
-        def_nodes: Vec::new(),
-        used: HashSet::new(),
-    };
-    for (i, (key, ast)) in defs.iter().enumerate() {
-        let text = &spec.definitions[i];
-        let node = low
-            .lower(ast, i)
-            .map_err(|(c, k)| ExprError::at(key, text, c, k))?;
-        low.def_nodes.push(node);
-    }
+    let mut low = lower_definitions(spec, &table, &defs)?;
     let mut outputs = Vec::with_capacity(nx);
     for (key, text, ast) in &eqs {
         let node = low
@@ -166,6 +87,116 @@ pub fn compile(spec: &SystemSpec, discrete: bool) -> Result<ExprModel, ExprError
         warnings,
         tape,
     })
+}
+
+/// The name table of a `[system]` table: states, inputs and parameters, each checked.
+pub(super) fn names(spec: &SystemSpec) -> Result<HashMap<String, Entry>, ExprError> {
+    if spec.states.is_empty() {
+        return Err(ExprError::key("system.states", ErrorKind::EmptyStates));
+    }
+    let mut table: HashMap<String, Entry> = HashMap::new();
+    let lists = [
+        ("states", "a state", &spec.states),
+        ("inputs", "an input", &spec.inputs),
+    ];
+    let mut var = 0u32;
+    for (list, what, names) in lists {
+        for (i, name) in names.iter().enumerate() {
+            let key = format!("system.{list}[{i}]");
+            declare(&mut table, name, Binding::Var(var), what, key)?;
+            var += 1;
+        }
+    }
+    for (name, &value) in &spec.parameters {
+        let key = format!("system.parameters.{name}");
+        if !value.is_finite() {
+            let kind = ErrorKind::NonFiniteParameter {
+                name: name.clone(),
+                value,
+            };
+            return Err(ExprError::key(key, kind));
+        }
+        declare(&mut table, name, Binding::Param(value), "a parameter", key)?;
+    }
+    Ok(table)
+}
+
+/// Checks that there is one equation per state.
+fn check_count(spec: &SystemSpec, eq_name: &str, equations: &[String]) -> Result<(), ExprError> {
+    let nx = spec.states.len();
+    let count =
+        |msg: String| ExprError::key(format!("system.{eq_name}"), ErrorKind::EquationCount(msg));
+    if equations.len() < nx {
+        let missing: Vec<&str> = spec.states[equations.len()..]
+            .iter()
+            .map(String::as_str)
+            .collect();
+        return Err(count(format!(
+            "{nx} states but {} equation{}: no equation for {} (one expression per state, in the order of `states`)",
+            equations.len(),
+            if equations.len() == 1 { "" } else { "s" },
+            missing.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", ")
+        )));
+    }
+    if equations.len() > nx {
+        let key = format!("system.{eq_name}[{nx}]");
+        let kind = ErrorKind::EquationCount(format!(
+            "{} equations for {nx} states: this one and any after it have no state",
+            equations.len()
+        ));
+        return Err(ExprError::at(key, &equations[nx], 1, kind));
+    }
+    Ok(())
+}
+
+/// Parses the definitions and adds their names to `table`.
+pub(super) fn definitions(
+    spec: &SystemSpec,
+    table: &mut HashMap<String, Entry>,
+) -> Result<Vec<(String, Ast)>, ExprError> {
+    // Definitions: names first (so that a later one used too early is recognised), then bodies.
+    let mut defs: Vec<(String, Ast)> = Vec::new();
+    for (i, text) in spec.definitions.iter().enumerate() {
+        let key = format!("system.definitions[{i}]");
+        let (name, col, ast) =
+            parse::parse_definition(text).map_err(|(c, k)| ExprError::at(&key, text, c, k))?;
+        if let Some(first) = clash(table, &name) {
+            let kind = ErrorKind::Duplicate { name, first };
+            return Err(ExprError::at(key, text, col, kind));
+        }
+        table.insert(
+            name.clone(),
+            Entry {
+                binding: Binding::Def(i),
+                what: "a definition".into(),
+                key: key.clone(),
+            },
+        );
+        defs.push((key, ast));
+    }
+    Ok(defs)
+}
+
+/// A lowering with the definitions' nodes made (in order).
+pub(super) fn lower_definitions<'a>(
+    spec: &SystemSpec,
+    table: &'a HashMap<String, Entry>,
+    defs: &[(String, Ast)],
+) -> Result<Lower<'a>, ExprError> {
+    let mut low = Lower {
+        table,
+        dag: Dag::new(),
+        def_nodes: Vec::new(),
+        used: HashSet::new(),
+    };
+    for (i, (key, ast)) in defs.iter().enumerate() {
+        let text = &spec.definitions[i];
+        let node = low
+            .lower(ast, i)
+            .map_err(|(c, k)| ExprError::at(key, text, c, k))?;
+        low.def_nodes.push(node);
+    }
+    Ok(low)
 }
 
 /// Where `abs`, `min`, `max` are used, and the parameters and definitions never used.
@@ -274,18 +305,19 @@ fn declare(
 }
 
 /// The lowering of syntax trees into the graph.
-struct Lower<'a> {
+pub(super) struct Lower<'a> {
     table: &'a HashMap<String, Entry>,
-    dag: Dag,
+    /// The graph.
+    pub(super) dag: Dag,
     /// The node of each definition lowered so far.
     def_nodes: Vec<NodeId>,
     /// The parameters and definitions used.
-    used: HashSet<String>,
+    pub(super) used: HashSet<String>,
 }
 
 impl Lower<'_> {
     /// The node of `ast`, where definitions `0..visible` may be used.
-    fn lower(&mut self, ast: &Ast, visible: usize) -> Result<NodeId, parse::ParseError> {
+    pub(super) fn lower(&mut self, ast: &Ast, visible: usize) -> Result<NodeId, parse::ParseError> {
         let id = match &ast.kind {
             AstKind::Num(v) => return Ok(self.dag.constant(*v)),
             AstKind::Name(name) => return self.name(name, ast.col, visible),

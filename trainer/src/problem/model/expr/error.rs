@@ -111,6 +111,10 @@ pub enum ErrorKind {
         /// The value.
         value: f64,
     },
+    /// A constraint that is not one inequality `lhs <= rhs` / `lhs >= rhs` in the states and
+    /// inputs, or a terminal constraint that uses an input (the message says which).
+    #[error("{0}")]
+    Constraint(String),
     /// A `units` entry for a name that is no state, input, parameter or definition.
     #[error("units given for `{name}`, which is no state, input, parameter or definition")]
     UnknownUnitName {

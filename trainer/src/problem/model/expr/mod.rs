@@ -17,6 +17,7 @@
 //! | hash-consed graph: CSE, constant folding | `dag.rs` | `Dag` |
 //! | flat instruction tape on registers | `tape.rs` | `Tape` |
 //! | the compiled model | `model.rs` | [`ExprModel`] |
+//! | `[ocp]` constraints g(x, u) ≤ 0 | `constraint.rs` | [`ConstraintSet`] |
 //! | errors | `error.rs` | [`ExprError`], [`ErrorKind`] |
 //!
 //! Evaluation order: an expression is computed in the order it is written (no reassociation),
@@ -24,6 +25,7 @@
 //! Rust; constant parts are folded with the very `f64` functions the tape uses.
 
 mod compile;
+mod constraint;
 mod dag;
 mod error;
 mod model;
@@ -35,6 +37,7 @@ mod tape;
 mod tests;
 
 pub use compile::compile;
+pub use constraint::{ConstraintInfo, ConstraintSet};
 pub use error::{ErrorKind, ExprError};
 pub use model::ExprModel;
 pub use parse::{Func, MAX_DEPTH, MAX_NESTING};

@@ -1,12 +1,18 @@
 //! The optimal control problem OCP(x_s) transcribed by multiple shooting into an NLP.
 //!
 //! ```text
-//! min_z  Σ_{k<N} x_kᵀQx_k + u_kᵀRu_k + x_NᵀPx_N  [+ Σ l1·s + l2·s²  (soft)]
+//! min_z  Σ_{k<N} (x_k − x_r)ᵀQ(x_k − x_r) + (u_k − u_r)ᵀR(u_k − u_r) + (x_N − x_r)ᵀP(x_N − x_r)
+//!                                                      [+ Σ l1·s + l2·s²  (soft)]
 //! s.t.   x_0 − x_s = 0                                 (parameter, an equality: LICQ-safe)
 //!        F(x_k, u_k) − x_{k+1} = 0,      k = 0..N−1     (RK4 dynamics)
 //!        x_lo,k ≤ x_k ≤ x_hi,k,          k = 1..N       (hard, or x_lo,k − s ≤ x_k ≤ x_hi,k + s, s ≥ 0)
 //!        u_lo,k ≤ u_k ≤ u_hi,k,          k = 0..N−1
+//!        g_i(x_k, u_k) ≤ 0  [− s]         path constraints (`ocp.constraints`), stages by kind
+//!        g_i(x_N) ≤ 0  [− s]              terminal constraints (`ocp.terminal_constraints`)
 //! ```
+//! The setpoint (x_r, u_r) is `ocp.x_ref`, `ocp.u_ref` (default the origin: then the cost is
+//! today's xᵀQx + uᵀRu bit for bit, since v − 0 = v). It enters the objective and its
+//! gradient only; the Hessian 2·diag(Q, R), P does not depend on it.
 //! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
 //! `ocp.stages` of a tightened (robust) design ([`crate::problem::OcpSettings::x_bounds`]);
 //! every consumer (SQP, QP, sensitivities) sees them only through the rows built here.
@@ -14,36 +20,22 @@
 //! Variables are ordered by stage, `z = (x_0, u_0, x_1, u_1, …, x_N, s…)`, so stage k's
 //! `(x_k, u_k)` is the contiguous block at `k·(nx+nu)`; the slacks of the soft problem
 //! follow. Equalities `c(z) = 0` are numbered `c_0` (initial state) then `c_{k+1}` (the
-//! dynamics from stage k). All inequalities are linear rows `aᵀz ≤ h` with one or two
-//! nonzeros ([`LinRow`]). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`, ν ≥ 0.
+//! dynamics from stage k). All inequalities are rows `aᵀz ≤ h` ([`LinRow`], in `rows.rs`):
+//! the boxes and affine constraints with constant coefficients, a nonlinear constraint
+//! `g(x_k, u_k) ≤ 0` as its linearisation at the current iterate z̄,
+//! `∇g(z̄)ᵀz ≤ ∇g(z̄)ᵀz̄ − g(z̄)`, refreshed by [`Ocp::relinearize`] whenever z moves (so a
+//! row's slack `h − aᵀz̄` is always −g(z̄)). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`,
+//! ν ≥ 0, and its Hessian includes `Σ ν_r ∇²g_r` ([`Ocp::hessian_blocks`]).
 
+mod rows;
+
+pub use rows::{LinRow, MAX_ROW};
+
+use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use nalgebra::DMatrix;
-
-/// One linear inequality row `Σ coef·z[idx] ≤ rhs` (one or two entries).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LinRow {
-    /// Variable indices (the second is meaningful only when `len == 2`).
-    pub idx: [usize; 2],
-    /// Coefficients.
-    pub coef: [f64; 2],
-    /// Number of entries (1 or 2).
-    pub len: usize,
-    /// Right-hand side h.
-    pub rhs: f64,
-}
-
-impl LinRow {
-    /// `aᵀz`.
-    pub fn dot(&self, z: &[f64]) -> f64 {
-        (0..self.len).map(|j| self.coef[j] * z[self.idx[j]]).sum()
-    }
-    /// Slack `h − aᵀz` (≥ 0 when satisfied).
-    pub fn slack(&self, z: &[f64]) -> f64 {
-        self.rhs - self.dot(z)
-    }
-}
+use rows::NlRow;
 
 /// Exact-penalty weights of the soft problem.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,6 +60,10 @@ pub struct Ocp {
     q: DMatrix<f64>,
     r: DMatrix<f64>,
     p: DMatrix<f64>,
+    /// Setpoint state x_ref of the costs (the origin unless `ocp.x_ref` is given).
+    pub x_ref: Vec<f64>,
+    /// Setpoint input u_ref of the stage cost (0 unless `ocp.u_ref` is given).
+    pub u_ref: Vec<f64>,
     /// Soft-constraint penalty, if this is the soft problem.
     pub soft: Option<SoftPenalty>,
     /// Number of variables (states, inputs, slacks).
@@ -76,8 +72,15 @@ pub struct Ocp {
     pub n_slack: usize,
     /// Number of equality constraints, (N+1)·nx.
     pub n_eq: usize,
-    /// Inequality rows `Gz ≤ h`.
+    /// Inequality rows `Gz ≤ h` (nonlinear ones linearised at the last
+    /// [`relinearize`](Ocp::relinearize) point).
     pub rows: Vec<LinRow>,
+    /// The compiled path and terminal constraints, if any.
+    constraints: Option<ConstraintSet>,
+    /// The rows of nonlinear constraints, by stage.
+    nl_rows: Vec<NlRow>,
+    /// The rows of all `[ocp]` constraints.
+    constraint_rows: Vec<usize>,
 }
 
 impl Ocp {
@@ -86,66 +89,13 @@ impl Ocp {
         let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
         let (nx, nu, n) = (model.nx(), model.nu(), cfg.ocp.horizon);
         let nw = n * (nx + nu) + nx;
-        let o = &cfg.ocp;
-        let mut rows = Vec::new();
-        let mut n_slack = 0;
-        let one = |i: usize, c: f64, rhs: f64| LinRow {
-            idx: [i, 0],
-            coef: [c, 0.0],
-            len: 1,
-            rhs,
-        };
-        for k in 0..=n {
-            let off = k * (nx + nu);
-            if k >= 1 {
-                let (x_lo, x_hi) = o.x_bounds(k);
-                for i in 0..nx {
-                    let (lo, hi) = (x_lo[i], x_hi[i]);
-                    if !lo.is_finite() && !hi.is_finite() {
-                        continue;
-                    }
-                    if soft {
-                        let s = nw + n_slack;
-                        n_slack += 1;
-                        if hi.is_finite() {
-                            rows.push(LinRow {
-                                idx: [off + i, s],
-                                coef: [1.0, -1.0],
-                                len: 2,
-                                rhs: hi,
-                            });
-                        }
-                        if lo.is_finite() {
-                            rows.push(LinRow {
-                                idx: [off + i, s],
-                                coef: [-1.0, -1.0],
-                                len: 2,
-                                rhs: -lo,
-                            });
-                        }
-                        rows.push(one(s, -1.0, 0.0));
-                    } else {
-                        if hi.is_finite() {
-                            rows.push(one(off + i, 1.0, hi));
-                        }
-                        if lo.is_finite() {
-                            rows.push(one(off + i, -1.0, -lo));
-                        }
-                    }
-                }
-            }
-            if k < n {
-                let (u_lo, u_hi) = o.u_bounds(k);
-                for j in 0..nu {
-                    if u_hi[j].is_finite() {
-                        rows.push(one(off + nx + j, 1.0, u_hi[j]));
-                    }
-                    if u_lo[j].is_finite() {
-                        rows.push(one(off + nx + j, -1.0, -u_lo[j]));
-                    }
-                }
-            }
-        }
+        let constraints = cfg.constraint_set().ok().flatten();
+        let rows::Built {
+            rows,
+            nl: nl_rows,
+            constraint_rows,
+            n_slack,
+        } = rows::build(cfg, constraints.as_ref(), nx, nu, nw, soft);
         Ocp {
             model,
             horizon: n,
@@ -154,6 +104,8 @@ impl Ocp {
             q: cfg.q(),
             r: cfg.r(),
             p: cfg.p(),
+            x_ref: cfg.ocp.x_ref_or_origin(nx),
+            u_ref: cfg.ocp.u_ref_or_zero(nu),
             soft: soft.then_some(SoftPenalty {
                 l1: cfg.solver.soft_l1,
                 l2: cfg.solver.soft_l2,
@@ -162,6 +114,9 @@ impl Ocp {
             n_slack,
             n_eq: (n + 1) * nx,
             rows,
+            constraints,
+            nl_rows,
+            constraint_rows,
         }
     }
 
@@ -178,22 +133,29 @@ impl Ocp {
         self.n_var - self.n_slack
     }
 
-    /// Objective f(z).
+    /// Objective f(z) (with the k = 0 state term, which is constant in the OCP but part of
+    /// the reported cost).
     pub fn objective(&self, z: &[f64]) -> f64 {
-        let quad = |m: &DMatrix<f64>, v: &[f64]| -> f64 {
+        // (v − c)ᵀM(v − c); with c = 0 exactly today's vᵀMv.
+        let quad = |m: &DMatrix<f64>, v: &[f64], c: &[f64]| -> f64 {
             let n = v.len();
             (0..n)
-                .map(|i| (0..n).map(|j| v[i] * m[(i, j)] * v[j]).sum::<f64>())
+                .map(|i| {
+                    (0..n)
+                        .map(|j| (v[i] - c[i]) * m[(i, j)] * (v[j] - c[j]))
+                        .sum::<f64>()
+                })
                 .sum()
         };
         let (nx, nu) = (self.nx, self.nu);
+        let (xr, ur) = (&self.x_ref[..], &self.u_ref[..]);
         let mut f = 0.0;
         for k in 0..self.horizon {
-            f += quad(&self.q, &z[self.ix(k)..self.ix(k) + nx]);
-            f += quad(&self.r, &z[self.iu(k)..self.iu(k) + nu]);
+            f += quad(&self.q, &z[self.ix(k)..self.ix(k) + nx], xr);
+            f += quad(&self.r, &z[self.iu(k)..self.iu(k) + nu], ur);
         }
         let xn = self.ix(self.horizon);
-        f += quad(&self.p, &z[xn..xn + nx]);
+        f += quad(&self.p, &z[xn..xn + nx], xr);
         if let Some(sp) = self.soft {
             for &s in &z[self.is()..] {
                 f += sp.l1 * s + sp.l2 * s * s;
@@ -206,16 +168,20 @@ impl Ocp {
     pub fn gradient(&self, z: &[f64], g: &mut [f64]) {
         let (nx, nu) = (self.nx, self.nu);
         g.fill(0.0);
-        let add = |m: &DMatrix<f64>, off: usize, n: usize, g: &mut [f64]| {
+        // ∇ (v − c)ᵀM(v − c) = 2M(v − c) for symmetric M.
+        let add = |m: &DMatrix<f64>, off: usize, c: &[f64], g: &mut [f64]| {
+            let n = c.len();
             for i in 0..n {
-                g[off + i] = 2.0 * (0..n).map(|j| m[(i, j)] * z[off + j]).sum::<f64>();
+                g[off + i] = 2.0 * (0..n).map(|j| m[(i, j)] * (z[off + j] - c[j])).sum::<f64>();
             }
         };
+        let (xr, ur) = (&self.x_ref[..], &self.u_ref[..]);
+        debug_assert_eq!((xr.len(), ur.len()), (nx, nu));
         for k in 0..self.horizon {
-            add(&self.q, self.ix(k), nx, g);
-            add(&self.r, self.iu(k), nu, g);
+            add(&self.q, self.ix(k), xr, g);
+            add(&self.r, self.iu(k), ur, g);
         }
-        add(&self.p, self.ix(self.horizon), nx, g);
+        add(&self.p, self.ix(self.horizon), xr, g);
         if let Some(sp) = self.soft {
             for i in self.is()..self.n_var {
                 g[i] = sp.l1 + 2.0 * sp.l2 * z[i];
@@ -278,8 +244,10 @@ impl Ocp {
 
     /// Hessian of the Lagrangian, as stage blocks: `blocks[k]` (k < N) is the row-major
     /// (nx+nu)² block of stage k, `blocks[N]` the nx² terminal block (stored in a
-    /// (nx+nu)² slot). Slack curvature (2·l2) is diagonal and not stored here.
-    pub fn hessian_blocks(&self, z: &[f64], lam: &[f64], blocks: &mut [f64]) {
+    /// (nx+nu)² slot). Slack curvature (2·l2) is diagonal and not stored here. `mult` are the
+    /// inequality multipliers ν (one per row) for the curvature `Σ ν_r ∇²g_r` of nonlinear
+    /// constraints; an empty `mult` means ν = 0 (the objective and dynamics part only).
+    pub fn hessian_blocks(&self, z: &[f64], lam: &[f64], mult: &[f64], blocks: &mut [f64]) {
         let (nx, nu) = (self.nx, self.nu);
         let nz = nx + nu;
         let bs = nz * nz;
@@ -309,6 +277,9 @@ impl Ocp {
                 blk[i * nz + j] = 2.0 * self.p[(i, j)];
             }
         }
+        if !mult.is_empty() {
+            self.add_constraint_curvature(z, mult, blocks);
+        }
     }
 
     /// Diagonal curvature of each slack (2·l2), 0 for the hard problem.
@@ -316,8 +287,8 @@ impl Ocp {
         self.soft.map_or(0.0, |s| 2.0 * s.l2)
     }
 
-    /// A primal initial guess for a cold start: hold the inputs at the projection of 0 onto
-    /// U and simulate from x_s (multiple shooting tolerates the resulting state-bound
+    /// A primal initial guess for a cold start: hold the inputs at the projection of u_ref
+    /// (0 by default) onto U and simulate from x_s (multiple shooting tolerates the resulting state-bound
     /// violations in the soft problem; the hard problem's states are projected onto the
     /// bounds, which the QP's linearisation then repairs).
     pub fn initial_guess(
@@ -337,7 +308,7 @@ impl Ocp {
         for k in 0..self.horizon {
             let iu = self.iu(k);
             for j in 0..nu {
-                z[iu + j] = 0.0f64.clamp(u_lo[j], u_hi[j]);
+                z[iu + j] = self.u_ref[j].clamp(u_lo[j], u_hi[j]);
             }
             self.model.step(&x[..nx], &z[iu..iu + nu], &mut xn[..nx]);
             let ix = self.ix(k + 1);
