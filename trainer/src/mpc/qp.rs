@@ -17,6 +17,7 @@
 //! (e.g. an infeasible linearisation, which clarabel certifies), or clarabel alone.
 
 pub mod ipm;
+pub mod riccati;
 
 use crate::mpc::ocp::Ocp;
 pub use crate::problem::QpSolverKind;
