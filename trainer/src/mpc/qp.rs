@@ -75,6 +75,14 @@ impl QpSolver {
         }
     }
 
+    /// The structured solver factorises by the band LU only (tests).
+    #[cfg(test)]
+    pub(crate) fn without_riccati(&mut self) {
+        if let Some(i) = self.ipm.as_mut() {
+            i.without_riccati();
+        }
+    }
+
     /// Forgets clarabel's solver object (see [`ClarabelQp::reset`]); the structured solver
     /// keeps no state between solves.
     pub fn reset(&mut self) {

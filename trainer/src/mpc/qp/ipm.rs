@@ -188,6 +188,12 @@ impl IpmQp {
         }
     }
 
+    /// Factorises by the band LU only (tests compare the two factorisations).
+    #[cfg(test)]
+    pub(crate) fn without_riccati(&mut self) {
+        self.riccati = None;
+    }
+
     /// Residuals r_d, r_e, r_i at the current iterate; returns the objective ½dᵀHd + gᵀd.
     #[allow(clippy::too_many_arguments)]
     fn residuals(
