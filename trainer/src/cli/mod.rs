@@ -17,6 +17,7 @@ mod solve;
 mod train;
 
 use anyhow::Result;
+use certify::StatisticalArgs;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use trainer::data::dataset::csv_path;
@@ -130,6 +131,8 @@ enum Cmd {
         /// Print JSON (the certificate record) instead of text.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        statistical: StatisticalArgs,
     },
     /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
     Eval {
@@ -270,7 +273,19 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             target_eps,
             l_mpc,
             json,
-        } => certify::execute(config.as_deref(), &model, &data, target_eps, l_mpc, json),
+            statistical,
+        } => {
+            let stat = statistical.options(&model)?;
+            certify::execute(
+                config.as_deref(),
+                &model,
+                &data,
+                target_eps,
+                l_mpc,
+                json,
+                stat.as_ref(),
+            )
+        }
         Cmd::Eval { model, states, out } => {
             common::refuse_overwrite(&[&out], &[&model, &states])?;
             eval::execute(&model, &states, &out)
