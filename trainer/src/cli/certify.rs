@@ -29,15 +29,19 @@ pub(super) struct StatisticalArgs {
     /// Seed of the statistical states.
     #[arg(long, default_value_t = DEFAULT_SEED, requires = "statistical")]
     statistical_seed: u64,
-    /// Dataset file for the statistical states (default: beside the model,
-    /// `<model>.statistical.bin`).
+    /// Dataset file for the statistical states (default: `certify`: beside the model,
+    /// `<model>.statistical.bin`; `refine`: `statistical.bin` in its output directory).
     #[arg(long, requires = "statistical")]
     statistical_store: Option<PathBuf>,
 }
 
 impl StatisticalArgs {
-    /// The options and the store path, or None without `--statistical`.
-    pub(super) fn options(&self, model: &Path) -> Result<Option<(StatisticalOptions, PathBuf)>> {
+    /// The options and the store path (`default_store` unless `--statistical-store`), or
+    /// None without `--statistical`.
+    pub(super) fn options(
+        &self,
+        default_store: PathBuf,
+    ) -> Result<Option<(StatisticalOptions, PathBuf)>> {
         let Some(n) = self.statistical else {
             return Ok(None);
         };
@@ -49,10 +53,7 @@ impl StatisticalArgs {
             progress: true,
         };
         o.validate().map_err(anyhow::Error::msg)?;
-        let store = self
-            .statistical_store
-            .clone()
-            .unwrap_or_else(|| model.with_extension("statistical.bin"));
+        let store = self.statistical_store.clone().unwrap_or(default_store);
         Ok(Some((o, store)))
     }
 }
@@ -167,7 +168,7 @@ fn print_terms(c: &Certificate) {
 }
 
 /// The statistical tier as text.
-fn print_statistical(s: &Statistical) {
+pub(super) fn print_statistical(s: &Statistical) {
     println!(
         "  statistical      P(error > eps) ≤ {:.3e} with confidence {} ({} exceedances in {} \
          i.i.d. states, {} unlabelled; max observed {:.6}; Clopper–Pearson)",

@@ -206,6 +206,8 @@ enum Cmd {
         /// No progress lines.
         #[arg(long, short)]
         quiet: bool,
+        #[command(flatten)]
+        statistical: StatisticalArgs,
     },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
@@ -275,7 +277,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             json,
             statistical,
         } => {
-            let stat = statistical.options(&model)?;
+            let stat = statistical.options(model.with_extension("statistical.bin"))?;
             certify::execute(
                 config.as_deref(),
                 &model,
@@ -317,14 +319,15 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             check,
             check_seed,
             quiet,
+            statistical,
         } => refine::execute(
             config.as_deref(),
             target_eps,
             budget,
             out.as_deref(),
-            check,
-            check_seed,
+            (check, check_seed),
             quiet,
+            &statistical,
         ),
         Cmd::Merge { out, inputs } => {
             let csv = csv_path(&out);

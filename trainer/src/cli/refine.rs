@@ -2,12 +2,16 @@
 //! `[refine]` table (`--config`; a robust design refines the tightened MPC). Resumes from
 //! `<out>/refine_state.bin` and writes the model, dataset, certificate, cells and log into
 //! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
-//! more states and, with `--check`, `check.json`. Fails if the target ε is not met.
+//! more states and, with `--check`, `check.json`; with `--statistical N` the certificate
+//! gets its statistical tier (states kept in `statistical.bin`). Fails if the target ε is
+//! not met.
 
+use super::certify::{print_statistical, StatisticalArgs};
 use super::common::load_config;
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
+use trainer::certify::statistical::StatisticalOptions;
 use trainer::problem::{ProblemConfig, RefineSettings};
 
 pub(super) fn execute(
@@ -15,9 +19,9 @@ pub(super) fn execute(
     target_eps: Option<f64>,
     budget: Option<usize>,
     out: Option<&Path>,
-    check: Option<usize>,
-    check_seed: u64,
+    (check, check_seed): (Option<usize>, u64),
     quiet: bool,
+    statistical: &StatisticalArgs,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
     let rs = cfg.refine.clone();
@@ -26,13 +30,36 @@ pub(super) fn execute(
         .unwrap_or_else(|| Path::new("runs").join(&cfg.name).join("refine"));
     std::fs::create_dir_all(&dir)
         .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let stat = statistical.options(dir.join("statistical.bin"))?;
     let t0 = std::time::Instant::now();
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
-    let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    if let Some((o, store)) = &stat {
+        let s = trainer::certify::statistical::certify_statistically(
+            &cfg,
+            &r.model.mlp,
+            (&cert.base.clamp_lo, &cert.base.clamp_hi),
+            cert.base.eps,
+            store,
+            &StatisticalOptions {
+                progress: !quiet,
+                ..o.clone()
+            },
+        )
+        .with_context(|| format!("statistical states in {}", store.display()))?;
+        if !quiet {
+            print_statistical(&s);
+        }
+        cert.statistical = Some(s);
+        trainer::io::write_atomic(
+            &dir.join("certificate.json"),
+            refine::pretty(&cert).as_bytes(),
+        )?;
+    }
     if cfg.system.nx() >= 2 {
         write_eps_map(&cfg, &rs, &r, &dir)?;
     }

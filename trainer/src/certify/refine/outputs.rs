@@ -100,6 +100,9 @@ pub struct LocalCertificate {
     pub base: crate::certify::certificate::Certificate,
     /// The local figures.
     pub local: LocalSummary,
+    /// The statistical tier (`trainer refine --statistical N`), absent without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub statistical: Option<crate::certify::statistical::Statistical>,
 }
 
 /// Builds the certificate of a finished refinement.
@@ -227,7 +230,11 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
             s = rs.safety
         ),
     };
-    LocalCertificate { base, local }
+    LocalCertificate {
+        base,
+        local,
+        statistical: None,
+    }
 }
 
 /// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),
