@@ -101,6 +101,10 @@ fn refine_meets_its_target_and_passes_the_check() {
     }
     let eps = cert["eps"].as_f64().unwrap();
     assert!(eps <= 1.0, "ε {eps}");
+    // The MPC's range in a cell is estimated from its corners: so is ε.
+    assert_eq!(cert["guarantee"], "estimated");
+    assert_eq!(cert["tiers"]["mpc_range"], "estimated");
+    assert_eq!(cert["tiers"]["corner_errors"], "sound");
     assert_eq!(cert["local"]["met"], true);
     let solves = cert["local"]["solves"].as_u64().unwrap();
     assert!(solves <= 3000);

@@ -103,7 +103,7 @@ pub(super) fn execute(
         None => None,
     };
     if json {
-        let mut v = serde_json::to_value(&c)?;
+        let mut v = trainer::certify::tier::certificate_json(&c);
         if let (Some(r), Some(o)) = (req, v.as_object_mut()) {
             o.insert("requirement".into(), serde_json::to_value(r)?);
         }
@@ -156,13 +156,15 @@ fn print_terms(c: &Certificate) {
         "  covering radius  {:.6}   ({})",
         c.covering_radius, c.covering_method
     );
+    let g = trainer::certify::tier::theorem1(c);
     println!(
-        "  eps              {:.6}   = eps_D + (L_MPC + L_NN)·r{}",
+        "  eps              {:.6}   = eps_D + (L_MPC + L_NN)·r   [{}: {}]",
         c.eps,
-        if c.l_mpc_is_estimate {
-            "  [L_MPC is an estimate]"
+        g.guarantee.name(),
+        if g.assumptions.is_empty() {
+            "every term proven".to_string()
         } else {
-            ""
+            g.assumptions.join("; ")
         }
     );
 }

@@ -271,7 +271,8 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             },
         )
         .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
-        let text = serde_json::to_string_pretty(&c).map_err(|e| fail("certify", e))?;
+        let text = serde_json::to_string_pretty(&crate::certify::tier::certificate_json(&c))
+            .map_err(|e| fail("certify", e))?;
         write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
         out += &format!(
             "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",

@@ -100,6 +100,9 @@ pub struct LocalCertificate {
     pub base: crate::certify::certificate::Certificate,
     /// The local figures.
     pub local: LocalSummary,
+    /// The weakest tier ε rests on, per term its tier, and the assumptions.
+    #[serde(flatten)]
+    pub guarantee: crate::certify::tier::Guarantee,
     /// The statistical tier (`trainer refine --statistical N`), absent without it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub statistical: Option<crate::certify::statistical::Statistical>,
@@ -233,6 +236,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     LocalCertificate {
         base,
         local,
+        guarantee: crate::certify::tier::local(),
         statistical: None,
     }
 }
