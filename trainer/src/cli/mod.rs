@@ -2,13 +2,14 @@
 //! comments are the help text) and `dispatch`, which runs the chosen one.
 //!
 //! Each subcommand lives in its own file (`run`, `solve`, `sample`, `train`, `certify`,
-//! `eval`, `compare`, `export`, `refine`, `merge`); `common` holds what they share.
+//! `eval`, `compare`, `export`, `refine`, `merge`, `import`); `common` holds what they share.
 
 mod certify;
 mod common;
 mod compare;
 mod eval;
 mod export;
+mod import;
 mod merge;
 mod refine;
 mod run;
@@ -204,6 +205,34 @@ enum Cmd {
         #[arg(long, short)]
         quiet: bool,
     },
+    /// Import a labelled dataset from another solver's CSV: columns x1..xn (or the
+    /// problem's state names), u1..um, optional du{j}_dx{i} and status, an optional leading
+    /// index column (pandas' default); checked against the problem, a sample re-solved by
+    /// ampc, stored as a dataset for train / certify.
+    Import {
+        /// The CSV file.
+        #[arg(long)]
+        csv: PathBuf,
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Output dataset file (default: the CSV's path with extension `.bin`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Rows re-solved by ampc's SQP to check the labels (0: none; all if fewer rows).
+        #[arg(long, default_value_t = trainer::data::import::DEFAULT_RESOLVE)]
+        resolve: usize,
+        /// Seed of the re-solved sample.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Accept labels that disagree with ampc's re-solve (recorded in the dataset and
+        /// the certificate, not an error).
+        #[arg(long)]
+        trust_labels: bool,
+        /// No summary.
+        #[arg(long, short)]
+        quiet: bool,
+    },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
         /// Output dataset file.
@@ -311,6 +340,24 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             check_seed,
             quiet,
         ),
+        Cmd::Import {
+            csv,
+            config,
+            out,
+            resolve,
+            seed,
+            trust_labels,
+            quiet,
+        } => {
+            let out = out.unwrap_or_else(|| csv.with_extension("bin"));
+            common::refuse_overwrite(&[&out], &[&csv, opt(&config)])?;
+            let opts = trainer::data::import::ImportOptions {
+                resolve,
+                seed,
+                trust_labels,
+            };
+            import::execute(config.as_deref(), &csv, &out, &opts, quiet)
+        }
         Cmd::Merge { out, inputs } => {
             let csv = csv_path(&out);
             let ins: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
