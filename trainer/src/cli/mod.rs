@@ -201,6 +201,10 @@ enum Cmd {
         /// Seed of the check's states.
         #[arg(long, default_value_t = 2024)]
         check_seed: u64,
+        /// Labels for the first round: a dataset of this problem (e.g. from `trainer
+        /// import`) whose records on the initial grid label those corners (no OCP solve).
+        #[arg(long)]
+        data: Option<PathBuf>,
         /// No progress lines.
         #[arg(long, short)]
         quiet: bool,
@@ -330,6 +334,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             out,
             check,
             check_seed,
+            data,
             quiet,
         } => refine::execute(
             config.as_deref(),
@@ -338,6 +343,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             out.as_deref(),
             check,
             check_seed,
+            data.as_deref(),
             quiet,
         ),
         Cmd::Import {

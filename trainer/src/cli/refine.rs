@@ -8,6 +8,7 @@ use super::common::load_config;
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
+use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
 
 pub(super) fn execute(
@@ -17,9 +18,11 @@ pub(super) fn execute(
     out: Option<&Path>,
     check: Option<usize>,
     check_seed: u64,
+    data: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let initial_labels = data.map(|p| first_round_labels(&cfg, p, quiet)).transpose()?;
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -29,6 +32,7 @@ pub(super) fn execute(
     let t0 = std::time::Instant::now();
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
+        initial_labels,
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
@@ -59,6 +63,41 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// `--data`: a dataset (e.g. from `trainer import`) labelled for this very problem, with
+/// Jacobian labels; its records on the initial grid label the first round's corners.
+fn first_round_labels(cfg: &ProblemConfig, path: &Path, quiet: bool) -> Result<Dataset> {
+    let d = Dataset::load(path)?;
+    if d.header.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was labelled for problem `{}` (hash {}…), not for the refined problem `{}`",
+            path.display(),
+            d.header.problem,
+            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            cfg.name
+        );
+    }
+    if d.labels.as_ref().is_some_and(|l| !l.jacobian) {
+        bail!(
+            "{}: imported without Jacobian columns du{{j}}_dx{{i}}; the local certificate \
+             needs ∂κ/∂x at every corner",
+            path.display()
+        );
+    }
+    let (n, total) = refine::initial_corners_labelled(cfg, &cfg.refine, &d);
+    if !quiet {
+        eprintln!(
+            "first round: {n} of the {total} initial grid corners labelled from {}{}",
+            path.display(),
+            if d.labels.is_some() {
+                " (imported labels)"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok(d)
 }
 
 /// The problem to refine, with `--target-eps` and `--budget` applied, and the design ε of
