@@ -43,8 +43,7 @@ static LOOP: Mutex<RefCell<Option<Loop>>> = Mutex::new(RefCell::new(None));
 
 #[entry]
 fn main() -> ! {
-    let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take())
-    else {
+    let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
         panic!("peripherals taken twice");
     };
     let mut rcc = dp.RCC.freeze(Config::hsi().sysclk(168.MHz()));
