@@ -59,7 +59,10 @@ fn imported_ampc_csv_trains_and_certifies_with_its_provenance() {
     ]);
     ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("54 rows") && err.contains("re-solved 54"), "{err}");
+    assert!(
+        err.contains("54 rows") && err.contains("re-solved 54"),
+        "{err}"
+    );
     // Identical labels to the dataset the CSV was exported from.
     let a = trainer::data::dataset::Dataset::load(Path::new(&data)).unwrap();
     let b = trainer::data::dataset::Dataset::load(&imported).unwrap();
@@ -83,13 +86,23 @@ fn imported_ampc_csv_trains_and_certifies_with_its_provenance() {
     assert!(l["max_disagreement"].as_f64().unwrap() <= 1e-6, "{l}");
     assert!(v["eps"].as_f64().unwrap().is_finite());
     assert!(
-        v["covering_method"].as_str().unwrap().contains("branch and bound"),
+        v["covering_method"]
+            .as_str()
+            .unwrap()
+            .contains("branch and bound"),
         "imported points are scattered points: {v}"
     );
     // ampc's own dataset: no labels record in its certificate.
     let own = d.join("own.bin");
     ok(&trainer(&[
-        "train", "--config", &cfg, "--data", &data, "--out", own.to_str().unwrap(), "--quiet",
+        "train",
+        "--config",
+        &cfg,
+        "--data",
+        &data,
+        "--out",
+        own.to_str().unwrap(),
+        "--quiet",
     ]));
     let v = certify_json(&cfg, own.to_str().unwrap(), &data);
     assert!(v.get("labels").is_none(), "{v}");
@@ -119,7 +132,13 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
     );
     assert!(!d.join("pandas.bin").exists(), "nothing written on refusal");
     ok(&trainer(&[
-        "import", "--csv", c, "--config", &cfg, "--trust-labels", "--quiet",
+        "import",
+        "--csv",
+        c,
+        "--config",
+        &cfg,
+        "--trust-labels",
+        "--quiet",
     ]));
     let im = d.join("pandas.bin");
     let model = d.join("m.bin");
@@ -134,16 +153,33 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
     ]);
     ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("λ₂ = 0"), "the dropped Jacobian term is stated: {err}");
+    assert!(
+        err.contains("λ₂ = 0"),
+        "the dropped Jacobian term is stated: {err}"
+    );
     let v = certify_json(&cfg, model.to_str().unwrap(), im.to_str().unwrap());
     let l = &v["labels"];
     assert_eq!(l["beyond_tolerance"], 1, "{l}");
     assert_eq!(l["trusted"], true);
     assert_eq!(l["jacobian"], false);
-    assert!((l["max_disagreement"].as_f64().unwrap() - 1e-3).abs() < 1e-6, "{l}");
+    assert!(
+        (l["max_disagreement"].as_f64().unwrap() - 1e-3).abs() < 1e-6,
+        "{l}"
+    );
     // A state outside X: an error naming the file, line and column.
     std::fs::write(&csv, ",x1,x2,u1\n0,0.0,0.0,0.0\n1,1e6,0.0,0.0\n").unwrap();
-    let o = trainer(&["import", "--csv", c, "--config", &cfg, "--out", "/dev/null/x"]);
+    let o = trainer(&[
+        "import",
+        "--csv",
+        c,
+        "--config",
+        &cfg,
+        "--out",
+        "/dev/null/x",
+    ]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("pandas.csv:3") && err.contains("`x1`"), "{err}");
+    assert!(
+        !o.status.success() && err.contains("pandas.csv:3") && err.contains("`x1`"),
+        "{err}"
+    );
 }

@@ -16,13 +16,14 @@ pub(super) fn execute(
     target_eps: Option<f64>,
     budget: Option<usize>,
     out: Option<&Path>,
-    check: Option<usize>,
-    check_seed: u64,
+    check: Option<(usize, u64)>,
     data: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
-    let initial_labels = data.map(|p| first_round_labels(&cfg, p, quiet)).transpose()?;
+    let initial_labels = data
+        .map(|p| first_round_labels(&cfg, p, quiet))
+        .transpose()?;
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -43,7 +44,7 @@ pub(super) fn execute(
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
-    if let Some(n) = check {
+    if let Some((n, check_seed)) = check {
         check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
     }
     if let Some(design) = robust_design {

@@ -168,7 +168,9 @@ pub fn refine(
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let mut hash = settings_hash(cfg, rs);
     if let Some(d) = &opts.initial_labels {
-        hash = crate::io::sha256_hex(format!("{hash}{}", crate::io::sha256_hex(&d.to_bytes())).as_bytes());
+        hash = crate::io::sha256_hex(
+            format!("{hash}{}", crate::io::sha256_hex(&d.to_bytes())).as_bytes(),
+        );
     }
     let band = cfg.ocp.u_bounds(0);
     let ls = LocalSettings { safety: rs.safety };
