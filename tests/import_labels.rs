@@ -1,7 +1,8 @@
 //! `trainer import` end to end: ampc's own `dataset.csv` imported back (identical labels),
 //! trained and certified with the imported provenance in the certificate; a pandas-style
 //! CSV with one label off by 1e-3 refused (file and line named) unless `--trust-labels`,
-//! which the certificate then records; a CSV outside X refused.
+//! which the certificate then records; a CSV outside X refused; `refine --data` labels its
+//! first round's corners from an imported dataset.
 
 use ampc_tests::{config, tempdir, trainer};
 use std::path::Path;
@@ -182,4 +183,81 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
         !o.status.success() && err.contains("pandas.csv:3") && err.contains("`x1`"),
         "{err}"
     );
+}
+
+#[test]
+fn refine_takes_its_first_round_labels_from_an_imported_dataset() {
+    let dir = tempdir();
+    let d = dir.path();
+    // The sampling grid is refine's initial grid (9 × 9 for two states).
+    let text = std::fs::read_to_string(config("double_integrator.toml"))
+        .unwrap()
+        .replace("counts = [21, 11]", "counts = [9, 9]");
+    let cfg = d.join("di.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let data = d.join("di.bin");
+    ok(&trainer(&[
+        "sample",
+        "--config",
+        cfg,
+        "--out",
+        data.to_str().unwrap(),
+        "--quiet",
+    ]));
+    let csv = d.join("di.csv");
+    ok(&trainer(&[
+        "import",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--config",
+        cfg,
+        "--quiet",
+    ]));
+    let o = trainer(&[
+        "refine",
+        "--config",
+        cfg,
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        d.join("r").to_str().unwrap(),
+        "--budget",
+        "120",
+        "--target-eps",
+        "100",
+    ]);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("first round: 81 of the 81 initial grid corners"),
+        "{err}"
+    );
+    // Without Jacobian columns the local certificate cannot use the labels: refused.
+    let ds = trainer::data::dataset::Dataset::load(&data).unwrap();
+    let mut s = String::from("x1,x2,u1\n");
+    for r in &ds.records {
+        s += &format!("{:?},{:?},{:?}\n", r.x[0], r.x[1], r.u[0]);
+    }
+    let nojac = d.join("nojac.csv");
+    std::fs::write(&nojac, s).unwrap();
+    ok(&trainer(&[
+        "import",
+        "--csv",
+        nojac.to_str().unwrap(),
+        "--config",
+        cfg,
+        "--quiet",
+    ]));
+    let o = trainer(&[
+        "refine",
+        "--config",
+        cfg,
+        "--data",
+        d.join("nojac.bin").to_str().unwrap(),
+        "--out",
+        d.join("r2").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("without Jacobian columns"));
 }
