@@ -131,7 +131,10 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
         err.contains("pandas.csv:22") && err.contains("--trust-labels"),
         "{err}"
     );
-    assert!(!d.join("pandas.bin").exists(), "nothing written on refusal");
+    assert!(
+        !d.join("pandas.imported.bin").exists(),
+        "nothing written on refusal"
+    );
     ok(&trainer(&[
         "import",
         "--csv",
@@ -141,7 +144,7 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
         "--trust-labels",
         "--quiet",
     ]));
-    let im = d.join("pandas.bin");
+    let im = d.join("pandas.imported.bin");
     let model = d.join("m.bin");
     let o = trainer(&[
         "train",
@@ -219,7 +222,7 @@ fn refine_takes_its_first_round_labels_from_an_imported_dataset() {
         "--config",
         cfg,
         "--data",
-        data.to_str().unwrap(),
+        d.join("di.imported.bin").to_str().unwrap(),
         "--out",
         d.join("r").to_str().unwrap(),
         "--budget",
@@ -254,7 +257,7 @@ fn refine_takes_its_first_round_labels_from_an_imported_dataset() {
         "--config",
         cfg,
         "--data",
-        d.join("nojac.bin").to_str().unwrap(),
+        d.join("nojac.imported.bin").to_str().unwrap(),
         "--out",
         d.join("r2").to_str().unwrap(),
     ]);

@@ -2,7 +2,7 @@
 //! (`--config`), checked (dimensions, domain X, finite labels), a seeded sample re-solved by
 //! ampc's SQP (`--resolve N`, `--seed`; a disagreement beyond the tolerance is an error
 //! unless `--trust-labels`), written as an ampc dataset with its provenance (`--out`,
-//! default: the CSV's path with extension `.bin`). No CSV export is written beside it (the
+//! default: the CSV's path with extension `.imported.bin`). No CSV export is written beside it (the
 //! input is one).
 
 use super::common::load_config;

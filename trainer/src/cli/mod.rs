@@ -220,7 +220,8 @@ enum Cmd {
         /// Problem file (default: the embedded pendulum).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Output dataset file (default: the CSV's path with extension `.bin`).
+        /// Output dataset file (default: the CSV's path with extension `.imported.bin`, so
+        /// that importing a `dataset.csv` never replaces the `dataset.bin` beside it).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Rows re-solved by ampc's SQP to check the labels (0: none; all if fewer rows).
@@ -354,7 +355,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             trust_labels,
             quiet,
         } => {
-            let out = out.unwrap_or_else(|| csv.with_extension("bin"));
+            let out = out.unwrap_or_else(|| csv.with_extension("imported.bin"));
             common::refuse_overwrite(&[&out], &[&csv, opt(&config)])?;
             let opts = trainer::data::import::ImportOptions {
                 resolve,
