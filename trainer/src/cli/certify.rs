@@ -120,6 +120,25 @@ pub(super) fn execute(
         c.n_points
     );
     print_terms(&c);
+    if let Some(l) = &c.labels {
+        println!(
+            "  labels           imported from {} (sha256 {}…): {} of {} rows re-solved by ampc, \
+             max |Δu| {:.3e}{}",
+            l.file,
+            &l.sha256[..12.min(l.sha256.len())],
+            l.resolved,
+            l.rows,
+            l.max_disagreement,
+            if l.beyond_tolerance + l.unlabelled_by_ampc > 0 {
+                format!(
+                    ", {} beyond tolerance / {} unlabelled by ampc, accepted by --trust-labels",
+                    l.beyond_tolerance, l.unlabelled_by_ampc
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
     if let Some(st) = &statistical {
         print_statistical(st);
     }

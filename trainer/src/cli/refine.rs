@@ -12,6 +12,7 @@ use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
 use trainer::certify::statistical::StatisticalOptions;
+use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
 
 pub(super) fn execute(
@@ -19,11 +20,15 @@ pub(super) fn execute(
     target_eps: Option<f64>,
     budget: Option<usize>,
     out: Option<&Path>,
-    (check, check_seed): (Option<usize>, u64),
+    check: Option<(usize, u64)>,
+    data: Option<&Path>,
     quiet: bool,
     statistical: &StatisticalArgs,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let initial_labels = data
+        .map(|p| first_round_labels(&cfg, p, quiet))
+        .transpose()?;
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -34,6 +39,7 @@ pub(super) fn execute(
     let t0 = std::time::Instant::now();
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
+        initial_labels,
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
@@ -66,7 +72,7 @@ pub(super) fn execute(
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
-    if let Some(n) = check {
+    if let Some((n, check_seed)) = check {
         check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
     }
     if let Some(design) = robust_design {
@@ -86,6 +92,41 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// `--data`: a dataset (e.g. from `trainer import`) labelled for this very problem, with
+/// Jacobian labels; its records on the initial grid label the first round's corners.
+fn first_round_labels(cfg: &ProblemConfig, path: &Path, quiet: bool) -> Result<Dataset> {
+    let d = Dataset::load(path)?;
+    if d.header.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was labelled for problem `{}` (hash {}…), not for the refined problem `{}`",
+            path.display(),
+            d.header.problem,
+            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            cfg.name
+        );
+    }
+    if d.labels.as_ref().is_some_and(|l| !l.jacobian) {
+        bail!(
+            "{}: imported without Jacobian columns du{{j}}_dx{{i}}; the local certificate \
+             needs ∂κ/∂x at every corner",
+            path.display()
+        );
+    }
+    let (n, total) = refine::initial_corners_labelled(cfg, &cfg.refine, &d);
+    if !quiet {
+        eprintln!(
+            "first round: {n} of the {total} initial grid corners labelled from {}{}",
+            path.display(),
+            if d.labels.is_some() {
+                " (imported labels)"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok(d)
 }
 
 /// The problem to refine, with `--target-eps` and `--budget` applied, and the design ε of

@@ -52,6 +52,7 @@ pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
             chunk: crate::data::dataset::CHUNK as u32,
         },
         records,
+        labels: None,
     }
 }
 
@@ -195,6 +196,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         hash: r.model.content_hash(),
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&dataset(cfg, st).to_bytes()),
+        labels: None,
     };
     let local = LocalSummary {
         method: "local".into(),
