@@ -360,10 +360,9 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             target_eps,
             budget,
             out.as_deref(),
-            check.map(|n| (n, check_seed)),
+            (check.map(|n| (n, check_seed)), &statistical),
             data.as_deref(),
             quiet,
-            &statistical,
         ),
         Cmd::Import {
             csv,

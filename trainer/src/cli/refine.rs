@@ -20,10 +20,9 @@ pub(super) fn execute(
     target_eps: Option<f64>,
     budget: Option<usize>,
     out: Option<&Path>,
-    check: Option<(usize, u64)>,
+    (check, statistical): (Option<(usize, u64)>, &StatisticalArgs),
     data: Option<&Path>,
     quiet: bool,
-    statistical: &StatisticalArgs,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
     let initial_labels = data
