@@ -102,7 +102,11 @@ macro_rules! include_controller {
         );
 
         // The invariants `evaluate` relies on, checked at compile time.
-        const _: () = assert!(CONTROLLER.validate().is_ok());
+        const _: () = assert!(
+            CONTROLLER.validate().is_ok(),
+            "invalid controller file: a non-finite bound, an empty box or a fallback outside \
+             the clamp band (Controller::validate)"
+        );
 
         /// `CONTROLLER.evaluate(x)`: never panics, `u` finite and inside the clamp band.
         #[inline]
