@@ -368,7 +368,22 @@ fn c_firmware_in_qemu_is_bit_identical_to_the_rust_firmware() {
         Command::new("arm-none-eabi-size").arg(&elf),
         "arm-none-eabi-size",
     );
-    println!("C firmware (91 rows bit-identical to the Rust firmware):\n{size}");
+    // Code reachable from ampc_evaluate (weights are literal pools inside it).
+    let nm = run_checked(
+        Command::new("arm-none-eabi-nm").arg("-S").arg(&elf),
+        "arm-none-eabi-nm",
+    );
+    let mut controller = 0u64;
+    for l in nm.lines() {
+        let f: Vec<&str> = l.split_whitespace().collect();
+        if f.len() == 4 && seen.contains(f[3]) {
+            controller += u64::from_str_radix(f[1], 16).unwrap();
+        }
+    }
+    println!(
+        "C firmware (91 rows bit-identical to the Rust firmware):\n{size}\
+         controller reachable from ampc_evaluate: {controller} B in {seen:?}"
+    );
 }
 
 /// function → referenced symbols, from `arm-none-eabi-objdump -d`.
