@@ -179,3 +179,69 @@ uint8_t ampc_evaluate(const float x[AMPC_NX], float u[AMPC_NU]);
     );
     Ok(o)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::placeholder_pendulum;
+    use super::*;
+
+    fn report() -> ExportReport {
+        ExportReport {
+            f32_allowance: [1.25e-4, 3.0e-3],
+            f32_observed: [1e-5, 1e-3],
+            samples: 10,
+            boxes: 4,
+        }
+    }
+
+    /// The initialiser of `AMPC_CERTIFICATE` in the `#ifdef`/`#else` branch `fast`.
+    fn block(h: &str, fast: bool) -> &str {
+        let (a, b) = h.split_once("#else\n").unwrap();
+        if fast {
+            a.rsplit_once("#ifdef AMPC_FAST_TANH\n").unwrap().1
+        } else {
+            b.split_once("#endif").unwrap().0
+        }
+    }
+
+    #[test]
+    fn header_values_read_back_to_the_exported_numbers() {
+        let m = placeholder_pendulum();
+        let h = render_c_header(&m, &report()).unwrap();
+        assert!(h.contains("#define AMPC_NX 2\n") && h.contains("#define AMPC_NU 1\n"));
+        assert!(h.is_ascii(), "the header is ASCII only");
+        for (k, fast) in [(0, false), (1, true)] {
+            let b = block(&h, fast);
+            let eps: f64 = b
+                .split_once("{\n    ")
+                .unwrap()
+                .1
+                .split_once(',')
+                .unwrap()
+                .0
+                .parse()
+                .unwrap();
+            assert_eq!(eps.to_bits(), (m.eps + report().f32_allowance[k]).to_bits());
+            assert!(b.contains("AMPC_GUARANTEE_ESTIMATED"));
+            assert!(b.contains(&format!("{}, /* fast_tanh */", u8::from(fast))));
+            assert!(b.contains(&format!("\"{}\"", m.hash)));
+            let (lo, hi) = m.clamp_band(m.eps + report().f32_allowance[k]);
+            assert!(b.contains(&format!("{{{:?}f}}, /* clamp_lo */", lo[0])));
+            assert!(b.contains(&format!("{{{:?}f}}, /* clamp_hi */", hi[0])));
+        }
+        let mut sound = m.clone();
+        sound.guarantee = super::super::Guarantee::Sound;
+        let h = render_c_header(&sound, &report()).unwrap();
+        assert!(block(&h, false).contains("AMPC_GUARANTEE_SOUND"));
+    }
+
+    #[test]
+    fn a_hash_the_c_field_cannot_hold_is_refused() {
+        let mut m = placeholder_pendulum();
+        m.hash = "x".repeat(HASH_CAPACITY + 1);
+        let e = render_c_header(&m, &report()).unwrap_err().to_string();
+        assert!(e.contains("hash"), "{e}");
+        m.hash = "a\"b".into();
+        assert!(render_c_header(&m, &report()).is_err());
+    }
+}
