@@ -11,6 +11,8 @@
 //! - [`certificate`]: the certificate's numbers.
 //! - [`blob`]: the postcard weight format and its validating decoder.
 //! - [`generated::weights`]: the compiled-in weights and certificates (`trainer export`).
+//! - [`include_controller!`]: the same for a crate's own exported controller (no fork of
+//!   this crate); [`generated`] includes the compiled-in pendulum with it.
 //!
 //! ```
 //! use controller_core::{CONTROLLER, Flags};

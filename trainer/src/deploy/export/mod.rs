@@ -285,6 +285,15 @@ impl ExportModel {
                 }
             }
         }
+        let supported = Guarantee::derived(self.l_mpc_is_estimate, self.placeholder);
+        if self.guarantee < supported {
+            return inv(format!(
+                "guarantee: {} claims more than the numbers support ({}: L_MPC is sampled or \
+                 the network is a placeholder)",
+                self.guarantee.name(),
+                supported.name()
+            ));
+        }
         for (v, w) in [
             (self.eps, "eps"),
             (self.eps_d, "eps_d"),
