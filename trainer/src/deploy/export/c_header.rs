@@ -231,6 +231,10 @@ mod tests {
         }
         let mut sound = m.clone();
         sound.guarantee = super::super::Guarantee::Sound;
+        // A placeholder (or a sampled L_MPC) cannot claim `sound`.
+        assert!(render_c_header(&sound, &report()).is_err());
+        sound.placeholder = false;
+        sound.l_mpc_is_estimate = false;
         let h = render_c_header(&sound, &report()).unwrap();
         assert!(block(&h, false).contains("AMPC_GUARANTEE_SOUND"));
     }
