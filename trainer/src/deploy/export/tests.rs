@@ -126,5 +126,8 @@ fn a_tier_above_what_the_numbers_support_is_refused() {
     assert_eq!(m.guarantee, Guarantee::Statistical);
     let m = m.with_declared_guarantee(Some(Guarantee::Sound));
     assert_eq!(m.guarantee, Guarantee::Statistical);
-    assert_eq!(m.with_declared_guarantee(None).guarantee, Guarantee::Statistical);
+    assert_eq!(
+        m.with_declared_guarantee(None).guarantee,
+        Guarantee::Statistical
+    );
 }
