@@ -181,6 +181,9 @@ enum Cmd {
         /// Name used in the generated file (default: pendulum).
         #[arg(long, default_value = "pendulum")]
         name: String,
+        /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
+        #[arg(long)]
+        c_header: Option<PathBuf>,
     },
     /// Adaptive refinement with local certificates: grow the data and the net until every
     /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
@@ -341,9 +344,20 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             rust,
             postcard,
             name,
+            c_header,
         } => {
-            common::refuse_overwrite(&[&rust, &postcard], &[&model, opt(&certificate)])?;
-            export::execute(&model, certificate.as_deref(), &rust, &postcard, &name)
+            common::refuse_overwrite(
+                &[&rust, &postcard, opt(&c_header)],
+                &[&model, opt(&certificate)],
+            )?;
+            export::execute(
+                &model,
+                certificate.as_deref(),
+                &rust,
+                &postcard,
+                &name,
+                c_header.as_deref(),
+            )
         }
         Cmd::Refine {
             config,
