@@ -57,7 +57,10 @@ pub const FAST_TANH: bool = cfg!(feature = "fast-tanh");
 /// [`Controller::evaluate`], so the `no-panic` feature covers it. Invoke it once per module
 /// (wrap several controllers in their own `mod`).
 ///
-/// ```ignore
+/// (Not a doctest: the path is the user crate's file; `tests/own_weights.rs` builds such a
+/// crate.)
+///
+/// ```text
 /// mod pendulum {
 ///     controller_core::include_controller!("weights.rs");
 /// }
