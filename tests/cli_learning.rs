@@ -74,6 +74,13 @@ fn train_certify_eval() {
     ] {
         assert!(v.get(k).is_some(), "missing key {k}: {v}");
     }
+    // The tier: L_MPC is sampled, so ε is an estimate; the other terms are sound.
+    assert_eq!(v["guarantee"], "estimated", "{v}");
+    assert_eq!(v["tiers"]["l_mpc"], "estimated");
+    for t in ["eps_d", "l_nn", "covering_radius", "f32_allowance"] {
+        assert_eq!(v["tiers"][t], "sound", "{t}");
+    }
+    assert!(v["assumptions"][0].as_str().unwrap().starts_with("l_mpc"));
     let f = |k: &str| v[k].as_f64().unwrap();
     assert!(f("l_nn_lower") <= f("l_nn") && f("l_nn") <= f("l_nn_naive"));
     assert!(

@@ -5,8 +5,9 @@
 //! The committed weights are the paper's pendulum controller (sensitivity-regularized) as
 //! `trainer run` produces it from the embedded `configs/pendulum.toml`: this test reruns
 //! that pipeline (sample → train → certify → export) and compares the files byte for byte.
-//! Regenerate them with
-//! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/generated/`.
+//! Regenerate them (and the C API's header `controller-core/capi/include/ampc.h`) with
+//! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/generated/`
+//! and `trainer export … --c-header` (README, "The embedded side").
 
 use ampc_tests::tempdir;
 use controller_core::activation;
@@ -43,6 +44,16 @@ fn committed_files_are_what_the_exporter_writes() {
         "controller-core/src/generated/weights.rs is stale: regenerate it with trainer export"
     );
     assert_eq!(std::fs::read(&bin).unwrap(), committed("weights.bin"));
+    // The C API's header is the exporter's for the same model and allowances.
+    let header = export::render_c_header(model, &report).unwrap();
+    let p = format!(
+        "{}/../controller-core/capi/include/ampc.h",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    assert!(
+        std::fs::read_to_string(&p).unwrap_or_default() == header,
+        "{p} is stale: regenerate it with trainer export --c-header"
+    );
     assert_eq!(controller_core::CERTIFICATE.hash, model.hash);
 }
 

@@ -82,13 +82,15 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");
         let dir = root.join(&cfg.name);
         let m = trainer::certify::Model::load(&dir.join("model_regularized.bin")).expect("model");
-        let c: trainer::certify::certificate::Certificate = serde_json::from_str(
-            &std::fs::read_to_string(dir.join("certificate.json")).expect("certificate"),
-        )
-        .expect("json");
+        let text = std::fs::read_to_string(dir.join("certificate.json")).expect("certificate");
+        let c: trainer::certify::certificate::Certificate =
+            serde_json::from_str(&text).expect("json");
+        let declared = trainer::deploy::export::Guarantee::declared_in(&text, "certificate.json")
+            .expect("guarantee");
         (
             trainer::deploy::export::ExportModel::from_trained(&cfg.name, &m, &c)
-                .expect("export model"),
+                .expect("export model")
+                .with_declared_guarantee(declared),
             dir,
         )
     })

@@ -57,7 +57,7 @@ fn main_job_and_tour() {
         "sampled lower",
         "L_MPC",
         "covering radius",
-        "[L_MPC is an estimate]",
+        "[estimated: l_mpc",
     ] {
         assert!(text.contains(k), "{k}: {text}");
     }

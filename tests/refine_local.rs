@@ -70,6 +70,8 @@ fn refine_meets_its_target_and_passes_the_check() {
         out.to_str().unwrap(),
         "--check",
         "2000",
+        "--statistical",
+        "1000",
         "--quiet",
     ]);
     ok(&o);
@@ -99,6 +101,10 @@ fn refine_meets_its_target_and_passes_the_check() {
     }
     let eps = cert["eps"].as_f64().unwrap();
     assert!(eps <= 1.0, "ε {eps}");
+    // The MPC's range in a cell is estimated from its corners: so is ε.
+    assert_eq!(cert["guarantee"], "estimated");
+    assert_eq!(cert["tiers"]["mpc_range"], "estimated");
+    assert_eq!(cert["tiers"]["corner_errors"], "sound");
     assert_eq!(cert["local"]["met"], true);
     let solves = cert["local"]["solves"].as_u64().unwrap();
     assert!(solves <= 3000);
@@ -110,6 +116,16 @@ fn refine_meets_its_target_and_passes_the_check() {
     assert_eq!(check["over_cell"], 0);
     assert_eq!(check["labelled"], 2000);
     assert_eq!(check["certified"].as_f64().unwrap(), eps);
+    // The statistical tier: 1000 other i.i.d. states; ε held at all of them (as at the
+    // check's), so the bound is the closed form 1 − β^{1/n}.
+    let st = &cert["statistical"];
+    assert_eq!(st["samples"], 1000);
+    assert_eq!(st["exceedances"], 0, "{st}");
+    assert_eq!(st["eps"].as_f64(), Some(eps));
+    let p = st["p_exceed_upper"].as_f64().unwrap();
+    let closed = 1.0 - 0.01f64.powf(1.0 / 1000.0);
+    assert!((p - closed).abs() <= 1e-10 * closed, "{p} vs {closed}");
+    assert!(out.join("statistical.bin").exists());
     // The estimated remainders were not exceeded at any state, and the data is not trivial.
     let used = check["max_remainder_use"].as_f64().unwrap();
     assert!(used > 0.0 && used <= 1.0, "remainder use {used}");

@@ -6,12 +6,30 @@
 //! rounding, every operation's rounding, the device tanh; computed by the exporter by
 //! interval forward error analysis). There is one certificate per tanh implementation;
 //! [`crate::CERTIFICATE`] is the one of this build.
+//!
+//! [`Guarantee`] is the tier of the claim: what the arithmetic behind ε proves. The exporter
+//! takes it from the learning side's certificate (its `guarantee`, when it states one) and
+//! never above what the numbers rest on: a sampled L_MPC makes ε an estimate.
+
+/// How strong the claim |κ(x) − u_f32(x)| ≤ ε on X is (strongest first).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[repr(u8)]
+pub enum Guarantee {
+    /// Every ingredient is a proven bound: ε bounds the error on all of X.
+    Sound = 0,
+    /// An ingredient holds with a stated probability: ε is a statistical bound.
+    Statistical = 1,
+    /// An ingredient is a sampled estimate (e.g. L_MPC): ε is an estimate, not a bound.
+    Estimated = 2,
+}
 
 /// A certificate for a controller with `NX` states and `NU` inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Certificate<const NX: usize, const NU: usize> {
     /// Total bound ε on |κ(x) − u_f32(x)| for x ∈ X: `eps_nn + f32_allowance`.
     pub eps: f64,
+    /// The tier of the claim ε (see [`Guarantee`]).
+    pub guarantee: Guarantee,
     /// Bound on ‖κ − κ_NN,f64‖ on X from the learning side (its `eps`).
     pub eps_nn: f64,
     /// Largest training-data error ε_D.

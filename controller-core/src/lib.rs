@@ -11,6 +11,8 @@
 //! - [`certificate`]: the certificate's numbers.
 //! - [`blob`]: the postcard weight format and its validating decoder.
 //! - [`generated::weights`]: the compiled-in weights and certificates (`trainer export`).
+//! - [`include_controller!`]: the same for a crate's own exported controller (no fork of
+//!   this crate); [`generated`] includes the compiled-in pendulum with it.
 //!
 //! ```
 //! use controller_core::{CONTROLLER, Flags};
@@ -29,50 +31,98 @@ pub mod generated;
 pub mod layer;
 pub mod mlp;
 
-pub use certificate::Certificate;
+pub use certificate::{Certificate, Guarantee};
 pub use controller::{Controller, Flags, InvalidController, Output};
-
-use generated::weights;
 
 /// Version of the weight/certificate format this core understands.
 pub const FORMAT_VERSION: u16 = 1;
 
-/// State dimension of the compiled-in controller.
-pub const NX: usize = weights::NX;
-/// Input dimension of the compiled-in controller.
-pub const NU: usize = weights::NU;
+/// Whether this build runs the rational tanh (feature `fast-tanh`): selects the certificate
+/// [`include_controller!`] uses (evaluated in this crate, so it follows this crate's feature).
+pub const FAST_TANH: bool = cfg!(feature = "fast-tanh");
 
-/// The certificate of this build (for its tanh: libm, or fast with `fast-tanh`).
-pub const CERTIFICATE: Certificate<NX, NU> = if cfg!(feature = "fast-tanh") {
-    weights::CERTIFICATE_FAST
-} else {
-    weights::CERTIFICATE_LIBM
-};
+/// Compiles a controller exported by `trainer export` into the calling crate: no fork of
+/// this repository, the same checks as the compiled-in one.
+///
+/// `include_controller!("weights.rs")` (path relative to the invoking file, as `include!`)
+/// expands, in the current module, to
+/// - `mod weights`: the generated file (its `NX`, `NU`, `Net`, `NET`, `X_LO`, `X_HI`,
+///   `CERTIFICATE_LIBM`, `CERTIFICATE_FAST`);
+/// - `NX`, `NU`, `CERTIFICATE` (the one for this build's tanh, see [`FAST_TANH`]),
+///   `CONTROLLER` and `fn evaluate(&[f32; NX]) -> Output<NU>`.
+///
+/// Compile-time checks, as for the compiled-in pendulum: layer sizes chain (type of `Net`),
+/// the certificate's dimensions are the network's, and [`Controller::validate`] passes
+/// (a `const` assertion: a broken file does not compile). `evaluate` is
+/// [`Controller::evaluate`], so the `no-panic` feature covers it. Invoke it once per module
+/// (wrap several controllers in their own `mod`).
+///
+/// (Not a doctest: the path is the user crate's file; `tests/own_weights.rs` builds such a
+/// crate.)
+///
+/// ```text
+/// mod pendulum {
+///     controller_core::include_controller!("weights.rs");
+/// }
+/// let out = pendulum::evaluate(&[0.1, 0.0]);
+/// assert_eq!(pendulum::CERTIFICATE.guarantee, controller_core::Guarantee::Estimated);
+/// ```
+#[macro_export]
+macro_rules! include_controller {
+    ($path:expr) => {
+        /// The controller written by `trainer export` (see the header of its file).
+        #[allow(
+            clippy::approx_constant,
+            clippy::excessive_precision,
+            clippy::unreadable_literal,
+            unused_imports
+        )]
+        pub mod weights {
+            use $crate::certificate::{Certificate, Guarantee};
+            use $crate::layer::Dense;
+            use $crate::mlp::Hidden;
+            include!($path);
+        }
 
-/// The compiled-in controller (weights in flash), with this build's clamp band.
-pub const CONTROLLER: Controller<NX, NU, weights::Net> = Controller::new(
-    weights::NET,
-    weights::X_LO,
-    weights::X_HI,
-    CERTIFICATE.clamp_lo,
-    CERTIFICATE.clamp_hi,
-    CERTIFICATE.fallback,
-);
+        /// State dimension of this controller.
+        pub const NX: usize = weights::NX;
+        /// Input dimension of this controller.
+        pub const NU: usize = weights::NU;
 
-// The invariants `evaluate` relies on, checked at compile time.
-const _: () = assert!(CONTROLLER.validate().is_ok());
+        /// The certificate of this build (for its tanh: libm, or fast with `fast-tanh`).
+        pub const CERTIFICATE: $crate::Certificate<NX, NU> = if $crate::FAST_TANH {
+            weights::CERTIFICATE_FAST
+        } else {
+            weights::CERTIFICATE_LIBM
+        };
+
+        /// The controller (weights in flash), with this build's clamp band.
+        pub const CONTROLLER: $crate::Controller<NX, NU, weights::Net> = $crate::Controller::new(
+            weights::NET,
+            weights::X_LO,
+            weights::X_HI,
+            CERTIFICATE.clamp_lo,
+            CERTIFICATE.clamp_hi,
+            CERTIFICATE.fallback,
+        );
+
+        // The invariants `evaluate` relies on, checked at compile time.
+        const _: () = assert!(
+            CONTROLLER.validate().is_ok(),
+            "invalid controller file: a non-finite bound, an empty box or a fallback outside \
+             the clamp band (Controller::validate)"
+        );
+
+        /// `CONTROLLER.evaluate(x)`: never panics, `u` finite and inside the clamp band.
+        #[inline]
+        pub fn evaluate(x: &[f32; NX]) -> $crate::Output<NU> {
+            CONTROLLER.evaluate(x)
+        }
+    };
+}
+
+pub use generated::{evaluate, CERTIFICATE, CONTROLLER, NU, NX};
 
 /// The same weights as a postcard blob (`generated/weights.bin`, written by `trainer export`
 /// next to `weights.rs`); [`blob::decode`] turns it into a controller equal to [`CONTROLLER`].
 pub const WEIGHTS_BLOB: &[u8] = include_bytes!("generated/weights.bin");
-
-/// `CONTROLLER.evaluate(x)`.
-///
-/// ```
-/// let u = controller_core::evaluate(&[0.0, 0.0]).u;
-/// assert!(u[0].is_finite());
-/// ```
-#[inline]
-pub fn evaluate(x: &[f32; NX]) -> Output<NU> {
-    CONTROLLER.evaluate(x)
-}

@@ -195,6 +195,37 @@ pub struct Certificate {
     /// certificates of older versions).
     #[serde(default)]
     pub dataset_hash: String,
+    /// `"labels"`: where the data's labels come from when they were imported from another
+    /// solver (file, SHA-256, the re-solve check); absent for ampc's own labels. Kept in the
+    /// JSON certificate only: the postcard model file does not store it (its format, and
+    /// every existing model, stay as they were).
+    #[serde(default, skip_serializing_if = "Option::is_none", with = "json_only")]
+    pub labels: Option<crate::data::import::ImportedLabels>,
+}
+
+/// Serde adapter of [`Certificate::labels`]: the value in human-readable formats (JSON),
+/// nothing at all in binary ones (postcard writes and reads zero bytes for a unit).
+mod json_only {
+    use crate::data::import::ImportedLabels;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<ImportedLabels>, s: S) -> Result<S::Ok, S::Error> {
+        if s.is_human_readable() {
+            v.serialize(s)
+        } else {
+            s.serialize_unit()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<ImportedLabels>, D::Error> {
+        if d.is_human_readable() {
+            Option::deserialize(d)
+        } else {
+            <()>::deserialize(d).map(|_| None)
+        }
+    }
 }
 
 /// Inputs that do not belong together: certifying them would bound the wrong thing.
@@ -441,6 +472,7 @@ pub fn certify(
         hash: model.content_hash(),
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&data.to_bytes()),
+        labels: data.labels.clone(),
     })
 }
 

@@ -10,6 +10,8 @@
 //! - [`certificate`]: Theorem 1 and its inverse (what a target ε requires).
 //! - [`local`]: the cell bound ε_C from corner labels, enclosures and a remainder.
 //! - [`refine`]: adaptive refinement of the cells until the target ε is met.
+//! - [`tier`]: sound / statistical / estimated, per term and for ε as a whole.
+//! - [`statistical`]: the Clopper–Pearson bound on P(‖κ − sat κ_NN‖ > ε) from i.i.d. states.
 //!
 //! Imports `problem`, `mpc`, `data` and `learn`.
 
@@ -18,6 +20,8 @@ pub mod lipschitz;
 pub mod local;
 pub mod netbounds;
 pub mod refine;
+pub mod statistical;
+pub mod tier;
 
 /// A model file as the later stages see it: the trained net with its certificate slot.
 pub type Model = crate::learn::train::TrainedModel<certificate::Certificate>;

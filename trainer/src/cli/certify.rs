@@ -5,10 +5,58 @@
 
 use super::common::problem_for_data;
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOptions};
+use trainer::certify::statistical::{
+    certify_statistically, Statistical, StatisticalOptions, DEFAULT_SEED,
+};
 use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
+
+/// The statistical tier's flags (shared by `certify`).
+#[derive(clap::Args, Debug, Clone)]
+pub(super) struct StatisticalArgs {
+    /// Also bound P(‖κ − sat κ_NN‖ > ε) statistically from this many fresh i.i.d. uniform
+    /// states of X, each solved by the MPC (Clopper–Pearson; resumable).
+    #[arg(long, value_name = "N")]
+    statistical: Option<usize>,
+    /// Confidence 1 − β of the statistical bound.
+    #[arg(long, default_value_t = 0.99, requires = "statistical")]
+    confidence: f64,
+    /// Probability target: also report the smallest ε whose bound is ≤ this.
+    #[arg(long, default_value_t = 1e-3, requires = "statistical")]
+    p_target: f64,
+    /// Seed of the statistical states.
+    #[arg(long, default_value_t = DEFAULT_SEED, requires = "statistical")]
+    statistical_seed: u64,
+    /// Dataset file for the statistical states (default: `certify`: beside the model,
+    /// `<model>.statistical.bin`; `refine`: `statistical.bin` in its output directory).
+    #[arg(long, requires = "statistical")]
+    statistical_store: Option<PathBuf>,
+}
+
+impl StatisticalArgs {
+    /// The options and the store path (`default_store` unless `--statistical-store`), or
+    /// None without `--statistical`.
+    pub(super) fn options(
+        &self,
+        default_store: PathBuf,
+    ) -> Result<Option<(StatisticalOptions, PathBuf)>> {
+        let Some(n) = self.statistical else {
+            return Ok(None);
+        };
+        let o = StatisticalOptions {
+            samples: n,
+            confidence: self.confidence,
+            seed: self.statistical_seed,
+            p_target: self.p_target,
+            progress: true,
+        };
+        o.validate().map_err(anyhow::Error::msg)?;
+        let store = self.statistical_store.clone().unwrap_or(default_store);
+        Ok(Some((o, store)))
+    }
+}
 
 pub(super) fn execute(
     config: Option<&Path>,
@@ -17,6 +65,7 @@ pub(super) fn execute(
     target: Option<f64>,
     l_mpc: Option<f64>,
     json: bool,
+    stat: Option<&(StatisticalOptions, PathBuf)>,
 ) -> Result<()> {
     let m = Model::load(model)?;
     let d = Dataset::load(data)?;
@@ -43,10 +92,23 @@ pub(super) fn execute(
     .with_context(|| format!("cannot certify {} on {}", model.display(), data.display()))?;
     let req =
         target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
+    let statistical = match stat {
+        Some((o, store)) => {
+            super::common::refuse_overwrite(&[store], &[model, data])?;
+            Some(
+                certify_statistically(&cfg, &m.mlp, (&c.clamp_lo, &c.clamp_hi), c.eps, store, o)
+                    .with_context(|| format!("statistical states in {}", store.display()))?,
+            )
+        }
+        None => None,
+    };
     if json {
-        let mut v = serde_json::to_value(&c)?;
+        let mut v = trainer::certify::tier::certificate_json(&c);
         if let (Some(r), Some(o)) = (req, v.as_object_mut()) {
             o.insert("requirement".into(), serde_json::to_value(r)?);
+        }
+        if let (Some(st), Some(o)) = (&statistical, v.as_object_mut()) {
+            o.insert("statistical".into(), serde_json::to_value(st)?);
         }
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
@@ -58,6 +120,28 @@ pub(super) fn execute(
         c.n_points
     );
     print_terms(&c);
+    if let Some(l) = &c.labels {
+        println!(
+            "  labels           imported from {} (sha256 {}…): {} of {} rows re-solved by ampc, \
+             max |Δu| {:.3e}{}",
+            l.file,
+            &l.sha256[..12.min(l.sha256.len())],
+            l.resolved,
+            l.rows,
+            l.max_disagreement,
+            if l.beyond_tolerance + l.unlabelled_by_ampc > 0 {
+                format!(
+                    ", {} beyond tolerance / {} unlabelled by ampc, accepted by --trust-labels",
+                    l.beyond_tolerance, l.unlabelled_by_ampc
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
+    if let Some(st) = &statistical {
+        print_statistical(st);
+    }
     if let Some(r) = req {
         match (r.delta, r.spacing, r.solves) {
             (Some(dl), Some(h), Some(n)) => println!(
@@ -91,13 +175,34 @@ fn print_terms(c: &Certificate) {
         "  covering radius  {:.6}   ({})",
         c.covering_radius, c.covering_method
     );
+    let g = trainer::certify::tier::theorem1(c);
     println!(
-        "  eps              {:.6}   = eps_D + (L_MPC + L_NN)·r{}",
+        "  eps              {:.6}   = eps_D + (L_MPC + L_NN)·r   [{}: {}]",
         c.eps,
-        if c.l_mpc_is_estimate {
-            "  [L_MPC is an estimate]"
+        g.guarantee.name(),
+        if g.assumptions.is_empty() {
+            "every term proven".to_string()
         } else {
-            ""
+            g.assumptions.join("; ")
         }
     );
+}
+
+/// The statistical tier as text.
+pub(super) fn print_statistical(s: &Statistical) {
+    println!(
+        "  statistical      P(error > eps) ≤ {:.3e} with confidence {} ({} exceedances in {} \
+         i.i.d. states, {} unlabelled; max observed {:.6}; Clopper–Pearson)",
+        s.p_exceed_upper, s.confidence, s.exceedances, s.samples, s.unlabelled, s.max_error
+    );
+    match s.eps_at_p_target {
+        Some(e) => println!(
+            "    eps at P ≤ {:.1e}  {e:.6}   (statistical, confidence {})",
+            s.p_target, s.confidence
+        ),
+        None => println!(
+            "    eps at P ≤ {:.1e}  not reachable with {} states (needs more)",
+            s.p_target, s.samples
+        ),
+    }
 }

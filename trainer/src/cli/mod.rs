@@ -2,13 +2,14 @@
 //! comments are the help text) and `dispatch`, which runs the chosen one.
 //!
 //! Each subcommand lives in its own file (`run`, `solve`, `sample`, `train`, `certify`,
-//! `eval`, `compare`, `export`, `refine`, `merge`); `common` holds what they share.
+//! `eval`, `compare`, `export`, `refine`, `merge`, `import`); `common` holds what they share.
 
 mod certify;
 mod common;
 mod compare;
 mod eval;
 mod export;
+mod import;
 mod merge;
 mod refine;
 mod run;
@@ -17,6 +18,7 @@ mod solve;
 mod train;
 
 use anyhow::Result;
+use certify::StatisticalArgs;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use trainer::data::dataset::csv_path;
@@ -130,6 +132,8 @@ enum Cmd {
         /// Print JSON (the certificate record) instead of text.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        statistical: StatisticalArgs,
     },
     /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
     Eval {
@@ -177,6 +181,9 @@ enum Cmd {
         /// Name used in the generated file (default: pendulum).
         #[arg(long, default_value = "pendulum")]
         name: String,
+        /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
+        #[arg(long)]
+        c_header: Option<PathBuf>,
     },
     /// Adaptive refinement with local certificates: grow the data and the net until every
     /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
@@ -200,7 +207,42 @@ enum Cmd {
         /// Seed of the check's states.
         #[arg(long, default_value_t = 2024)]
         check_seed: u64,
+        /// Labels for the first round: a dataset of this problem (e.g. from `trainer
+        /// import`) whose records on the initial grid label those corners (no OCP solve).
+        #[arg(long)]
+        data: Option<PathBuf>,
         /// No progress lines.
+        #[arg(long, short)]
+        quiet: bool,
+        #[command(flatten)]
+        statistical: StatisticalArgs,
+    },
+    /// Import a labelled dataset from another solver's CSV: columns x1..xn (or the
+    /// problem's state names), u1..um, optional du{j}_dx{i} and status, an optional leading
+    /// index column (pandas' default); checked against the problem, a sample re-solved by
+    /// ampc, stored as a dataset for train / certify.
+    Import {
+        /// The CSV file.
+        #[arg(long)]
+        csv: PathBuf,
+        /// Problem file (default: the embedded pendulum).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Output dataset file (default: the CSV's path with extension `.imported.bin`, so
+        /// that importing a `dataset.csv` never replaces the `dataset.bin` beside it).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Rows re-solved by ampc's SQP to check the labels (0: none; all if fewer rows).
+        #[arg(long, default_value_t = trainer::data::import::DEFAULT_RESOLVE)]
+        resolve: usize,
+        /// Seed of the re-solved sample.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Accept labels that disagree with ampc's re-solve (recorded in the dataset and
+        /// the certificate, not an error).
+        #[arg(long)]
+        trust_labels: bool,
+        /// No summary.
         #[arg(long, short)]
         quiet: bool,
     },
@@ -270,7 +312,19 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             target_eps,
             l_mpc,
             json,
-        } => certify::execute(config.as_deref(), &model, &data, target_eps, l_mpc, json),
+            statistical,
+        } => {
+            let stat = statistical.options(model.with_extension("statistical.bin"))?;
+            certify::execute(
+                config.as_deref(),
+                &model,
+                &data,
+                target_eps,
+                l_mpc,
+                json,
+                stat.as_ref(),
+            )
+        }
         Cmd::Eval { model, states, out } => {
             common::refuse_overwrite(&[&out], &[&model, &states])?;
             eval::execute(&model, &states, &out)
@@ -290,9 +344,20 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             rust,
             postcard,
             name,
+            c_header,
         } => {
-            common::refuse_overwrite(&[&rust, &postcard], &[&model, opt(&certificate)])?;
-            export::execute(&model, certificate.as_deref(), &rust, &postcard, &name)
+            common::refuse_overwrite(
+                &[&rust, &postcard, opt(&c_header)],
+                &[&model, opt(&certificate)],
+            )?;
+            export::execute(
+                &model,
+                certificate.as_deref(),
+                &rust,
+                &postcard,
+                &name,
+                c_header.as_deref(),
+            )
         }
         Cmd::Refine {
             config,
@@ -301,16 +366,36 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             out,
             check,
             check_seed,
+            data,
             quiet,
+            statistical,
         } => refine::execute(
             config.as_deref(),
             target_eps,
             budget,
             out.as_deref(),
-            check,
-            check_seed,
+            (check.map(|n| (n, check_seed)), &statistical),
+            data.as_deref(),
             quiet,
         ),
+        Cmd::Import {
+            csv,
+            config,
+            out,
+            resolve,
+            seed,
+            trust_labels,
+            quiet,
+        } => {
+            let out = out.unwrap_or_else(|| csv.with_extension("imported.bin"));
+            common::refuse_overwrite(&[&out], &[&csv, opt(&config)])?;
+            let opts = trainer::data::import::ImportOptions {
+                resolve,
+                seed,
+                trust_labels,
+            };
+            import::execute(config.as_deref(), &csv, &out, &opts, quiet)
+        }
         Cmd::Merge { out, inputs } => {
             let csv = csv_path(&out);
             let ins: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();

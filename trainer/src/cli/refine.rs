@@ -2,12 +2,17 @@
 //! `[refine]` table (`--config`; a robust design refines the tightened MPC). Resumes from
 //! `<out>/refine_state.bin` and writes the model, dataset, certificate, cells and log into
 //! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
-//! more states and, with `--check`, `check.json`. Fails if the target ε is not met.
+//! more states and, with `--check`, `check.json`; with `--statistical N` the certificate
+//! gets its statistical tier (states kept in `statistical.bin`). Fails if the target ε is
+//! not met.
 
+use super::certify::{print_statistical, StatisticalArgs};
 use super::common::load_config;
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
+use trainer::certify::statistical::StatisticalOptions;
+use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
 
 pub(super) fn execute(
@@ -15,31 +20,58 @@ pub(super) fn execute(
     target_eps: Option<f64>,
     budget: Option<usize>,
     out: Option<&Path>,
-    check: Option<usize>,
-    check_seed: u64,
+    (check, statistical): (Option<(usize, u64)>, &StatisticalArgs),
+    data: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let initial_labels = data
+        .map(|p| first_round_labels(&cfg, p, quiet))
+        .transpose()?;
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| Path::new("runs").join(&cfg.name).join("refine"));
     std::fs::create_dir_all(&dir)
         .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    let stat = statistical.options(dir.join("statistical.bin"))?;
     let t0 = std::time::Instant::now();
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
+        initial_labels,
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
-    let cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    if let Some((o, store)) = &stat {
+        let s = trainer::certify::statistical::certify_statistically(
+            &cfg,
+            &r.model.mlp,
+            (&cert.base.clamp_lo, &cert.base.clamp_hi),
+            cert.base.eps,
+            store,
+            &StatisticalOptions {
+                progress: !quiet,
+                ..o.clone()
+            },
+        )
+        .with_context(|| format!("statistical states in {}", store.display()))?;
+        if !quiet {
+            print_statistical(&s);
+        }
+        cert.statistical = Some(s);
+        trainer::io::write_atomic(
+            &dir.join("certificate.json"),
+            refine::pretty(&cert).as_bytes(),
+        )?;
+    }
     if cfg.system.nx() >= 2 {
         write_eps_map(&cfg, &rs, &r, &dir)?;
     }
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
-    if let Some(n) = check {
+    if let Some((n, check_seed)) = check {
         check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
     }
     if let Some(design) = robust_design {
@@ -59,6 +91,41 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// `--data`: a dataset (e.g. from `trainer import`) labelled for this very problem, with
+/// Jacobian labels; its records on the initial grid label the first round's corners.
+fn first_round_labels(cfg: &ProblemConfig, path: &Path, quiet: bool) -> Result<Dataset> {
+    let d = Dataset::load(path)?;
+    if d.header.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was labelled for problem `{}` (hash {}…), not for the refined problem `{}`",
+            path.display(),
+            d.header.problem,
+            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            cfg.name
+        );
+    }
+    if d.labels.as_ref().is_some_and(|l| !l.jacobian) {
+        bail!(
+            "{}: imported without Jacobian columns du{{j}}_dx{{i}}; the local certificate \
+             needs ∂κ/∂x at every corner",
+            path.display()
+        );
+    }
+    let (n, total) = refine::initial_corners_labelled(cfg, &cfg.refine, &d);
+    if !quiet {
+        eprintln!(
+            "first round: {n} of the {total} initial grid corners labelled from {}{}",
+            path.display(),
+            if d.labels.is_some() {
+                " (imported labels)"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok(d)
 }
 
 /// The problem to refine, with `--target-eps` and `--budget` applied, and the design ε of

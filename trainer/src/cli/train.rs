@@ -36,6 +36,14 @@ pub(super) fn execute(
             &cfg.problem_hash()[..12]
         );
     }
+    if let Some(l) = d.labels.as_ref().filter(|l| !l.jacobian && !nominal) {
+        eprintln!(
+            "note: {} holds labels imported from {} without Jacobian columns: the Jacobian \
+             term is dropped at every point (λ₂ = 0 in effect; λ₁, λ₃ as configured)",
+            data.display(),
+            l.file
+        );
+    }
     let set = TrainSet::from_dataset(&d);
     if set.is_empty() {
         bail!("{}: no labelled points to train on", data.display());

@@ -4,8 +4,10 @@
 //!   its index.
 //! - [`dataset`]: labelling a plan with the MPC law (parallel, resumable, sharded), the
 //!   dataset file, its CSV and the merge of shards.
+//! - [`import`]: a dataset from another solver's CSV, checked and re-solved in part.
 //!
 //! Imports `problem` and `mpc`.
 
 pub mod dataset;
+pub mod import;
 pub mod sampling;

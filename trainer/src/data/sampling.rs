@@ -87,7 +87,7 @@ impl Sampler {
                 }
             }
             // Not a plan (rejected by validation): no state.
-            SamplerKind::Adaptive => x[..d].fill(f64::NAN),
+            SamplerKind::Adaptive | SamplerKind::Imported => x[..d].fill(f64::NAN),
             SamplerKind::Halton => {
                 for j in 0..d {
                     let shift = if self.seed == 0 {

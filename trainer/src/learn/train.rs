@@ -566,6 +566,7 @@ mod tests {
                 chunk: crate::data::dataset::CHUNK as u32,
             },
             records: recs,
+            labels: None,
         };
         let set = TrainSet::from_dataset(&d);
         let val = label_random_states(&cfg, 40, 1);

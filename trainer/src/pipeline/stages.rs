@@ -271,7 +271,8 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             },
         )
         .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
-        let text = serde_json::to_string_pretty(&c).map_err(|e| fail("certify", e))?;
+        let text = serde_json::to_string_pretty(&crate::certify::tier::certificate_json(&c))
+            .map_err(|e| fail("certify", e))?;
         write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
         out += &format!(
             "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
@@ -289,9 +290,15 @@ fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
 
 fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
     let m = load_model("export", &d.join("model_regularized.bin"))?;
-    let c: Certificate = load_json("export", &d.join("certificate.json"))?;
-    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c)
+    let cert_path = d.join("certificate.json");
+    let c: Certificate = load_json("export", &cert_path)?;
+    let text = std::fs::read_to_string(&cert_path)
+        .map_err(|e| fail("export", format!("{}: {e}", cert_path.display())))?;
+    let declared = crate::deploy::export::Guarantee::declared_in(&text, "certificate.json")
         .map_err(|e| fail("export", e))?;
+    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c)
+        .map_err(|e| fail("export", e))?
+        .with_declared_guarantee(declared);
     let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
         .map_err(|e| fail("export", e))?;
     let json = serde_json::json!({

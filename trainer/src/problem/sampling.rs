@@ -26,6 +26,9 @@ pub enum SamplerKind {
     /// Points chosen by adaptive refinement (`trainer refine`); not a sampling plan, so
     /// rejected in `[sampling]`.
     Adaptive,
+    /// Points (and labels) imported from another solver's CSV (`trainer import`); not a
+    /// sampling plan, so rejected in `[sampling]`.
+    Imported,
 }
 
 /// Sampler settings (`[sampling]`).

@@ -367,6 +367,12 @@ impl ProblemConfig {
                     "\"adaptive\" datasets are made by `trainer refine`, not sampled",
                 ));
             }
+            SamplerKind::Imported => {
+                return Err(invalid(
+                    "sampling.sampler",
+                    "\"imported\" datasets are made by `trainer import`, not sampled",
+                ));
+            }
         }
         self.refine.validate(nx)?;
         Ok(())

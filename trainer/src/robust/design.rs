@@ -18,7 +18,8 @@ pub struct Design {
     pub stages: StageBounds,
 }
 
-/// Designs the tube (LQR gain of the linearisation at the origin, its Riccati matrix as P,
+/// Designs the tube (LQR gain of the linearisation at the setpoint — the origin without
+/// one —, its Riccati matrix as P,
 /// the input weight chosen from `robust.lqr_r_scales` to minimise [`Tube::score`]) or the
 /// Lipschitz tightening, and tightens the bounds for `cfg.robust.eps`. A problem with
 /// `[ocp]` path or terminal constraints is refused ([`RobustError::UntightenedConstraints`]):
@@ -47,11 +48,14 @@ pub fn design(cfg: &ProblemConfig) -> Result<Design, RobustError> {
         ),
         RobustMethod::Tube => {
             let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+            // The ancillary LQR is designed where the loop settles: the setpoint
+            // (x_ref, u_ref), the origin without one (clamped into X and U).
+            let (xr, ur) = (cfg.ocp.x_ref_or_origin(nx), cfg.ocp.u_ref_or_zero(nu));
             let x0: Vec<f64> = (0..nx)
-                .map(|i| 0.0f64.clamp(cfg.domain.lo[i], cfg.domain.hi[i]))
+                .map(|i| xr[i].clamp(cfg.domain.lo[i], cfg.domain.hi[i]))
                 .collect();
             let u0: Vec<f64> = (0..nu)
-                .map(|j| 0.0f64.clamp(cfg.ocp.u_lo[j], cfg.ocp.u_hi[j]))
+                .map(|j| ur[j].clamp(cfg.ocp.u_lo[j], cfg.ocp.u_hi[j]))
                 .collect();
             let (a0, b0) = linearize_at(&model, &x0, &u0);
             let q = rs
@@ -73,7 +77,7 @@ pub fn design(cfg: &ProblemConfig) -> Result<Design, RobustError> {
             }
             best.ok_or_else(|| RobustError::Infeasible {
                 eps: rs.eps,
-                reason: "the Riccati equation of the linearisation at the origin has no \
+                reason: "the Riccati equation of the linearisation at the setpoint has no \
                          stabilising solution for any robust.lqr_r_scales"
                     .into(),
             })?

@@ -315,3 +315,31 @@ fn constraints_are_refused_by_the_design() {
         assert!(design::design(&cfg).is_ok());
     }
 }
+
+/// With a setpoint, the ancillary LQR gain is that of the linearisation at (x_ref, u_ref),
+/// not at the origin (where the pendulum's linearisation differs).
+#[test]
+fn tube_gain_is_the_lqr_of_the_linearisation_at_the_setpoint() {
+    let mut cfg = pendulum(0.05);
+    let (th, p) = (0.3f64, Pendulum::default());
+    // The torque that holds θ = 0.3: ω̇ = 0 there.
+    let u_eq = p.m * p.l * p.g * (th + std::f64::consts::PI).sin();
+    cfg.ocp.x_ref = Some(vec![th, 0.0]);
+    cfg.ocp.u_ref = Some(vec![u_eq]);
+    cfg.validate().unwrap();
+    let d = design::design(&cfg).unwrap();
+    let scale = d.tube.lqr_r_scale.expect("tube method");
+    let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    let gain = |x: &[f64], u: &[f64]| {
+        let (a, b) = linearize_at(&model, x, u);
+        tube::dare(&a, &b, &cfg.q(), &(cfg.r() * scale)).unwrap().1
+    };
+    let at_ref = gain(&[th, 0.0], &[u_eq]);
+    let at_origin = gain(&[0.0, 0.0], &[0.0]);
+    let k = DMatrix::from_row_slice(1, 2, &[d.tube.k[0][0], d.tube.k[0][1]]);
+    assert!((&k - &at_ref).amax() <= 1e-12, "{k} vs {at_ref}");
+    assert!(
+        (&k - &at_origin).amax() > 1e-3,
+        "the setpoint's gain {k} should differ from the origin's {at_origin}"
+    );
+}

@@ -234,6 +234,81 @@ fn label(cfg: &ProblemConfig, points: &mut [Point], idx: &[usize]) {
     }
 }
 
+/// The labelled records of `data` with a finite Jacobian that sit on the initial grid
+/// (`counts` points per axis over X; within 1e-9 of a grid spacing per axis), by lattice key.
+fn keyed_labels<'d>(
+    cfg: &ProblemConfig,
+    counts: &[usize],
+    data: &'d crate::data::dataset::Dataset,
+) -> HashMap<Vec<u64>, &'d crate::data::dataset::Record> {
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let mut by_key = HashMap::new();
+    let usable = |r: &&crate::data::dataset::Record| {
+        r.is_labelled()
+            && r.x.len() == lo.len()
+            && r.u.iter().chain(&r.du_dx).all(|v| v.is_finite())
+    };
+    for r in data.records.iter().filter(usable) {
+        let key: Option<Vec<u64>> = (0..lo.len())
+            .map(|k| {
+                let n = counts[k].saturating_sub(1).max(1) as f64;
+                let t = (r.x[k] - lo[k]) / (hi[k] - lo[k]) * n;
+                let i = t.round();
+                ((t - i).abs() <= 1e-9 && (0.0..=n).contains(&i)).then_some((i as u64) << LEVELS)
+            })
+            .collect();
+        if let Some(k) = key {
+            by_key.entry(k).or_insert(r);
+        }
+    }
+    by_key
+}
+
+/// How many of the initial grid's corners `data` labels (see [`RefineOptions::initial_labels`]),
+/// and how many corners there are.
+pub fn initial_corners_labelled(
+    cfg: &ProblemConfig,
+    rs: &crate::problem::RefineSettings,
+    data: &crate::data::dataset::Dataset,
+) -> (usize, usize) {
+    let counts = rs.initial_counts(cfg.system.nx());
+    (
+        keyed_labels(cfg, &counts, data).len(),
+        counts.iter().product(),
+    )
+}
+
+/// Gives the corners `idx` the labels of `data`'s records at their states
+/// ([`keyed_labels`]); returns the corners left to solve. The active set of such a label is
+/// not known, so the corner is not `regular` (its cells use the first-order form).
+fn take_labels(
+    cfg: &ProblemConfig,
+    counts: &[usize],
+    points: &mut [Point],
+    idx: &[usize],
+    data: &crate::data::dataset::Dataset,
+) -> Vec<usize> {
+    let by_key = keyed_labels(cfg, counts, data);
+    let mut left = Vec::new();
+    for &i in idx {
+        match by_key.get(&points[i].key) {
+            Some(r) => {
+                let p = &mut points[i];
+                p.u = r.u.clone();
+                p.du = r.du_dx.clone();
+                p.status = Some(r.status);
+                p.cost = r.cost;
+                p.degeneracy = r.degeneracy;
+                p.max_slack = r.max_slack;
+                p.regular = false;
+                p.piece = 0;
+            }
+            None => left.push(i),
+        }
+    }
+    left
+}
+
 struct Ctx<'a> {
     cfg: &'a ProblemConfig,
     lat: Lattice,

@@ -52,6 +52,7 @@ pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
             chunk: crate::data::dataset::CHUNK as u32,
         },
         records,
+        labels: None,
     }
 }
 
@@ -100,6 +101,12 @@ pub struct LocalCertificate {
     pub base: crate::certify::certificate::Certificate,
     /// The local figures.
     pub local: LocalSummary,
+    /// The weakest tier ε rests on, per term its tier, and the assumptions.
+    #[serde(flatten)]
+    pub guarantee: crate::certify::tier::Guarantee,
+    /// The statistical tier (`trainer refine --statistical N`), absent without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub statistical: Option<crate::certify::statistical::Statistical>,
 }
 
 /// Builds the certificate of a finished refinement.
@@ -189,6 +196,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         hash: r.model.content_hash(),
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&dataset(cfg, st).to_bytes()),
+        labels: None,
     };
     let local = LocalSummary {
         method: "local".into(),
@@ -227,7 +235,12 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
             s = rs.safety
         ),
     };
-    LocalCertificate { base, local }
+    LocalCertificate {
+        base,
+        local,
+        guarantee: crate::certify::tier::local(),
+        statistical: None,
+    }
 }
 
 /// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),

@@ -22,6 +22,10 @@ use std::time::Instant;
 pub struct RefineOptions {
     /// Called after each round.
     pub on_round: Option<fn(&RoundLog, usize)>,
+    /// Labels for the first round (e.g. a dataset of `trainer import`): an initial grid
+    /// corner whose state is a labelled record with a finite Jacobian takes that label
+    /// instead of an OCP solve. Part of the checkpoint's identity.
+    pub initial_labels: Option<crate::data::dataset::Dataset>,
 }
 
 /// The result of a refinement run.
@@ -162,7 +166,12 @@ pub fn refine(
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
-    let hash = settings_hash(cfg, rs);
+    let mut hash = settings_hash(cfg, rs);
+    if let Some(d) = &opts.initial_labels {
+        hash = crate::io::sha256_hex(
+            format!("{hash}{}", crate::io::sha256_hex(&d.to_bytes())).as_bytes(),
+        );
+    }
     let band = cfg.ocp.u_bounds(0);
     let ls = LocalSettings { safety: rs.safety };
     // Every retrained net holds the setpoint (`refine.training.hold_setpoint`).
@@ -243,6 +252,9 @@ pub fn refine(
                 }
                 let n = ctx.node(&mut st, lo, vec![1u64 << LEVELS; nx], &mut pending);
                 st.roots.push(n);
+            }
+            if let Some(d) = &opts.initial_labels {
+                pending = take_labels(cfg, &counts, &mut st.points, &pending, d);
             }
             st
         }

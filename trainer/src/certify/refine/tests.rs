@@ -72,3 +72,73 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
     let leaf = leaf_of(&st, &lat, &counts, &cfg.domain.hi);
     assert!(st.nodes[leaf].split.is_none());
 }
+
+/// `--data`: corners of the initial grid take the labels of records at their states (within
+/// rounding), and only those; records off the grid, unlabelled or without a finite
+/// Jacobian label nothing.
+#[test]
+fn first_round_corners_take_the_labels_of_records_at_their_states() {
+    use crate::data::dataset::{Dataset, Record};
+    let cfg = ProblemConfig::default();
+    let counts = [4usize, 3];
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
+    let mut ctx = Ctx {
+        cfg: &cfg,
+        lat,
+        index: HashMap::new(),
+    };
+    let mut st = RefineState {
+        hash: String::new(),
+        points: vec![],
+        nodes: vec![],
+        roots: vec![],
+        model: None,
+        best: None,
+        log: vec![],
+        bounds: vec![],
+        finished: false,
+    };
+    let mut pending = Vec::new();
+    for r in 0..6u64 {
+        let lo = vec![(r / 2) << LEVELS, (r % 2) << LEVELS];
+        let n = ctx.node(&mut st, lo, vec![1 << LEVELS; 2], &mut pending);
+        st.roots.push(n);
+    }
+    assert_eq!(pending.len(), 12);
+    let rec = |i: u64, x: Vec<f64>, status: SqpStatus, du: f64| Record {
+        index: i,
+        x,
+        u: vec![i as f64],
+        du_dx: vec![du, 1.0],
+        cost: 1.0,
+        status,
+        iterations: 0,
+        kkt: 0.0,
+        degeneracy: None,
+        max_slack: 0.0,
+    };
+    let p = |i: usize| st.points[pending[i]].x.clone();
+    // Rounding of another tool's last digit is absorbed.
+    let nudged: Vec<f64> = p(4).iter().map(|v| v * (1.0 + 1e-15)).collect();
+    let off_grid = vec![0.5 * (p(0)[0] + p(1)[0]), p(0)[1]];
+    let records = vec![
+        rec(0, p(0), SqpStatus::Converged, 2.0),
+        rec(1, p(1), SqpStatus::Infeasible, 2.0),
+        rec(2, p(2), SqpStatus::Soft, f64::NAN),
+        rec(3, nudged, SqpStatus::Soft, 3.0),
+        rec(4, off_grid, SqpStatus::Converged, 2.0),
+    ];
+    let mut data = crate::certify::refine::dataset(&cfg, &st);
+    data.records = records;
+    let data: Dataset = data;
+    let left = take_labels(&cfg, &counts, &mut st.points, &pending, &data);
+    assert_eq!(left.len(), 10, "two corners labelled by the data");
+    assert!(!left.contains(&pending[0]) && !left.contains(&pending[4]));
+    let a = &st.points[pending[0]];
+    assert_eq!((a.u.clone(), a.du.clone()), (vec![0.0], vec![2.0, 1.0]));
+    assert_eq!((a.status, a.regular), (Some(SqpStatus::Converged), false));
+    assert_eq!(st.points[pending[4]].u, vec![3.0]);
+    assert_eq!(st.points[pending[4]].status, Some(SqpStatus::Soft));
+    assert!(st.points[pending[1]].status.is_none());
+    assert!(st.points[pending[2]].status.is_none());
+}

@@ -8,7 +8,11 @@
 //! chunks c with c mod N = K) merge into exactly the single-run dataset.
 //!
 //! **File format** (version [`FORMAT_VERSION`]): the postcard encoding of [`Dataset`]
-//! (magic, version, header, records sorted by index) followed by its SHA-256
+//! (magic, version, header, records sorted by index) followed by its SHA-256. A dataset
+//! imported from another solver (`trainer import`) is version [`IMPORTED_FORMAT_VERSION`]:
+//! the same bytes followed by the postcard encoding of its
+//! [`ImportedLabels`](crate::data::import::ImportedLabels), then the SHA-256 of it all; ampc's
+//! own datasets stay version 2, byte for byte, and both versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
 //! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
@@ -20,6 +24,7 @@
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
 
+use crate::data::import::ImportedLabels;
 use crate::io::{decode_checked, write_atomic};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::mpc::sensitivity::Degeneracy;
@@ -29,8 +34,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Dataset file format version.
+/// Dataset file format version (labels from ampc's own solver).
 pub const FORMAT_VERSION: u32 = 2;
+/// Format version of a dataset whose labels were imported: version 2 plus its
+/// [`ImportedLabels`] after the records.
+pub const IMPORTED_FORMAT_VERSION: u32 = 3;
 /// Magic bytes at the start of a dataset file.
 pub const MAGIC: [u8; 8] = *b"AMPCDSET";
 /// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
@@ -176,6 +184,10 @@ pub struct Dataset {
     pub header: Header,
     /// Records sorted by index.
     pub records: Vec<Record>,
+    /// Where the labels come from when they were imported (`None`: ampc's solver). Stored
+    /// after the records in format version [`IMPORTED_FORMAT_VERSION`] only.
+    #[serde(skip)]
+    pub labels: Option<ImportedLabels>,
 }
 
 /// Counts by status, for reports.
@@ -231,14 +243,25 @@ impl Dataset {
             path: origin.to_string(),
             reason,
         };
-        let d: Dataset = decode_checked(
+        // Both versions pass the version check; version 3 then reads its labels record.
+        let mut d: Dataset = decode_checked(
             bytes,
             origin,
             &MAGIC,
             "dataset",
-            |d: &Dataset| d.version,
+            |d: &Dataset| match d.version {
+                IMPORTED_FORMAT_VERSION => FORMAT_VERSION,
+                v => v,
+            },
             FORMAT_VERSION,
         )?;
+        if d.version == IMPORTED_FORMAT_VERSION {
+            let body = crate::io::unseal(bytes).unwrap_or_default();
+            let labels = postcard::take_from_bytes::<Dataset>(body)
+                .and_then(|(_, rest)| postcard::from_bytes::<ImportedLabels>(rest))
+                .map_err(|e| fmt(format!("imported dataset without its labels record: {e}")))?;
+            d.labels = Some(labels);
+        }
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
         for (i, r) in d.records.iter().enumerate() {
             if r.x.len() != nx || r.u.len() != nu || r.du_dx.len() != nx * nu {
@@ -257,9 +280,14 @@ impl Dataset {
         Ok(d)
     }
 
-    /// Encodes the dataset (postcard, sealed with its checksum).
+    /// Encodes the dataset (postcard, then the imported labels record if any, sealed with
+    /// its checksum).
     pub fn to_bytes(&self) -> Vec<u8> {
-        crate::io::seal(postcard::to_allocvec(self).unwrap_or_default())
+        let mut body = postcard::to_allocvec(self).unwrap_or_default();
+        if let Some(l) = &self.labels {
+            body.extend(postcard::to_allocvec(l).unwrap_or_default());
+        }
+        crate::io::seal(body)
     }
 
     /// Writes the dataset atomically.
@@ -443,6 +471,7 @@ pub fn generate(
         version: FORMAT_VERSION,
         header,
         records,
+        labels: None,
     };
     // The dataset and its CSV as one set: a failure leaves the previous pair.
     let csv = csv_path(out);
@@ -518,6 +547,7 @@ pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
         version: FORMAT_VERSION,
         header: base,
         records,
+        labels: None,
     })
 }
 

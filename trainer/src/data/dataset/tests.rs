@@ -85,6 +85,7 @@ proptest! {
                 index: i, x: vec![0.5, 1.0], u: vec![2.0], du_dx: vec![1.0, 2.0], cost: 1.0,
                 status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0,
             }).collect(),
+            labels: None,
         };
         let mut b = d.to_bytes();
         for (i, v) in flips { let n = b.len(); b[i % n] = v; }

@@ -23,10 +23,14 @@
 //! - `allowance`: the f32 error analysis ([`f32_allowance`], [`sampled_max_diff`],
 //!   [`certify_f32`]);
 //! - `rust`: the generated Rust file ([`render_rust`]);
+//! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
+//! - `guarantee`: the certificate's tier ([`Guarantee`]);
 //! - `blob`: the postcard blob ([`render_postcard`], [`crc32`]).
 
 mod allowance;
 mod blob;
+mod c_header;
+mod guarantee;
 mod rust;
 mod tanh;
 #[cfg(test)]
@@ -40,6 +44,8 @@ use crate::io::FileError;
 pub use allowance::{certify_f32, eval_f32, f32_allowance, sampled_max_diff, SAMPLES};
 use allowance::{f32_down, f32_up};
 pub use blob::{crc32, render_postcard, BLOB_MAGIC, BLOB_VERSION};
+pub use c_header::render_c_header;
+pub use guarantee::Guarantee;
 pub use rust::render_rust;
 pub use tanh::{Tanh, TANH_FAST_ERR_BINS};
 
@@ -119,6 +125,9 @@ pub struct ExportModel {
     pub hash: String,
     /// True for a stand-in network without a certificate.
     pub placeholder: bool,
+    /// Tier of the certificate's claim (default: the weakest, `estimated`).
+    #[serde(default)]
+    pub guarantee: Guarantee,
 }
 
 /// What can go wrong in an export.
@@ -275,6 +284,15 @@ impl ExportModel {
                     return inv(format!("fallback[{j}] outside the actuator limits"));
                 }
             }
+        }
+        let supported = Guarantee::derived(self.l_mpc_is_estimate, self.placeholder);
+        if self.guarantee < supported {
+            return inv(format!(
+                "guarantee: {} claims more than the numbers support ({}: L_MPC is sampled or \
+                 the network is a placeholder)",
+                self.guarantee.name(),
+                supported.name()
+            ));
         }
         for (v, w) in [
             (self.eps, "eps"),
@@ -455,6 +473,7 @@ pub fn placeholder_pendulum() -> ExportModel {
         covering_radius: 0.0,
         hash: "placeholder-2-10-10-1-seed-5eed".into(),
         placeholder: true,
+        guarantee: Guarantee::Estimated,
     }
 }
 
@@ -532,6 +551,16 @@ impl ExportModel {
             covering_radius: cert.covering_radius,
             hash: cert.hash.clone(),
             placeholder: false,
+            guarantee: Guarantee::derived(cert.l_mpc_is_estimate, false),
         })
+    }
+
+    /// This model with its tier lowered to `declared` (the certificate's `"guarantee"`,
+    /// see [`Guarantee::declared_in`]) when that is weaker: a claim is never raised.
+    pub fn with_declared_guarantee(mut self, declared: Option<Guarantee>) -> Self {
+        if let Some(d) = declared {
+            self.guarantee = self.guarantee.weakest(d);
+        }
+        self
     }
 }

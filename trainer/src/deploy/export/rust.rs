@@ -1,6 +1,11 @@
 //! The generated Rust file `controller-core/src/generated/weights.rs` ([`render_rust`]):
 //! the folded f32 layers, the network type and constant, the f32 domain and one
 //! `Certificate` per device tanh, laid out the way rustfmt formats it (width [`WIDTH`]).
+//!
+//! The file is a plain list of items for `controller_core::include_controller!` (which
+//! wraps it in a module, imports `Certificate`, `Guarantee`, `Dense`, `Hidden` and allows
+//! the float-literal lints): no inner attributes, no `use` of `crate::` paths, so the same
+//! file compiles inside `controller-core` and in any crate that depends on it.
 
 use std::fmt::Write as _;
 
@@ -76,6 +81,10 @@ fn certificate_literal(
     };
     vec![
         ("eps".into(), lit64(eps_total)),
+        (
+            "guarantee".into(),
+            format!("Guarantee::{}", model.guarantee.rust_name()),
+        ),
         ("eps_nn".into(), lit64(model.eps)),
         ("eps_d".into(), lit64(model.eps_d)),
         ("l_nn".into(), lit64(model.l_nn)),
@@ -116,51 +125,47 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
     if model.placeholder {
         let _ = writeln!(
             o,
-            "//! PLACEHOLDER weights for `{}`: a deterministic stand-in network, NOT the trained",
+            "// PLACEHOLDER weights for `{}`: a deterministic stand-in network, NOT the trained",
             model.name
         );
         o.push_str(
-            "//! controller and NOT certified (eps_nn = 0; only the f32 allowance is computed).\n\
-             //! It exists so that the embedded side can be built and tested before training;\n\
-             //! `trainer export` replaces it with the trained network.\n",
+            "// controller and NOT certified (eps_nn = 0; only the f32 allowance is computed).\n\
+             // It exists so that the embedded side can be built and tested before training;\n\
+             // `trainer export` replaces it with the trained network.\n",
         );
     } else {
         let _ = writeln!(
             o,
-            "//! Weights and certificates of the `{}` controller.",
+            "// Weights and certificates of the `{}` controller.",
             model.name
         );
     }
     let arch: Vec<String> = sizes.iter().map(usize::to_string).collect();
     let _ = writeln!(
         o,
-        "//!\n//! Architecture {} (tanh hidden layers, linear output), input and output scalings\n\
-         //! folded into the first and last layer (physical units in and out). Model hash:\n\
-         //! `{}`.",
+        "//\n// Architecture {} (tanh hidden layers, linear output), input and output scalings\n\
+         // folded into the first and last layer (physical units in and out). Model hash:\n\
+         // `{}`.",
         arch.join("-"),
         model.hash
     );
     let _ = writeln!(
         o,
-        "//!\n//! f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64| over X, {} sub-boxes) vs the\n\
-         //! largest difference on {} random states: libm tanh {:.3e} vs {:.3e}; fast tanh\n\
-         //! {:.3e} vs {:.3e}.",
+        "//\n// f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64| over X, {} sub-boxes) vs the\n\
+         // largest difference on {} random states: libm tanh {:.3e} vs {:.3e}; fast tanh\n\
+         // {:.3e} vs {:.3e}. Guarantee tier of ε: {}.",
         report.boxes,
         report.samples,
         report.f32_allowance[0],
         report.f32_observed[0],
         report.f32_allowance[1],
-        report.f32_observed[1]
+        report.f32_observed[1],
+        model.guarantee.name()
     );
     o.push_str(
-        "#![allow(\n    clippy::approx_constant,\n    clippy::excessive_precision,\n    \
-         clippy::unreadable_literal\n)]\n\n",
+        "//\n// Compile it with `controller_core::include_controller!(\"weights.rs\")` (it provides\n\
+         // `Certificate`, `Guarantee`, `Dense` and `Hidden`).\n\n",
     );
-    o.push_str("use crate::certificate::Certificate;\nuse crate::layer::Dense;\n");
-    if model.layers.len() > 1 {
-        o.push_str("use crate::mlp::Hidden;\n");
-    }
-    o.push('\n');
     let _ = writeln!(o, "/// State dimension.\npub const NX: usize = {nx};");
     let _ = writeln!(o, "/// Input dimension.\npub const NU: usize = {nu};");
     // Network type

@@ -111,3 +111,23 @@ fn a_certificate_of_another_model_or_no_problem_is_refused() {
     assert!(e.contains("names no problem"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_tier_above_what_the_numbers_support_is_refused() {
+    let mut m = placeholder_pendulum();
+    m.guarantee = Guarantee::Sound;
+    let e = m.validate().unwrap_err().to_string();
+    assert!(e.contains("guarantee") && e.contains("estimated"), "{e}");
+    m.placeholder = false;
+    m.l_mpc_is_estimate = false;
+    assert!(m.validate().is_ok());
+    // A declaration only ever lowers the tier.
+    let m = m.with_declared_guarantee(Some(Guarantee::Statistical));
+    assert_eq!(m.guarantee, Guarantee::Statistical);
+    let m = m.with_declared_guarantee(Some(Guarantee::Sound));
+    assert_eq!(m.guarantee, Guarantee::Statistical);
+    assert_eq!(
+        m.with_declared_guarantee(None).guarantee,
+        Guarantee::Statistical
+    );
+}

@@ -1,0 +1,44 @@
+/*
+ * Minimal Cortex-M4F start-up for QEMU mps2-an386: vector table, .data/.bss set-up, FPU
+ * enable, newlib's semihosting handles (rdimon), main, and _exit with main's status.
+ */
+#include <stdint.h>
+#include <unistd.h>
+
+extern uint32_t _sidata, _sdata, _edata, _sbss, _ebss, _estack;
+extern int main(void);
+extern void initialise_monitor_handles(void);
+
+void Reset_Handler(void);
+void Fault_Handler(void);
+
+void Reset_Handler(void) {
+    uint32_t *src = &_sidata;
+    uint32_t *dst;
+    for (dst = &_sdata; dst < &_edata;) {
+        *dst++ = *src++;
+    }
+    for (dst = &_sbss; dst < &_ebss;) {
+        *dst++ = 0u;
+    }
+    /* CPACR: full access to CP10 and CP11 (the FPU) before any floating-point code. */
+    *(volatile uint32_t *)0xE000ED88u |= 0xFu << 20;
+    __asm__ volatile("dsb\n\tisb" ::: "memory");
+    initialise_monitor_handles();
+    _exit(main());
+}
+
+void Fault_Handler(void) {
+    _exit(3);
+}
+
+struct vector_table {
+    uint32_t *initial_sp;
+    void (*handlers[15])(void);
+};
+
+__attribute__((section(".isr_vector"), used)) const struct vector_table vectors = {
+    &_estack,
+    {Reset_Handler, Fault_Handler, Fault_Handler, Fault_Handler, Fault_Handler,
+     Fault_Handler, 0, 0, 0, 0, Fault_Handler, Fault_Handler, 0, Fault_Handler,
+     Fault_Handler}};

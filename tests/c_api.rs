@@ -1,0 +1,413 @@
+//! The C API (`controller-core/capi`): its header compiles as strict C99 and its static
+//! library gives, from C, exactly what the Rust core gives.
+//!
+//! 1. Host: `libampc_capi.a` built for the host, `ampc_stdin.c` compiled with the host `cc`
+//!    (`-std=c99 -Wall -Wextra -Werror -pedantic`) and linked against it; 10⁴ states (inside,
+//!    near and outside X, NaN, ±inf, −0, subnormals, random bit patterns) through it: flags
+//!    and the bits of u equal `controller_core::evaluate`; the header's certificate equals
+//!    the library's (`ampc_linked_certificate`) and the core's.
+//! 2. QEMU: the library built for thumbv7em-none-eabihf, the C firmware
+//!    (`capi/c/firmware`, arm-none-eabi-gcc, newlib + semihosting) runs the upswing in
+//!    QEMU mps2-an386; its 91 rows equal, bit for bit, those of the Rust firmware run in
+//!    QEMU; no panic symbol is reachable from `ampc_evaluate` in its ELF.
+//!
+//! Needs `cc`, `arm-none-eabi-gcc` with newlib (`gcc-arm-none-eabi`,
+//! `libnewlib-arm-none-eabi`), `qemu-system-arm`, binutils-arm-none-eabi and the
+//! thumbv7em-none-eabihf target (`.ci/run` installs them); fails loudly without them.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use controller_core::{Flags, CERTIFICATE, FAST_TANH, NX};
+
+fn root() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn capi() -> PathBuf {
+    root().join("controller-core/capi")
+}
+
+/// `target/` of this build (target/<profile>/deps/<test> → target).
+fn target_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    exe.ancestors().nth(3).unwrap().to_path_buf()
+}
+
+/// Builds `libampc_capi.a` (release, own target dir) for `target` (None: the host) and
+/// returns its path.
+fn build_staticlib(target: Option<&str>, features: &[&str]) -> PathBuf {
+    let dir = target_dir().join("c-api");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "-p", "ampc-capi", "--release", "--lib"])
+        .env("CARGO_TARGET_DIR", &dir)
+        .current_dir(root());
+    let mut feats: Vec<&str> = features.to_vec();
+    if FAST_TANH {
+        feats.push("fast-tanh");
+    }
+    if !feats.is_empty() {
+        cmd.args(["--features", &feats.join(",")]);
+    }
+    if let Some(t) = target {
+        cmd.args(["--target", t]);
+    }
+    let st = cmd.status().expect("run cargo");
+    assert!(st.success(), "building ampc-capi for {target:?} failed");
+    match target {
+        Some(t) => dir.join(t).join("release/libampc_capi.a"),
+        None => dir.join("release/libampc_capi.a"),
+    }
+}
+
+fn run_checked(cmd: &mut Command, what: &str) -> String {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("{what}: cannot run {cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{what} failed ({:?}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+const STRICT: [&str; 5] = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"];
+
+/// 10⁴ states: every branch of `evaluate` and every kind of float.
+fn states() -> Vec<[f32; NX]> {
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    };
+    let special = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -0.0,
+        0.0,
+        f32::MIN_POSITIVE / 4.0,
+        f32::MAX,
+        f32::MIN,
+        1e30,
+        -1e-30,
+    ];
+    let (lo, hi) = (CERTIFICATE.domain_lo, CERTIFICATE.domain_hi);
+    (0..10_000)
+        .map(|k| {
+            let mut x = [0.0f32; NX];
+            for (i, xi) in x.iter_mut().enumerate() {
+                let r = next();
+                let t = (r >> 40) as f64 / (1u64 << 24) as f64;
+                let w = hi[i] - lo[i];
+                *xi = match k % 10 {
+                    0 => f32::from_bits((r >> 32) as u32),
+                    1 => special[(r % special.len() as u64) as usize],
+                    2 => (lo[i] - 0.5 * w + 2.0 * w * t) as f32,
+                    _ => (lo[i] + w * t) as f32,
+                };
+            }
+            x
+        })
+        .collect()
+}
+
+#[test]
+fn host_c_program_is_bit_identical_to_the_core_on_ten_thousand_states() {
+    let lib = build_staticlib(None, &[]);
+    let dir = ampc_tests::tempdir();
+    let exe = dir.path().join("ampc_stdin");
+    let mut cc = Command::new("cc");
+    cc.args(STRICT)
+        .arg("-O2")
+        .arg("-I")
+        .arg(capi().join("include"))
+        .arg(capi().join("c/ampc_stdin.c"))
+        .arg(&lib)
+        .args(["-lm", "-lpthread", "-ldl", "-o"])
+        .arg(&exe);
+    if FAST_TANH {
+        cc.arg("-DAMPC_FAST_TANH");
+    }
+    run_checked(&mut cc, "cc (strict C99) of ampc_stdin.c + libampc_capi.a");
+    // The header on its own, also as C++ would see it, with the same warnings as errors.
+    let hdr = capi().join("include/ampc.h");
+    run_checked(
+        Command::new("cc")
+            .args(STRICT)
+            .args(["-fsyntax-only", "-x", "c"])
+            .arg(&hdr),
+        "cc -fsyntax-only ampc.h",
+    );
+
+    let xs = states();
+    let mut input = String::new();
+    for x in &xs {
+        let line: Vec<String> = x.iter().map(|v| format!("0x{:08x}", v.to_bits())).collect();
+        input += &line.join(" ");
+        input.push('\n');
+    }
+    let mut child = Command::new(&exe)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Write from another thread: the child's output would fill its pipe meanwhile.
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()));
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut lines = text.lines();
+    let head = lines.next().unwrap();
+    let tier = ["sound", "statistical", "estimated"][CERTIFICATE.guarantee as usize];
+    let f: Vec<&str> = head.split(' ').collect();
+    assert_eq!(
+        f.len(),
+        5,
+        "first line {head:?}: certificate <ok|MISMATCH> eps= tier= hash="
+    );
+    assert_eq!(
+        (f[0], f[1], f[3], f[4]),
+        (
+            "certificate",
+            "ok",
+            format!("tier={tier}").as_str(),
+            format!("hash={}", CERTIFICATE.hash).as_str()
+        ),
+        "the header's certificate is not the library's or the core's"
+    );
+    // %.17g reads back to the same double.
+    let eps: f64 = f[2].strip_prefix("eps=").unwrap().parse().unwrap();
+    assert_eq!(eps.to_bits(), CERTIFICATE.eps.to_bits());
+    let mut seen = BTreeSet::new();
+    let mut n = 0;
+    for (x, line) in xs.iter().zip(lines) {
+        let (flags, bits) = line.split_once(" # ").unwrap();
+        let flags: u8 = flags.split(' ').next().unwrap().parse().unwrap();
+        let u: Vec<u32> = bits
+            .split(' ')
+            .map(|b| u32::from_str_radix(b, 16).unwrap())
+            .collect();
+        let want = controller_core::evaluate(x);
+        assert_eq!(
+            (flags, u.as_slice()),
+            (want.flags.0, want.u.map(f32::to_bits).as_slice()),
+            "x = {x:?}: C {line:?}, Rust {want:?}"
+        );
+        seen.insert(flags);
+        n += 1;
+    }
+    assert_eq!(n, xs.len());
+    // The states exercise every outcome: inside, projected, non-finite.
+    for f in [Flags::EMPTY, Flags::OUT_OF_DOMAIN, Flags::NON_FINITE] {
+        assert!(seen.contains(&f.0), "no state with flags {f:?}: {seen:?}");
+    }
+    println!(
+        "host: {n} states bit-identical; libampc_capi.a {} bytes",
+        std::fs::metadata(&lib).unwrap().len()
+    );
+}
+
+/// One row of a firmware run: k, bits of x1, x2, u, flags.
+type Row = (usize, u32, u32, u32, u8);
+
+fn qemu(elf: &Path) -> String {
+    let out = Command::new("qemu-system-arm")
+        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(elf)
+        .output()
+        .expect("qemu-system-arm not found: apt-get install -y qemu-system-arm");
+    assert!(
+        out.status.success(),
+        "{} exited with {:?}: {}",
+        elf.display(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Rows of the C firmware (floats as hex bits) or the Rust firmware (decimal, 9 digits).
+fn rows(csv: &str, hex: bool) -> Vec<Row> {
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(firmware_example::HEADER));
+    let f32_bits = |s: &str| {
+        if hex {
+            u32::from_str_radix(s, 16).unwrap()
+        } else {
+            s.parse::<f32>().unwrap().to_bits()
+        }
+    };
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 5, "row {l:?}");
+            (
+                f[0].parse().unwrap(),
+                f32_bits(f[1]),
+                f32_bits(f[2]),
+                f32_bits(f[3]),
+                f[4].parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// The Rust firmware, built as tests/firmware_in_qemu.rs builds it (same target dir and
+/// arguments: no second build).
+fn rust_firmware() -> PathBuf {
+    let dir = target_dir().join("firmware-qemu");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "-p", "firmware-example", "--release", "--bins"])
+        .args(["--target", "thumbv7em-none-eabihf"])
+        .env("CARGO_TARGET_DIR", &dir)
+        .current_dir(root());
+    if FAST_TANH {
+        cmd.args(["--features", "fast-tanh"]);
+    }
+    assert!(cmd.status().expect("run cargo").success());
+    dir.join("thumbv7em-none-eabihf/release/firmware-example")
+}
+
+/// The C firmware's ELF: `capi/c/firmware` + the thumbv7em static library.
+fn c_firmware() -> PathBuf {
+    let lib = build_staticlib(Some("thumbv7em-none-eabihf"), &["pendulum-plant"]);
+    let fw = capi().join("c/firmware");
+    let elf = target_dir().join("c-api/c-firmware.elf");
+    let mut gcc = Command::new("arm-none-eabi-gcc");
+    gcc.args([
+        "-mcpu=cortex-m4",
+        "-mthumb",
+        "-mfloat-abi=hard",
+        "-mfpu=fpv4-sp-d16",
+    ])
+    .args(STRICT)
+    .args([
+        "-O2",
+        "-ffunction-sections",
+        "-fdata-sections",
+        "-nostartfiles",
+    ])
+    .args([
+        "--specs=nano.specs",
+        "--specs=rdimon.specs",
+        "-Wl,--gc-sections",
+    ])
+    .arg("-T")
+    .arg(fw.join("mps2_an386.ld"))
+    .arg("-I")
+    .arg(capi().join("include"))
+    .arg(fw.join("startup.c"))
+    .arg(fw.join("main.c"))
+    .arg(&lib)
+    .arg("-o")
+    .arg(&elf);
+    if FAST_TANH {
+        gcc.arg("-DAMPC_FAST_TANH");
+    }
+    run_checked(
+        &mut gcc,
+        "arm-none-eabi-gcc (apt-get install -y gcc-arm-none-eabi libnewlib-arm-none-eabi)",
+    );
+    elf
+}
+
+#[test]
+fn c_firmware_in_qemu_is_bit_identical_to_the_rust_firmware() {
+    let elf = c_firmware();
+    let c = rows(&qemu(&elf), true);
+    let rust = rows(&qemu(&rust_firmware()), false);
+    assert_eq!(c.len(), firmware_example::STEPS + 1);
+    assert_eq!(c.len(), rust.len());
+    for (a, b) in c.iter().zip(&rust) {
+        assert_eq!(
+            a, b,
+            "step {}: C firmware {a:x?}, Rust firmware {b:x?}",
+            a.0
+        );
+    }
+    // The upswing moves (the comparison is not of two constant sequences).
+    assert!(c.iter().map(|r| r.3).collect::<BTreeSet<_>>().len() > 10);
+
+    // No panic path from the C entry point into the library (panic handler: a loop).
+    let graph = call_graph(&elf);
+    assert!(
+        graph.contains_key("ampc_evaluate"),
+        "ampc_evaluate not in the ELF"
+    );
+    let mut seen = BTreeSet::new();
+    let mut stack = vec!["ampc_evaluate".to_string()];
+    while let Some(f) = stack.pop() {
+        if seen.insert(f.clone()) {
+            stack.extend(graph.get(&f).into_iter().flatten().cloned());
+        }
+    }
+    let bad: Vec<&String> = seen
+        .iter()
+        .filter(|f| f.to_lowercase().contains("panic"))
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "panic paths reachable from ampc_evaluate: {bad:?}"
+    );
+    let size = run_checked(
+        Command::new("arm-none-eabi-size").arg(&elf),
+        "arm-none-eabi-size",
+    );
+    // Code reachable from ampc_evaluate (weights are literal pools inside it).
+    let nm = run_checked(
+        Command::new("arm-none-eabi-nm").arg("-S").arg(&elf),
+        "arm-none-eabi-nm",
+    );
+    let mut controller = 0u64;
+    for l in nm.lines() {
+        let f: Vec<&str> = l.split_whitespace().collect();
+        if f.len() == 4 && seen.contains(f[3]) {
+            controller += u64::from_str_radix(f[1], 16).unwrap();
+        }
+    }
+    println!(
+        "C firmware (91 rows bit-identical to the Rust firmware):\n{size}\
+         controller reachable from ampc_evaluate: {controller} B in {seen:?}"
+    );
+}
+
+/// function → referenced symbols, from `arm-none-eabi-objdump -d`.
+fn call_graph(elf: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let text = run_checked(
+        Command::new("arm-none-eabi-objdump")
+            .args(["-d", "--no-show-raw-insn"])
+            .arg(elf),
+        "arm-none-eabi-objdump",
+    );
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let mut cur = String::new();
+    for line in text.lines() {
+        if let Some(name) = line
+            .strip_suffix(">:")
+            .and_then(|l| l.split_once(" <"))
+            .map(|x| x.1)
+        {
+            cur = name.to_string();
+            graph.entry(cur.clone()).or_default();
+        } else if let Some((_, target)) = line.split_once('<') {
+            let t = target.split(['+', '>']).next().unwrap_or("");
+            if !t.is_empty() && t != cur {
+                graph.entry(cur.clone()).or_default().insert(t.to_string());
+            }
+        }
+    }
+    graph
+}

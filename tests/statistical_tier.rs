@@ -1,0 +1,168 @@
+//! `trainer certify --statistical N` end to end on a small double-integrator model: the
+//! JSON's `"statistical"` block (the keys) against a recount made here from the
+//! stored states (`trainer eval` of the model at them, the certificate's clamp band) and
+//! the closed form of the Clopper–Pearson bound for k = 0; a second call reuses the
+//! stored states (same answer, file untouched); bad flags are clear errors.
+
+use ampc_tests::{config, tempdir, trainer};
+use std::path::Path;
+
+fn csv(p: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(p).unwrap();
+    let mut lines = text.lines();
+    let head = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    (head, rows)
+}
+
+#[test]
+fn statistical_tier_counts_and_bounds_exceedances() {
+    let dir = tempdir();
+    let d = dir.path();
+    let text = std::fs::read_to_string(config("double_integrator.toml"))
+        .unwrap()
+        .replace("counts = [21, 11]", "counts = [9, 5]")
+        + "\n[training]\nepochs = 60\nbatch_size = 9\nvalidation_n = 20\nlog_every = 50\n";
+    let cfg = d.join("di.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let (cfg, data, model) = (
+        cfg.to_str().unwrap().to_string(),
+        d.join("di.bin"),
+        d.join("m.bin"),
+    );
+    let (data, model) = (data.to_str().unwrap(), model.to_str().unwrap());
+    for args in [
+        vec!["sample", "--config", &cfg, "--out", data, "--quiet"],
+        vec![
+            "train", "--config", &cfg, "--data", data, "--out", model, "--quiet",
+        ],
+    ] {
+        let o = trainer(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let n = 600usize;
+    let certify = |extra: &[&str]| {
+        let mut a = vec![
+            "certify", "--config", &cfg, "--model", model, "--data", data, "--json",
+        ];
+        a.extend_from_slice(extra);
+        trainer(&a)
+    };
+    let ns = n.to_string();
+    let first = certify(&["--statistical", &ns, "--confidence", "0.95"]);
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
+    let st = &v["statistical"];
+    assert_eq!(st["samples"], n);
+    assert_eq!(st["confidence"], 0.95);
+    let eps = v["eps"].as_f64().unwrap();
+    assert_eq!(st["eps"].as_f64(), Some(eps));
+
+    // Recount from the stored states with the model's own outputs.
+    let store = d.join("m.statistical.bin");
+    let store_csv = d.join("m.statistical.csv");
+    assert!(store.exists() && store_csv.exists());
+    let (head, rows) = csv(&store_csv);
+    assert_eq!(rows.len(), n);
+    let col = |name: &str| head.iter().position(|h| h == name).unwrap();
+    let (ix1, ix2, iu, ist) = (col("x1"), col("x2"), col("u1"), col("status"));
+    let states = d.join("states.csv");
+    let mut s = String::from("x1,x2\n");
+    for r in &rows {
+        s += &format!("{},{}\n", r[ix1], r[ix2]);
+    }
+    std::fs::write(&states, s).unwrap();
+    let evald = d.join("eval.csv");
+    let o = trainer(&[
+        "eval",
+        "--model",
+        model,
+        "--states",
+        states.to_str().unwrap(),
+        "--out",
+        evald.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (eh, erows) = csv(&evald);
+    let eu = eh.iter().position(|h| h == "u1").unwrap();
+    let (lo, hi) = (
+        v["clamp_lo"][0].as_f64().unwrap(),
+        v["clamp_hi"][0].as_f64().unwrap(),
+    );
+    let mut errors = Vec::new();
+    for (r, e) in rows.iter().zip(&erows) {
+        let labelled = r[ist] == "converged" || r[ist] == "soft";
+        let err = if labelled {
+            let kappa: f64 = r[iu].parse().unwrap();
+            let net: f64 = e[eu].parse().unwrap();
+            (kappa - net.clamp(lo, hi)).abs()
+        } else {
+            f64::INFINITY
+        };
+        errors.push(err);
+    }
+    let k = errors.iter().filter(|e| **e > eps).count();
+    assert_eq!(st["exceedances"], k);
+    let max = errors
+        .iter()
+        .filter(|e| e.is_finite())
+        .fold(0.0f64, |m, e| m.max(*e));
+    assert!((st["max_error"].as_f64().unwrap() - max).abs() <= 1e-9 * (1.0 + max));
+    let p = st["p_exceed_upper"].as_f64().unwrap();
+    if k == 0 {
+        let closed = 1.0 - 0.05f64.powf(1.0 / n as f64);
+        assert!((p - closed).abs() <= 1e-10 * closed, "{p} vs {closed}");
+    } else {
+        // At least the observed rate.
+        assert!(p >= k as f64 / n as f64, "{p} below the observed rate");
+    }
+    // The level for P ≤ 1e-2: exceedances of it are few enough that their bound is ≤ 1e-2.
+    let o2 = certify(&[
+        "--statistical",
+        &ns,
+        "--confidence",
+        "0.95",
+        "--p-target",
+        "0.02",
+    ]);
+    assert!(o2.status.success());
+    let v2: serde_json::Value = serde_json::from_slice(&o2.stdout).unwrap();
+    let e2 = v2["statistical"]["eps_at_p_target"]
+        .as_f64()
+        .expect("reachable with 600 states");
+    let k2 = errors.iter().filter(|e| **e > e2).count();
+    // 1 − 0.05^{1/600} = 5.0e-3 ≤ 0.02: a level exists; its exceedance rate is below 2 %.
+    assert!((k2 as f64) < 0.02 * n as f64, "{k2} exceedances of {e2}");
+    assert!(errors.iter().filter(|e| **e >= e2).count() > k2 || e2 == 0.0);
+
+    // Reused, not re-solved: the store is untouched and the answer the same.
+    let before = std::fs::metadata(&store).unwrap().modified().unwrap();
+    let o3 = certify(&["--statistical", &ns, "--confidence", "0.95"]);
+    assert!(o3.status.success());
+    assert_eq!(o3.stdout, first.stdout);
+    assert_eq!(
+        std::fs::metadata(&store).unwrap().modified().unwrap(),
+        before
+    );
+
+    // Bad flags name themselves.
+    for (flag, val) in [("--confidence", "1.5"), ("--statistical", "0")] {
+        let o = certify(&["--statistical", "10", flag, val]);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(flag), "{err}");
+    }
+    // Without the flag nothing is solved.
+    std::fs::remove_file(&store).unwrap();
+    let o = certify(&[]);
+    assert!(o.status.success());
+    assert!(!store.exists());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v.get("statistical").is_none());
+}

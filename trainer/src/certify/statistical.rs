@@ -1,0 +1,380 @@
+//! [`Statistical`]: the dimension-free, probabilistic tier of a certificate.
+//!
+//! From n i.i.d. uniform states of X with k exceedances of ε (‖κ(x) − sat κ_NN(x)‖₂ > ε,
+//! sat = the deployed clamp band), the Clopper–Pearson upper bound p̄ on
+//! p = P(‖κ − sat κ_NN‖ > ε) at confidence 1 − β is the p̄ solving
+//!
+//!   P(Bin(n, p̄) ≤ k) = Σ_{i ≤ k} C(n, i) p̄ⁱ (1 − p̄)^{n−i} = β     (p̄ = 1 for k = n),
+//!
+//! i.e. the 1 − β quantile of Beta(k + 1, n − k); for k = 0 it is 1 − β^{1/n}. With
+//! probability at least 1 − β over the draw of the states, p ≤ p̄ (Hertneck et al. 2018
+//! use this form). It rests on the states being i.i.d. uniform on X and on the MPC labels
+//! being κ (a state the MPC leaves unlabelled counts as an exceedance), not on Lipschitz
+//! constants or cells — hence it scales to any dimension.
+//!
+//! [`eps_for_probability`] turns it around: the smallest observed-error level ε_p such that
+//! the bound for ε_p is ≤ a target p (the (k*+1)-th largest error, k* the largest count
+//! whose bound is ≤ p).
+
+use crate::data::dataset::{self, Dataset, DatasetError, GenerateOptions};
+use crate::learn::mlp::{Mlp, Workspace};
+use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The statistical tier of a certificate (`"statistical"` in `certificate.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Statistical {
+    /// n: i.i.d. uniform states of X drawn (seeded).
+    pub samples: u64,
+    /// k: states whose error exceeds ε (unlabelled states included).
+    pub exceedances: u64,
+    /// 1 − β.
+    pub confidence: f64,
+    /// Clopper–Pearson upper bound on P(‖κ − sat κ_NN‖ > ε) at that confidence.
+    pub p_exceed_upper: f64,
+    /// The ε the exceedances are counted against.
+    pub eps: f64,
+    /// States the MPC left without a label (counted as exceedances).
+    pub unlabelled: u64,
+    /// Largest observed error over the labelled states.
+    pub max_error: f64,
+    /// Seed of the states (`crate::rng::uniform` streams).
+    pub seed: u64,
+    /// The smallest ε whose bound at this confidence is ≤ `p_target` (None when n is too
+    /// small for `p_target`).
+    pub eps_at_p_target: Option<f64>,
+    /// The probability target of `eps_at_p_target`.
+    pub p_target: f64,
+    /// What the bound rests on, in words.
+    pub rests_on: String,
+}
+
+/// ln P(Bin(n, p) ≤ k), summed in log space (no underflow for n up to 10⁸ or more).
+fn ln_binomial_cdf(n: u64, k: u64, p: f64) -> f64 {
+    if p <= 0.0 {
+        return 0.0;
+    }
+    if p >= 1.0 {
+        return if k >= n { 0.0 } else { f64::NEG_INFINITY };
+    }
+    let (lp, lq) = (p.ln(), (-p).ln_1p());
+    // ln pmf(0) = n ln(1 − p); ln pmf(i+1) = ln pmf(i) + ln((n − i)/(i + 1)) + ln(p/(1−p)).
+    let mut term = n as f64 * lq;
+    let (mut max, mut terms) = (term, Vec::with_capacity(k.min(n) as usize + 1));
+    terms.push(term);
+    for i in 0..k.min(n) {
+        term += ((n - i) as f64 / (i + 1) as f64).ln() + lp - lq;
+        max = max.max(term);
+        terms.push(term);
+    }
+    max + terms.iter().map(|t| (t - max).exp()).sum::<f64>().ln()
+}
+
+/// Clopper–Pearson upper bound p̄ on a binomial probability from k successes in n trials
+/// at `confidence` = 1 − β (one-sided): P(Bin(n, p̄) ≤ k) = β. Bisection to 1e-15
+/// relative; 1 for k ≥ n or n = 0; NaN for a confidence outside (0, 1).
+pub fn clopper_pearson_upper(n: u64, k: u64, confidence: f64) -> f64 {
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return f64::NAN;
+    }
+    if n == 0 || k >= n {
+        return 1.0;
+    }
+    let ln_beta = (1.0 - confidence).ln();
+    // The CDF falls in p: find the crossing of ln β.
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if ln_binomial_cdf(n, k, mid) > ln_beta {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-15 * hi {
+            break;
+        }
+    }
+    // The upper end: the bound is never rounded down.
+    hi
+}
+
+/// The smallest level ε_p among the observed errors such that counting exceedances of
+/// ε_p gives a bound ≤ `p_target`: with the errors sorted decreasingly e₍₁₎ ≥ e₍₂₎ ≥ …,
+/// ε_p = e₍k*+1₎ where k* is the largest k with `clopper_pearson_upper(n, k) ≤ p_target`
+/// (exceedances of e₍k*+1₎ are strict, so at most k*). `errors` holds one entry per sample,
+/// +∞ for an unlabelled state. None when even k = 0 does not reach `p_target`.
+pub fn eps_for_probability(errors: &[f64], p_target: f64, confidence: f64) -> Option<f64> {
+    let n = errors.len() as u64;
+    if clopper_pearson_upper(n, 0, confidence) > p_target {
+        return None;
+    }
+    // The bound grows with k: bisect for k*.
+    let (mut lo, mut hi) = (0u64, n);
+    while lo < hi {
+        let mid = lo + (hi - lo).div_ceil(2);
+        if clopper_pearson_upper(n, mid, confidence) <= p_target {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    let mut sorted: Vec<f64> = errors
+        .iter()
+        .map(|e| if e.is_nan() { f64::INFINITY } else { *e })
+        .collect();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    sorted.get(lo as usize).copied().or(Some(0.0))
+}
+
+/// The statistical tier from per-sample errors (+∞ or NaN for an unlabelled state).
+pub fn from_errors(
+    errors: &[f64],
+    eps: f64,
+    confidence: f64,
+    seed: u64,
+    p_target: f64,
+) -> Statistical {
+    let bad = |e: &f64| !e.is_finite();
+    let unlabelled = errors.iter().filter(|e| bad(e)).count() as u64;
+    let exceedances = errors.iter().filter(|e| bad(e) || **e > eps).count() as u64;
+    let n = errors.len() as u64;
+    Statistical {
+        samples: n,
+        exceedances,
+        confidence,
+        p_exceed_upper: clopper_pearson_upper(n, exceedances, confidence),
+        eps,
+        unlabelled,
+        max_error: errors
+            .iter()
+            .filter(|e| !bad(e))
+            .fold(0.0f64, |m, e| m.max(*e)),
+        seed,
+        eps_at_p_target: eps_for_probability(errors, p_target, confidence),
+        p_target,
+        rests_on: "i.i.d. uniform states of X labelled by the MPC (an unlabelled state counts \
+                   as an exceedance); Clopper–Pearson bound, no Lipschitz or cell assumption"
+            .into(),
+    }
+}
+
+/// Default seed of the statistical states: a stream of its own, apart from the data's
+/// (`sampling.seed`, default 0) and the refinement check's.
+pub const DEFAULT_SEED: u64 = 0x5354_4154;
+
+/// Settings of a statistical certificate (`--statistical N`, `--confidence`, …).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatisticalOptions {
+    /// n: number of i.i.d. uniform states.
+    pub samples: usize,
+    /// 1 − β (default 0.99).
+    pub confidence: f64,
+    /// Seed of the states (default [`DEFAULT_SEED`]).
+    pub seed: u64,
+    /// Target probability for `eps_at_p_target` (default 1e-3).
+    pub p_target: f64,
+    /// Show the labelling's progress bar.
+    pub progress: bool,
+}
+
+impl Default for StatisticalOptions {
+    fn default() -> Self {
+        StatisticalOptions {
+            samples: 0,
+            confidence: 0.99,
+            seed: DEFAULT_SEED,
+            p_target: 1e-3,
+            progress: false,
+        }
+    }
+}
+
+impl StatisticalOptions {
+    /// Checks the numbers; the message names the flag.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.samples == 0 {
+            return Err("--statistical must be at least 1 state".into());
+        }
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return Err(format!(
+                "--confidence must lie in (0, 1), got {}",
+                self.confidence
+            ));
+        }
+        if !(self.p_target > 0.0 && self.p_target < 1.0) {
+            return Err(format!(
+                "--p-target must lie in (0, 1), got {}",
+                self.p_target
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The labelling problem of the statistical states: `cfg` with `n` uniform random states
+/// (seeded) and cold starts, so that each label depends on its own state only.
+pub fn sampling_problem(cfg: &ProblemConfig, opts: &StatisticalOptions) -> ProblemConfig {
+    let mut c = cfg.clone();
+    c.sampling = SamplingSettings {
+        sampler: SamplerKind::Random,
+        counts: c.sampling.counts.clone(),
+        n: opts.samples,
+        seed: opts.seed,
+    };
+    c.solver.warm_start = false;
+    c
+}
+
+/// Labels (or reuses) the statistical states in `store` (a dataset file: resumable through
+/// its checkpoint, reused when complete and of the same plan and problem) and counts the
+/// exceedances of `eps` by the clamped net `clamp(mlp(x), lo, hi)`.
+pub fn certify_statistically(
+    cfg: &ProblemConfig,
+    mlp: &Mlp,
+    clamp: (&[f64], &[f64]),
+    eps: f64,
+    store: &Path,
+    opts: &StatisticalOptions,
+) -> Result<Statistical, DatasetError> {
+    let sc = sampling_problem(cfg, opts);
+    let reusable = |d: &Dataset| {
+        d.header.problem_hash == sc.problem_hash()
+            && d.header.sampling == sc.sampling
+            && d.header.shard.is_none()
+            && d.records.len() == opts.samples
+    };
+    let data = match Dataset::load(store) {
+        Ok(d) if reusable(&d) => d,
+        _ => dataset::generate(
+            &sc,
+            store,
+            &GenerateOptions {
+                shard: None,
+                progress: opts.progress,
+            },
+        )?,
+    };
+    let nu = clamp.0.len();
+    let nx = cfg.system.nx();
+    let mut ws = Workspace::default();
+    let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    let errors: Vec<f64> = data
+        .records
+        .iter()
+        .map(|r| {
+            if !r.is_labelled() || r.u.iter().any(|v| !v.is_finite()) {
+                return f64::INFINITY;
+            }
+            mlp.eval(&r.x, &mut u, &mut jac, &mut ws);
+            let e = (0..nu)
+                .map(|j| (r.u[j] - u[j].clamp(clamp.0[j], clamp.1[j])).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            // A non-finite net output counts as an exceedance.
+            if e.is_finite() {
+                e
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    Ok(from_errors(
+        &errors,
+        eps,
+        opts.confidence,
+        opts.seed,
+        opts.p_target,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against scipy 1.x `beta.ppf(1 − β, k + 1, n − k)` (an independent implementation
+    /// of the same quantile), computed once with Python and written here.
+    #[test]
+    fn matches_the_beta_quantile() {
+        for (n, k, c, want) in [
+            (10, 1, 0.95, 0.394_163_302_436_504_66),
+            (200, 3, 0.99, 0.049_348_311_348_674_84),
+            (500_000, 0, 0.99, 9.210_297_956_921_517e-6),
+            (100_000, 7, 0.99, 1.599_924_346_890_874_6e-4),
+            (50, 49, 0.9, 0.997_895_008_295_863_2),
+            (1_000_000, 250, 0.99, 2.893_142_251_211_049_6e-4),
+        ] {
+            let got = clopper_pearson_upper(n, k, c);
+            assert!(
+                (got - want).abs() <= 1e-9 * want,
+                "n {n} k {k} c {c}: {got} vs {want}"
+            );
+            assert!(got >= want * (1.0 - 1e-12), "never rounded down");
+        }
+    }
+
+    #[test]
+    fn zero_exceedances_closed_form_and_edges() {
+        for n in [1u64, 7, 1000, 500_000] {
+            for c in [0.9f64, 0.99, 0.999] {
+                let want = 1.0 - (1.0 - c).powf(1.0 / n as f64);
+                let got = clopper_pearson_upper(n, 0, c);
+                assert!((got - want).abs() <= 1e-10 * want, "{n} {c}: {got} {want}");
+            }
+        }
+        assert_eq!(clopper_pearson_upper(10, 10, 0.99), 1.0);
+        assert_eq!(clopper_pearson_upper(0, 0, 0.99), 1.0);
+        assert!(clopper_pearson_upper(10, 1, 1.0).is_nan());
+        // Monotone in k.
+        let b: Vec<f64> = (0..20)
+            .map(|k| clopper_pearson_upper(100, k, 0.99))
+            .collect();
+        assert!(b.windows(2).all(|w| w[0] < w[1]), "{b:?}");
+    }
+
+    /// Coverage: over 4000 seeded binomial draws, the bound is below the true p in at most
+    /// a β share of them (plus Monte Carlo slack).
+    #[test]
+    fn covers_the_true_probability() {
+        for (p, n, c) in [(0.02, 200u64, 0.95), (0.001, 3000, 0.9), (0.3, 40, 0.99)] {
+            let draws = 4000u64;
+            let mut misses = 0;
+            for d in 0..draws {
+                let k = (0..n)
+                    .filter(|&i| crate::rng::uniform(91, d, i) < p)
+                    .count() as u64;
+                misses += (clopper_pearson_upper(n, k, c) < p) as u64;
+            }
+            let rate = misses as f64 / draws as f64;
+            let beta = 1.0 - c;
+            // 4 standard deviations of the Monte Carlo estimate.
+            let slack = 4.0 * (beta * (1.0 - beta) / draws as f64).sqrt();
+            assert!(
+                rate <= beta + slack,
+                "p {p} n {n}: miss rate {rate} > β {beta}"
+            );
+        }
+    }
+
+    #[test]
+    fn eps_for_probability_picks_the_order_statistic() {
+        // 1000 errors 0.001..1.0; n = 1000 at 99 %: k = 0 gives 4.6e-3.
+        let errors: Vec<f64> = (1..=1000).map(|i| i as f64 / 1000.0).collect();
+        assert_eq!(eps_for_probability(&errors, 1e-3, 0.99), None);
+        let p = clopper_pearson_upper(1000, 0, 0.99);
+        assert_eq!(eps_for_probability(&errors, p, 0.99), Some(1.0));
+        let p5 = clopper_pearson_upper(1000, 5, 0.99);
+        let e = eps_for_probability(&errors, p5, 0.99).unwrap();
+        // Exceedances of e are exactly 5, and its bound is the target.
+        assert_eq!(errors.iter().filter(|v| **v > e).count(), 5);
+        let s = from_errors(&errors, e, 0.99, 0, p5);
+        assert_eq!(s.exceedances, 5);
+        assert!(s.p_exceed_upper <= p5);
+        // An unlabelled state counts as an exceedance, at any ε.
+        let mut with_nan = errors.clone();
+        with_nan[0] = f64::NAN;
+        let s = from_errors(&with_nan, 10.0, 0.99, 0, 0.5);
+        assert_eq!((s.exceedances, s.unlabelled), (1, 1));
+        assert_eq!(s.max_error, 1.0);
+    }
+}
