@@ -76,6 +76,20 @@ impl SqpStatus {
     }
 }
 
+/// How a solve globalises its steps.
+///
+/// `Conservative` is the retry ladder's second rung ([`crate::mpc::law`]): the blockwise
+/// convexified Hessian at every iteration (never the exact one), the penalty also at least
+/// the classical `1.1·‖λ⁺‖_∞` (steps favour feasibility), and three times the iterations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Globalisation {
+    /// The rules of the module doc.
+    #[default]
+    Default,
+    /// Convexified Hessian, the larger penalty, `3·max_iter`.
+    Conservative,
+}
+
 /// The parts of the KKT residual (all ∞-norms).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct KktResidual {
@@ -258,9 +272,15 @@ pub struct SqpSolver {
     x_hi: Vec<f64>,
     u_lo: Vec<f64>,
     u_hi: Vec<f64>,
+    globalisation: Globalisation,
 }
 
 impl SqpSolver {
+    /// Sets how the following solves globalise (until set again).
+    pub fn set_globalisation(&mut self, g: Globalisation) {
+        self.globalisation = g;
+    }
+
     /// The structured QP solver factorises by the band LU only (tests).
     #[cfg(test)]
     pub(crate) fn without_riccati(&mut self) {
@@ -281,6 +301,7 @@ impl SqpSolver {
             x_hi: cfg.ocp.x_hi.clone(),
             u_lo: cfg.ocp.u_lo.clone(),
             u_hi: cfg.ocp.u_hi.clone(),
+            globalisation: Globalisation::Default,
         }
     }
 
@@ -460,6 +481,12 @@ impl SqpSolver {
     /// Solves OCP(xs) from the primal-dual guess `start`.
     pub fn solve(&mut self, xs: &[f64], start: PrimalDual) -> SqpResult {
         let tol = self.settings.tol;
+        let conservative = self.globalisation == Globalisation::Conservative;
+        let max_iter = if conservative {
+            3 * self.settings.max_iter
+        } else {
+            self.settings.max_iter
+        };
         self.qp.reset();
         let mut p = start;
         let mut info = SqpInfo::default();
@@ -505,7 +532,7 @@ impl SqpSolver {
                     break SqpStatus::Converged;
                 }
             }
-            if info.iterations >= self.settings.max_iter {
+            if info.iterations >= max_iter {
                 break SqpStatus::MaxIterations;
             }
             self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
@@ -519,7 +546,8 @@ impl SqpSolver {
             // A QP with the exact Hessian that the QP solvers fail on (seen once in 300
             // hard re-solves of the Gymnasium cart-pole from a soft optimum) is re-solved with
             // the blockwise rule.
-            let mut exact = self.ocp.n_slack == 0
+            let mut exact = !conservative
+                && self.ocp.n_slack == 0
                 && !self.ocp.has_nonlinear_rows()
                 && self
                     .convexity
@@ -573,6 +601,10 @@ impl SqpSolver {
                 if mu < needed {
                     mu = needed + 1.0;
                 }
+            }
+            if conservative {
+                let lam_max = (lam_qp.iter().chain(&nu_qp)).fold(0.0f64, |m, v| m.max(v.abs()));
+                mu = mu.max(1.1 * lam_max);
             }
             let f0 = self.ocp.objective(&p.z);
             let phi0 = f0 + mu * c1;

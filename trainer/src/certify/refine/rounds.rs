@@ -357,16 +357,19 @@ pub fn refine(
         bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
         let mut split_any = false;
         if !met && round + 1 < rs.max_rounds {
+            // Cells with a corner the MPC could not label (ε_C = ∞) are split after the
+            // others, with what budget remains, once per round each, along their longest
+            // side relative to X: the uncertified region around a failed state halves
+            // every round instead of staying a whole cell, and the new corners are solved
+            // (and retried, warm-started from their labelled neighbours) like any other.
+            let (failed, mut bad): (Vec<_>, Vec<_>) =
+                bad.into_iter().partition(|(_, b)| !b.corner.is_finite());
+            bad.extend(failed);
             for (n, b) in bad {
                 let node = st.nodes[n].clone();
                 // Axis: the largest remainder term; ties and infinite terms: longest side
                 // relative to X.
                 let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-                // A corner without an MPC label (failed solve): splitting cannot help; the
-                // cell stays uncertified (ε_C = ∞) and is reported.
-                if !b.corner.is_finite() {
-                    continue;
-                }
                 let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width;
                 let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
                 let Some(&first) = cand.first() else {
