@@ -7,7 +7,6 @@ use super::common::problem_for_data;
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOptions};
-use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 
 pub(super) fn execute(
@@ -18,7 +17,7 @@ pub(super) fn execute(
     l_mpc: Option<f64>,
     json: bool,
 ) -> Result<()> {
-    let m = Model::load(model)?;
+    let m = super::common::load_model(model)?;
     let d = Dataset::load(data)?;
     let cfg = problem_for_data(config, data, &d)?;
     if let Some(v) = l_mpc {

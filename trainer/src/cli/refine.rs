@@ -3,6 +3,9 @@
 //! `<out>/refine_state.bin` and writes the model, dataset, certificate, cells and log into
 //! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
 //! more states and, with `--check`, `check.json`. Fails if the target ε is not met.
+//! `--certify-only --model M` keeps the network of M (a model file or an ONNX file) fixed and
+//! refines only the cells; the certificate is about M (its hash); for an ONNX M no
+//! `model.bin` is written (export M itself with the certificate).
 
 use super::common::load_config;
 use anyhow::{bail, Context, Result};
@@ -17,9 +20,27 @@ pub(super) fn execute(
     out: Option<&Path>,
     check: Option<usize>,
     check_seed: u64,
+    fixed: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let fixed = match fixed {
+        Some(p) => {
+            let m = super::common::load_model(p)?;
+            let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+            if (m.mlp.nx(), m.mlp.nu()) != (nx, nu) {
+                bail!(
+                    "{}: the network maps {} states to {} inputs; problem `{}` has {nx} and {nu}",
+                    p.display(),
+                    m.mlp.nx(),
+                    m.mlp.nu(),
+                    cfg.name
+                );
+            }
+            Some(m)
+        }
+        None => None,
+    };
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -29,6 +50,7 @@ pub(super) fn execute(
     let t0 = std::time::Instant::now();
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
+        fixed,
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
