@@ -10,7 +10,8 @@ The file is used unedited.
 Usage (double integrator of configs/double_integrator.toml, labels from `trainer sample`):
 
     trainer sample --config configs/double_integrator.toml --out di.bin   # writes di.csv
-    python tests/reference/torch_export.py di.csv tests/reference/di_tanh.onnx --act tanh
+    python tests/reference/torch_export.py di.csv tests/reference/di_tanh.onnx --act tanh \
+        --hidden 32 32 --steps 8000
     python tests/reference/torch_export.py di.csv tests/reference/di_relu.onnx --act relu
 
 The fixtures were made with torch 1.12.1 (the TorchScript-based exporter, opset 13).
