@@ -205,12 +205,12 @@ pub(super) fn sha256_file(path: &Path) -> Result<String> {
 pub(super) fn load_model(path: &Path) -> Result<Model> {
     let (m, notes) = trainer::deploy::onnx::load_any(path)?;
     if let Some(n) = notes {
+        let act = format!("{:?}", m.mlp.activation).to_lowercase();
         eprintln!(
-            "{}: ONNX (producer `{}`, opset {}) read as a {} MLP {:?}{}; its hash is the file's SHA-256 {}",
+            "{}: ONNX (producer `{}`, opset {}) read as a {act} MLP {:?}{}; its hash is the file's SHA-256 {}",
             path.display(),
             n.producer,
             n.opset,
-            format!("{:?}", m.mlp.activation).to_lowercase(),
             m.mlp.widths(),
             if n.clips_dropped > 0 {
                 format!(

@@ -158,7 +158,7 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
         }
         let out = n.outputs.first().cloned().unwrap_or_default();
         // Nodes on constants only (e.g. an Identity of a weight).
-        if n.op == "Identity" && consts.contains_key(&n.inputs[0]) {
+        if n.op == "Identity" && n.inputs.first().is_some_and(|i| consts.contains_key(i)) {
             let t = consts[&n.inputs[0]].clone();
             consts.insert(out, t);
             continue;
@@ -198,15 +198,7 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
                  single chain of dense layers is supported"
             ));
         };
-        let other = |i: usize| -> R<&Tensor> {
-            let name = n
-                .inputs
-                .get(i)
-                .ok_or_else(|| format!("{label}: missing input {i}"))?;
-            consts.get(name).ok_or_else(|| {
-                format!("{label}: input '{name}' is not a constant (weights must be initializers or Constants)")
-            })
-        };
+        let other = |i: usize| constant(&consts, n, i, &label);
         let step = match n.op.as_str() {
             "Identity" => {
                 current = out;
@@ -224,7 +216,7 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
                     return Err(format!("{label}: transA = 1 is not supported"));
                 }
                 let b = other(1)?;
-                let [r, c] = b.dims[..] else {
+                let &[r, c] = &b.dims[..] else {
                     return Err(format!("{label}: weight of shape {:?} (2-D expected)", b.dims));
                 };
                 let (r, c) = (r as usize, c as usize);
@@ -293,6 +285,25 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
         ));
     }
     assemble(steps, notes, input.dims.last().copied().flatten())
+}
+
+/// Input `i` of node `n`, which must be a constant.
+fn constant<'a>(
+    consts: &'a HashMap<String, Tensor>,
+    n: &Node,
+    i: usize,
+    label: &str,
+) -> R<&'a Tensor> {
+    let name = n
+        .inputs
+        .get(i)
+        .ok_or_else(|| format!("{label}: missing input {i}"))?;
+    consts.get(name).ok_or_else(|| {
+        format!(
+            "{label}: input '{name}' is not a constant (weights must be initializers or \
+             Constants)"
+        )
+    })
 }
 
 /// The values of `t` broadcast to length `n` (a scalar or a vector of `n`).
@@ -437,10 +448,8 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
     if !finite {
         return Err("non-finite weights".into());
     }
-    let activation = match (act, layers.len()) {
-        (Some(a), _) => a,
-        (None, _) => Activation::Tanh,
-    };
+    // A net without hidden layers has no activation: any will do.
+    let activation = act.unwrap_or(Activation::Tanh);
     Ok((
         Mlp {
             layers,

@@ -91,12 +91,17 @@ impl Graph {
     fn clip_box(&mut self, tag: &str, input: &str, output: &str, lo: &[f32], hi: &[f32]) {
         let n = lo.len();
         let same = lo.iter().all(|v| *v == lo[0]) && hi.iter().all(|v| *v == hi[0]);
-        let mut clip = |g: &mut Graph, k: usize, i: &str, o: &str| {
+        let clip = |g: &mut Graph, k: usize, i: &str, o: &str| {
             let (l, h) = (format!("{tag}_lo_{k}"), format!("{tag}_hi_{k}"));
             g.inits.push(tensor_f32(&l, &[], &[lo[k]]));
             g.inits.push(tensor_f32(&h, &[], &[hi[k]]));
-            g.nodes
-                .push(node("Clip", &format!("{tag}_clip_{k}"), &[i, &l, &h], &[o], &[]));
+            g.nodes.push(node(
+                "Clip",
+                &format!("{tag}_clip_{k}"),
+                &[i, l.as_str(), h.as_str()],
+                &[o],
+                &[],
+            ));
         };
         if n == 1 || same {
             clip(self, 0, input, output);
@@ -110,12 +115,12 @@ impl Graph {
         self.nodes.push(node(
             "Split",
             &format!("{tag}_split"),
-            &[input, &split],
+            &[input, split.as_str()],
             &p,
             &[attr_int("axis", 1)],
         ));
-        for k in 0..n {
-            clip(self, k, &parts[k], &clipped[k]);
+        for (k, (p, c)) in parts.iter().zip(&clipped).enumerate() {
+            clip(self, k, p, c);
         }
         let c: Vec<&str> = clipped.iter().map(String::as_str).collect();
         self.nodes.push(node(
@@ -219,15 +224,15 @@ pub fn render_onnx(model: &ExportModel, activation: Activation, allowance: Optio
         g.nodes.push(node(
             "Gemm",
             &format!("layer{k}"),
-            &[&prev, &wn, &bn],
-            &[&zn],
+            &[prev.as_str(), wn.as_str(), bn.as_str()],
+            &[zn.as_str()],
             &[attr_int("transB", 1)],
         ));
         prev = zn;
         if k + 1 < n {
             let an = format!("a{k}");
             g.nodes
-                .push(node(act, &format!("{}{k}", act.to_lowercase()), &[&prev], &[&an], &[]));
+                .push(node(act, &format!("{}{k}", act.to_lowercase()), &[prev.as_str()], &[an.as_str()], &[]));
             prev = an;
         }
     }
