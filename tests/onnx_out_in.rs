@@ -12,8 +12,8 @@
 
 use ampc_tests::{config, tempdir, trainer};
 use std::path::{Path, PathBuf};
-use trainer::deploy::export::{eval_f32, ExportModel, Tanh};
 use tract_onnx::prelude::*;
+use trainer::deploy::export::{eval_f32, ExportModel, Tanh};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -94,15 +94,21 @@ fn tract_computes_what_the_controller_computes() {
     let em = trainer::deploy::export::placeholder_pendulum();
     let report = trainer::deploy::export::certify_f32(&em).unwrap();
     let a = report.f32_allowance[0];
-    let bytes = trainer::deploy::onnx::render_onnx(&em, trainer::learn::mlp::Activation::Tanh, Some(a));
+    let bytes =
+        trainer::deploy::onnx::render_onnx(&em, trainer::learn::mlp::Activation::Tanh, Some(a));
     let xs = states(&em.domain_lo, &em.domain_hi);
     let got = tract_run(&bytes, &xs, em.nx());
     let want = controller(&em, a, &xs);
     let (d, scale) = max_diff(&got, &want);
     // Both are f32 evaluations of the same f32 network: they may differ by the order of the
     // sums and the tanh implementation, each within the sound f32 allowance of the f64 net.
-    eprintln!("tract vs controller on 10^4 states: max |Δu| {d:.3e} (allowance {a:.3e}, |u| ≤ {scale})");
-    assert!(d <= 2.0 * a, "tract differs from the controller by {d:e} > 2·{a:e}");
+    eprintln!(
+        "tract vs controller on 10^4 states: max |Δu| {d:.3e} (allowance {a:.3e}, |u| ≤ {scale})"
+    );
+    assert!(
+        d <= 2.0 * a,
+        "tract differs from the controller by {d:e} > 2·{a:e}"
+    );
     // And the projection and clamp are there: states outside X give the output at the
     // projected state, within the band.
     let (clo, chi) = em.clamp_band(em.eps + a);
@@ -197,7 +203,10 @@ fn pytorch_net_is_certified_and_exported_unedited() {
         serde_json::from_str(&std::fs::read_to_string(&cert_path).unwrap()).unwrap();
     assert_eq!(lc["hash"], sha256(&net), "{log}");
     assert!(lc["eps"].as_f64().unwrap() <= target);
-    assert!(!out.join("model.bin").exists(), "an ONNX net is not rewritten");
+    assert!(
+        !out.join("model.bin").exists(),
+        "an ONNX net is not rewritten"
+    );
     // The fixture is untouched (nothing retrained it).
     let before = sha256(&net);
     // export: ONNX and the controller-core files from the same certificate.
@@ -311,10 +320,13 @@ fn relu_net_exports_to_onnx_not_to_controller_core() {
         .copied()
         .collect();
     let got = tract_run(&bytes, &xs, 2);
-    let (lo, hi) = (
-        c["u_lo"][0].as_f64().unwrap() - c["eps"].as_f64().unwrap(),
-        c["u_hi"][0].as_f64().unwrap() + c["eps"].as_f64().unwrap(),
-    );
+    // The clamp band written in the metadata (U_d ⊕ ε within the actuator limits).
+    let band = |k: &str| -> f64 {
+        let v = g.meta(k).unwrap();
+        v.trim_matches(|c| c == '[' || c == ']').parse().unwrap()
+    };
+    let (lo, hi) = (band("ampc.clamp_lo"), band("ampc.clamp_hi"));
+    assert!(lo <= c["u_lo"][0].as_f64().unwrap() && hi >= c["u_hi"][0].as_f64().unwrap());
     for (x, u) in xs.chunks(2).zip(&got) {
         let x64 = [f64::from(x[0]), f64::from(x[1])];
         let r = m.mlp.predict(&x64)[0].clamp(lo, hi);

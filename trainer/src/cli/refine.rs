@@ -13,6 +13,7 @@ use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
 use trainer::problem::{ProblemConfig, RefineSettings};
 
+#[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
     config: Option<&Path>,
     target_eps: Option<f64>,

@@ -234,7 +234,9 @@ fn attribute(b: &[u8]) -> R<Attribute> {
             2 => a.f = floats(&v).map_err(wire("attribute f"))?.first().copied(),
             3 => a.i = Some(int(&v, "attribute i")?),
             5 => a.t = Some(tensor(bytes(&v, "attribute t")?)?),
-            7 => a.floats.extend(floats(&v).map_err(wire("attribute floats"))?),
+            7 => a
+                .floats
+                .extend(floats(&v).map_err(wire("attribute floats"))?),
             8 => a.ints.extend(ints(&v).map_err(wire("attribute ints"))?),
             _ => {}
         }
@@ -250,9 +252,7 @@ fn node(b: &[u8]) -> R<Node> {
             2 => nd.outputs.push(string(&v)),
             3 => nd.name = string(&v),
             4 => nd.op = string(&v),
-            5 => nd
-                .attributes
-                .push(attribute(bytes(&v, "node attribute")?)?),
+            5 => nd.attributes.push(attribute(bytes(&v, "node attribute")?)?),
             7 => nd.domain = string(&v),
             _ => {}
         }
@@ -270,13 +270,17 @@ fn value_info(b: &[u8]) -> R<ValueInfo> {
                     if n2 != 1 {
                         continue;
                     }
-                    for (n3, v3) in fields(bytes(&v2, "tensor type")?).map_err(wire("tensor type"))? {
+                    for (n3, v3) in
+                        fields(bytes(&v2, "tensor type")?).map_err(wire("tensor type"))?
+                    {
                         match n3 {
                             1 => vi.elem_type = int(&v3, "elem_type")?,
                             2 => {
                                 for (_, d) in fields(bytes(&v3, "shape")?).map_err(wire("shape"))? {
                                     let mut dim = None;
-                                    for (n4, v4) in fields(bytes(&d, "dim")?).map_err(wire("dim"))? {
+                                    for (n4, v4) in
+                                        fields(bytes(&d, "dim")?).map_err(wire("dim"))?
+                                    {
                                         if n4 == 1 {
                                             dim = Some(int(&v4, "dim_value")?);
                                         }

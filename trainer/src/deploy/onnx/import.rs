@@ -99,7 +99,9 @@ fn constant_value(n: &Node, label: &str) -> R<Tensor> {
             _ => {}
         }
     }
-    Err(format!("{label}: a Constant without a supported value attribute"))
+    Err(format!(
+        "{label}: a Constant without a supported value attribute"
+    ))
 }
 
 /// Reads the graph as a dense MLP; errors name the node (or tensor) at fault.
@@ -209,7 +211,9 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             "Softplus" => Step::Act(Activation::Softplus, label.clone()),
             "Gemm" | "MatMul" => {
                 if pos != 0 {
-                    return Err(format!("{label}: the running value must be the first operand"));
+                    return Err(format!(
+                        "{label}: the running value must be the first operand"
+                    ));
                 }
                 let gemm = n.op == "Gemm";
                 if gemm && int_attr(n, "transA", 0) != 0 {
@@ -217,16 +221,27 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
                 }
                 let b = other(1)?;
                 let &[r, c] = &b.dims[..] else {
-                    return Err(format!("{label}: weight of shape {:?} (2-D expected)", b.dims));
+                    return Err(format!(
+                        "{label}: weight of shape {:?} (2-D expected)",
+                        b.dims
+                    ));
                 };
                 let (r, c) = (r as usize, c as usize);
                 let trans = gemm && int_attr(n, "transB", 0) != 0;
                 let (out_w, in_w) = if trans { (r, c) } else { (c, r) };
-                let alpha = if gemm { scalar_attr(n, "alpha", 1.0) } else { 1.0 };
+                let alpha = if gemm {
+                    scalar_attr(n, "alpha", 1.0)
+                } else {
+                    1.0
+                };
                 let mut w = vec![0.0; out_w * in_w];
                 for o in 0..out_w {
                     for i in 0..in_w {
-                        let v = if trans { b.values[o * c + i] } else { b.values[i * c + o] };
+                        let v = if trans {
+                            b.values[o * c + i]
+                        } else {
+                            b.values[i * c + o]
+                        };
                         w[o * in_w + i] = if alpha == 1.0 { v } else { alpha * v };
                     }
                 }
@@ -251,14 +266,17 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             }
             "Add" | "Sub" | "Mul" | "Div" => {
                 let t = other(1 - pos.min(1))?;
-                let op = match (n.op.as_str(), pos) {
-                    ("Add", _) => '+',
-                    ("Mul", _) => '*',
-                    ("Sub", 0) => '-',
-                    ("Sub", _) => 'r',
-                    ("Div", 0) => '/',
-                    _ => return Err(format!("{label}: a constant divided by the running value is not an affine map")),
-                };
+                let op =
+                    match (n.op.as_str(), pos) {
+                        ("Add", _) => '+',
+                        ("Mul", _) => '*',
+                        ("Sub", 0) => '-',
+                        ("Sub", _) => 'r',
+                        ("Div", 0) => '/',
+                        _ => return Err(format!(
+                            "{label}: a constant divided by the running value is not an affine map"
+                        )),
+                    };
                 // A MatMul followed by Add is a layer with its bias.
                 if let (Some(Step::Linear(l, _, open @ true)), '+') = (steps.last_mut(), op) {
                     l.b = broadcast(t, l.out, &label)?;
@@ -378,7 +396,9 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
     let (mut c, mut h) = (vec![0.0; nx], vec![1.0; nx]);
     for s in &steps[..first] {
         let Step::Elem(op, v, label) = s else {
-            let Step::Act(_, label) = s else { unreachable!() };
+            let Step::Act(_, label) = s else {
+                unreachable!()
+            };
             return Err(format!("{label}: an activation before the first layer"));
         };
         let v = broadcast(
@@ -406,7 +426,9 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
     let (mut o, mut sc) = (vec![0.0; nu], vec![1.0; nu]);
     for s in &steps[last + 1..] {
         let Step::Elem(op, v, label) = s else {
-            let Step::Act(_, label) = s else { unreachable!() };
+            let Step::Act(_, label) = s else {
+                unreachable!()
+            };
             return Err(format!(
                 "{label}: an activation after the last layer (the output must be linear)"
             ));
@@ -438,7 +460,11 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
             }
         }
     }
-    if let Some(i) = h.iter().chain(&sc).position(|v| *v == 0.0 || !v.is_finite()) {
+    if let Some(i) = h
+        .iter()
+        .chain(&sc)
+        .position(|v| *v == 0.0 || !v.is_finite())
+    {
         return Err(format!("scaling {i}: zero or non-finite scale"));
     }
     let finite = layers

@@ -54,10 +54,13 @@ fn varint(b: &[u8], pos: &mut usize) -> Result<u64, WireError> {
 }
 
 fn take<'a>(b: &'a [u8], pos: &mut usize, n: usize) -> Result<&'a [u8], WireError> {
-    let end = pos.checked_add(n).filter(|&e| e <= b.len()).ok_or(WireError {
-        offset: *pos,
-        reason: "field runs past the end",
-    })?;
+    let end = pos
+        .checked_add(n)
+        .filter(|&e| e <= b.len())
+        .ok_or(WireError {
+            offset: *pos,
+            reason: "field runs past the end",
+        })?;
     let s = &b[*pos..end];
     *pos = end;
     Ok(s)
@@ -258,7 +261,10 @@ mod tests {
 
     #[test]
     fn repeated_scalars_decode_packed_and_unpacked() {
-        let v: Vec<u8> = [1.0f32, -2.5].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let v: Vec<u8> = [1.0f32, -2.5]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         assert_eq!(floats(&Value::Bytes(&v)).unwrap(), vec![1.0, -2.5]);
         assert_eq!(
             doubles(&Value::Fixed64(0.1f64.to_bits())).unwrap(),

@@ -24,7 +24,11 @@ fn export_model(seed: u64) -> ExportModel {
         .iter()
         .map(|l| DenseF64 {
             w: l.w.chunks(l.inp).map(<[f64]>::to_vec).collect(),
-            b: l.b.iter().enumerate().map(|(i, _)| 0.1 * i as f64 - 0.2).collect(),
+            b: l.b
+                .iter()
+                .enumerate()
+                .map(|(i, _)| 0.1 * i as f64 - 0.2)
+                .collect(),
         })
         .collect();
     em.input = Scaling {
@@ -249,7 +253,11 @@ fn check(bytes: &[u8], n: &Net, act: Activation, f: fn(f64) -> f64) {
         let (mut u, mut j) = ([0.0], [0.0; 2]);
         m.mlp.eval(&x, &mut u, &mut j, &mut ws);
         let r = reference(n, f, &x);
-        assert!((u[0] - r).abs() < 1e-12 * (1.0 + r.abs()), "{} vs {r}", u[0]);
+        assert!(
+            (u[0] - r).abs() < 1e-12 * (1.0 + r.abs()),
+            "{} vs {r}",
+            u[0]
+        );
     }
 }
 
@@ -298,7 +306,12 @@ fn torch_style_gemm_graph_imports() {
         tensor("net.2.weight", &[1, 3], &n.w2, true),
         tensor("net.2.bias", &[1], &n.b2, true),
     ];
-    check(&model(&nodes, &inits, 2, 1, "output"), &n, Activation::Tanh, f64::tanh);
+    check(
+        &model(&nodes, &inits, 2, 1, "output"),
+        &n,
+        Activation::Tanh,
+        f64::tanh,
+    );
 }
 
 /// MatMul (weights [in, out]) + Add bias, Gemm without transB, Relu, Softplus.
@@ -390,8 +403,13 @@ fn unsupported_graphs_are_refused_naming_the_node() {
     ];
     for (nodes, want) in cases {
         let bytes = model(&nodes, &inits, 2, 1, "output");
-        let e = import_bytes(&bytes, "foreign.onnx").unwrap_err().to_string();
-        assert!(e.contains("foreign.onnx") && e.contains(want), "{e}\nwanted: {want}");
+        let e = import_bytes(&bytes, "foreign.onnx")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("foreign.onnx") && e.contains(want),
+            "{e}\nwanted: {want}"
+        );
     }
     let e = import_bytes(b"not a model at all", "junk.bin")
         .unwrap_err()

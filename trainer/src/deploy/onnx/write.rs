@@ -25,7 +25,9 @@ pub const OPSET: i64 = 13;
 
 fn tensor_f32(name: &str, dims: &[i64], v: &[f32]) -> Writer {
     let mut t = Writer::default();
-    t.packed_ints(1, dims).int(2, super::graph::FLOAT).string(8, name);
+    t.packed_ints(1, dims)
+        .int(2, super::graph::FLOAT)
+        .string(8, name);
     let raw: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
     t.bytes(9, &raw);
     t
@@ -183,7 +185,10 @@ pub fn metadata(
         ("ampc.l_nn", num(model.l_nn)),
         ("ampc.l_nn_method", model.l_nn_method.clone()),
         ("ampc.l_mpc", num(model.l_mpc)),
-        ("ampc.l_mpc_is_estimate", model.l_mpc_is_estimate.to_string()),
+        (
+            "ampc.l_mpc_is_estimate",
+            model.l_mpc_is_estimate.to_string(),
+        ),
         ("ampc.covering_radius", num(model.covering_radius)),
         (
             "ampc.f32_allowance",
@@ -231,8 +236,13 @@ pub fn render_onnx(model: &ExportModel, activation: Activation, allowance: Optio
         prev = zn;
         if k + 1 < n {
             let an = format!("a{k}");
-            g.nodes
-                .push(node(act, &format!("{}{k}", act.to_lowercase()), &[prev.as_str()], &[an.as_str()], &[]));
+            g.nodes.push(node(
+                act,
+                &format!("{}{k}", act.to_lowercase()),
+                &[prev.as_str()],
+                &[an.as_str()],
+                &[],
+            ));
             prev = an;
         }
     }
