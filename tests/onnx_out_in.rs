@@ -182,7 +182,7 @@ fn pytorch_net_is_certified_and_exported_unedited() {
     assert!(eps_global.is_finite() && eps_global > 0.0);
     // refine --certify-only: the net fixed, cells refined to a target.
     let out = d.join("refine");
-    let target = 0.3;
+    let target = 0.5;
     let log = ok(&trainer(&[
         "refine",
         "--config",
