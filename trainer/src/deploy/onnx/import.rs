@@ -266,17 +266,18 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             }
             "Add" | "Sub" | "Mul" | "Div" => {
                 let t = other(1 - pos.min(1))?;
-                let op =
-                    match (n.op.as_str(), pos) {
-                        ("Add", _) => '+',
-                        ("Mul", _) => '*',
-                        ("Sub", 0) => '-',
-                        ("Sub", _) => 'r',
-                        ("Div", 0) => '/',
-                        _ => return Err(format!(
+                let op = match (n.op.as_str(), pos) {
+                    ("Add", _) => '+',
+                    ("Mul", _) => '*',
+                    ("Sub", 0) => '-',
+                    ("Sub", _) => 'r',
+                    ("Div", 0) => '/',
+                    _ => {
+                        return Err(format!(
                             "{label}: a constant divided by the running value is not an affine map"
-                        )),
-                    };
+                        ))
+                    }
+                };
                 // A MatMul followed by Add is a layer with its bias.
                 if let (Some(Step::Linear(l, _, open @ true)), '+') = (steps.last_mut(), op) {
                     l.b = broadcast(t, l.out, &label)?;
