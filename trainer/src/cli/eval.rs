@@ -4,10 +4,9 @@
 use super::common::{csv_numbers, jacobian_header, read_states};
 use anyhow::Result;
 use std::path::Path;
-use trainer::certify::Model;
 
 pub(super) fn execute(model: &Path, states: &Path, out: &Path) -> Result<()> {
-    let m = Model::load(model)?;
+    let m = super::common::load_model(model)?;
     let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
     let xs = read_states(states, nx)?;
     let mut s = jacobian_header(nx, nu).join(",");
