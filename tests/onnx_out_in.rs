@@ -161,6 +161,7 @@ fn pytorch_net_is_certified_and_exported_unedited() {
     let ev = d.join("eval.csv");
     let log = ok(&trainer(&[
         "eval",
+        "--raw",
         "--model",
         netp,
         "--states",

@@ -96,7 +96,7 @@ pub(super) fn execute(
 
 /// The certificate of `--certificate` (with the tier its JSON declares, if any), or the one
 /// stored in the model at `model_path`; either way it must be about this very network.
-fn load_certificate(
+pub(super) fn load_certificate(
     model_path: &Path,
     m: &Model,
     certificate: Option<&Path>,

@@ -144,9 +144,18 @@ enum Cmd {
         /// Input CSV with header `x1,…,xn`.
         #[arg(long)]
         states: PathBuf,
-        /// Output CSV `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+        /// Output CSV: the controller's `x1..xn,u1..um,flags` (flags: 1 out of domain, 2 not
+        /// finite, 4 clamped), or with --raw the bare network's
+        /// `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
         #[arg(long)]
         out: PathBuf,
+        /// Certificate JSON whose domain and clamp band the controller uses (default: the
+        /// one stored in the model).
+        #[arg(long)]
+        certificate: Option<PathBuf>,
+        /// The bare f64 network and its Jacobian, without projection, clamp or f32.
+        #[arg(long)]
+        raw: bool,
     },
     /// The paper's Table I over seeds: nominal and regularized nets from the same initial
     /// weights, median [min, max] of R², ε_D and the Lipschitz bounds.
@@ -338,9 +347,15 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 stat.as_ref(),
             )
         }
-        Cmd::Eval { model, states, out } => {
-            common::refuse_overwrite(&[&out], &[&model, &states])?;
-            eval::execute(&model, &states, &out)
+        Cmd::Eval {
+            model,
+            states,
+            out,
+            certificate,
+            raw,
+        } => {
+            common::refuse_overwrite(&[&out], &[&model, &states, opt(&certificate)])?;
+            eval::execute(&model, &states, &out, certificate.as_deref(), raw)
         }
         Cmd::Compare {
             config,

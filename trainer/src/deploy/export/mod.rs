@@ -23,6 +23,7 @@
 //! - `allowance`: the f32 error analysis ([`f32_allowance`], [`sampled_max_diff`],
 //!   [`certify_f32`]);
 //! - `rust`: the generated Rust file ([`render_rust`]);
+//! - `device`: the exported controller evaluated as `controller-core` does ([`device::Device`]);
 //! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
 //! - `blob`: the postcard blob ([`render_postcard`], [`crc32`]).
@@ -30,6 +31,7 @@
 mod allowance;
 mod blob;
 mod c_header;
+pub mod device;
 mod guarantee;
 mod rust;
 mod tanh;
