@@ -112,3 +112,89 @@ fn core_matches_the_exporters_f32_model_bit_for_bit() {
         assert_eq!(got.to_bits(), expect.to_bits(), "x = {x:?}");
     }
 }
+
+/// `trainer eval` (default: the controller) computes what the core computes, flags and all,
+/// bit for bit — inside X, outside it (projection) and where the clamp acts; `--raw` is the
+/// bare network (no projection: its output differs outside X).
+#[test]
+fn eval_gives_the_cores_output_and_flags() {
+    let (_, run_dir) = ampc_tests::trained_pendulum();
+    let dir = tempdir();
+    let mut s = 0x0bad_cafe_1234_5678u64;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    // Twice X's width in each direction: about three quarters of the states are outside.
+    let xs: Vec<[f32; 2]> = (0..2000)
+        .map(|_| [-16.0 + 32.0 * rnd(), -3.0 + 6.0 * rnd()])
+        .collect();
+    let mut text = String::from("x1,x2\n");
+    for x in &xs {
+        text += &format!("{:?},{:?}\n", f64::from(x[0]), f64::from(x[1]));
+    }
+    let states = dir.path().join("s.csv");
+    std::fs::write(&states, text).unwrap();
+    let model = run_dir.join("model_regularized.bin");
+    let run = |out: &str, raw: bool| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "eval",
+            "--model",
+            model.to_str().unwrap(),
+            "--states",
+            states.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if raw {
+            args.push("--raw");
+        }
+        let o = ampc_tests::trainer(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(out).unwrap()
+    };
+    let ctrl = run("c.csv", false);
+    let mut lines = ctrl.lines();
+    assert_eq!(lines.next(), Some("x1,x2,u1,flags"));
+    let (mut outside, mut clamped) = (0, 0);
+    for (x, l) in xs.iter().zip(lines) {
+        let f: Vec<&str> = l.split(',').collect();
+        let u: f64 = f[2].parse().unwrap();
+        let flags: u8 = f[3].parse().unwrap();
+        let core = controller_core::evaluate(x);
+        assert_eq!(u, f64::from(core.u[0]), "x = {x:?}");
+        assert_eq!(flags, core.flags.0, "x = {x:?}");
+        outside += usize::from(flags & 1 != 0);
+        clamped += usize::from(flags & 4 != 0);
+    }
+    assert!(outside > 1000, "{outside} states outside X");
+    let raw = run("r.csv", true);
+    assert!(raw.starts_with("x1,x2,u1,du1_dx1,du1_dx2\n"));
+    // Where the controller neither projected nor clamped, it is the f64 network within the
+    // sound f32 allowance of the export.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("export_report.json")).unwrap())
+            .unwrap();
+    let allowance = report["f32_allowance_libm"].as_f64().unwrap();
+    let mut inside = 0;
+    for (r, c) in raw.lines().skip(1).zip(ctrl.lines().skip(1)) {
+        let c: Vec<&str> = c.split(',').collect();
+        if c[3] != "0" {
+            continue;
+        }
+        inside += 1;
+        let (ur, uc): (f64, f64) = (
+            r.split(',').nth(2).unwrap().parse().unwrap(),
+            c[2].parse().unwrap(),
+        );
+        assert!(
+            (ur - uc).abs() <= allowance,
+            "{r} vs {c:?}: allowance {allowance}"
+        );
+    }
+    assert!(inside > 100, "{inside} states inside X");
+    eprintln!("{outside} outside, {clamped} clamped, {inside} inside and unclamped");
+}
