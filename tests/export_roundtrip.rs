@@ -7,7 +7,9 @@
 //! that pipeline (sample → train → certify → export) and compares the files byte for byte.
 //! Regenerate them (and the C API's header `controller-core/capi/include/ampc.h`) with
 //! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/generated/`
-//! and `trainer export … --c-header` (README, "The embedded side").
+//! and `trainer export … --c-header` (README, "The embedded side"), or with
+//! `AMPC_BLESS=1 cargo test -p ampc-tests --test export_roundtrip` (writes the three files
+//! from this test's own pipeline run).
 
 use ampc_tests::tempdir;
 use controller_core::activation;
@@ -31,6 +33,23 @@ fn committed_files_are_what_the_exporter_writes() {
         dir.path().join("weights.bin"),
     );
     let report = export::export_files(model, &rs, &bin).unwrap();
+    let generated = format!(
+        "{}/../controller-core/src/generated",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let header_path = format!(
+        "{}/../controller-core/capi/include/ampc.h",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    if std::env::var_os("AMPC_BLESS").is_some() {
+        std::fs::copy(&rs, format!("{generated}/weights.rs")).unwrap();
+        std::fs::copy(&bin, format!("{generated}/weights.bin")).unwrap();
+        std::fs::write(
+            &header_path,
+            export::render_c_header(model, &report).unwrap(),
+        )
+        .unwrap();
+    }
     // The pipeline's export stage wrote the same files.
     assert_eq!(
         std::fs::read(&rs).unwrap(),
@@ -46,10 +65,7 @@ fn committed_files_are_what_the_exporter_writes() {
     assert_eq!(std::fs::read(&bin).unwrap(), committed("weights.bin"));
     // The C API's header is the exporter's for the same model and allowances.
     let header = export::render_c_header(model, &report).unwrap();
-    let p = format!(
-        "{}/../controller-core/capi/include/ampc.h",
-        env!("CARGO_MANIFEST_DIR")
-    );
+    let p = header_path;
     assert!(
         std::fs::read_to_string(&p).unwrap_or_default() == header,
         "{p} is stale: regenerate it with trainer export --c-header"
