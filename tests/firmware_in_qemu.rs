@@ -185,6 +185,32 @@ fn probe_states_match_host(board: &Board) {
         assert!((0..PROBES).any(|i| controller_core::evaluate(&probe_state(i)).flags.contains(f)));
     }
     assert!(flagged > 0 && flagged < PROBES as usize / 2, "{flagged}");
+
+    // The device's u (= the host's, bit for bit) is within the certified f32 allowance of
+    // the f64 network at the projected state, clamped to the band, on every finite probe.
+    let (model, _) = ampc_tests::trained_pendulum();
+    assert_eq!(model.hash, CERTIFICATE.hash);
+    let (lo, hi) = model.domain_f32();
+    let mut worst = 0.0f64;
+    for (i, row) in rows.iter().enumerate() {
+        let x = probe_state(i as u32);
+        if !x.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let xp: Vec<f64> = (0..2)
+            .map(|k| f64::from(x[k].clamp(lo[k], hi[k])))
+            .collect();
+        let u64 = model.eval_f64(&xp)[0].clamp(
+            f64::from(CERTIFICATE.clamp_lo[0]),
+            f64::from(CERTIFICATE.clamp_hi[0]),
+        );
+        worst = worst.max((f64::from(f32::from_bits(row[1])) - u64).abs());
+    }
+    println!(
+        "{}: probes: max |u_device − u_f64| = {worst:e} (allowance {:e})",
+        board.machine, CERTIFICATE.f32_allowance
+    );
+    assert!(worst > 0.0 && worst <= CERTIFICATE.f32_allowance);
 }
 
 #[test]
