@@ -99,7 +99,7 @@ const ACC_Q: [f32; 5] = [
 /// Inputs are clipped to `|x| ≤ ACC_CLIP` (then `1 − tanh < 5·10⁻⁹`).
 const ACC_CLIP: f32 = 10.0;
 /// log₂ e in f32.
-const LOG2E: f32 = 1.442_695;
+const LOG2E: f32 = core::f32::consts::LOG2_E;
 /// ln 2 rounded to 16 significant bits: `k·LN2_HI` is exact for `k < 2⁸`.
 const LN2_HI: f32 = 0.693_145_75;
 /// `ln 2 − LN2_HI`, rounded to f32.

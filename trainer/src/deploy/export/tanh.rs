@@ -44,7 +44,7 @@ const ACC_Q: [f32; 5] = [
     0.001_381_461_3,
 ];
 const ACC_CLIP: f32 = 10.0;
-const LOG2E: f32 = 1.442_695;
+const LOG2E: f32 = core::f32::consts::LOG2_E;
 const LN2_HI: f32 = 0.693_145_75;
 const LN2_LO: f32 = 1.428_606_8e-6;
 
