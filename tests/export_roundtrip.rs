@@ -180,8 +180,12 @@ fn eval_gives_the_cores_output_and_flags() {
             "--out",
             out.to_str().unwrap(),
         ];
+        let cert = run_dir.join("certificate.json");
         if raw {
             args.push("--raw");
+        } else {
+            // The pipeline keeps the certificate beside the model, not in it.
+            args.extend(["--certificate", cert.to_str().unwrap()]);
         }
         let o = ampc_tests::trainer(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -111,7 +111,10 @@ pub fn load_any(path: &Path) -> Result<(Model, Option<ImportNotes>), ModelFileEr
         source,
     })?;
     let origin = path.display().to_string();
-    if bytes.starts_with(&MODEL_MAGIC) {
+    // Every ampc artifact starts with `AMPC`: another kind (a dataset, a checkpoint, a
+    // blob) given as a model gets the model reader's "not an ampc model" error, not an
+    // ONNX parse error.
+    if bytes.starts_with(&MODEL_MAGIC) || bytes.starts_with(b"AMPC") {
         return Ok((Model::from_bytes(&bytes, &origin)?, None));
     }
     let (m, notes) = import_bytes(&bytes, &origin)?;

@@ -43,7 +43,7 @@ pub fn judge(eps: f64, u_lo: &[f64], u_hi: &[f64]) -> (f64, &'static str) {
         .sum::<f64>()
         .sqrt();
     let r = eps / d;
-    let word = if !(r < 1.0) {
+    let word = if r.is_nan() || r >= 1.0 {
         "vacuous"
     } else if r >= 0.2 {
         "weak"
