@@ -7,12 +7,95 @@ use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 use trainer::problem::ProblemConfig;
 
-/// The problem file of `--config`, or the embedded pendulum.
+/// The problem file of `--config`, or — when nothing names a problem — the embedded
+/// pendulum, said on stderr ([`embedded_pendulum`]).
 pub(super) fn load_config(path: Option<&Path>) -> Result<ProblemConfig> {
     Ok(match path {
         Some(p) => warn_plant(ProblemConfig::load(p)?),
-        None => ProblemConfig::default(),
+        None => embedded_pendulum(),
     })
+}
+
+/// The embedded pendulum, for a command given no `--config` and no input that names a
+/// problem; says so on stderr before anything else.
+pub(super) fn embedded_pendulum() -> ProblemConfig {
+    eprintln!(
+        "problem `pendulum`: the embedded pendulum (configs/pendulum.toml) — no --config \
+         given and no input names a problem"
+    );
+    ProblemConfig::default()
+}
+
+/// The problem a model (at `path`) is used with: `--config` if given — then the model's
+/// problem hash (and dimensions) must match it — else the problem file stored in the model
+/// (`learn::model_file`), else the embedded pendulum only if the model's stored problem
+/// hash is the pendulum's (a model of an older build). `None`: no problem is known (an ONNX
+/// file, or an older model of another problem). Says on stderr which problem it took.
+pub(super) fn problem_for_model(
+    config: Option<&Path>,
+    path: &Path,
+    m: &Model,
+) -> Result<Option<ProblemConfig>> {
+    if let Some(p) = config {
+        let cfg = warn_plant(ProblemConfig::load(p)?);
+        if (m.mlp.nx(), m.mlp.nu()) != (cfg.system.nx(), cfg.system.nu()) {
+            bail!(
+                "{}: the network maps {} states to {} inputs; problem `{}` of {} has {} and {}",
+                path.display(),
+                m.mlp.nx(),
+                m.mlp.nu(),
+                cfg.name,
+                p.display(),
+                cfg.system.nx(),
+                cfg.system.nu()
+            );
+        }
+        if !m.problem_hash.is_empty() && m.problem_hash != cfg.problem_hash() {
+            bail!(
+                "{} was trained on labels of problem {} (hash {}…), not of problem `{}` of {} \
+                 (hash {}…): omit --config to use the model's own problem",
+                path.display(),
+                stored_name(m.problem_toml.as_deref()),
+                short(&m.problem_hash),
+                cfg.name,
+                p.display(),
+                short(&cfg.problem_hash())
+            );
+        }
+        return Ok(Some(cfg));
+    }
+    if let Some(t) = &m.problem_toml {
+        let origin = format!("{} (its stored problem file)", path.display());
+        let cfg = warn_plant(ProblemConfig::from_stored_toml(t, &origin)?);
+        eprintln!(
+            "problem `{}` from {} (no --config given)",
+            cfg.name,
+            path.display()
+        );
+        return Ok(Some(cfg));
+    }
+    let pendulum = ProblemConfig::default();
+    if m.problem_hash == pendulum.problem_hash() {
+        eprintln!(
+            "problem `pendulum`: the embedded pendulum, whose problem hash {} records (no \
+             --config given)",
+            path.display()
+        );
+        return Ok(Some(pendulum));
+    }
+    Ok(None)
+}
+
+/// The `name` of a stored problem file, in backquotes (or "of unknown name").
+pub(super) fn stored_name(toml: Option<&str>) -> String {
+    toml.and_then(|t| t.parse::<toml::Table>().ok())
+        .and_then(|t| t.get("name").and_then(|v| v.as_str()).map(str::to_string))
+        .map_or_else(|| "of unknown name".into(), |n| format!("`{n}`"))
+}
+
+/// The first 12 bytes of a hash (all of it if shorter or not ASCII there).
+pub(super) fn short(h: &str) -> &str {
+    h.get(..12).unwrap_or(h)
 }
 
 /// Shows the plant compiler's warnings (an expression plant's non-smooth functions and

@@ -7,6 +7,9 @@
 //! the clamp band, and the flags (`deploy::export::device`): columns `x1..xn,u1..um,flags`
 //! (flags: 1 out of domain, 2 not finite, 4 clamped). With `--raw`, the bare f64 network
 //! and its Jacobian: `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+//!
+//! With `--config`, the model (and the certificate) must be of that problem; without it the
+//! problem stored in the model is named on stderr and the certificate checked against it.
 
 use super::common::{csv_numbers, jacobian_header, read_states};
 use anyhow::{bail, Context, Result};
@@ -15,14 +18,22 @@ use trainer::deploy::export::device::Device;
 use trainer::deploy::export::{ExportModel, Tanh};
 use trainer::learn::mlp::Activation;
 
-pub(super) fn execute(
-    model: &Path,
-    states: &Path,
-    out: &Path,
-    certificate: Option<&Path>,
-    raw: bool,
-) -> Result<()> {
+/// The input files of `eval`.
+pub(super) struct Inputs<'a> {
+    /// `--config`.
+    pub config: Option<&'a Path>,
+    /// `--model`.
+    pub model: &'a Path,
+    /// `--states`.
+    pub states: &'a Path,
+    /// `--certificate`.
+    pub certificate: Option<&'a Path>,
+}
+
+pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> {
+    let (model, states, certificate) = (inputs.model, inputs.states, inputs.certificate);
     let m = super::common::load_model(model)?;
+    let problem = super::common::problem_for_model(inputs.config, model, &m)?;
     let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
     if raw && certificate.is_some() {
         bail!("--raw evaluates the bare network: a certificate plays no part (drop --certificate)");
@@ -50,6 +61,9 @@ pub(super) fn execute(
         }
         let (cert, _) = super::export::load_certificate(model, &m, certificate)
             .context("the controller's output needs the certificate (domain and clamp band); --raw evaluates the bare network")?;
+        if let Some(cfg) = &problem {
+            super::export::check_certificate_problem(&cert, model, certificate, cfg)?;
+        }
         let em = ExportModel::from_trained("eval", &m, &cert)?;
         let dev = Device::new(&em, Tanh::Libm)?;
         let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();

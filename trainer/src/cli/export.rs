@@ -7,6 +7,10 @@
 //! alone (its f32 allowance is not analysed). Both paths clamp to (U_d ⊕ ε) ∩ actuator with
 //! the actuator limits = U_d, i.e. to U_d. The certificate's tier is the weaker of its JSON's
 //! `"guarantee"` (if any) and what its numbers rest on (`Guarantee`).
+//!
+//! The problem: `--config` (the model and the certificate must be of it), else the one
+//! stored in the model (`learn::model_file`). The generated files' name (`--name`, default
+//! that problem's name, else the model file's stem) is made an identifier ([`identifier`]).
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
@@ -28,10 +32,11 @@ pub(super) struct Outputs<'a> {
 }
 
 pub(super) fn execute(
+    config: Option<&Path>,
     model: &Path,
     certificate: Option<&Path>,
     out: &Outputs<'_>,
-    name: &str,
+    name: Option<&str>,
 ) -> Result<()> {
     if out.rust.is_some() != out.postcard.is_some() {
         bail!("--rust and --postcard go together (the Rust file and the blob of one export)");
@@ -43,7 +48,13 @@ pub(super) fn execute(
         bail!("--c-header goes with --rust and --postcard (the header describes that export)");
     }
     let m = super::common::load_model(model)?;
+    let problem = super::common::problem_for_model(config, model, &m)?;
     let (cert, declared) = load_certificate(model, &m, certificate)?;
+    if let Some(cfg) = &problem {
+        check_certificate_problem(&cert, model, certificate, cfg)?;
+    }
+    let name = export_name(name, problem.as_ref().map(|c| c.name.as_str()), model);
+    let name = name.as_str();
     let tanh = m.mlp.activation == Activation::Tanh;
     let mut allowance = None;
     if let (Some(rust), Some(postcard)) = (out.rust, out.postcard) {
@@ -94,6 +105,69 @@ pub(super) fn execute(
     Ok(())
 }
 
+/// The generated files' name: `--name`, else the problem's name, else the model file's
+/// stem (said on stderr), as an [`identifier`] (a change is said on stderr).
+fn export_name(given: Option<&str>, problem: Option<&str>, model: &Path) -> String {
+    let raw = match (given, problem) {
+        (Some(n), _) | (None, Some(n)) => n.to_string(),
+        (None, None) => {
+            let stem = model
+                .file_stem()
+                .map_or("model".into(), |s| s.to_string_lossy().into_owned());
+            eprintln!(
+                "note: {} names no problem (an ONNX file or a model of an older build): the \
+                 generated files are named after the file, `{}` (pass --name or --config)",
+                model.display(),
+                identifier(&stem)
+            );
+            stem
+        }
+    };
+    let id = identifier(&raw);
+    if id != raw {
+        eprintln!("note: name `{raw}` written as the identifier `{id}`");
+    }
+    id
+}
+
+/// `s` as an identifier of Rust and C: every character other than A–Z, a–z, 0–9 and `_`
+/// becomes `_`, a leading digit gets a `_` before it, and the empty name is `model`.
+pub(super) fn identifier(s: &str) -> String {
+    let mut id: String = s
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    if id.is_empty() {
+        id = "model".into();
+    } else if id.starts_with(|c: char| c.is_ascii_digit()) {
+        id.insert(0, '_');
+    }
+    id
+}
+
+/// Checks that a certificate (`--certificate`, else the one stored in the model at
+/// `model_path`) is about problem `cfg`.
+pub(super) fn check_certificate_problem(
+    cert: &Certificate,
+    model_path: &Path,
+    certificate: Option<&Path>,
+    cfg: &trainer::problem::ProblemConfig,
+) -> Result<()> {
+    if !cert.problem_hash.is_empty() && cert.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} certifies the network for problem hash {}…, not for its problem `{}` (hash {}…)",
+            certificate.map_or_else(
+                || format!("the certificate stored in {}", model_path.display()),
+                |p| p.display().to_string()
+            ),
+            super::common::short(&cert.problem_hash),
+            cfg.name,
+            super::common::short(&cfg.problem_hash())
+        );
+    }
+    Ok(())
+}
+
 /// The certificate of `--certificate` (with the tier its JSON declares, if any), or the one
 /// stored in the model at `model_path`; either way it must be about this very network.
 pub(super) fn load_certificate(
@@ -130,4 +204,18 @@ pub(super) fn load_certificate(
         );
     }
     Ok((cert, declared))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn identifiers() {
+        use super::identifier;
+        assert_eq!(identifier("double_integrator"), "double_integrator");
+        assert_eq!(identifier("cart-pole v2"), "cart_pole_v2");
+        assert_eq!(identifier("2link"), "_2link");
+        assert_eq!(identifier(""), "model");
+        assert_eq!(identifier("a*/\nb"), "a___nb");
+        assert_eq!(identifier("θ"), "_");
+    }
 }

@@ -43,6 +43,9 @@ enum Cmd {
     Run {
         /// Problem file (default: the embedded pendulum).
         config: Option<PathBuf>,
+        /// Problem file, as a flag (the same as the positional argument).
+        #[arg(long = "config", id = "config_flag", conflicts_with = "config")]
+        config_flag: Option<PathBuf>,
         /// Root directory of runs; the run goes to `<out>/<name>/`.
         #[arg(long, default_value = "runs")]
         out: PathBuf,
@@ -138,6 +141,10 @@ enum Cmd {
     },
     /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
     Eval {
+        /// Problem file: the model (and certificate) must be of this problem (default: the
+        /// problem stored in the model).
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Model file, or an ONNX file (detected by content).
         #[arg(long)]
         model: PathBuf,
@@ -177,6 +184,10 @@ enum Cmd {
     /// with the certificate's f32 allowance) and/or as an ONNX model with the certificate in
     /// its metadata.
     Export {
+        /// Problem file: the model and the certificate must be of this problem (default: the
+        /// problem stored in the model).
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Model file from `trainer train`, or an ONNX file (detected by content).
         #[arg(long)]
         model: PathBuf,
@@ -193,9 +204,10 @@ enum Cmd {
         /// certificate under `ampc.*` metadata keys.
         #[arg(long)]
         onnx: Option<PathBuf>,
-        /// Name used in the generated file (default: pendulum).
-        #[arg(long, default_value = "pendulum")]
-        name: String,
+        /// Name used in the generated files (default: the model's problem name), made a
+        /// valid identifier (characters other than A–Z, a–z, 0–9, _ become _).
+        #[arg(long)]
+        name: Option<String>,
         /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
         #[arg(long)]
         c_header: Option<PathBuf>,
@@ -270,6 +282,10 @@ enum Cmd {
     },
     /// Merge shard files into one dataset, identical to an unsharded run.
     Merge {
+        /// Problem file: every shard must be labelled for this problem (default: the shards'
+        /// own, which must agree).
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Output dataset file.
         out: PathBuf,
         /// Shard files.
@@ -283,12 +299,20 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
     match cli.cmd {
         Cmd::Run {
             config,
+            config_flag,
             out,
             force,
             quiet,
             verbose,
             robust_eps,
-        } => run::execute(config.as_deref(), &out, &force, quiet, verbose, robust_eps),
+        } => run::execute(
+            config.or(config_flag).as_deref(),
+            &out,
+            &force,
+            quiet,
+            verbose,
+            robust_eps,
+        ),
         Cmd::Solve {
             config,
             states,
@@ -348,14 +372,21 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             )
         }
         Cmd::Eval {
+            config,
             model,
             states,
             out,
             certificate,
             raw,
         } => {
-            common::refuse_overwrite(&[&out], &[&model, &states, opt(&certificate)])?;
-            eval::execute(&model, &states, &out, certificate.as_deref(), raw)
+            common::refuse_overwrite(&[&out], &[&model, &states, opt(&certificate), opt(&config)])?;
+            let inputs = eval::Inputs {
+                config: config.as_deref(),
+                model: &model,
+                states: &states,
+                certificate: certificate.as_deref(),
+            };
+            eval::execute(&inputs, &out, raw)
         }
         Cmd::Compare {
             config,
@@ -367,6 +398,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             compare::execute(config.as_deref(), &data, seeds, json.as_deref())
         }
         Cmd::Export {
+            config,
             model,
             certificate,
             rust,
@@ -377,7 +409,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
         } => {
             common::refuse_overwrite(
                 &[opt(&rust), opt(&postcard), opt(&onnx), opt(&c_header)],
-                &[&model, opt(&certificate)],
+                &[&model, opt(&certificate), opt(&config)],
             )?;
             let out = export::Outputs {
                 rust: rust.as_deref(),
@@ -385,7 +417,13 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 onnx: onnx.as_deref(),
                 c_header: c_header.as_deref(),
             };
-            export::execute(&model, certificate.as_deref(), &out, &name)
+            export::execute(
+                config.as_deref(),
+                &model,
+                certificate.as_deref(),
+                &out,
+                name.as_deref(),
+            )
         }
         Cmd::Refine {
             config,
@@ -427,11 +465,16 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             };
             import::execute(config.as_deref(), &csv, &out, &opts, quiet)
         }
-        Cmd::Merge { out, inputs } => {
+        Cmd::Merge {
+            config,
+            out,
+            inputs,
+        } => {
             let csv = csv_path(&out);
-            let ins: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+            let mut ins: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+            ins.push(opt(&config));
             common::refuse_overwrite(&[&out, &csv], &ins)?;
-            merge::execute(&out, &inputs)
+            merge::execute(config.as_deref(), &out, &inputs)
         }
     }
 }

@@ -7,9 +7,13 @@
 //! not met. `--certify-only --model M` keeps the network of M (a model file or an ONNX file)
 //! fixed and refines only the cells; the certificate is about M (its hash); for an ONNX M no
 //! `model.bin` is written (export M itself with the certificate).
+//!
+//! The problem: `--config`, else the one stored in `--data` (its header) or in `--model`
+//! (`learn::model_file`), else — nothing names one — the embedded pendulum (said on
+//! stderr). A model of another problem than the refined one is refused.
 
 use super::certify::{print_statistical, StatisticalArgs};
-use super::common::load_config;
+use super::common::{embedded_pendulum, load_config, problem_for_data, problem_for_model};
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
@@ -28,13 +32,28 @@ pub(super) fn execute(
     fixed: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
-    let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
+    let fixed_model = fixed
+        .map(|p| super::common::load_model(p).map(|m| (p, m)))
+        .transpose()?;
+    let base = match (config, data, &fixed_model) {
+        (Some(_), _, _) => load_config(config)?,
+        (None, Some(p), _) => problem_for_data(None, p, &Dataset::load(p)?)?,
+        (None, None, Some((p, m))) => problem_for_model(None, p, m)?.with_context(|| {
+            format!(
+                "{} names no problem (an ONNX file or a model of an older build): pass --config",
+                p.display()
+            )
+        })?,
+        (None, None, None) => embedded_pendulum(),
+    };
+    // A problem stored in an artifact may already be a robust design's tightened MPC.
+    let tightened = config.is_none() && base.ocp.stages.is_some();
+    let (cfg, robust_design) = refine_config(base, tightened, target_eps, budget)?;
     let initial_labels = data
         .map(|p| first_round_labels(&cfg, p, quiet))
         .transpose()?;
-    let fixed = match fixed {
-        Some(p) => {
-            let m = super::common::load_model(p)?;
+    let fixed = match fixed_model {
+        Some((p, m)) => {
             let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
             if (m.mlp.nx(), m.mlp.nu()) != (nx, nu) {
                 bail!(
@@ -43,6 +62,17 @@ pub(super) fn execute(
                     m.mlp.nx(),
                     m.mlp.nu(),
                     cfg.name
+                );
+            }
+            if !m.problem_hash.is_empty() && m.problem_hash != cfg.problem_hash() {
+                bail!(
+                    "{} was trained on labels of problem {} (hash {}…), not of the refined \
+                     problem `{}` (hash {}…)",
+                    p.display(),
+                    super::common::stored_name(m.problem_toml.as_deref()),
+                    super::common::short(&m.problem_hash),
+                    cfg.name,
+                    super::common::short(&cfg.problem_hash())
                 );
             }
             Some(m)
@@ -150,18 +180,18 @@ fn first_round_labels(cfg: &ProblemConfig, path: &Path, quiet: bool) -> Result<D
     Ok(d)
 }
 
-/// The problem to refine, with `--target-eps` and `--budget` applied, and the design ε of
+/// The problem to refine (`cfg`, tightened already if `tightened`), with `--target-eps` and `--budget` applied, and the design ε of
 /// a robust design (`[robust] eps > 0`), whose tightened MPC is then the problem.
 fn refine_config(
-    config: Option<&Path>,
+    mut cfg: ProblemConfig,
+    tightened: bool,
     target_eps: Option<f64>,
     budget: Option<usize>,
 ) -> Result<(ProblemConfig, Option<f64>)> {
-    let mut cfg = load_config(config)?;
     // A robust design (`[robust] eps > 0`): refine the data of the tightened MPC, with the
     // design ε as the default target (Corollary 1 needs certified ε ≤ design ε).
     let mut robust_note = None;
-    if cfg.robust.enabled() {
+    if cfg.robust.enabled() && !tightened {
         let design = trainer::robust::design(&cfg)?;
         let eps = cfg.robust.eps;
         let mut rcfg = trainer::robust::robust_config(&cfg, &design);

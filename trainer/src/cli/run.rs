@@ -67,7 +67,7 @@ fn read_problem(config: Option<&Path>) -> Result<(ProblemConfig, String)> {
             )
         }
         None => (
-            ProblemConfig::default(),
+            super::common::embedded_pendulum(),
             trainer::problem::PENDULUM_TOML.to_string(),
         ),
     })

@@ -78,6 +78,7 @@ pub(super) fn execute(
         },
     )?;
     model.certificate = Some(cert.clone());
+    model.problem_toml = Some(cfg.to_toml_string()?);
     model.save(out)?;
     if !quiet {
         print_summary(&model, &cert, nominal, (t_train, t_val), out);

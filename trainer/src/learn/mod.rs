@@ -8,10 +8,12 @@
 //! - [`setpoint`]: the setpoint hold κ_NN(x) − κ_NN(x_ref) + κ(x_ref), folded into the
 //!   last bias after training.
 //! - `stored_settings`: the model file's encoding of the training settings.
+//! - [`model_file`]: the model file (encoding, checks, the trailer holding the problem file).
 //!
 //! Imports `problem`, `mpc` and `data`.
 
 pub mod mlp;
+pub mod model_file;
 pub mod setpoint;
 mod stored_settings;
 pub mod train;

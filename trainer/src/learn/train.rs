@@ -11,14 +11,12 @@
 //! the Jacobian term. Metrics: ε_D = max_i ‖κ(x_i) − κ_NN(x_i)‖ over the training set
 //! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
 
-use crate::data::dataset::{Dataset, DatasetError};
-use crate::io::write_atomic;
+use crate::data::dataset::Dataset;
 use crate::learn::mlp::{Batch, LossParts, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Schedule, TrainSettings};
 use crate::rng::splitmix64;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 
 /// Model file format version.
 pub const MODEL_VERSION: u32 = 3;
@@ -225,64 +223,10 @@ pub struct TrainedModel<C> {
     /// binds. Not stored in the model file (`None` after loading one).
     #[serde(skip)]
     pub source_hash: Option<String>,
-}
-
-impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
-    /// Encodes the model.
-    pub fn to_bytes(&self) -> Vec<u8> {
-        crate::io::seal(postcard::to_allocvec(self).unwrap_or_default())
-    }
-    /// Writes the model atomically.
-    pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
-        Ok(write_atomic(path, &self.to_bytes())?)
-    }
-    /// Decodes and checks a model; `origin` names it in errors.
-    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, DatasetError> {
-        let fmt = |reason: String| DatasetError::Format {
-            path: origin.to_string(),
-            reason,
-        };
-        let m: TrainedModel<C> = crate::io::decode_checked(
-            bytes,
-            origin,
-            &MODEL_MAGIC,
-            "model",
-            |m: &TrainedModel<C>| m.version,
-            MODEL_VERSION,
-        )?;
-        let w = m.mlp.widths();
-        let shapes_ok = m.mlp.layers.iter().zip(w.windows(2)).all(|(l, p)| {
-            l.inp == p[0] && l.out == p[1] && l.w.len() == l.inp * l.out && l.b.len() == l.out
-        }) && m.mlp.in_center.len() == w[0]
-            && m.mlp.in_half.len() == w[0]
-            && m.mlp.out_center.len() == m.mlp.nu()
-            && m.mlp.out_half.len() == m.mlp.nu()
-            && m.mlp.layers.windows(2).all(|p| p[0].out == p[1].inp);
-        if !shapes_ok || m.mlp.layers.is_empty() {
-            return Err(fmt("inconsistent layer shapes".into()));
-        }
-        Ok(m)
-    }
-    /// SHA-256 (hex) of the network's parameters and scaling: what a certificate is about
-    /// (for an imported network: of the file it was imported from, [`Self::source_hash`]).
-    pub fn content_hash(&self) -> String {
-        use sha2::{Digest, Sha256};
-        if let Some(h) = &self.source_hash {
-            return h.clone();
-        }
-        crate::io::hex(&Sha256::digest(
-            postcard::to_allocvec(&self.mlp).unwrap_or_default(),
-        ))
-    }
-
-    /// Reads a model file.
-    pub fn load(path: &Path) -> Result<Self, DatasetError> {
-        let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, &path.display().to_string())
-    }
+    /// The problem file (TOML) of the labels, kept in the model file's trailer
+    /// ([`crate::learn::model_file`]); `None` in older files and ONNX imports.
+    #[serde(skip)]
+    pub problem_toml: Option<String>,
 }
 
 /// Adam optimiser state.
@@ -507,6 +451,7 @@ pub fn train_from<C>(
         history,
         certificate: None,
         source_hash: None,
+        problem_toml: None,
     }
 }
 
@@ -550,6 +495,7 @@ mod tests {
     use super::*;
     use crate::problem::ProblemConfig;
     use proptest::prelude::*;
+    use std::path::Path;
 
     fn setup(epochs: usize) -> (ProblemConfig, TrainSet, TrainSet) {
         let path = concat!(
@@ -675,6 +621,15 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("shapes"));
+        // The stored problem: round trip; a file without it (older builds) keeps its bytes.
+        let mut with = m.clone();
+        with.problem_toml = Some(cfg.to_toml_string().unwrap());
+        let wb = with.to_bytes();
+        assert_eq!(TrainedModel::<()>::from_bytes(&wb, "m").unwrap(), with);
+        assert_eq!(&wb[..bytes.len() - 32], &bytes[..bytes.len() - 32]);
+        // An older build (postcard ignores the trailer) reads the same model.
+        let old: TrainedModel<()> = postcard::from_bytes(crate::io::unseal(&wb).unwrap()).unwrap();
+        assert_eq!(old, m);
     }
 
     proptest! {

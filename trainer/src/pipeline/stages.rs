@@ -209,8 +209,9 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
     }
     // Both nets hold the setpoint (`training.hold_setpoint`): κ(x_ref) solved once.
     let hold = Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail("train", e))?;
+    let toml = cfg.to_toml_string().map_err(|e| fail("train", e))?;
     let one = |nominal: bool| -> Model {
-        train(
+        let mut m: Model = train(
             &cfg.training,
             &TrainOptions {
                 nominal,
@@ -223,7 +224,9 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
             &data.header.problem_hash,
             &dh,
-        )
+        );
+        m.problem_toml = Some(toml.clone());
+        m
     };
     let (n, r) = rayon::join(|| one(true), || one(false));
     n.save(&d.join("model_nominal.bin"))

@@ -258,6 +258,7 @@ pub fn write_outputs(
     if r.model.source_hash.is_none() {
         let mut model = r.model.clone();
         model.certificate = Some(cert.base.clone());
+        model.problem_toml = cfg.to_toml_string().ok();
         model.save(&dir.join("model.bin"))?;
     }
     let ds = dataset(cfg, &r.state);

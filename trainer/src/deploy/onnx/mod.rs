@@ -100,6 +100,7 @@ pub fn import_bytes(bytes: &[u8], origin: &str) -> Result<(Model, ImportNotes), 
         history: Vec::new(),
         certificate: None,
         source_hash: Some(crate::io::sha256_hex(bytes)),
+        problem_toml: None,
     };
     Ok((model, notes))
 }

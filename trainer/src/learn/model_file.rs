@@ -1,0 +1,133 @@
+//! The model file of a [`TrainedModel`]: its encoding, the checks on reading it, and how it
+//! stores the problem file of its labels — an optional trailer after the postcard-encoded
+//! model, inside the sealed body,
+//!
+//! ```text
+//! file = magic … postcard(TrainedModel) ‖ [ "AMPCPROB" ‖ postcard(String: problem TOML) ] ‖ SHA-256
+//! ```
+//!
+//! Backward compatible both ways: postcard ignores bytes after a complete value, so a
+//! build without the trailer reads a new file as before, and a file written before the
+//! trailer (or of a network without a problem, e.g. an ONNX import) reads back with no
+//! stored problem. The checksum covers the trailer. The stored text is what
+//! `ProblemConfig::to_toml_string` wrote; `trainer eval`/`export`/`refine` take the
+//! problem from it when no `--config` is given.
+
+use super::train::{TrainedModel, MODEL_MAGIC, MODEL_VERSION};
+use crate::data::dataset::DatasetError;
+use crate::io::write_atomic;
+use serde::Serialize;
+use std::path::Path;
+
+/// Marks the start of the trailer.
+pub const PROBLEM_MAGIC: [u8; 8] = *b"AMPCPROB";
+
+/// Appends the trailer holding `toml` (if any) to an encoded model body.
+pub fn append(body: &mut Vec<u8>, toml: Option<&str>) {
+    if let Some(t) = toml {
+        body.extend_from_slice(&PROBLEM_MAGIC);
+        body.extend(postcard::to_allocvec(t).unwrap_or_default());
+    }
+}
+
+/// The problem text stored in the bytes that follow an encoded model (`rest`): `None` if
+/// there are none; an error (the reason) if they are not one well-formed trailer.
+pub fn read(rest: &[u8]) -> Result<Option<String>, String> {
+    if rest.is_empty() {
+        return Ok(None);
+    }
+    let Some(tail) = rest.strip_prefix(&PROBLEM_MAGIC[..]) else {
+        return Err(format!("{} unexpected bytes after the model", rest.len()));
+    };
+    match postcard::take_from_bytes::<String>(tail) {
+        Ok((s, [])) => Ok(Some(s)),
+        Ok((_, extra)) => Err(format!(
+            "{} unexpected bytes after the stored problem",
+            extra.len()
+        )),
+        Err(e) => Err(format!("stored problem: {e}")),
+    }
+}
+
+impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
+    /// Encodes the model.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut body = postcard::to_allocvec(self).unwrap_or_default();
+        append(&mut body, self.problem_toml.as_deref());
+        crate::io::seal(body)
+    }
+    /// Writes the model atomically.
+    pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
+        Ok(write_atomic(path, &self.to_bytes())?)
+    }
+    /// Decodes and checks a model; `origin` names it in errors.
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, DatasetError> {
+        let fmt = |reason: String| DatasetError::Format {
+            path: origin.to_string(),
+            reason,
+        };
+        let mut m: TrainedModel<C> = crate::io::decode_checked(
+            bytes,
+            origin,
+            &MODEL_MAGIC,
+            "model",
+            |m: &TrainedModel<C>| m.version,
+            MODEL_VERSION,
+        )?;
+        let w = m.mlp.widths();
+        let shapes_ok = m.mlp.layers.iter().zip(w.windows(2)).all(|(l, p)| {
+            l.inp == p[0] && l.out == p[1] && l.w.len() == l.inp * l.out && l.b.len() == l.out
+        }) && m.mlp.in_center.len() == w[0]
+            && m.mlp.in_half.len() == w[0]
+            && m.mlp.out_center.len() == m.mlp.nu()
+            && m.mlp.out_half.len() == m.mlp.nu()
+            && m.mlp.layers.windows(2).all(|p| p[0].out == p[1].inp);
+        if !shapes_ok || m.mlp.layers.is_empty() {
+            return Err(fmt("inconsistent layer shapes".into()));
+        }
+        let body = crate::io::unseal(bytes).unwrap_or_default();
+        let rest = postcard::take_from_bytes::<Self>(body).map_or(&[][..], |(_, r)| r);
+        m.problem_toml = read(rest).map_err(fmt)?;
+        Ok(m)
+    }
+    /// SHA-256 (hex) of the network's parameters and scaling: what a certificate is about
+    /// (for an imported network: of the file it was imported from, [`Self::source_hash`]).
+    pub fn content_hash(&self) -> String {
+        use sha2::{Digest, Sha256};
+        if let Some(h) = &self.source_hash {
+            return h.clone();
+        }
+        crate::io::hex(&Sha256::digest(
+            postcard::to_allocvec(&self.mlp).unwrap_or_default(),
+        ))
+    }
+
+    /// Reads a model file.
+    pub fn load(path: &Path) -> Result<Self, DatasetError> {
+        let bytes = std::fs::read(path).map_err(|source| DatasetError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_malformed_trailers() {
+        let mut body = vec![1u8, 2, 3];
+        append(&mut body, None);
+        assert_eq!(body, [1, 2, 3]);
+        append(&mut body, Some("name = \"x\"\n"));
+        assert_eq!(read(&body[3..]).unwrap().as_deref(), Some("name = \"x\"\n"));
+        assert_eq!(read(&[]).unwrap(), None);
+        assert!(read(&body[4..]).is_err());
+        let mut longer = body[3..].to_vec();
+        longer.push(0);
+        assert!(read(&longer).unwrap_err().contains("1 unexpected"));
+        assert!(read(&body[3..body.len() - 1]).is_err());
+    }
+}
