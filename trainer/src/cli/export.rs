@@ -203,6 +203,29 @@ pub(super) fn load_certificate(
             model_path.display()
         );
     }
+    let origin = || {
+        certificate.map_or_else(
+            || format!("the certificate stored in {}", model_path.display()),
+            |p| p.display().to_string(),
+        )
+    };
+    let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
+    for (key, len, want) in [
+        ("domain_lo", cert.domain_lo.len(), nx),
+        ("domain_hi", cert.domain_hi.len(), nx),
+        ("u_lo", cert.u_lo.len(), nu),
+        ("u_hi", cert.u_hi.len(), nu),
+        ("clamp_lo", cert.clamp_lo.len(), nu),
+        ("clamp_hi", cert.clamp_hi.len(), nu),
+    ] {
+        if len != want {
+            bail!(
+                "{}: `{key}` has {len} entries, but {} maps {nx} states to {nu} inputs",
+                origin(),
+                model_path.display()
+            );
+        }
+    }
     Ok((cert, declared))
 }
 
