@@ -395,6 +395,78 @@ mod tests {
         );
     }
 
+    /// Centre, radius and height of the pocket of [`pocket`].
+    const POCKET: ([f64; 2], f64, f64) = ([0.23, 0.21], 0.15, 5.0);
+
+    /// A law with an interior pocket: the linear κ₀ = x₁ + 0.3x₂ (active set 0), and on the
+    /// disk |x − p| < ρ another active set (1) that lifts κ by a cone H·(1 − |x − p|/ρ),
+    /// touching neither the corners nor the edges of the cell [0, 0.4]². With `lift` false:
+    /// κ₀ everywhere, but the active set still reported (the corner data a code would see
+    /// if it used only the corners' values and sensitivities).
+    fn pocket_law(x: &[f64], lift: bool) -> (f64, [f64; 2], u64) {
+        let ([p0, p1], rho, h) = POCKET;
+        let d = ((x[0] - p0).powi(2) + (x[1] - p1).powi(2)).sqrt();
+        let (mut u, mut g) = (x[0] + 0.3 * x[1], [1.0, 0.3]);
+        if lift && d < rho {
+            u += h * (1.0 - d / rho);
+            if d > 0.0 {
+                g[0] -= h / rho * (x[0] - p0) / d;
+                g[1] -= h / rho * (x[1] - p1) / d;
+            }
+        }
+        (u, g, (d < rho) as u64)
+    }
+
+    /// The pocket inside a cell: its corners (and edges) see only κ₀, so the cell's bound
+    /// equals that of κ₀ — the documented blind spot of corner data. One split, as the
+    /// refinement makes while ε_C is above its target, puts a corner into the pocket, and
+    /// then every child's bound covers the error sampled in it. In the child holding the
+    /// pocket's apex, a bound from the corners' values and sensitivities alone (the corner
+    /// errors plus the network's part of the remainder) is exceeded by the samples: the
+    /// bound must use the edges' secant slopes and the change of active set.
+    #[test]
+    fn a_pocket_inside_a_cell_is_covered_once_a_split_puts_a_corner_in_it() {
+        let m = net();
+        let pocket = |x: &[f64]| pocket_law(x, true);
+        let flat = |x: &[f64]| pocket_law(x, false);
+        let kappa0 = |x: &[f64]| (x[0] + 0.3 * x[1], [1.0, 0.3], 0u64);
+        let (parent, worst_parent) = check_cell(&pocket, &m, [0.0, 0.0], [0.4, 0.4], 5);
+        let (parent0, _) = check_cell(&kappa0, &m, [0.0, 0.0], [0.4, 0.4], 5);
+        assert_eq!(parent, parent0, "corner data cannot see the pocket");
+        eprintln!(
+            "parent cell: bound {} vs sampled max {worst_parent}",
+            parent.eps
+        );
+        for (lo, hi) in [
+            ([0.0, 0.0], [0.2, 0.2]),
+            ([0.2, 0.0], [0.4, 0.2]),
+            ([0.0, 0.2], [0.2, 0.4]),
+            ([0.2, 0.2], [0.4, 0.4]),
+        ] {
+            let (b, worst) = check_cell(&pocket, &m, lo, hi, 7);
+            assert_eq!(b.form, Form::FirstOrder, "{lo:?}: the active set changes");
+            assert!(
+                worst <= b.eps,
+                "child {lo:?}..{hi:?}: sampled {worst} > bound {b:?}"
+            );
+            // The network's part of the first-order remainder (κ₀'s secants equal its
+            // sensitivities, the active set change forces the first-order form).
+            let (b0, _) = check_cell(&flat, &m, lo, hi, 7);
+            let corners_only = b.corner + b0.remainder + LABEL_TOL;
+            eprintln!(
+                "child {lo:?}: bound {} (corner {}, remainder {}), sampled {worst}, \
+                 corners only {corners_only}",
+                b.eps, b.corner, b.remainder
+            );
+            if lo == [0.2, 0.2] {
+                assert!(
+                    worst > corners_only,
+                    "the apex's child does not discriminate: sampled {worst} ≤ {corners_only}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn a_non_finite_network_gets_no_bound() {
         let mut m = net();

@@ -188,9 +188,22 @@ impl LipSdp {
 /// LipSDP-Neuron bound √ρ (see the module doc), certified by a Cholesky factorisation;
 /// falls back to the naive bound if no certificate is found. Without hidden layers: ‖W̃‖₂.
 pub fn lipsdp_bound(mlp: &Mlp) -> f64 {
+    if mlp.layers.len() == 1 {
+        return spectral_norm(&mat(&mlp.physical_layers()[0]));
+    }
+    match lipsdp_multipliers(mlp) {
+        Some((rho, _)) => rho.sqrt(),
+        None => naive_bound(mlp),
+    }
+}
+
+/// The certified LipSDP-Neuron solution behind [`lipsdp_bound`]: ρ and the diagonal
+/// multipliers T (hidden units in layer order) with M(ρ, T) ⪯ 0 verified by a Cholesky
+/// factorisation of −M(ρ, T); `None` without hidden layers or if no certificate was found.
+pub fn lipsdp_multipliers(mlp: &Mlp) -> Option<(f64, Vec<f64>)> {
     let sdp = LipSdp::new(mlp);
     if sdp.w.len() == 1 {
-        return spectral_norm(&sdp.w[0]);
+        return None;
     }
     // Closed-form start: S_0 = I, t_j = 1/‖W̃_j S_{j−1}⁻¹ W̃_jᵀ‖, S_j = 2t_jI − t_j²W̃_jS⁻¹W̃_jᵀ.
     let mut t = vec![0.0; sdp.nh];
@@ -219,9 +232,7 @@ pub fn lipsdp_bound(mlp: &Mlp) -> f64 {
         }
         scale *= 2.0;
     }
-    let Some(rho0) = cur else {
-        return naive_bound(mlp);
-    };
+    let rho0 = cur?;
     // Minimise f_μ over θ = ln t by gradient steps with backtracking (BB step sizes), for
     // μ = 10⁻²ρ₀, 10⁻³ρ₀, …, 10⁻¹¹ρ₀ (each stage warm-started), keeping the T of the least
     // λ_max seen.
@@ -283,12 +294,12 @@ pub fn lipsdp_bound(mlp: &Mlp) -> f64 {
     let mut rho_c = rho * (1.0 + 1e-9) + 1e-12;
     for _ in 0..60 {
         if sdp.certify(rho_c, &t) {
-            return rho_c.sqrt();
+            return Some((rho_c, t));
         }
         rho_c *= 1.0 + 1e-6;
         rho_c += 1e-9;
     }
-    naive_bound(mlp)
+    None
 }
 
 /// Exact maximum of ‖W̃_m D_{m−1}⋯D_1 W̃_1‖₂ over slope vertices D_j ∈ {0,1}ⁿ; `None` if

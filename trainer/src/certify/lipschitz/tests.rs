@@ -1,6 +1,8 @@
 //! The Lipschitz bounds: sampled ≤ vertex ≤ LipSDP ≤ naive on random nets, closed forms
 //! (one layer, one neuron, decoupled nets), the vertex enumeration against brute force,
-//! LipSDP against an independent solve; the MPC estimates of a linear law.
+//! LipSDP against an independent solve and its multipliers checked on the LMI assembled
+//! independently (Fazlyab et al.'s [A; B] form, not the module's block assembly); the MPC
+//! estimates of a linear law.
 
 use super::*;
 use crate::learn::mlp::Activation;
@@ -153,16 +155,61 @@ fn lipsdp_reaches_the_known_optimum_of_decoupled_nets() {
     assert!((vertex_bound(&m, 22).unwrap() - exact).abs() <= 1e-12 * exact);
 }
 
+/// The LipSDP-Neuron matrix assembled as in Fazlyab et al. (2019), Theorem 2, with slopes
+/// in [α, β] = [0, 1] — independently of `LipSdp::k`/`n1t`:
+/// `M = [A; B]ᵀ [[0, T], [T, −2T]] [A; B] + diag(−ρI, 0, …, 0, W̃_lᵀW̃_l)` with
+/// `A = [blkdiag(W̃_0, …, W̃_{l−1}), 0]`, `B = [0, I]` over z = (x, hidden units).
+fn lmi(mlp: &Mlp, rho: f64, t: &[f64]) -> DMatrix<f64> {
+    let w: Vec<DMatrix<f64>> = mlp
+        .physical_layers()
+        .iter()
+        .map(|l| DMatrix::from_row_slice(l.out, l.inp, &l.w))
+        .collect();
+    let h = w.len() - 1;
+    let n0 = w[0].ncols();
+    let nh: usize = w[..h].iter().map(|m| m.nrows()).sum();
+    let dim = n0 + nh;
+    let mut a = DMatrix::zeros(nh, dim);
+    let (mut r, mut c) = (0, 0);
+    for wj in &w[..h] {
+        a.view_mut((r, c), (wj.nrows(), wj.ncols())).copy_from(wj);
+        r += wj.nrows();
+        c += wj.ncols();
+    }
+    let mut b = DMatrix::zeros(nh, dim);
+    b.view_mut((0, n0), (nh, nh)).fill_with_identity();
+    let tm = DMatrix::from_diagonal(&DVector::from_column_slice(t));
+    let mut m =
+        a.transpose() * &tm * &b + b.transpose() * &tm * &a - b.transpose() * &tm * &b * 2.0;
+    for i in 0..n0 {
+        m[(i, i)] -= rho;
+    }
+    let last = &w[h];
+    let nl = last.ncols();
+    let mut corner = m.view_mut((dim - nl, dim - nl), (nl, nl));
+    corner += last.transpose() * last;
+    m
+}
+
+/// Whether −M(ρ, T) of [`lmi`] is positive definite (a Cholesky factorisation).
+fn lmi_holds(mlp: &Mlp, rho: f64, t: &[f64]) -> bool {
+    nalgebra::Cholesky::new(-lmi(mlp, rho, t)).is_some()
+}
+
 /// An independent LipSDP-Neuron solve: for fixed T, the least ρ with −M(ρ, T) ⪰ 0 by
-/// bisection on Cholesky factorisations of the full matrix (no Schur complement, no
-/// eigenvalues, no gradients), minimised over T by a derivative-free pattern search in
-/// log T (coordinate and random directions, shrinking steps).
+/// bisection on Cholesky factorisations of the full matrix of [`lmi`] (no Schur
+/// complement, no eigenvalues, no gradients, not the module's assembly), minimised over T
+/// by a derivative-free pattern search in log T (coordinate and random directions,
+/// shrinking steps).
 fn lipsdp_reference(mlp: &Mlp) -> f64 {
-    let sdp = LipSdp::new(mlp);
+    let nh: usize = mlp.layers[..mlp.layers.len() - 1]
+        .iter()
+        .map(|l| l.out)
+        .sum();
     let least_rho = |t: &[f64]| -> f64 {
         let (mut lo, mut hi) = (0.0, 1.0);
         let mut k = 0;
-        while !sdp.certify(hi, t) {
+        while !lmi_holds(mlp, hi, t) {
             hi *= 4.0;
             k += 1;
             if k > 200 {
@@ -171,7 +218,7 @@ fn lipsdp_reference(mlp: &Mlp) -> f64 {
         }
         for _ in 0..200 {
             let mid = 0.5 * (lo + hi);
-            if sdp.certify(mid, t) {
+            if lmi_holds(mlp, mid, t) {
                 hi = mid;
             } else {
                 lo = mid;
@@ -182,7 +229,7 @@ fn lipsdp_reference(mlp: &Mlp) -> f64 {
         }
         hi
     };
-    let mut th = vec![0.0; sdp.nh];
+    let mut th = vec![0.0; nh];
     let eval = |th: &[f64]| least_rho(&th.iter().map(|v| v.exp()).collect::<Vec<_>>());
     // A feasible start: T = 2^k I with K(T) ≻ 0.
     let mut f = eval(&th);
@@ -194,16 +241,14 @@ fn lipsdp_reference(mlp: &Mlp) -> f64 {
     let mut it = 0u64;
     while step > 1e-8 {
         let mut improved = false;
-        let ndir = 2 * sdp.nh + 6 * sdp.nh;
+        let ndir = 2 * nh + 6 * nh;
         for d in 0..ndir {
-            let dir: Vec<f64> = if d < 2 * sdp.nh {
+            let dir: Vec<f64> = if d < 2 * nh {
                 let s = if d % 2 == 0 { 1.0 } else { -1.0 };
-                (0..sdp.nh)
-                    .map(|k| if k == d / 2 { s } else { 0.0 })
-                    .collect()
+                (0..nh).map(|k| if k == d / 2 { s } else { 0.0 }).collect()
             } else {
                 it += 1;
-                (0..sdp.nh)
+                (0..nh)
                     .map(|k| 2.0 * crate::rng::uniform(77, it, k as u64) - 1.0)
                     .collect()
             };
@@ -239,6 +284,67 @@ fn lipsdp_agrees_with_an_independent_solve() {
             slow.is_finite() && (fast - slow).abs() <= 2e-3 * slow,
             "{widths:?}: descent {fast} vs reference {slow}"
         );
+    }
+}
+
+/// The multipliers behind `lipsdp_bound`, checked on the independently assembled LMI by
+/// its eigenvalues: M(ρ, T) ⪯ 0 (feasible) and M(0.99ρ, T) not (ρ is tight for this T);
+/// and √ρ between the largest sampled Jacobian norm (the network's own forward-mode
+/// derivative) and the product of the layers' spectral norms.
+#[test]
+fn lipsdp_multipliers_are_feasible_for_an_independent_assembly() {
+    for (seed, widths) in [
+        (1u64, [2usize, 4, 3, 1].as_slice()),
+        (2, &[2, 10, 10, 1]),
+        (3, &[3, 5, 4, 2]),
+        (4, &[4, 16, 16, 16, 2]),
+    ] {
+        let m = net(seed, widths);
+        let (rho, t) = lipsdp_multipliers(&m).expect("a certificate");
+        assert_eq!(lipsdp_bound(&m), rho.sqrt());
+        assert!(t.iter().all(|v| *v > 0.0), "{widths:?}: T {t:?}");
+        let lmax = |r: f64| lmi(&m, r, &t).symmetric_eigenvalues().max();
+        let scale = lmi(&m, rho, &t).norm();
+        assert!(
+            lmax(rho) <= 1e-12 * scale,
+            "{widths:?}: λ_max(M(ρ, T)) = {} > 0",
+            lmax(rho)
+        );
+        assert!(
+            lmax(0.99 * rho) > 0.0,
+            "{widths:?}: ρ not tight for T (λ_max at 0.99ρ = {})",
+            lmax(0.99 * rho)
+        );
+        let product: f64 = m
+            .physical_layers()
+            .iter()
+            .map(|l| {
+                DMatrix::from_row_slice(l.out, l.inp, &l.w)
+                    .singular_values()
+                    .max()
+            })
+            .product();
+        let (nx, nu) = (widths[0], *widths.last().unwrap());
+        let mut ws = Workspace::default();
+        let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+        let mut lower = 0.0f64;
+        for s in 0..3000u64 {
+            let x: Vec<f64> = (0..nx)
+                .map(|k| -2.0 + 5.0 * crate::rng::uniform(seed + 100, s, k as u64))
+                .collect();
+            m.eval(&x, &mut u, &mut j, &mut ws);
+            lower = lower.max(DMatrix::from_row_slice(nu, nx, &j).singular_values().max());
+        }
+        let l = rho.sqrt();
+        assert!(
+            lower <= l * (1.0 + 1e-12),
+            "{widths:?}: sampled {lower} > LipSDP {l}"
+        );
+        assert!(
+            l <= product * (1.0 + 1e-12),
+            "{widths:?}: LipSDP {l} > product {product}"
+        );
+        eprintln!("{widths:?}: sampled {lower:.4} ≤ LipSDP {l:.4} ≤ product {product:.4}");
     }
 }
 
