@@ -421,9 +421,11 @@ mod tests {
     /// equals that of κ₀ — the documented blind spot of corner data. One split, as the
     /// refinement makes while ε_C is above its target, puts a corner into the pocket, and
     /// then every child's bound covers the error sampled in it. In the child holding the
-    /// pocket's apex, a bound from the corners' values and sensitivities alone (the corner
-    /// errors plus the network's part of the remainder) is exceeded by the samples: the
-    /// bound must use the edges' secant slopes and the change of active set.
+    /// pocket's apex, the corner errors plus the network's part of the remainder alone are
+    /// exceeded by the samples: the bound must use the MPC's slope range on the cell (here
+    /// the pocket corner's sensitivity, which sees the cone's slope; the edge secants see
+    /// it too — a pocket corner with κ₀'s sensitivity would need the secants alone, not
+    /// tested here) and the change of active set (first-order form).
     #[test]
     fn a_pocket_inside_a_cell_is_covered_once_a_split_puts_a_corner_in_it() {
         let m = net();
