@@ -238,7 +238,7 @@ mod tests {
         assert_eq!(identifier("cart-pole v2"), "cart_pole_v2");
         assert_eq!(identifier("2link"), "_2link");
         assert_eq!(identifier(""), "model");
-        assert_eq!(identifier("a*/\nb"), "a___nb");
+        assert_eq!(identifier("a*/\nb"), "a___b");
         assert_eq!(identifier("θ"), "_");
     }
 }
