@@ -124,7 +124,11 @@ pub(super) fn load_certificate(
     };
     if cert.hash != m.content_hash() {
         bail!(
-            "the certificate is about another network (hash {}), not {}",
+            "{}: the certificate is about another network (hash {}), not {}",
+            certificate.map_or_else(
+                || format!("{} (its stored certificate)", model_path.display()),
+                |p| p.display().to_string()
+            ),
             cert.hash,
             model_path.display()
         );
