@@ -15,7 +15,7 @@
 //! bytes), and every `Err` names the file (or the setting) at fault.
 //!
 //! `cargo test -p trainer --test fuzz` runs [`SMOKE`] cases per target; the full counts
-//! (`fuzz_*`, ignored) run with `cargo test -p trainer --release --test fuzz -- --ignored`
+//! (`fuzz_*`, ignored) run with `cargo test -p trainer --test fuzz -- --ignored`
 //! (see BENCHMARKS.md for the counts and times). Fixed RNG seed: the same inputs every run.
 
 use proptest::collection::vec;
@@ -197,12 +197,12 @@ enum Op {
 fn op() -> impl Strategy<Value = Op> {
     let at = any::<usize>();
     prop_oneof![
-        (at.clone(), 1u8..=255).prop_map(|(i, m)| Op::Flip(i, m)),
-        (at.clone(), any::<u8>()).prop_map(|(i, b)| Op::Set(i, b)),
-        (at.clone(), vec(any::<u8>(), 1..8)).prop_map(|(i, b)| Op::Insert(i, b)),
-        (at.clone(), 1usize..16).prop_map(|(i, n)| Op::Delete(i, n)),
-        at.clone().prop_map(Op::Truncate),
-        (at.clone(), 1usize..64, at).prop_map(|(i, n, j)| Op::Duplicate(i, n, j)),
+        (at, 1u8..=255).prop_map(|(i, m)| Op::Flip(i, m)),
+        (at, any::<u8>()).prop_map(|(i, b)| Op::Set(i, b)),
+        (at, vec(any::<u8>(), 1..8)).prop_map(|(i, b)| Op::Insert(i, b)),
+        (at, 1usize..16).prop_map(|(i, n)| Op::Delete(i, n)),
+        at.prop_map(Op::Truncate),
+        (at, 1usize..64, at).prop_map(|(i, n, j)| Op::Duplicate(i, n, j)),
     ]
 }
 
@@ -582,10 +582,10 @@ enum Edit {
 fn edit() -> impl Strategy<Value = Edit> {
     let at = any::<usize>();
     prop_oneof![
-        (at.clone(), value()).prop_map(|(i, v)| Edit::Replace(i, v)),
-        at.clone().prop_map(Edit::Remove),
-        (at.clone(), "[a-z_]{1,12}", value()).prop_map(|(i, k, v)| Edit::Add(i, k, v)),
-        (at.clone(), any::<usize>(), value()).prop_map(|(i, j, v)| Edit::Element(i, j, v)),
+        (at, value()).prop_map(|(i, v)| Edit::Replace(i, v)),
+        at.prop_map(Edit::Remove),
+        (at, "[a-z_]{1,12}", value()).prop_map(|(i, k, v)| Edit::Add(i, k, v)),
+        (at, any::<usize>(), value()).prop_map(|(i, j, v)| Edit::Element(i, j, v)),
     ]
 }
 
@@ -759,7 +759,7 @@ fn problem_arbitrary(cases: u32) {
 macro_rules! targets {
     ($($full:ident, $smoke:ident, $f:ident, $n:expr;)*) => {$(
         #[test]
-        #[ignore = "fuzz campaign: cargo test -p trainer --release --test fuzz -- --ignored"]
+        #[ignore = "fuzz campaign: cargo test -p trainer --test fuzz -- --ignored"]
         fn $full() {
             $f($n);
         }
@@ -777,7 +777,7 @@ targets! {
     fuzz_partial, smoke_partial, partial, 1_000_000;
     fuzz_certificate, smoke_certificate, certificate, 1_000_000;
     fuzz_manifest, smoke_manifest, manifest, 1_000_000;
-    fuzz_onnx, smoke_onnx, onnx, 1_000_000;
+    fuzz_onnx, smoke_onnx, onnx, 500_000;
     fuzz_states_csv, smoke_states_csv, states_csv, 1_000_000;
     fuzz_import_csv, smoke_import_csv, import_csv, 1_000_000;
     fuzz_problem_bytes, smoke_problem_bytes, problem_bytes, 20_000;
