@@ -167,65 +167,16 @@ pub(super) fn refuse_overwrite(outputs: &[&Path], inputs: &[&Path]) -> Result<()
     Ok(())
 }
 
-/// Reads a states CSV: header `x1,…,xn`, one finite state per row.
+/// Reads a states CSV: header `x1,…,xn`, one finite state per row
+/// (`trainer::data::states::parse_states`).
 pub(super) fn read_states(path: &Path, nx: usize) -> Result<Vec<Vec<f64>>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read states file {}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().with_context(|| {
-        format!(
-            "{}: empty file (expected a header x1,…,x{nx})",
-            path.display()
-        )
-    })?;
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let expected: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
-    if cols != expected {
-        bail!(
-            "{}:1: header must be `{}` for this problem ({} states), got `{}`",
-            path.display(),
-            expected.join(","),
-            nx,
-            header.trim()
-        );
-    }
-    let mut out = Vec::new();
-    for (ln, line) in lines {
-        let vals: Vec<&str> = line.split(',').map(str::trim).collect();
-        if vals.len() != nx {
-            bail!(
-                "{}:{}: expected {nx} columns, got {}",
-                path.display(),
-                ln + 1,
-                vals.len()
-            );
-        }
-        let mut x = Vec::with_capacity(nx);
-        for (i, v) in vals.iter().enumerate() {
-            let f: f64 = v.parse().with_context(|| {
-                format!(
-                    "{}:{}: x{} = `{v}` is not a number",
-                    path.display(),
-                    ln + 1,
-                    i + 1
-                )
-            })?;
-            if !f.is_finite() {
-                bail!(
-                    "{}:{}: x{} = {v} is not finite",
-                    path.display(),
-                    ln + 1,
-                    i + 1
-                );
-            }
-            x.push(f);
-        }
-        out.push(x);
-    }
-    Ok(out)
+    Ok(trainer::data::states::parse_states(
+        &text,
+        &path.display().to_string(),
+        nx,
+    )?)
 }
 
 /// The CSV columns `x1..xn,u1..um,du1_dx1,…,dum_dxn` (state, inputs, row-major Jacobian).

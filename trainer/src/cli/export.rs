@@ -59,7 +59,13 @@ pub(super) fn execute(
     let mut allowance = None;
     if let (Some(rust), Some(postcard)) = (out.rust, out.postcard) {
         let em = ExportModel::from_trained(name, &m, &cert)
-            .with_context(|| format!("cannot export {} for controller-core", model.display()))?
+            .with_context(|| {
+                format!(
+                    "cannot export {} for controller-core with the certificate of {}",
+                    model.display(),
+                    certificate.unwrap_or(model).display()
+                )
+            })?
             .with_declared_guarantee(declared);
         let r = export_files(&em, rust, postcard)?;
         if let Some(h) = out.c_header {
@@ -80,7 +86,15 @@ pub(super) fn execute(
         allowance = Some(r.f32_allowance[0]);
     }
     if let Some(onnx) = out.onnx {
-        let em = ExportModel::from_certified(name, &m, &cert)?.with_declared_guarantee(declared);
+        let em = ExportModel::from_certified(name, &m, &cert)
+            .with_context(|| {
+                format!(
+                    "cannot export {} with the certificate of {}",
+                    model.display(),
+                    certificate.unwrap_or(model).display()
+                )
+            })?
+            .with_declared_guarantee(declared);
         em.validate()?;
         if allowance.is_none() && tanh {
             allowance = Some(certify_f32(&em)?.f32_allowance[0]);
@@ -198,7 +212,11 @@ pub(super) fn load_certificate(
     };
     if cert.hash != m.content_hash() {
         bail!(
-            "the certificate is about another network (hash {}), not {}",
+            "{}: the certificate is about another network (hash {}), not {}",
+            certificate.map_or_else(
+                || format!("{} (its stored certificate)", model_path.display()),
+                |p| p.display().to_string()
+            ),
             cert.hash,
             model_path.display()
         );

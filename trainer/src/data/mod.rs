@@ -11,3 +11,4 @@
 pub mod dataset;
 pub mod import;
 pub mod sampling;
+pub mod states;

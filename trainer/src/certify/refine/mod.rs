@@ -165,6 +165,21 @@ pub struct RefineState {
     pub finished: bool,
 }
 
+impl RefineState {
+    /// Decodes a checkpoint's bytes (`seal(postcard(state))`, see [`crate::io::seal`]); errors
+    /// name `path` and the fault.
+    pub fn from_bytes(bytes: &[u8], path: &std::path::Path) -> Result<Self, RefineError> {
+        let body = crate::io::unseal(bytes).ok_or_else(|| RefineError::Corrupt {
+            path: path.to_path_buf(),
+            reason: "checksum mismatch: corrupt, modified or of an older version".into(),
+        })?;
+        postcard::from_bytes(body).map_err(|e| RefineError::Corrupt {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })
+    }
+}
+
 /// The geometry of the lattice.
 #[derive(Debug, Clone)]
 struct Lattice {

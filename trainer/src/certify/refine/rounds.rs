@@ -200,14 +200,7 @@ pub fn refine(
                 path: p.display().to_string(),
                 source: e,
             })?;
-            let body = crate::io::unseal(&bytes).ok_or_else(|| RefineError::Corrupt {
-                path: p.to_path_buf(),
-                reason: "checksum mismatch: corrupt, modified or of an older version".into(),
-            })?;
-            let st: RefineState = postcard::from_bytes(body).map_err(|e| RefineError::Corrupt {
-                path: p.to_path_buf(),
-                reason: e.to_string(),
-            })?;
+            let st = RefineState::from_bytes(&bytes, p)?;
             if st.hash != hash {
                 return Err(RefineError::Mismatch {
                     path: p.to_path_buf(),

@@ -83,7 +83,7 @@ fn columns(
         let name = unquote(raw);
         let num = |p: &str, n: usize| -> Option<usize> {
             let i: usize = name.strip_prefix(p)?.parse().ok()?;
-            (1..=n).contains(&i).then_some(i - 1)
+            (1..=n).contains(&i).then(|| i - 1)
         };
         let col = if k == 0 && matches!(name, "" | "index" | "Unnamed: 0") {
             Col::Index

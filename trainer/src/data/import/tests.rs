@@ -226,3 +226,30 @@ fn the_sample_is_seeded_distinct_and_sorted() {
     assert_eq!(resolve_sample(&rows[..5], 50, 7), rows[..5].to_vec());
     assert!(resolve_sample(&rows, 0, 7).is_empty());
 }
+
+/// Found by the fuzzer (trainer/tests/fuzz.rs): a column `x0` / `u0` subtracted 1 from 0
+/// (an overflow panic in debug builds) before checking the range.
+#[test]
+fn a_column_numbered_zero_is_an_unknown_column_not_a_panic() {
+    let names = (
+        vec!["p".to_string(), "v".to_string()],
+        vec!["a".to_string()],
+    );
+    for head in ["x0,x1,u1", "x1,x2,u0"] {
+        let text = format!("{head}\n0.0,0.0,0.0\n");
+        let e = super::csv::parse(
+            &text,
+            "z.csv",
+            (&names.0, &names.1),
+            &[-1.0; 2],
+            &[1.0; 2],
+            1,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("z.csv:1: column `") && e.contains("unknown column"),
+            "{e}"
+        );
+    }
+}

@@ -181,7 +181,15 @@ pub fn tensor(b: &[u8]) -> R<Tensor> {
             "{label} keeps its data in an external file (save the model with its weights inside)"
         ));
     }
-    let count: i64 = t.dims.iter().product();
+    // Non-negative dimensions whose product fits (a corrupt shape is an error, not an
+    // overflow).
+    let Some(count) = t
+        .dims
+        .iter()
+        .try_fold(1i64, |a, &d| if d < 0 { None } else { a.checked_mul(d) })
+    else {
+        return Err(format!("{label}: invalid shape {:?}", t.dims));
+    };
     match (t.data_type, raw) {
         (FLOAT, Some(r)) if r.len() % 4 == 0 => {
             t.values = r

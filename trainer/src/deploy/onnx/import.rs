@@ -226,6 +226,15 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
                         b.dims
                     ));
                 };
+                // An integer tensor (no float values) or a shape its values do not fill is
+                // refused here, before it is indexed.
+                if r < 0 || c < 0 || b.values.len() as u64 != r as u64 * c as u64 {
+                    return Err(format!(
+                        "{label}: weight of shape {:?} with {} floating-point values",
+                        b.dims,
+                        b.values.len()
+                    ));
+                }
                 let (r, c) = (r as usize, c as usize);
                 let trans = gemm && int_attr(n, "transB", 0) != 0;
                 let (out_w, in_w) = if trans { (r, c) } else { (c, r) };

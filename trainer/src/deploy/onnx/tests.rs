@@ -416,3 +416,50 @@ fn unsupported_graphs_are_refused_naming_the_node() {
         .to_string();
     assert!(e.contains("junk.bin") && e.contains("neither"), "{e}");
 }
+
+/// Found by the fuzzer (trainer/tests/fuzz.rs): a Gemm whose weight is an integer tensor
+/// (its values in `ints`, none in `values`) was indexed out of bounds; a negative or
+/// overflowing shape could overflow. Both are errors naming the tensor or node now.
+#[test]
+fn integer_weights_and_bad_shapes_are_errors_not_panics() {
+    let int_tensor = |name: &str, dims: &[i64], v: &[i32]| {
+        let mut t = Writer::default();
+        let b: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        t.packed_ints(1, dims)
+            .int(2, 6)
+            .string(8, name)
+            .bytes(9, &b);
+        t
+    };
+    let gemm = [node(
+        "Gemm",
+        "gemm",
+        &["input", "W", "b"],
+        &["output"],
+        &[attr_i("transB", 1)],
+    )];
+    let b = tensor("b", &[1], &[0.5], true);
+    let bytes = model(
+        &gemm,
+        &[int_tensor("W", &[1, 2], &[1, 2]), b.clone()],
+        2,
+        1,
+        "output",
+    );
+    let e = import_bytes(&bytes, "w.onnx").unwrap_err().to_string();
+    assert!(
+        e.contains("w.onnx") && e.contains("floating-point values"),
+        "{e}"
+    );
+    for dims in [[-1i64, -2], [i64::MAX, 4]] {
+        let bytes = model(
+            &gemm,
+            &[tensor("W", &dims, &[1.0, 2.0], true), b.clone()],
+            2,
+            1,
+            "output",
+        );
+        let e = import_bytes(&bytes, "s.onnx").unwrap_err().to_string();
+        assert!(e.contains("s.onnx") && e.contains("invalid shape"), "{e}");
+    }
+}
