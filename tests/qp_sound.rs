@@ -59,7 +59,11 @@ fn the_double_integrator_certificate_is_sound_and_holds_at_sampled_states() {
             .map(|k| lo[k] + (hi[k] - lo[k]) * trainer::rng::uniform(77, i, k as u64))
             .collect();
         let (l, _) = law.solve(&x, None);
-        assert_eq!(l.status, trainer::mpc::sqp::SqpStatus::Converged, "at {x:?}");
+        assert_eq!(
+            l.status,
+            trainer::mpc::sqp::SqpStatus::Converged,
+            "at {x:?}"
+        );
         let u = model.mlp.predict(&x)[0].clamp(-1.0, 1.0);
         let e = (l.u[0] - u).abs();
         assert!(e <= eps, "at {x:?}: error {e} > ε {eps}");

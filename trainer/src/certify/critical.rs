@@ -92,10 +92,8 @@ impl AffineLaw {
     /// rounding of this evaluation).
     pub fn eval(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let nx = x.len();
-        let trunc: f64 = self.delta[0]
-            + (0..nx)
-                .map(|j| self.delta[1 + j] * x[j].abs())
-                .sum::<f64>();
+        let trunc: f64 =
+            self.delta[0] + (0..nx).map(|j| self.delta[1 + j] * x[j].abs()).sum::<f64>();
         let g = gamma(nx + 1);
         let mut y = Vec::with_capacity(self.y0.len());
         let mut e = Vec::with_capacity(self.y0.len());
@@ -178,11 +176,9 @@ impl QpCertifier {
                 cfg.system.name()
             )));
         }
-        if !dominant(&cfg.r(), true) || !dominant(&cfg.q(), false) || !dominant(&cfg.p(), false)
-        {
+        if !dominant(&cfg.r(), true) || !dominant(&cfg.q(), false) || !dominant(&cfg.p(), false) {
             return Err(NotQp(
-                "the weights are not proven convex (R ≻ 0, Q, P ⪰ 0 by diagonal dominance)"
-                    .into(),
+                "the weights are not proven convex (R ≻ 0, Q, P ⪰ 0 by diagonal dominance)".into(),
             ));
         }
         let ocp = Ocp::new(cfg, false);
@@ -410,7 +406,13 @@ impl QpCertifier {
     /// these |set| rows in U have rank < |set| — computed in rational arithmetic from the
     /// f64 data (every f64 is a dyadic rational). Cached.
     pub fn dependent(&self, set: &[usize]) -> bool {
-        if let Some(&v) = self.dependent.lock().ok().and_then(|c| c.get(set).copied()).as_ref() {
+        if let Some(&v) = self
+            .dependent
+            .lock()
+            .ok()
+            .and_then(|c| c.get(set).copied())
+            .as_ref()
+        {
             return v;
         }
         let v = self.exact_rank_deficient(set);
@@ -635,7 +637,10 @@ impl QpCertifier {
     pub fn kappa(&self, l: &AffineLaw, x: &[f64]) -> (Vec<f64>, f64) {
         let (y, e) = l.eval(x);
         let r = self.iu0..self.iu0 + self.nu;
-        (y[r.clone()].to_vec(), e[r].iter().fold(0.0, |m, v| m.max(*v)))
+        (
+            y[r.clone()].to_vec(),
+            e[r].iter().fold(0.0, |m, v| m.max(*v)),
+        )
     }
 }
 

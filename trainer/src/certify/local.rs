@@ -218,13 +218,12 @@ pub fn exact_cell_bound(
     let nx = lo.len();
     let mut best: Option<CellBound> = None;
     for p in pieces {
-        let finite = p
-            .u
-            .iter()
-            .chain(&p.gain)
-            .chain(&p.gain_err)
-            .chain([&p.u_err])
-            .all(|v| v.is_finite());
+        let finite =
+            p.u.iter()
+                .chain(&p.gain)
+                .chain(&p.gain_err)
+                .chain([&p.u_err])
+                .all(|v| v.is_finite());
         let b = bound_with(
             lo,
             hi,
@@ -234,7 +233,13 @@ pub fn exact_cell_bound(
             |i, k| {
                 let g = p.gain[i * nx + k];
                 let d = p.gain_err[k];
-                (Iv { lo: g - d, hi: g + d }, 0.0)
+                (
+                    Iv {
+                        lo: g - d,
+                        hi: g + d,
+                    },
+                    0.0,
+                )
             },
             true,
             net_u,

@@ -197,6 +197,10 @@ mod tests {
         let g = local_exact(9, 10);
         assert_eq!(g.guarantee, Tier::Estimated);
         assert_eq!(g.assumptions.len(), 1);
-        assert!(g.assumptions[0].contains("1 of 10 cells"), "{:?}", g.assumptions);
+        assert!(
+            g.assumptions[0].contains("1 of 10 cells"),
+            "{:?}",
+            g.assumptions
+        );
     }
 }

@@ -53,7 +53,11 @@ fn qps_are_detected_and_everything_else_refused() {
     ] {
         assert!(QpCertifier::detect(&load(name)).is_ok(), "{name}");
     }
-    for name in ["pendulum.toml", "stiff_spring_setpoint.toml", "cartpole.toml"] {
+    for name in [
+        "pendulum.toml",
+        "stiff_spring_setpoint.toml",
+        "cartpole.toml",
+    ] {
         assert!(QpCertifier::detect(&load(name)).is_err(), "{name}");
     }
     let affine = "[system]\nkind = \"discrete\"\nstates = [\"p\", \"v\"]\ninputs = [\"f\"]\n\
@@ -159,10 +163,17 @@ fn a_box_across_a_region_boundary_is_refused_by_one_law_and_covered_by_both() {
     let (p, s_lo, s_hi) = boundary(&mut law);
     let (lo, hi) = ([p - 0.01, 0.29], [p + 0.01, 0.31]);
     assert!(q.prove(&lo, &hi, &s_lo, &[]).is_none(), "left set accepted");
-    assert!(q.prove(&lo, &hi, &s_hi, &[]).is_none(), "right set accepted");
+    assert!(
+        q.prove(&lo, &hi, &s_hi, &[]).is_none(),
+        "right set accepted"
+    );
     // Either side alone on its own side is fine.
-    assert!(q.prove(&[p - 0.02, 0.29], &[p - 0.01, 0.31], &s_lo, &[]).is_some());
-    assert!(q.prove(&[p + 0.01, 0.29], &[p + 0.02, 0.31], &s_hi, &[]).is_some());
+    assert!(q
+        .prove(&[p - 0.02, 0.29], &[p - 0.01, 0.31], &s_lo, &[])
+        .is_some());
+    assert!(q
+        .prove(&[p + 0.01, 0.29], &[p + 0.02, 0.31], &s_hi, &[])
+        .is_some());
     let sets: Vec<Vec<usize>> = (0..4)
         .map(|c| {
             let x = [
@@ -262,4 +273,3 @@ fn the_exact_cell_bound_holds_at_sampled_points() {
     }
     assert!(checked >= 2, "only {checked} boxes proven");
 }
-

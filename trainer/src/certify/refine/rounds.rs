@@ -136,12 +136,10 @@ pub(super) fn bound_leaves(
             // Where the MPC is a QP: the exact bound if the cell's proof succeeds (it needs
             // no labels, only candidate active sets from some corners).
             if let Some(q) = qp {
-                let sets: Vec<Option<&[usize]>> =
-                    pts.iter().map(|p| p.active.as_deref()).collect();
+                let sets: Vec<Option<&[usize]>> = pts.iter().map(|p| p.active.as_deref()).collect();
                 if let Some(laws) = q.prove_from_corners(&lo, &hi, &sets) {
                     let pieces = q.pieces(&lo, &hi, &laws);
-                    let b =
-                        exact_cell_bound(&lo, &hi, &pieces, &nu_c, &nb.bounds(&lo, &hi), band);
+                    let b = exact_cell_bound(&lo, &hi, &pieces, &nu_c, &nb.bounds(&lo, &hi), band);
                     if b.exact {
                         return (n, b);
                     }
