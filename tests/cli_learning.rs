@@ -107,6 +107,7 @@ fn train_certify_eval() {
     let grid = d.join("grid.csv");
     let o = trainer(&[
         "eval",
+        "--raw",
         "--model",
         m,
         "--states",
@@ -160,6 +161,7 @@ fn train_certify_eval() {
     let out = d.join("e.csv");
     let o = trainer(&[
         "eval",
+        "--raw",
         "--model",
         m,
         "--states",

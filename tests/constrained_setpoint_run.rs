@@ -180,6 +180,7 @@ fn run_with_setpoint_path_constraints_and_terminal_region() {
         let out = d.join(format!("eval_{name}.csv"));
         ok(&trainer(&[
             "eval",
+            "--raw",
             "--model",
             run.join(format!("model_{name}.bin")).to_str().unwrap(),
             "--states",

@@ -1,18 +1,42 @@
-//! The firmware on an emulated Cortex-M4: builds `firmware-example` for
-//! thumbv7em-none-eabihf, runs it in QEMU (mps2-an386, semihosting), and compares its
-//! 91-row trajectory with (1) the host running the same f32 code — bit for bit — and
-//! (2) the f64 network, within the certificate's f32 allowance. Also checks on the ELF
-//! that no panic symbol is reachable from `ampc_evaluate` (call graph from objdump).
+//! The firmware on an emulated Cortex-M4 (thumbv7em-none-eabihf, QEMU mps2-an386, hardware
+//! f32) and an emulated Cortex-M0 (thumbv6m-none-eabi, QEMU microbit, no FPU: soft-float f32,
+//! the ARMv6-M instruction set of the M0+): builds `firmware-example` for the target, runs it
+//! in QEMU (semihosting), and compares its 91-row trajectory with (1) the host running the
+//! same f32 code — bit for bit — and (2) the f64 network, within the certificate's f32
+//! allowance; runs `evaluate-check` (600 probe states: edge cases, inside and around X) and
+//! compares every `u` bit pattern and flag set with the host's `evaluate`. Also checks on
+//! each ELF that no panic symbol is reachable from `ampc_evaluate` (call graph from objdump).
 //!
-//! Needs `rustup target add thumbv7em-none-eabihf`, `qemu-system-arm` and
-//! `binutils-arm-none-eabi` (`.ci/run` installs them); fails loudly without them.
+//! Needs `rustup target add thumbv7em-none-eabihf thumbv6m-none-eabi`, `qemu-system-arm`
+//! and `binutils-arm-none-eabi` (`.ci/run` installs them); fails loudly without them.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::process::Command;
 
 use controller_core::{Flags, CERTIFICATE};
-use firmware_example::{run, Row, HEADER, STEPS};
+use firmware_example::{probe_state, run, Row, HEADER, PROBES, STEPS};
+
+/// A QEMU machine and the Rust target built for it.
+struct Board {
+    target: &'static str,
+    cpu: &'static str,
+    machine: &'static str,
+}
+
+/// Cortex-M4F: QEMU's MPS2 AN386 image.
+const M4: Board = Board {
+    target: "thumbv7em-none-eabihf",
+    cpu: "cortex-m4",
+    machine: "mps2-an386",
+};
+
+/// Cortex-M0 (ARMv6-M, the M0+'s instruction set, no FPU): QEMU's BBC micro:bit.
+const M0: Board = Board {
+    target: "thumbv6m-none-eabi",
+    cpu: "cortex-m0",
+    machine: "microbit",
+};
 
 /// `target/` of this build (target/<profile>/deps/<test> → target).
 fn target_dir() -> PathBuf {
@@ -20,13 +44,14 @@ fn target_dir() -> PathBuf {
     exe.ancestors().nth(3).unwrap().to_path_buf()
 }
 
-/// Builds the firmware binaries (own target dir: no lock contention with the outer cargo).
-fn build_firmware() -> PathBuf {
+/// Builds the firmware binaries for `board` (own target dir: no lock contention with the
+/// outer cargo).
+fn build_firmware(board: &Board) -> PathBuf {
     let dir = target_dir().join("firmware-qemu");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.args(["build", "-p", "firmware-example", "--release", "--bins"])
-        .args(["--target", "thumbv7em-none-eabihf"])
+        .args(["--target", board.target])
         .env("CARGO_TARGET_DIR", &dir)
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     if controller_core::activation::TANH_KIND == "fast" {
@@ -35,21 +60,23 @@ fn build_firmware() -> PathBuf {
     let st = cmd.status().expect("run cargo");
     assert!(
         st.success(),
-        "building the firmware failed (is the target installed? rustup target add thumbv7em-none-eabihf)"
+        "building the firmware failed (is the target installed? rustup target add {})",
+        board.target
     );
-    dir.join("thumbv7em-none-eabihf/release")
+    dir.join(board.target).join("release")
 }
 
-fn qemu(elf: &std::path::Path) -> String {
+fn qemu(board: &Board, elf: &std::path::Path) -> String {
     let out = Command::new("qemu-system-arm")
-        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
+        .args(["-cpu", board.cpu, "-machine", board.machine, "-nographic"])
         .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
         .arg(elf)
         .output()
         .expect("qemu-system-arm not found: apt-get install -y qemu-system-arm");
     assert!(
         out.status.success(),
-        "firmware exited with {:?}",
+        "firmware {elf:?} on {} exited with {:?}",
+        board.machine,
         out.status
     );
     String::from_utf8(out.stdout).unwrap()
@@ -72,10 +99,11 @@ fn parse(csv: &str) -> Vec<Row> {
         .collect()
 }
 
-#[test]
-fn firmware_trajectory_matches_host_and_f64_network() {
-    let bins = build_firmware();
-    let device = parse(&qemu(&bins.join("firmware-example")));
+/// The trajectory on `board` against the host (bit for bit) and the f64 network (within
+/// the allowance).
+fn trajectory_matches_host_and_f64_network(board: &Board) {
+    let bins = build_firmware(board);
+    let device = parse(&qemu(board, &bins.join("firmware-example")));
     assert_eq!(device.len(), STEPS + 1);
     assert!(device.iter().enumerate().all(|(k, r)| r.k == k));
 
@@ -86,7 +114,8 @@ fn firmware_trajectory_matches_host_and_f64_network() {
         assert_eq!(
             (d.x.map(f32::to_bits), d.u.to_bits(), d.flags),
             (h.x.map(f32::to_bits), h.u.to_bits(), h.flags),
-            "step {}: device {d:?} host {h:?}",
+            "{}, step {}: device {d:?} host {h:?}",
+            board.machine,
             d.k
         );
     }
@@ -111,10 +140,87 @@ fn firmware_trajectory_matches_host_and_f64_network() {
         worst = worst.max((f64::from(r.u) - u64).abs());
     }
     println!(
-        "max |u_device − u_f64| = {worst:e} (allowance {:e})",
-        CERTIFICATE.f32_allowance
+        "{}: max |u_device − u_f64| = {worst:e} (allowance {:e})",
+        board.machine, CERTIFICATE.f32_allowance
     );
+    assert!(worst > 0.0, "no rounding seen at all: comparison blind?");
     assert!(worst <= CERTIFICATE.f32_allowance);
+}
+
+#[test]
+fn firmware_trajectory_matches_host_and_f64_network() {
+    trajectory_matches_host_and_f64_network(&M4);
+}
+
+#[test]
+fn cortex_m0_trajectory_matches_host_and_f64_network() {
+    trajectory_matches_host_and_f64_network(&M0);
+}
+
+/// `evaluate-check` on `board`: every probe state's `u` bits and flags equal the host's.
+fn probe_states_match_host(board: &Board) {
+    let bins = build_firmware(board);
+    let out = qemu(board, &bins.join("evaluate-check"));
+    let rows: Vec<Vec<u32>> = out
+        .lines()
+        .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), PROBES as usize, "{}", board.machine);
+    let mut flagged = 0;
+    for (i, row) in rows.iter().enumerate() {
+        let x = probe_state(i as u32);
+        let h = controller_core::evaluate(&x);
+        assert_eq!(
+            row.as_slice(),
+            [i as u32, h.u[0].to_bits(), u32::from(h.flags.0)],
+            "{}: state {i} {x:?}: device u = {:e}, host u = {:e}",
+            board.machine,
+            f32::from_bits(row[1]),
+            h.u[0]
+        );
+        flagged += usize::from(h.flags != Flags::EMPTY);
+    }
+    // The probe set reaches the projection and the non-finite path, and plain states.
+    for f in [Flags::OUT_OF_DOMAIN, Flags::NON_FINITE] {
+        assert!((0..PROBES).any(|i| controller_core::evaluate(&probe_state(i)).flags.contains(f)));
+    }
+    assert!(flagged > 0 && flagged < PROBES as usize / 2, "{flagged}");
+
+    // The device's u (= the host's, bit for bit) is within the certified f32 allowance of
+    // the f64 network at the projected state, clamped to the band, on every finite probe.
+    let (model, _) = ampc_tests::trained_pendulum();
+    assert_eq!(model.hash, CERTIFICATE.hash);
+    let (lo, hi) = model.domain_f32();
+    let mut worst = 0.0f64;
+    for (i, row) in rows.iter().enumerate() {
+        let x = probe_state(i as u32);
+        if !x.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let xp: Vec<f64> = (0..2)
+            .map(|k| f64::from(x[k].clamp(lo[k], hi[k])))
+            .collect();
+        let u64 = model.eval_f64(&xp)[0].clamp(
+            f64::from(CERTIFICATE.clamp_lo[0]),
+            f64::from(CERTIFICATE.clamp_hi[0]),
+        );
+        worst = worst.max((f64::from(f32::from_bits(row[1])) - u64).abs());
+    }
+    println!(
+        "{}: probes: max |u_device − u_f64| = {worst:e} (allowance {:e})",
+        board.machine, CERTIFICATE.f32_allowance
+    );
+    assert!(worst > 0.0 && worst <= CERTIFICATE.f32_allowance);
+}
+
+#[test]
+fn probe_states_match_host_on_cortex_m4() {
+    probe_states_match_host(&M4);
+}
+
+#[test]
+fn probe_states_match_host_on_cortex_m0() {
+    probe_states_match_host(&M0);
 }
 
 /// Call graph of an ELF from `arm-none-eabi-objdump -d`: function → called/branched-to
@@ -168,7 +274,13 @@ fn call_graph(
 
 #[test]
 fn no_panic_reachable_from_evaluate_in_the_elf() {
-    let bins = build_firmware();
+    for board in [M4, M0] {
+        no_panic_reachable_from_evaluate(&board);
+    }
+}
+
+fn no_panic_reachable_from_evaluate(board: &Board) {
+    let bins = build_firmware(board);
     let elf = bins.join("evaluate-bench");
     let (graph, sizes) = call_graph(&elf);
     assert!(
@@ -200,7 +312,8 @@ fn no_panic_reachable_from_evaluate_in_the_elf() {
     // static itself usually disappears: its size (if any) is added separately.
     let data = sizes.get("AMPC_CONTROLLER").copied().unwrap_or(0);
     println!(
-        "controller flash: {code} B in {} functions {:?} (code + literal pools) + AMPC_CONTROLLER static {data} B = {} B",
+        "{}: controller flash: {code} B in {} functions {:?} (code + literal pools) + AMPC_CONTROLLER static {data} B = {} B",
+        board.machine,
         seen.len(),
         seen,
         code + data

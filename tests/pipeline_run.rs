@@ -120,6 +120,52 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     ] {
         assert!(report.contains(s), "report.md lacks {s}");
     }
+    // The first section is the verdict: the certificate's tier, ε judged against the
+    // largest distance between two inputs of U, and the band the export clamps to (= U).
+    let first = report.split("\n## ").nth(1).expect("a section");
+    assert!(first.starts_with("Verdict"), "{first}");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(run.join(f)).unwrap()).unwrap()
+    };
+    let (cert, export) = (read("certificate.json"), read("export_report.json"));
+    let tier = cert["guarantee"].as_str().unwrap();
+    assert!(first.contains(&format!(", {tier}**")), "{first}");
+    let v = |j: &serde_json::Value, k: &str| -> Vec<f64> {
+        j[k].as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (u_lo, u_hi) = (v(&cert, "u_lo"), v(&cert, "u_hi"));
+    let d_u = u_lo
+        .iter()
+        .zip(&u_hi)
+        .map(|(l, h)| (h - l).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let eps = cert["eps"].as_f64().unwrap();
+    match eps / d_u {
+        r if r >= 1.0 => assert!(first.contains("the bound is vacuous"), "{first}"),
+        r if r >= 0.2 => assert!(first.contains("the bound is weak"), "{first}"),
+        _ => assert!(!first.contains("the bound is"), "{first}"),
+    }
+    // (U rounded inward to f32.)
+    for (j, (bl, bh)) in v(&export, "clamp_lo")
+        .iter()
+        .zip(v(&export, "clamp_hi"))
+        .enumerate()
+    {
+        let tol = |u: f64| 1e-7 * u.abs().max(1.0);
+        assert!(
+            *bl >= u_lo[j] && bl - u_lo[j] <= tol(u_lo[j]),
+            "clamp_lo {bl} vs {u_lo:?}"
+        );
+        assert!(
+            bh <= u_hi[j] && u_hi[j] - bh <= tol(u_hi[j]),
+            "clamp_hi {bh} vs {u_hi:?}"
+        );
+    }
     let html = std::fs::read_to_string(run.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
     // Self-contained: every figure inline, every Markdown table an HTML table.

@@ -101,6 +101,7 @@ fn main_job_and_tour() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = trainer(&[
         "eval",
+        "--raw",
         "--model",
         &p("model_regularized.bin"),
         "--states",

@@ -124,6 +124,7 @@ fn run_holds_a_nonzero_setpoint_exactly() {
         let evaluated = d.join(format!("eval_{name}.csv"));
         let o = trainer(&[
             "eval",
+            "--raw",
             "--model",
             model_path.to_str().unwrap(),
             "--states",

@@ -81,6 +81,7 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     let evald = d.join("eval.csv");
     let o = trainer(&[
         "eval",
+        "--raw",
         "--model",
         model,
         "--states",

@@ -48,7 +48,8 @@ pub struct Certificate<const NX: usize, const NU: usize> {
     pub f32_allowance: f64,
     /// Largest |κ_NN,f32 − κ_NN,f64| seen on the exporter's random states.
     pub f32_observed: f64,
-    /// Which tanh the allowance is for (`"libm"` or `"fast"`).
+    /// Which tanh the allowance is for (`"libm"`: the default accurate tanh, see
+    /// [`crate::activation`]; or `"fast"`).
     pub tanh: &'static str,
     /// The tanh error bound used in the allowance.
     pub tanh_max_abs_err: f64,

@@ -5,7 +5,8 @@
 //! feature, and a call-graph check of the firmware ELF — see the README).
 //!
 //! - [`layer`]: `Dense<I, O>`, one affine layer, fixed operation order.
-//! - [`activation`]: the device tanh (libm `tanhf`, or `fast-tanh`) and its error bound.
+//! - [`activation`]: the device tanh (its own accurate tanh, or `fast-tanh`) and its error
+//!   bound.
 //! - [`mlp`]: the network as a chain of layers whose sizes the compiler checks.
 //! - [`controller`]: `evaluate`: domain projection, forward pass, clamp, flags.
 //! - [`certificate`]: the certificate's numbers.
@@ -89,7 +90,8 @@ macro_rules! include_controller {
         /// Input dimension of this controller.
         pub const NU: usize = weights::NU;
 
-        /// The certificate of this build (for its tanh: libm, or fast with `fast-tanh`).
+        /// The certificate of this build (for its tanh: the default, label `libm`, or fast
+        /// with `fast-tanh`).
         pub const CERTIFICATE: $crate::Certificate<NX, NU> = if $crate::FAST_TANH {
             weights::CERTIFICATE_FAST
         } else {

@@ -4,7 +4,7 @@
 //! `Hidden<I, H, Next>` is one tanh layer `R^I → R^H` followed by `Next: Network<H>`;
 //! the last layer is a plain [`Dense`] (linear output). A `Next` whose input size is not
 //! `H` does not implement `Network<H>`, so a mismatched chain is a type error
-//! (`tests/compile_fail/`). The activation is [`crate::activation::tanh`] (libm's `tanhf`,
+//! (`tests/compile_fail/`). The activation is [`crate::activation::tanh`] (the core's accurate tanh,
 //! or the rational approximation with the `fast-tanh` feature).
 //!
 //! ```

@@ -46,6 +46,52 @@ pub fn run(mut sink: impl FnMut(&Row)) {
     }
 }
 
+/// Number of states of [`probe_state`].
+pub const PROBES: u32 = 600;
+
+/// The `i`-th state of the device-versus-host check (`evaluate-check` prints
+/// `controller_core::evaluate` on each; `tests/firmware_in_qemu.rs` compares the bits with
+/// the host): first 16 edge cases (zeros of both signs, NaN, ±inf, subnormals, huge values,
+/// the corners of X and points just outside), then pseudo-random states (xorshift32, fixed
+/// seed) uniform on X widened by 10 % of its width on each side, computed in f32.
+pub fn probe_state(i: u32) -> [f32; 2] {
+    let lo = controller_core::CERTIFICATE.domain_lo.map(|v| v as f32);
+    let hi = controller_core::CERTIFICATE.domain_hi.map(|v| v as f32);
+    let fixed = [
+        [0.0, 0.0],
+        [-0.0, -0.0],
+        [f32::NAN, 0.0],
+        [0.0, f32::INFINITY],
+        [f32::NEG_INFINITY, 0.5],
+        [1.0e-40, -1.0e-40],
+        [1.0e30, -1.0e30],
+        [-f32::MAX, f32::MAX],
+        lo,
+        hi,
+        [lo[0], hi[1]],
+        [hi[0], lo[1]],
+        [lo[0] - 1.0, 0.0],
+        [0.0, hi[1] + 1.0],
+        [f32::MIN_POSITIVE, -f32::MIN_POSITIVE],
+        [-1.0e-3, 2.0e-3],
+    ];
+    if let Some(x) = fixed.get(i as usize) {
+        return *x;
+    }
+    let mut s = 0x9e37_79b9u32 ^ i.wrapping_mul(0x85eb_ca6b);
+    let mut unit = || {
+        s ^= s << 13;
+        s ^= s >> 17;
+        s ^= s << 5;
+        (s >> 8) as f32 / (1u32 << 24) as f32
+    };
+    let mut x = [0.0f32; 2];
+    for ((xi, l), h) in x.iter_mut().zip(lo).zip(hi) {
+        *xi = l + (h - l) * (1.2 * unit() - 0.1);
+    }
+    x
+}
+
 /// CSV header of the firmware's output.
 pub const HEADER: &str = "k,x1,x2,u,flags";
 
@@ -91,6 +137,22 @@ mod tests {
         let n = format_row(&r, &mut buf);
         let s = std::str::from_utf8(&buf[..n]).unwrap();
         assert_eq!(s, "7,-3.14159274e0,5.00000000e-1,1.50000000e1,5\n");
+    }
+
+    #[test]
+    fn probe_states_cover_edges_inside_and_outside() {
+        let lo = controller_core::CERTIFICATE.domain_lo;
+        let hi = controller_core::CERTIFICATE.domain_hi;
+        let xs: Vec<[f32; 2]> = (0..PROBES).map(probe_state).collect();
+        assert!(xs.iter().any(|x| x[0].is_nan()));
+        let inside =
+            |x: &[f32; 2]| (0..2).all(|i| f64::from(x[i]) >= lo[i] && f64::from(x[i]) <= hi[i]);
+        let n_in = xs.iter().filter(|x| inside(x)).count();
+        assert!(
+            n_in > PROBES as usize / 2 && n_in < PROBES as usize - 50,
+            "{n_in}"
+        );
+        assert_ne!(xs[100], xs[101]);
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! Firmware example: the paper's pendulum upswing in closed loop on a Cortex-M4.
+//! Firmware example: the paper's pendulum upswing in closed loop on a Cortex-M4 (`cargo
+//! firmware`, QEMU mps2-an386) or a Cortex-M0/M0+ (`cargo firmware-m0`, QEMU microbit).
 //!
 //! Runs [`firmware_example::run`] (RK4 plant in f32 + `controller_core::evaluate`, 90
 //! steps from (−π, 0)) and prints `k,x1,x2,u,flags` rows over semihosting, then exits

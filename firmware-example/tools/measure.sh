@@ -1,22 +1,34 @@
 #!/usr/bin/env bash
-# Embedded measurements for BENCHMARKS.md: sizes, stack, instructions per evaluate.
-# Usage: firmware-example/tools/measure.sh   (needs qemu-system-arm, binutils-arm-none-eabi, cc)
+# Embedded measurements for BENCHMARKS.md: sizes, stack, instructions per evaluate, on the
+# Cortex-M4F (thumbv7em-none-eabihf, QEMU mps2-an386) and the Cortex-M0 (thumbv6m-none-eabi,
+# soft-float, QEMU microbit), each with the default (accurate) and the fast tanh.
+# Usage: firmware-example/tools/measure.sh [m4|m0 ...]   (default: both; needs
+# qemu-system-arm, binutils-arm-none-eabi, cc, and both rustup targets)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 T=${CARGO_TARGET_DIR:-target}
+mkdir -p "$T"
 cc -shared -fPIC -O2 -o "$T/libinsn_count.so" firmware-example/tools/insn_count.c
-for variant in libm fast; do
-  dir="$T/measure-$variant"
-  feat=(); [ "$variant" = fast ] && feat=(--features fast-tanh)
-  CARGO_TARGET_DIR="$dir" cargo build -q -p firmware-example --release --target thumbv7em-none-eabihf --bins "${feat[@]}"
-  bin="$dir/thumbv7em-none-eabihf/release"
-  echo "== $variant tanh"
-  arm-none-eabi-size "$bin/firmware-example" "$bin/evaluate-bench"
-  arm-none-eabi-nm -S "$bin/evaluate-bench" | grep -E " (ampc_evaluate|.*tanhf.*|.*expm1f.*)$" || true
-  for n in 1 1001; do
-    qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic \
-      -semihosting-config enable=on,target=native,arg=evaluate-bench,arg=$n \
-      -plugin "$T/libinsn_count.so" -d plugin -kernel "$bin/evaluate-bench" 2>&1 | tr '\n' ' '
-    echo
+boards=("$@"); [ ${#boards[@]} -eq 0 ] && boards=(m4 m0)
+for board in "${boards[@]}"; do
+  case $board in
+    m4) target=thumbv7em-none-eabihf; qemu=(-cpu cortex-m4 -machine mps2-an386) ;;
+    m0) target=thumbv6m-none-eabi; qemu=(-cpu cortex-m0 -machine microbit) ;;
+    *) echo "unknown board $board (m4 or m0)" >&2; exit 2 ;;
+  esac
+  for variant in accurate fast; do
+    dir="$T/measure-$variant"
+    feat=(); [ "$variant" = fast ] && feat=(--features fast-tanh)
+    CARGO_TARGET_DIR="$dir" cargo build -q -p firmware-example --release --target "$target" --bins "${feat[@]}"
+    bin="$dir/$target/release"
+    echo "== $board ($target), $variant tanh"
+    arm-none-eabi-size "$bin/firmware-example" "$bin/evaluate-bench"
+    arm-none-eabi-nm -S --size-sort "$bin/evaluate-bench" | grep -E " (ampc_evaluate|.*tanh.*|.*expm1f.*|__aeabi_f.*|__.*sf3.*)$" || true
+    for n in 1 1001; do
+      qemu-system-arm "${qemu[@]}" -nographic \
+        -semihosting-config enable=on,target=native,arg=evaluate-bench,arg=$n \
+        -plugin "$T/libinsn_count.so" -d plugin -kernel "$bin/evaluate-bench" 2>&1 | tr '\n' ' '
+      echo
+    done
   done
 done

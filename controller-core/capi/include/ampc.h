@@ -2,7 +2,7 @@
 /*
  * ampc.h: C interface of controller-core (crate controller-core/capi, libampc_capi.a) for
  * the `pendulum` controller, architecture 2-10-10-1 (tanh hidden layers), model hash
- * 5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7.
+ * 5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563.
  * Plain C99; link libampc_capi.a built for your target with the same features.
  */
 #ifndef AMPC_H
@@ -49,7 +49,7 @@ struct ampc_certificate {
     uint8_t guarantee;
     /* 1 for an untrained placeholder network (no certificate from the learning side). */
     uint8_t placeholder;
-    /* 1 if eps is for the rational tanh (feature fast-tanh), 0 for libm's tanhf. */
+    /* 1 if eps is for the rational tanh (feature fast-tanh), 0 for the accurate tanh. */
     uint8_t fast_tanh;
     /* Certified domain X. */
     double domain_lo[AMPC_NX];
@@ -65,7 +65,7 @@ struct ampc_certificate {
  * the fast-tanh feature. */
 #ifdef AMPC_FAST_TANH
 static const struct ampc_certificate AMPC_CERTIFICATE = {
-    31.52142471798844, /* eps */
+    31.521424718124386, /* eps */
     AMPC_GUARANTEE_ESTIMATED, /* guarantee */
     0, /* placeholder */
     1, /* fast_tanh */
@@ -73,11 +73,11 @@ static const struct ampc_certificate AMPC_CERTIFICATE = {
     {6.283185307179586, 1.0}, /* domain_hi */
     {-15.0f}, /* clamp_lo */
     {15.0f}, /* clamp_hi */
-    "5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7" /* hash */
+    "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563" /* hash */
 };
 #else
 static const struct ampc_certificate AMPC_CERTIFICATE = {
-    31.5152666336216, /* eps */
+    31.515266633752496, /* eps */
     AMPC_GUARANTEE_ESTIMATED, /* guarantee */
     0, /* placeholder */
     0, /* fast_tanh */
@@ -85,7 +85,7 @@ static const struct ampc_certificate AMPC_CERTIFICATE = {
     {6.283185307179586, 1.0}, /* domain_hi */
     {-15.0f}, /* clamp_lo */
     {15.0f}, /* clamp_hi */
-    "5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7" /* hash */
+    "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563" /* hash */
 };
 #endif
 

@@ -3,10 +3,10 @@
 //
 // Architecture 2-10-10-1 (tanh hidden layers, linear output), input and output scalings
 // folded into the first and last layer (physical units in and out). Model hash:
-// `5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7`.
+// `5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563`.
 //
 // f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64| over X, 65536 sub-boxes) vs the
-// largest difference on 1000000 random states: libm tanh 2.904e-4 vs 1.124e-5; fast tanh
+// largest difference on 1000000 random states: accurate tanh 2.904e-4 vs 1.046e-5; fast tanh
 // 6.448e-3 vs 2.704e-3. Guarantee tier of ε: estimated.
 //
 // Compile it with `controller_core::include_controller!("weights.rs")` (it provides
@@ -177,17 +177,17 @@ pub const X_HI: [f32; 2] = [6.283185, 1.0];
 
 /// The certificate for the libm tanh.
 pub const CERTIFICATE_LIBM: Certificate<2, 1> = Certificate {
-    eps: 31.5152666336216,
+    eps: 31.515266633752496,
     guarantee: Guarantee::Estimated,
-    eps_nn: 31.514976224130624,
-    eps_d: 3.1780945707531454,
-    l_nn: 108.99155589637097,
+    eps_nn: 31.514976224126617,
+    eps_d: 3.1780945707504067,
+    l_nn: 108.99155589636509,
     l_nn_method: "SlopeVertices",
     l_mpc: 22.42244817003057,
     l_mpc_is_estimate: true,
     covering_radius: 0.21563060843241086,
-    f32_allowance: 0.0002904094909763909,
-    f32_observed: 1.1238903437238434e-5,
+    f32_allowance: 0.0002904096258809645,
+    f32_observed: 1.0457192375135094e-5,
     tanh: "libm",
     tanh_max_abs_err: 1.2e-7,
     domain_lo: [-6.283185307179586, -1.0],
@@ -199,23 +199,23 @@ pub const CERTIFICATE_LIBM: Certificate<2, 1> = Certificate {
     clamp_lo: [-15.0],
     clamp_hi: [15.0],
     fallback: [0.0],
-    hash: "5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7",
+    hash: "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563",
     placeholder: false,
 };
 
 /// The certificate for the fast tanh.
 pub const CERTIFICATE_FAST: Certificate<2, 1> = Certificate {
-    eps: 31.52142471798844,
+    eps: 31.521424718124386,
     guarantee: Guarantee::Estimated,
-    eps_nn: 31.514976224130624,
-    eps_d: 3.1780945707531454,
-    l_nn: 108.99155589637097,
+    eps_nn: 31.514976224126617,
+    eps_d: 3.1780945707504067,
+    l_nn: 108.99155589636509,
     l_nn_method: "SlopeVertices",
     l_mpc: 22.42244817003057,
     l_mpc_is_estimate: true,
     covering_radius: 0.21563060843241086,
-    f32_allowance: 0.006448493857815947,
-    f32_observed: 0.002703831372100396,
+    f32_allowance: 0.006448493997767961,
+    f32_observed: 0.0027038313708231954,
     tanh: "fast",
     tanh_max_abs_err: 0.0001,
     domain_lo: [-6.283185307179586, -1.0],
@@ -227,6 +227,6 @@ pub const CERTIFICATE_FAST: Certificate<2, 1> = Certificate {
     clamp_lo: [-15.0],
     clamp_hi: [15.0],
     fallback: [0.0],
-    hash: "5a5b91e01223cc43d93a9eb4360f02a0a427b4ba8132d1b60f170696da5b59a7",
+    hash: "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563",
     placeholder: false,
 };

@@ -1,4 +1,5 @@
-//! Measurement firmware for `controller_core::evaluate` on the Cortex-M4 (QEMU).
+//! Measurement firmware for `controller_core::evaluate` on the Cortex-M4 or the Cortex-M0 (QEMU;
+//! `tools/measure.sh`).
 //!
 //! Reads the number of calls N from the semihosting command line
 //! (`-semihosting-config enable=on,target=native,arg=evaluate-bench,arg=N`, default 1),

@@ -10,7 +10,6 @@ use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOp
 use trainer::certify::statistical::{
     certify_statistically, Statistical, StatisticalOptions, DEFAULT_SEED,
 };
-use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 
 /// The statistical tier's flags (shared by `certify`).
@@ -67,7 +66,7 @@ pub(super) fn execute(
     json: bool,
     stat: Option<&(StatisticalOptions, PathBuf)>,
 ) -> Result<()> {
-    let m = Model::load(model)?;
+    let m = super::common::load_model(model)?;
     let d = Dataset::load(data)?;
     let cfg = problem_for_data(config, data, &d)?;
     if let Some(v) = l_mpc {

@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
+use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 use trainer::problem::ProblemConfig;
 
@@ -197,4 +198,30 @@ pub(super) fn sha256_file(path: &Path) -> Result<String> {
     use sha2::{Digest, Sha256};
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     Ok(trainer::io::hex(&Sha256::digest(&bytes)))
+}
+
+/// The trained model of `--model`: the trainer's model file or an ONNX file (detected by
+/// content, `trainer::deploy::onnx::load_any`); says on stderr what an ONNX import found.
+pub(super) fn load_model(path: &Path) -> Result<Model> {
+    let (m, notes) = trainer::deploy::onnx::load_any(path)?;
+    if let Some(n) = notes {
+        let act = format!("{:?}", m.mlp.activation).to_lowercase();
+        eprintln!(
+            "{}: ONNX (producer `{}`, opset {}) read as a {act} MLP {:?}{}; its hash is the file's SHA-256 {}",
+            path.display(),
+            n.producer,
+            n.opset,
+            m.mlp.widths(),
+            if n.clips_dropped > 0 {
+                format!(
+                    " ({} Clip of an ampc export dropped: projection onto X and output clamp)",
+                    n.clips_dropped
+                )
+            } else {
+                String::new()
+            },
+            m.content_hash()
+        );
+    }
+    Ok(m)
 }

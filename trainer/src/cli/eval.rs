@@ -1,24 +1,71 @@
 //! `trainer eval`: evaluates a trained model (`--model`) at every state of a states CSV
-//! (`--states`, header `x1,…,xn`) and writes its outputs and Jacobians as CSV (`--out`).
+//! (`--states`, header `x1,…,xn`) and writes a CSV (`--out`).
+//!
+//! By default the output is the **controller's**: what `controller-core` computes for the
+//! exported model under its certificate (`--certificate` JSON, or the one stored in the
+//! model) — the state rounded to f32, projected onto the certified domain, the f32 network,
+//! the clamp band, and the flags (`deploy::export::device`): columns `x1..xn,u1..um,flags`
+//! (flags: 1 out of domain, 2 not finite, 4 clamped). With `--raw`, the bare f64 network
+//! and its Jacobian: `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
 
 use super::common::{csv_numbers, jacobian_header, read_states};
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use std::path::Path;
-use trainer::certify::Model;
+use trainer::deploy::export::device::Device;
+use trainer::deploy::export::{ExportModel, Tanh};
+use trainer::learn::mlp::Activation;
 
-pub(super) fn execute(model: &Path, states: &Path, out: &Path) -> Result<()> {
-    let m = Model::load(model)?;
+pub(super) fn execute(
+    model: &Path,
+    states: &Path,
+    out: &Path,
+    certificate: Option<&Path>,
+    raw: bool,
+) -> Result<()> {
+    let m = super::common::load_model(model)?;
     let (nx, nu) = (m.mlp.nx(), m.mlp.nu());
-    let xs = read_states(states, nx)?;
-    let mut s = jacobian_header(nx, nu).join(",");
-    s.push('\n');
-    let mut ws = trainer::learn::mlp::Workspace::default();
-    let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
-    for x in &xs {
-        m.mlp.eval(x, &mut u, &mut jac, &mut ws);
-        s += &csv_numbers(x.iter().chain(&u).chain(&jac));
-        s.push('\n');
+    if raw && certificate.is_some() {
+        bail!("--raw evaluates the bare network: a certificate plays no part (drop --certificate)");
     }
+    let xs = read_states(states, nx)?;
+    let s = if raw {
+        let mut s = jacobian_header(nx, nu).join(",");
+        s.push('\n');
+        let mut ws = trainer::learn::mlp::Workspace::default();
+        let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+        for x in &xs {
+            m.mlp.eval(x, &mut u, &mut jac, &mut ws);
+            s += &csv_numbers(x.iter().chain(&u).chain(&jac));
+            s.push('\n');
+        }
+        s
+    } else {
+        if m.mlp.activation != Activation::Tanh {
+            bail!(
+                "{}: a {:?} network — controller-core runs tanh networks only; evaluate the \
+                 bare network with --raw",
+                model.display(),
+                m.mlp.activation
+            );
+        }
+        let (cert, _) = super::export::load_certificate(model, &m, certificate)
+            .context("the controller's output needs the certificate (domain and clamp band); --raw evaluates the bare network")?;
+        let em = ExportModel::from_trained("eval", &m, &cert)?;
+        let dev = Device::new(&em, Tanh::Libm)?;
+        let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
+        head.extend((1..=nu).map(|j| format!("u{j}")));
+        head.push("flags".into());
+        let mut s = head.join(",");
+        s.push('\n');
+        for x in &xs {
+            let xf: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+            let (u, flags) = dev.evaluate(&xf);
+            let u: Vec<f64> = u.iter().map(|v| f64::from(*v)).collect();
+            s += &csv_numbers(x.iter().chain(&u));
+            s += &format!(",{flags}\n");
+        }
+        s
+    };
     trainer::io::write_atomic(out, s.as_bytes())?;
     Ok(())
 }

@@ -117,10 +117,11 @@ enum Cmd {
         /// Problem file (default: the embedded pendulum).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Model file from `trainer train`.
+        /// Model file from `trainer train`, or an ONNX file (detected by content).
         #[arg(long)]
         model: PathBuf,
-        /// The dataset the model was trained on.
+        /// The dataset the model was trained on (for a net trained elsewhere: a dataset of
+        /// this problem from `trainer sample`).
         #[arg(long)]
         data: PathBuf,
         /// Also report the data density a target ε requires.
@@ -137,15 +138,24 @@ enum Cmd {
     },
     /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
     Eval {
-        /// Model file.
+        /// Model file, or an ONNX file (detected by content).
         #[arg(long)]
         model: PathBuf,
         /// Input CSV with header `x1,…,xn`.
         #[arg(long)]
         states: PathBuf,
-        /// Output CSV `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+        /// Output CSV: the controller's `x1..xn,u1..um,flags` (flags: 1 out of domain, 2 not
+        /// finite, 4 clamped), or with --raw the bare network's
+        /// `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
         #[arg(long)]
         out: PathBuf,
+        /// Certificate JSON whose domain and clamp band the controller uses (default: the
+        /// one stored in the model).
+        #[arg(long)]
+        certificate: Option<PathBuf>,
+        /// The bare f64 network and its Jacobian, without projection, clamp or f32.
+        #[arg(long)]
+        raw: bool,
     },
     /// The paper's Table I over seeds: nominal and regularized nets from the same initial
     /// weights, median [min, max] of R², ε_D and the Lipschitz bounds.
@@ -163,21 +173,26 @@ enum Cmd {
         #[arg(long)]
         json: Option<PathBuf>,
     },
-    /// Export a trained model for controller-core: a generated Rust file and a postcard blob,
-    /// with the certificate's f32 allowance.
+    /// Export a trained model for controller-core (a generated Rust file and a postcard blob,
+    /// with the certificate's f32 allowance) and/or as an ONNX model with the certificate in
+    /// its metadata.
     Export {
-        /// Model file from `trainer train`.
+        /// Model file from `trainer train`, or an ONNX file (detected by content).
         #[arg(long)]
         model: PathBuf,
         /// Certificate JSON (default: the one stored in the model by `trainer train`).
         #[arg(long)]
         certificate: Option<PathBuf>,
-        /// Output Rust file.
+        /// Output Rust file (with --postcard).
         #[arg(long)]
-        rust: PathBuf,
-        /// Output postcard blob.
+        rust: Option<PathBuf>,
+        /// Output postcard blob (with --rust).
         #[arg(long)]
-        postcard: PathBuf,
+        postcard: Option<PathBuf>,
+        /// Output ONNX file: the f32 network as the controller computes it (opset 13),
+        /// certificate under `ampc.*` metadata keys.
+        #[arg(long)]
+        onnx: Option<PathBuf>,
         /// Name used in the generated file (default: pendulum).
         #[arg(long, default_value = "pendulum")]
         name: String,
@@ -211,6 +226,13 @@ enum Cmd {
         /// import`) whose records on the initial grid label those corners (no OCP solve).
         #[arg(long)]
         data: Option<PathBuf>,
+        /// Keep the network of --model fixed: only split the cells (solving the MPC at their
+        /// corners) until the target or the budget, and certify that network (no training).
+        #[arg(long, requires = "model")]
+        certify_only: bool,
+        /// The network to certify with --certify-only: a model file or an ONNX file.
+        #[arg(long, requires = "certify_only")]
+        model: Option<PathBuf>,
         /// No progress lines.
         #[arg(long, short)]
         quiet: bool,
@@ -325,9 +347,15 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 stat.as_ref(),
             )
         }
-        Cmd::Eval { model, states, out } => {
-            common::refuse_overwrite(&[&out], &[&model, &states])?;
-            eval::execute(&model, &states, &out)
+        Cmd::Eval {
+            model,
+            states,
+            out,
+            certificate,
+            raw,
+        } => {
+            common::refuse_overwrite(&[&out], &[&model, &states, opt(&certificate)])?;
+            eval::execute(&model, &states, &out, certificate.as_deref(), raw)
         }
         Cmd::Compare {
             config,
@@ -343,21 +371,21 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             certificate,
             rust,
             postcard,
+            onnx,
             name,
             c_header,
         } => {
             common::refuse_overwrite(
-                &[&rust, &postcard, opt(&c_header)],
+                &[opt(&rust), opt(&postcard), opt(&onnx), opt(&c_header)],
                 &[&model, opt(&certificate)],
             )?;
-            export::execute(
-                &model,
-                certificate.as_deref(),
-                &rust,
-                &postcard,
-                &name,
-                c_header.as_deref(),
-            )
+            let out = export::Outputs {
+                rust: rust.as_deref(),
+                postcard: postcard.as_deref(),
+                onnx: onnx.as_deref(),
+                c_header: c_header.as_deref(),
+            };
+            export::execute(&model, certificate.as_deref(), &out, &name)
         }
         Cmd::Refine {
             config,
@@ -367,6 +395,8 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             check,
             check_seed,
             data,
+            certify_only: _,
+            model,
             quiet,
             statistical,
         } => refine::execute(
@@ -376,6 +406,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             out.as_deref(),
             (check.map(|n| (n, check_seed)), &statistical),
             data.as_deref(),
+            model.as_deref(),
             quiet,
         ),
         Cmd::Import {

@@ -4,7 +4,9 @@
 //! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
 //! more states and, with `--check`, `check.json`; with `--statistical N` the certificate
 //! gets its statistical tier (states kept in `statistical.bin`). Fails if the target ε is
-//! not met.
+//! not met. `--certify-only --model M` keeps the network of M (a model file or an ONNX file)
+//! fixed and refines only the cells; the certificate is about M (its hash); for an ONNX M no
+//! `model.bin` is written (export M itself with the certificate).
 
 use super::certify::{print_statistical, StatisticalArgs};
 use super::common::load_config;
@@ -15,6 +17,7 @@ use trainer::certify::statistical::StatisticalOptions;
 use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
 
+#[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
     config: Option<&Path>,
     target_eps: Option<f64>,
@@ -22,12 +25,30 @@ pub(super) fn execute(
     out: Option<&Path>,
     (check, statistical): (Option<(usize, u64)>, &StatisticalArgs),
     data: Option<&Path>,
+    fixed: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
     let (cfg, robust_design) = refine_config(config, target_eps, budget)?;
     let initial_labels = data
         .map(|p| first_round_labels(&cfg, p, quiet))
         .transpose()?;
+    let fixed = match fixed {
+        Some(p) => {
+            let m = super::common::load_model(p)?;
+            let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+            if (m.mlp.nx(), m.mlp.nu()) != (nx, nu) {
+                bail!(
+                    "{}: the network maps {} states to {} inputs; problem `{}` has {nx} and {nu}",
+                    p.display(),
+                    m.mlp.nx(),
+                    m.mlp.nu(),
+                    cfg.name
+                );
+            }
+            Some(m)
+        }
+        None => None,
+    };
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -39,6 +60,7 @@ pub(super) fn execute(
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
         initial_labels,
+        fixed,
     };
     let checkpoint = dir.join("refine_state.bin");
     let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;

@@ -27,10 +27,22 @@ pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Resul
     }
     trainer::io::write_atomic(out, s.as_bytes())?;
     let bad = labels.iter().filter(|l| !l.status.is_labelled()).count();
+    // Which rung of the solver's retry ladder labelled a state (not a CSV column: readers
+    // of the format stay as they are).
+    let mut retried = std::collections::BTreeMap::<&str, usize>::new();
+    for r in labels.iter().filter_map(|l| l.retry) {
+        *retried.entry(r.as_str()).or_default() += 1;
+    }
+    let retried: Vec<String> = retried.iter().map(|(k, n)| format!("{k} {n}")).collect();
     eprintln!(
-        "solved {} states ({} without a label) -> {}",
+        "solved {} states ({} without a label{}) -> {}",
         labels.len(),
         bad,
+        if retried.is_empty() {
+            String::new()
+        } else {
+            format!("; after a retry: {}", retried.join(", "))
+        },
         out.display()
     );
     Ok(())

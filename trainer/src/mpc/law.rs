@@ -7,13 +7,60 @@
 //! the soft optimum and flagged [`SqpStatus::Soft`] when `solver.soft_fallback` is on, and
 //! reported [`SqpStatus::Infeasible`] (no label) otherwise. The sensitivity is that of the
 //! problem that produced the label.
+//!
+//! A state that still has no label (`max_iterations` or `numerical_failure`) climbs a retry
+//! ladder before it is reported ([`Retry`] records the rung that labelled it):
+//! 1. the hard problem with the conservative globalisation ([`Globalisation::Conservative`]);
+//! 2. continuation from the setpoint x_c (x_ref, or the origin): the hard problem at
+//!    x_c + θ(x_s − x_c) for θ = 0 → 1, each solve warm-started from the last solved θ
+//!    (step doubled on success, halved on failure), first with the default globalisation,
+//!    then with the conservative one — warm starts from solved neighbours on a path that
+//!    depends only on x_s (deterministic, independent of the order of the states);
+//! 3. the exact-penalty (soft) problem with the conservative globalisation, deciding
+//!    feasibility as above (a hard re-solve from its optimum if the slacks vanish).
+//!
+//! The ladder runs only where the plain solve found no label, so every state labelled without
+//! it keeps its label bit for bit.
 
 use crate::mpc::sensitivity::{sensitivity, Degeneracy};
-use crate::mpc::sqp::{PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
+use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
 use crate::problem::ProblemConfig;
 
 /// Slack size above which the soft optimum proves the hard OCP infeasible.
 pub const SLACK_TOL: f64 = 1e-6;
+
+/// The rung of the retry ladder (module doc) that labelled a state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Retry {
+    /// Hard problem, conservative globalisation, cold start.
+    Conservative,
+    /// Continuation from the setpoint, default globalisation.
+    Continuation,
+    /// Continuation from the setpoint, conservative globalisation.
+    ContinuationConservative,
+    /// Soft problem, conservative globalisation (its label, or the hard re-solve from it).
+    Soft,
+    /// Hard problem warm-started from a solved neighbour ([`MpcLaw::solve_from_neighbour`]).
+    Neighbour,
+}
+
+impl Retry {
+    /// Name used in summaries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Retry::Conservative => "conservative",
+            Retry::Continuation => "continuation",
+            Retry::ContinuationConservative => "continuation_conservative",
+            Retry::Soft => "soft_conservative",
+            Retry::Neighbour => "neighbour",
+        }
+    }
+}
+
+/// Step of the continuation parameter θ below which the continuation gives up.
+const MIN_THETA_STEP: f64 = 1.0 / 256.0;
+/// Hard solves one continuation may spend.
+const MAX_CONTINUATION_SOLVES: usize = 40;
 
 /// One labelled state (x, κ(x), ∂κ/∂x) with its provenance.
 #[derive(Debug, Clone, PartialEq)]
@@ -37,6 +84,8 @@ pub struct Label {
     /// The strongly active constraint rows of the solution (empty when unlabelled): two
     /// labels with the same active set lie in the same smooth piece of κ.
     pub active: Vec<usize>,
+    /// The retry that labelled the state (`None`: the plain solve did, or no label).
+    pub retry: Option<Retry>,
 }
 
 /// A reusable MPC law evaluator: one hard and (lazily) one soft SQP workspace.
@@ -82,6 +131,7 @@ impl MpcLaw {
             degeneracy: sens.degeneracy,
             max_slack: r.point.z[ocp.is()..].iter().fold(0.0f64, |m, v| m.max(*v)),
             active: sens.active,
+            retry: None,
         }
     }
 
@@ -97,12 +147,39 @@ impl MpcLaw {
             degeneracy: None,
             max_slack: f64::NAN,
             active: Vec::new(),
+            retry: None,
         }
     }
 
     /// Solves OCP(xs). `warm` is a neighbour's hard solution (same problem). Returns the
     /// label and, for converged hard solves, the solution (to warm-start neighbours).
+    /// States the plain solve leaves without a label climb the retry ladder (module doc).
     pub fn solve(&mut self, xs: &[f64], warm: Option<&PrimalDual>) -> (Label, Option<PrimalDual>) {
+        let (label, sol) = self.solve_plain(xs, warm);
+        if !matches!(
+            label.status,
+            SqpStatus::MaxIterations | SqpStatus::NumericalFailure
+        ) || xs.iter().any(|v| !v.is_finite())
+            || xs.len() != self.hard.ocp.nx
+        {
+            return (label, sol);
+        }
+        let spent = label.info.iterations;
+        match self.retry(xs) {
+            Some((mut l, sol, retry)) => {
+                l.info.iterations += spent;
+                l.retry = Some(retry);
+                (l, sol)
+            }
+            None => (label, sol),
+        }
+    }
+
+    fn solve_plain(
+        &mut self,
+        xs: &[f64],
+        warm: Option<&PrimalDual>,
+    ) -> (Label, Option<PrimalDual>) {
         if xs.iter().any(|v| !v.is_finite()) || xs.len() != self.hard.ocp.nx {
             return (
                 self.unlabelled(xs, SqpStatus::NumericalFailure, SqpInfo::default()),
@@ -170,6 +247,161 @@ impl MpcLaw {
     }
 }
 
+impl MpcLaw {
+    /// The retry ladder (module doc) for a state the plain solve left without a label.
+    fn retry(&mut self, xs: &[f64]) -> Option<(Label, Option<PrimalDual>, Retry)> {
+        let mut spent = 0;
+        // 1. Conservative globalisation, cold start.
+        self.hard.set_globalisation(Globalisation::Conservative);
+        let r = self.hard.solve(xs, self.hard.cold_start(xs));
+        self.hard.set_globalisation(Globalisation::Default);
+        spent += r.info.iterations;
+        if r.status == SqpStatus::Converged {
+            let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+            l.info.iterations = spent;
+            return Some((l, Some(r.point), Retry::Conservative));
+        }
+        // 2. Continuation from the setpoint.
+        for (g, rung) in [
+            (Globalisation::Default, Retry::Continuation),
+            (Globalisation::Conservative, Retry::ContinuationConservative),
+        ] {
+            self.hard.set_globalisation(g);
+            let c = self.continuation(xs, &mut spent);
+            self.hard.set_globalisation(Globalisation::Default);
+            if let Some(r) = c {
+                let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+                l.info.iterations = spent;
+                return Some((l, Some(r.point), rung));
+            }
+        }
+        // 3. The soft problem, conservative globalisation.
+        let cfg = &self.cfg;
+        let soft = self.soft.get_or_insert_with(|| SqpSolver::new(cfg, true));
+        soft.set_globalisation(Globalisation::Conservative);
+        let s = soft.solve(xs, soft.cold_start(xs));
+        soft.set_globalisation(Globalisation::Default);
+        spent += s.info.iterations;
+        if s.status != SqpStatus::Converged {
+            return None;
+        }
+        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
+        let max_slack = s.point.z[soft.ocp.is()..]
+            .iter()
+            .fold(0.0f64, |m, v| m.max(*v));
+        if max_slack <= SLACK_TOL {
+            let nw = self.hard.ocp.n_var;
+            let start = PrimalDual {
+                z: s.point.z[..nw].to_vec(),
+                lam: s.point.lam.clone(),
+                nu: vec![0.0; self.hard.ocp.rows.len()],
+            };
+            self.hard.set_globalisation(Globalisation::Conservative);
+            let h = self.hard.solve(xs, start);
+            self.hard.set_globalisation(Globalisation::Default);
+            spent += h.info.iterations;
+            if h.status != SqpStatus::Converged {
+                return None;
+            }
+            let mut l = self.finish(&self.hard, xs, &h, SqpStatus::Converged);
+            l.info.iterations = spent;
+            return Some((l, Some(h.point), Retry::Soft));
+        }
+        let status = if self.cfg.solver.soft_fallback {
+            SqpStatus::Soft
+        } else {
+            SqpStatus::Infeasible
+        };
+        if status == SqpStatus::Infeasible {
+            let info = SqpInfo {
+                iterations: spent,
+                ..s.info
+            };
+            return Some((self.unlabelled(xs, status, info), None, Retry::Soft));
+        }
+        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
+        let mut l = self.finish(soft, xs, &s, SqpStatus::Soft);
+        l.info.iterations = spent;
+        Some((l, None, Retry::Soft))
+    }
+
+    /// The hard problem at `xs` warm-started from the solution of the hard problem at a
+    /// neighbour `near` (solved here first), with the default then the conservative
+    /// globalisation: the retry for a state that stayed unlabelled after [`solve`](Self::solve)
+    /// once a neighbour has a label. `None` if either solve fails.
+    pub fn solve_from_neighbour(&mut self, xs: &[f64], near: &[f64]) -> Option<Label> {
+        let nx = self.hard.ocp.nx;
+        if xs.len() != nx || near.len() != nx || xs.iter().chain(near).any(|v| !v.is_finite()) {
+            return None;
+        }
+        let n = self.hard.solve(near, self.hard.cold_start(near));
+        if n.status != SqpStatus::Converged {
+            return None;
+        }
+        let mut spent = n.info.iterations;
+        for g in [Globalisation::Default, Globalisation::Conservative] {
+            let mut start = n.point.clone();
+            start.z[..nx].copy_from_slice(xs);
+            self.hard.set_globalisation(g);
+            let r = self.hard.solve(xs, start);
+            self.hard.set_globalisation(Globalisation::Default);
+            spent += r.info.iterations;
+            if r.status == SqpStatus::Converged {
+                let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+                l.info.iterations = spent;
+                l.retry = Some(Retry::Neighbour);
+                return Some(l);
+            }
+        }
+        None
+    }
+
+    /// The hard problem at x_c + θ(x_s − x_c), θ = 0 → 1, each solve warm-started from the
+    /// last solved θ. Returns the solve at θ = 1, or `None` if a step below
+    /// [`MIN_THETA_STEP`] fails or the solves run out.
+    fn continuation(&mut self, xs: &[f64], spent: &mut usize) -> Option<SqpResult> {
+        let nx = xs.len();
+        let centre: Vec<f64> = if self.hard.ocp.x_ref.len() == nx {
+            self.hard.ocp.x_ref.clone()
+        } else {
+            vec![0.0; nx]
+        };
+        let mut r = self.hard.solve(&centre, self.hard.cold_start(&centre));
+        *spent += r.info.iterations;
+        if r.status != SqpStatus::Converged {
+            return None;
+        }
+        let (mut theta, mut step) = (0.0f64, 0.25f64);
+        let mut x = vec![0.0; nx];
+        for _ in 0..MAX_CONTINUATION_SOLVES {
+            let t = (theta + step).min(1.0);
+            for i in 0..nx {
+                x[i] = centre[i] + t * (xs[i] - centre[i]);
+            }
+            if t == 1.0 {
+                x.copy_from_slice(xs);
+            }
+            let mut start = r.point.clone();
+            start.z[..nx].copy_from_slice(&x);
+            let next = self.hard.solve(&x, start);
+            *spent += next.info.iterations;
+            if next.status == SqpStatus::Converged {
+                if t == 1.0 {
+                    return Some(next);
+                }
+                (theta, r) = (t, next);
+                step = (2.0 * step).min(0.5);
+            } else {
+                step *= 0.5;
+                if step < MIN_THETA_STEP {
+                    return None;
+                }
+            }
+        }
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -212,6 +444,79 @@ mod tests {
                 l.cost,
                 row[5]
             );
+        }
+    }
+
+    fn config(name: &str) -> ProblemConfig {
+        let path = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/"))
+            .join(name);
+        ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// A cart-pole state (one of 1000 uniform random states of `configs/cartpole.toml`'s X)
+    /// where the plain solve ends in `max_iterations`, and IPOPT (tol 1e-10,
+    /// `tests/reference/ipopt_compare.py`'s OCP) converges to u₀ = 20 (saturated), cost
+    /// 952.4189555579322. The ladder labels it: a KKT point of the hard problem (residual
+    /// recomputed from the returned point) with IPOPT's input and cost.
+    #[test]
+    fn a_state_the_plain_solve_fails_is_labelled_by_a_retry() {
+        let cfg = config("cartpole.toml");
+        let xs = [
+            0.9373483962054916,
+            0.527648909042475,
+            -0.12863379318484958,
+            0.9225198250891367,
+        ];
+        let (ipopt_u, ipopt_cost) = (19.999999999999424, 952.4189555579322);
+        let mut law = MpcLaw::new(&cfg);
+        let (plain, _) = law.solve_plain(&xs, None);
+        assert!(
+            matches!(
+                plain.status,
+                SqpStatus::MaxIterations | SqpStatus::NumericalFailure
+            ),
+            "{:?}",
+            plain.status
+        );
+        let (l, sol) = law.solve(&xs, None);
+        eprintln!("{:?} {:?} u {:?} cost {}", l.status, l.retry, l.u, l.cost);
+        assert_eq!(l.status, SqpStatus::Converged);
+        assert!(l.retry.is_some());
+        let sol = sol.expect("a converged hard solve returns its point");
+        let res = law.hard_solver().kkt_residual(&xs, &sol);
+        assert!(res.max() <= cfg.solver.tol, "{res:?}");
+        assert_eq!(l.u, sol.z[law.hard_solver().ocp.iu(0)..][..1].to_vec());
+        assert!(
+            (l.u[0] - ipopt_u).abs() <= 1e-6,
+            "u {} vs IPOPT {ipopt_u}",
+            l.u[0]
+        );
+        assert!(
+            (l.cost - ipopt_cost).abs() <= 1e-6 * ipopt_cost,
+            "cost {} vs IPOPT {ipopt_cost}",
+            l.cost
+        );
+        assert!(l.du_dx.iter().all(|v| v.is_finite()));
+    }
+
+    /// States the plain solve labels get exactly its label: the ladder runs only after a
+    /// failure (random cart-pole states, compared field by field).
+    #[test]
+    fn labels_without_a_retry_are_the_plain_ones() {
+        let cfg = config("cartpole.toml");
+        let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+        let mut law = MpcLaw::new(&cfg);
+        for i in 0..20u64 {
+            let xs: Vec<f64> = (0..4)
+                .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(41, i, k as u64))
+                .collect();
+            let (a, pa) = law.solve_plain(&xs, None);
+            let (b, pb) = law.solve(&xs, None);
+            if a.status.is_labelled() {
+                assert_eq!(a, b, "{xs:?}");
+                assert_eq!(pa, pb, "{xs:?}");
+                assert!(b.retry.is_none());
+            }
         }
     }
 }

@@ -7,12 +7,14 @@
 //! - [`ocp`]: the OCP's functions, constraints and their derivatives (from `problem::model`).
 //! - [`sqp`]: the SQP solver (allocate once, `step`, `solve`), with [`qp`] inside it:
 //!   the structured interior point (`qp::ipm`) or Clarabel.
+//! - [`convexity`]: whether a QP subproblem is strictly convex on the dynamics' null space.
 //! - [`kkt`]: banded KKT layouts and factorisations shared by the QP and the sensitivity.
 //! - [`sensitivity`]: ∂u₀*/∂x_s from the converged KKT system, with degeneracy flags.
 //! - [`law`]: one labelled state: hard OCP, soft fallback, warm starts.
 //!
 //! Imports only `problem` (and the leaf modules `io`, `rng`).
 
+pub mod convexity;
 pub mod kkt;
 pub mod law;
 pub mod ocp;

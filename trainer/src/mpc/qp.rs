@@ -17,6 +17,7 @@
 //! (e.g. an infeasible linearisation, which clarabel certifies), or clarabel alone.
 
 pub mod ipm;
+pub mod riccati;
 
 use crate::mpc::ocp::Ocp;
 pub use crate::problem::QpSolverKind;
@@ -71,6 +72,14 @@ impl QpSolver {
             clarabel: None,
             last_iterations: 0,
             fallbacks: 0,
+        }
+    }
+
+    /// The structured solver factorises by the band LU only (tests).
+    #[cfg(test)]
+    pub(crate) fn without_riccati(&mut self) {
+        if let Some(i) = self.ipm.as_mut() {
+            i.without_riccati();
         }
     }
 

@@ -301,7 +301,12 @@ fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
         .with_declared_guarantee(declared);
     let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
         .map_err(|e| fail("export", e))?;
+    // The band the exported controller (libm tanh, the default) clamps to.
+    let (blo, bhi) = em.clamp_band(c.eps + r.f32_allowance[0]);
+    let f64s = |v: Vec<f32>| v.into_iter().map(f64::from).collect::<Vec<_>>();
     let json = serde_json::json!({
+        "clamp_lo": f64s(blo),
+        "clamp_hi": f64s(bhi),
         "f32_allowance_libm": r.f32_allowance[0],
         "f32_allowance_fast_tanh": r.f32_allowance[1],
         "f32_observed_libm": r.f32_observed[0],

@@ -227,18 +227,68 @@ fn label(cfg: &ProblemConfig, points: &mut [Point], idx: &[usize]) {
         .map_init(|| MpcLaw::new(cfg), |law, x| law.solve(x, None).0)
         .collect();
     for (&i, l) in idx.iter().zip(labels) {
-        let p = &mut points[i];
-        p.regular = l.status == SqpStatus::Converged && l.degeneracy.is_none();
-        p.piece = fnv(&l.active);
-        // Hard solutions only (a soft label's rows are those of another problem).
-        p.active = (l.status == SqpStatus::Converged).then(|| l.active.clone());
-        p.u = l.u;
-        p.du = l.du_dx;
-        p.status = Some(l.status);
-        p.cost = l.cost;
-        p.degeneracy = l.degeneracy;
-        p.max_slack = l.max_slack;
+        set_label(&mut points[i], l);
     }
+    // States still without a label: retried warm-started from the nearest labelled regular
+    // point (distance relative to the lattice's extent; ties: the lower index), which a
+    // failed corner gains as its cells are split around it.
+    let failed: Vec<usize> = idx
+        .iter()
+        .copied()
+        .filter(|&i| {
+            matches!(
+                points[i].status,
+                Some(SqpStatus::MaxIterations | SqpStatus::NumericalFailure)
+            )
+        })
+        .collect();
+    if failed.is_empty() {
+        return;
+    }
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let near: Vec<(usize, Option<usize>)> = failed
+        .iter()
+        .map(|&i| {
+            let d = |p: &Point| -> f64 {
+                (0..lo.len())
+                    .map(|k| ((p.x[k] - points[i].x[k]) / (hi[k] - lo[k])).powi(2))
+                    .sum()
+            };
+            let best = (0..points.len())
+                .filter(|&j| points[j].regular)
+                .min_by(|&a, &b| d(&points[a]).total_cmp(&d(&points[b])).then(a.cmp(&b)));
+            (i, best)
+        })
+        .collect();
+    let retried: Vec<(usize, Option<Label>)> = near
+        .par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, &(i, j)| {
+                let l = j.and_then(|j| law.solve_from_neighbour(&points[i].x, &points[j].x));
+                (i, l)
+            },
+        )
+        .collect();
+    for (i, l) in retried {
+        if let Some(l) = l {
+            set_label(&mut points[i], l);
+        }
+    }
+}
+
+/// Stores a label in its point.
+fn set_label(p: &mut Point, l: Label) {
+    p.regular = l.status == SqpStatus::Converged && l.degeneracy.is_none();
+    p.piece = fnv(&l.active);
+    // Hard solutions only (a soft label's rows are those of another problem).
+    p.active = (l.status == SqpStatus::Converged).then(|| l.active.clone());
+    p.u = l.u;
+    p.du = l.du_dx;
+    p.status = Some(l.status);
+    p.cost = l.cost;
+    p.degeneracy = l.degeneracy;
+    p.max_slack = l.max_slack;
 }
 
 /// Gives every labelled point whose active set is unknown (an imported label, a point read

@@ -259,7 +259,9 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
 
 /// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),
 /// `certificate.json`, `cells.csv` (every leaf: box, ε_C, corner term, remainder, form),
-/// `refine_log.json`. Returns the certificate.
+/// `refine_log.json`. Returns the certificate. A net imported from another format (ONNX,
+/// `source_hash` set) is not written as `model.bin`: the certificate binds the source file,
+/// which stays the model to export.
 pub fn write_outputs(
     cfg: &ProblemConfig,
     rs: &RefineSettings,
@@ -267,9 +269,11 @@ pub fn write_outputs(
     dir: &Path,
 ) -> Result<LocalCertificate, DatasetError> {
     let cert = certificate(cfg, rs, r);
-    let mut model = r.model.clone();
-    model.certificate = Some(cert.base.clone());
-    model.save(&dir.join("model.bin"))?;
+    if r.model.source_hash.is_none() {
+        let mut model = r.model.clone();
+        model.certificate = Some(cert.base.clone());
+        model.save(&dir.join("model.bin"))?;
+    }
     let ds = dataset(cfg, &r.state);
     ds.save(&dir.join("dataset.bin"))?;
     write_atomic(&dir.join("dataset.csv"), ds.to_csv().as_bytes())?;

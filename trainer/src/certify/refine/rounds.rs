@@ -1,6 +1,7 @@
 //! The refinement loop: label new corners, (re)train, bound every leaf cell, split the cells
 //! above the target — round after round, checkpointed, until the target ε is met or the
-//! budget of solves is spent.
+//! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
+//! is given and never retrained: only the cells are split (their corners solved).
 
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -27,6 +28,9 @@ pub struct RefineOptions {
     /// corner whose state is a labelled record with a finite Jacobian takes that label
     /// instead of an OCP solve. Part of the checkpoint's identity.
     pub initial_labels: Option<crate::data::dataset::Dataset>,
+    /// Certify this network as it is (`refine --certify-only`): no training, the rounds
+    /// only split cells and solve their corners; the checkpoint is bound to its hash.
+    pub fixed: Option<Model>,
 }
 
 /// The result of a refinement run.
@@ -183,7 +187,13 @@ pub fn refine(
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
-    let mut hash = settings_hash(cfg, rs);
+    let mut hash = match &opts.fixed {
+        // A fixed net: a checkpoint of another net (or of a training run) does not match.
+        Some(m) => crate::io::sha256_hex(
+            format!("{}|fixed:{}", settings_hash(cfg, rs), m.content_hash()).as_bytes(),
+        ),
+        None => settings_hash(cfg, rs),
+    };
     if let Some(d) = &opts.initial_labels {
         hash = crate::io::sha256_hex(
             format!("{hash}{}", crate::io::sha256_hex(&d.to_bytes())).as_bytes(),
@@ -194,7 +204,10 @@ pub fn refine(
     // Where the MPC is a QP, cells are proven exact and refinement goes on until all are.
     let qp = QpCertifier::detect(cfg).ok();
     // Every retrained net holds the setpoint (`refine.training.hold_setpoint`).
-    let hold = Hold::if_enabled(cfg, rs.training.hold_setpoint)?;
+    let hold = match opts.fixed {
+        Some(_) => None,
+        None => Hold::if_enabled(cfg, rs.training.hold_setpoint)?,
+    };
     let mut ctx = Ctx {
         cfg,
         lat: lat.clone(),
@@ -229,7 +242,7 @@ pub fn refine(
         // target, a larger budget or more rounds).
         let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
         let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
-        if let (false, Some(model)) = (more, st.model.clone()) {
+        if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
             let mut state = st.clone();
             if let Some(q) = &qp {
                 // Which cells are exact is not stored: prove them again.
@@ -280,6 +293,10 @@ pub fn refine(
             st
         }
     };
+    if let Some(m) = &opts.fixed {
+        // The given net (with its source hash, which a checkpoint does not store).
+        st.model = Some(m.clone());
+    }
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -296,7 +313,7 @@ pub fn refine(
             .bounds
             .iter()
             .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
-        let retrain = st.model.is_none() || fit_bound;
+        let retrain = opts.fixed.is_none() && (st.model.is_none() || fit_bound);
         if retrain {
             // Emphasis: points with a large error under the current net.
             let mut hard = Vec::new();
@@ -384,16 +401,19 @@ pub fn refine(
         bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
         let mut split_any = false;
         if !met && round + 1 < rs.max_rounds {
+            // Cells with a corner the MPC could not label (ε_C = ∞) are split after the
+            // others, with what budget remains, once per round each, along their longest
+            // side relative to X: the uncertified region around a failed state halves
+            // every round instead of staying a whole cell, and the new corners are solved
+            // (and retried, warm-started from their labelled neighbours) like any other.
+            let (failed, mut bad): (Vec<_>, Vec<_>) =
+                bad.into_iter().partition(|(_, b)| !b.corner.is_finite());
+            bad.extend(failed);
             for (n, b) in bad {
                 let node = st.nodes[n].clone();
                 // Axis: the largest remainder term; ties and infinite terms: longest side
                 // relative to X.
                 let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-                // A corner without an MPC label (failed solve): splitting cannot help; the
-                // cell stays uncertified (ε_C = ∞) and is reported.
-                if !b.corner.is_finite() {
-                    continue;
-                }
                 let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width;
                 let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
                 let Some(&first) = cand.first() else {
@@ -462,7 +482,7 @@ pub fn refine(
             return Ok(Refined {
                 met,
                 state: st,
-                model,
+                model: opts.fixed.clone().unwrap_or(model),
             });
         }
     }

@@ -102,7 +102,7 @@ struct ampc_certificate {{
     uint8_t guarantee;
     /* 1 for an untrained placeholder network (no certificate from the learning side). */
     uint8_t placeholder;
-    /* 1 if eps is for the rational tanh (feature fast-tanh), 0 for libm's tanhf. */
+    /* 1 if eps is for the rational tanh (feature fast-tanh), 0 for the accurate tanh. */
     uint8_t fast_tanh;
     /* Certified domain X. */
     double domain_lo[AMPC_NX];

@@ -23,6 +23,7 @@
 //! - `allowance`: the f32 error analysis ([`f32_allowance`], [`sampled_max_diff`],
 //!   [`certify_f32`]);
 //! - `rust`: the generated Rust file ([`render_rust`]);
+//! - `device`: the exported controller evaluated as `controller-core` does ([`device::Device`]);
 //! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
 //! - `blob`: the postcard blob ([`render_postcard`], [`crc32`]).
@@ -30,6 +31,7 @@
 mod allowance;
 mod blob;
 mod c_header;
+pub mod device;
 mod guarantee;
 mod rust;
 mod tanh;
@@ -480,7 +482,26 @@ pub fn placeholder_pendulum() -> ExportModel {
 impl ExportModel {
     /// The export description of a trained tanh network and its certificate (physical
     /// units; the actuator limits are the data's input bounds U_d unless given).
+    /// controller-core runs tanh networks only: other activations are refused.
     pub fn from_trained(
+        name: &str,
+        model: &crate::certify::Model,
+        cert: &crate::certify::certificate::Certificate,
+    ) -> Result<Self, ExportError> {
+        if model.mlp.activation != crate::learn::mlp::Activation::Tanh {
+            return Err(ExportError::Invalid(format!(
+                "activation {:?}: controller-core (the Rust and postcard export) runs tanh \
+                 networks only; export this one with --onnx",
+                model.mlp.activation
+            )));
+        }
+        Self::from_certified(name, model, cert)
+    }
+
+    /// [`ExportModel::from_trained`] for any hidden activation (the layers and scalings are
+    /// the same; [`ExportModel::eval_f64`] and the f32 analysis assume tanh, so the caller
+    /// of a non-tanh network uses only the folding, domain and band: the ONNX export).
+    pub fn from_certified(
         name: &str,
         model: &crate::certify::Model,
         cert: &crate::certify::certificate::Certificate,
@@ -506,12 +527,6 @@ impl ExportModel {
                 "the certificate is for problem hash {}, the model was trained on labels of \
                  problem hash {}",
                 cert.problem_hash, model.problem_hash
-            )));
-        }
-        if m.activation != crate::learn::mlp::Activation::Tanh {
-            return Err(ExportError::Invalid(format!(
-                "activation {:?}: the device supports tanh only",
-                m.activation
             )));
         }
         let layers = m

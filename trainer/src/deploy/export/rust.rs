@@ -152,7 +152,7 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
     let _ = writeln!(
         o,
         "//\n// f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64| over X, {} sub-boxes) vs the\n\
-         // largest difference on {} random states: libm tanh {:.3e} vs {:.3e}; fast tanh\n\
+         // largest difference on {} random states: accurate tanh {:.3e} vs {:.3e}; fast tanh\n\
          // {:.3e} vs {:.3e}. Guarantee tier of ε: {}.",
         report.boxes,
         report.samples,

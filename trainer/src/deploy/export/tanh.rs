@@ -1,9 +1,14 @@
-//! The device tanh implementations of `controller-core` ([`Tanh`]): libm's `tanhf` and
-//! the clamped rational
+//! The device tanh implementations of `controller-core` ([`Tanh`]): the default accurate
+//! tanh (`controller_core::activation::tanh_accurate`: an odd polynomial for |x| < 0.875,
+//! else `sign(x)·(1 − 2/(e^{2a} + 1))` with a Cody–Waite `exp`; label `"libm"`, the name of
+//! the default tanh in certificates and reports since libm's `tanhf` was it) and the
+//! clamped rational
 //! ```text
 //! t(x) = x (135135 + 17325 x² + 378 x⁴ + x⁶) / (135135 + 62370 x² + 3150 x⁴ + 28 x⁶),  |x| ≤ 4.97
 //! ```
 //! with the bounds on |t(ξ) − tanh(ξ)| verified exhaustively in `controller_core::activation`.
+//! Both are copies, operation by operation, of the device code (`tests/export_roundtrip.rs`
+//! checks them bit for bit).
 
 /// `FAST_CLIP` of `controller_core::activation`.
 const FAST_CLIP: f32 = 4.97;
@@ -21,10 +26,55 @@ pub const TANH_FAST_ERR_BINS: [(f64, f64); 10] = [
     (4.5, 4.25e-5),
     (f64::INFINITY, 1.0e-4),
 ];
+/// `controller_core::activation`'s constants of `tanh_accurate` (same names).
+const ACC_CUT: f32 = 0.875;
+const ACC_P: [f32; 6] = [
+    -0.333_331_76,
+    0.133_299_98,
+    -0.053_710_45,
+    0.020_895_608,
+    -0.006_869_007_4,
+    0.001_314_905,
+];
+const ACC_Q: [f32; 5] = [
+    0.499_999_94,
+    0.166_665_21,
+    0.041_668_39,
+    0.008_368_71,
+    0.001_381_461_3,
+];
+const ACC_CLIP: f32 = 10.0;
+const LOG2E: f32 = core::f32::consts::LOG2_E;
+const LN2_HI: f32 = 0.693_145_75;
+const LN2_LO: f32 = 1.428_606_8e-6;
+
+/// `controller_core::activation::tanh_accurate`, the same f32 operations in the same order.
+fn tanh_accurate(x: f32) -> f32 {
+    let a = f32::from_bits(x.to_bits() & 0x7fff_ffff);
+    if a < ACC_CUT {
+        let z = x * x;
+        let [p0, p1, p2, p3, p4, p5] = ACC_P;
+        let p = p0 + z * (p1 + z * (p2 + z * (p3 + z * (p4 + z * p5))));
+        return x + x * (z * p);
+    }
+    let a = if a < ACC_CLIP { a } else { ACC_CLIP };
+    let y = a + a;
+    let k = (y * LOG2E + 0.5) as i32;
+    let kf = k as f32;
+    let r = (y - kf * LN2_HI) - kf * LN2_LO;
+    let [q0, q1, q2, q3, q4] = ACC_Q;
+    let q = q0 + r * (q1 + r * (q2 + r * (q3 + r * q4)));
+    let p = 1.0 + (r + r * (r * q));
+    let e = f32::from_bits(p.to_bits().wrapping_add((k as u32) << 23));
+    let t = 1.0 - 2.0 / (e + 1.0);
+    f32::from_bits(t.to_bits() | (x.to_bits() & 0x8000_0000))
+}
+
 /// The device tanh implementations of `controller-core`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tanh {
-    /// libm's `tanhf` (default build).
+    /// The default build's accurate tanh (`controller_core::activation::tanh_accurate`;
+    /// libm's `tanhf` before, hence the name and the label `"libm"`).
     Libm,
     /// The clamped rational (`fast-tanh` feature).
     Fast,
@@ -37,7 +87,7 @@ impl Tanh {
     /// The f32 function as the device computes it (same code as `controller-core`).
     pub fn eval(self, x: f32) -> f32 {
         match self {
-            Tanh::Libm => libm::tanhf(x),
+            Tanh::Libm => tanh_accurate(x),
             Tanh::Fast => {
                 let x = if x > FAST_CLIP {
                     FAST_CLIP
@@ -65,7 +115,7 @@ impl Tanh {
     }
 
     /// Bound on |t(ξ) − tanh(ξ)| for `lo ≤ |ξ| ≤ hi` (the fast tanh's piecewise bound,
-    /// `controller_core::activation::TANH_FAST_ERR_BINS`; libm's is uniform).
+    /// `controller_core::activation::TANH_FAST_ERR_BINS`; the accurate one's is uniform).
     pub fn max_abs_err_on(self, lo: f64, hi: f64) -> f64 {
         match self {
             Tanh::Libm => self.max_abs_err(),

@@ -17,14 +17,20 @@
 //! ⎡ H + Gᵀ W G   Eᵀ ⎤ ⎡Δd⎤   ⎡ −r_d − Gᵀ((r_c + ν∘r_i)/t) ⎤
 //! ⎣ E            0  ⎦ ⎣Δλ⎦ = ⎣ −r_e                        ⎦ ,    W = diag(ν/t),
 //! ```
-//! which has the OCP's stage structure: it is factorised once per iteration by the banded
-//! LU of the `kkt` module (cost O(N), not O(N³)) and solved twice (predictor, corrector).
+//! which has the OCP's stage structure: it is factorised once per iteration and solved twice
+//! (predictor, corrector). The hard problem uses the Riccati recursion of the [`riccati`]
+//! module (O(N(nx + nu)³)); the soft problem (slacks couple the rows), and any QP whose
+//! R̃_k is not positive definite, the banded LU of the `kkt` module (O(N·b²), b the
+//! half-bandwidth).
+//!
+//! [`riccati`]: super::riccati
 //! Both steps use one step length (a QP's dual residual couples d and ν), 99% of the way to
 //! the boundary. The starting point is the solution of the `W = I` system shifted into the
 //! interior (as in CVXOPT). Termination: relative residuals and the gap `tᵀν` below `1e-10`
 //! (as for the clarabel reference); at the iteration limit, or when the iterates diverge
 //! (an infeasible QP), the solve reports failure and the caller may fall back to clarabel.
 
+use super::riccati::RiccatiKkt;
 use super::{QpData, QpStatus};
 use crate::mpc::kkt::{BandedKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
@@ -42,6 +48,11 @@ const TAU: f64 = 0.99;
 #[derive(Debug, Clone)]
 pub struct IpmQp {
     kkt: BandedKkt,
+    riccati: Option<RiccatiKkt>,
+    /// Whether the current solve factorises by Riccati (else by the band LU).
+    use_riccati: bool,
+    /// Whether the band LU holds the current QP's base matrix.
+    band_ready: bool,
     d: Vec<f64>,
     lam: Vec<f64>,
     nu: Vec<f64>,
@@ -154,6 +165,9 @@ impl IpmQp {
         let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
         IpmQp {
             kkt: BandedKkt::new(KktLayout::new(ocp, Vec::new())),
+            riccati: RiccatiKkt::new(ocp),
+            use_riccati: false,
+            band_ready: false,
             d: vec![0.0; nv],
             lam: vec![0.0; ne],
             nu: vec![0.0; m],
@@ -172,6 +186,12 @@ impl IpmQp {
             dnu: vec![0.0; m],
             last_iterations: 0,
         }
+    }
+
+    /// Factorises by the band LU only (tests compare the two factorisations).
+    #[cfg(test)]
+    pub(crate) fn without_riccati(&mut self) {
+        self.riccati = None;
     }
 
     /// Residuals r_d, r_e, r_i at the current iterate; returns the objective ½dᵀHd + gᵀd.
@@ -203,9 +223,41 @@ impl IpmQp {
         pobj
     }
 
+    /// Factorises `H + Gᵀ diag(self.w) G` (with E): by Riccati while it applies, else by the
+    /// band LU (assembled on first use in this QP). Returns false if singular.
+    fn factor(&mut self, ocp: &Ocp, hess: &[f64], jx: &[f64], ju: &[f64], min_ratio: f64) -> bool {
+        if self.use_riccati {
+            if let Some(r) = self.riccati.as_mut() {
+                if r.factor(ocp, hess, jx, ju, &self.w) {
+                    return true;
+                }
+            }
+            self.use_riccati = false;
+        }
+        if !self.band_ready {
+            if !self.kkt.set_base(ocp, hess, jx, ju) {
+                return false;
+            }
+            self.band_ready = true;
+        }
+        let ratio = self.kkt.factor_weighted(&self.w);
+        !(ratio.is_nan() || ratio <= min_ratio)
+    }
+
+    /// Solves the factorised system for `self.rhs` in place.
+    fn solve_system(&mut self, ocp: &Ocp, jx: &[f64], ju: &[f64]) -> bool {
+        match self.riccati.as_mut() {
+            Some(r) if self.use_riccati => {
+                r.solve_in_place(ocp, jx, ju, &mut self.rhs);
+                self.rhs.iter().all(|v| v.is_finite())
+            }
+            _ => self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch),
+        }
+    }
+
     /// Solves the Newton system for the complementarity target `rc` (in `self.tmp`) with the
     /// current factorisation; writes Δd, Δλ into `self.rhs` and Δt, Δν into `dt`, `dnu`.
-    fn newton(&mut self, ocp: &Ocp, use_aff: bool) -> bool {
+    fn newton(&mut self, ocp: &Ocp, jx: &[f64], ju: &[f64], use_aff: bool) -> bool {
         let (nv, ne) = (ocp.n_var, ocp.n_eq);
         // rhs_z = −r_d − Gᵀ((r_c + ν∘r_i)/t), rhs_λ = −r_e.
         for i in 0..nv {
@@ -220,7 +272,7 @@ impl IpmQp {
                 self.rhs[row.idx[j]] -= row.coef[j] * v;
             }
         }
-        if !self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch) {
+        if !self.solve_system(ocp, jx, ju) {
             return false;
         }
         let (dt, dnu) = if use_aff {
@@ -266,12 +318,10 @@ impl IpmQp {
             return QpStatus::Failed;
         }
         // Starting point: solve with W = I, i.e. min ½dᵀHd + gᵀd + ½‖Gd − b‖² s.t. Ed = −c.
-        if !self.kkt.set_base(ocp, hess, jac_x, jac_u) {
-            return QpStatus::Failed;
-        }
+        self.use_riccati = self.riccati.is_some();
+        self.band_ready = false;
         self.w.fill(1.0);
-        let ratio = self.kkt.factor_weighted(&self.w);
-        if ratio.is_nan() || ratio <= 1e-14 {
+        if !self.factor(ocp, hess, jac_x, jac_u, 1e-14) {
             return QpStatus::Failed;
         }
         for i in 0..nv {
@@ -281,7 +331,7 @@ impl IpmQp {
             self.rhs[nv + i] = -c[i];
         }
         add_gt(ocp, &self.b, &mut self.rhs[..nv]);
-        if !self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch) {
+        if !self.solve_system(ocp, jac_x, jac_u) {
             return QpStatus::Failed;
         }
         self.d.copy_from_slice(&self.rhs[..nv]);
@@ -340,8 +390,7 @@ impl IpmQp {
             for i in 0..m {
                 self.w[i] = self.nu[i] / self.t[i];
             }
-            let ratio = self.kkt.factor_weighted(&self.w);
-            if ratio.is_nan() || ratio <= 0.0 {
+            if !self.factor(ocp, hess, jac_x, jac_u, 0.0) {
                 if err <= TOL_REDUCED {
                     break;
                 }
@@ -351,7 +400,7 @@ impl IpmQp {
             for i in 0..m {
                 self.tmp[i] = -self.t[i] * self.nu[i];
             }
-            if !self.newton(ocp, true) {
+            if !self.newton(ocp, jac_x, jac_u, true) {
                 return QpStatus::Failed;
             }
             let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
@@ -366,7 +415,7 @@ impl IpmQp {
                 self.tmp[i] =
                     sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
             }
-            if !self.newton(ocp, false) {
+            if !self.newton(ocp, jac_x, jac_u, false) {
                 return QpStatus::Failed;
             }
             let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));

@@ -484,12 +484,17 @@ mod tests {
         }
     }
 
+    /// The plants whose derivatives are checked. Central differences are only meaningful
+    /// where the dynamics are smooth, so `abs`'s kink is placed at ω = 40, out of reach of
+    /// the sampled states within one step (|Δω| < 10 here); `abs` on both sides of its
+    /// kink is checked at the expression level (`expr::tests::props`). A kink at ω = 0
+    /// made this test fail when an RK4 stage landed within h of it (CI, stop 20).
     fn systems() -> Vec<Discrete> {
         let pend = r#"
             states = ["theta", "omega"]
             inputs = ["u"]
             parameters = { m = 0.7, l = 1.3, g = 9.81, c = 0.1 }
-            definitions = ["tau = u - c*omega*abs(omega) + 0.1*u^3"]
+            definitions = ["tau = u - c*omega*abs(omega - 40) + 0.1*u^3"]
             rhs = ["omega", "tau/(m*l^2) - g/l*sin(theta + pi)"]
         "#;
         let disc = r#"
@@ -593,7 +598,10 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(64))]
+        #![proptest_config(ProptestConfig {
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x616d_7063),
+        ..ProptestConfig::with_cases(64)
+    })]
         #[test]
         fn ad_derivatives_match_finite_differences(
             x in proptest::collection::vec(-3.0f64..3.0, 12),

@@ -152,6 +152,7 @@ fn load<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T, ReportError> {
 pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Report, ReportError> {
     let a = Artifacts::load(dir)?;
     let blocks = [
+        verdict::verdict(cfg, &a),
         sections::problem(cfg),
         sections::dataset(&a),
         sections::table_i(cfg, &a),
@@ -170,6 +171,8 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
         blocks,
     })
 }
+
+mod verdict;
 
 #[cfg(test)]
 mod tests;

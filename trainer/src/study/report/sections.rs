@@ -41,6 +41,10 @@ pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
             boxed(&cfg.ocp.u_lo, &cfg.ocp.u_hi),
             boxed(&cfg.domain.lo, &cfg.domain.hi),
         )),
+        Block::Para({
+            let (xs, us) = crate::study::plots::axis_names(&cfg.system);
+            format!("States: {}; inputs: {}.", xs.join(", "), us.join(", "))
+        }),
     ]
 }
 
@@ -245,10 +249,13 @@ pub(super) fn certificate(a: &Artifacts) -> Vec<Block> {
             head: strs(&["term", "regularized", "nominal", "how"]),
             rows,
         },
-        Block::Para(format!(
-            "Output clamp band U ⊕ [−ε, ε] of the exported (regularized) controller: u ∈ {}.",
-            boxed(&cert.clamp_lo, &cert.clamp_hi)
-        )),
+        Block::Para({
+            let (lo, hi) = super::verdict::exported_band(a);
+            format!(
+                "The exported (regularized) controller clamps to (U ⊕ [−ε, ε]) ∩ U = u ∈ {} (the actuator limits are U: a clamp wider than U would let the controller ask for inputs the MPC never gives).",
+                boxed(&lo, &hi)
+            )
+        }),
     ]
 }
 

@@ -185,7 +185,10 @@ fn model(texts: &[String]) -> Result<ExprModel, super::super::ExprError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(1024))]
+    #![proptest_config(ProptestConfig {
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x616d_7063),
+        ..ProptestConfig::with_cases(1024)
+    })]
     #[test]
     fn tape_equals_direct_evaluation(
         a in tree(),
@@ -277,7 +280,10 @@ fn close(a: f64, b: f64, tol: f64) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(96))]
+    #![proptest_config(ProptestConfig {
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x616d_7063),
+        ..ProptestConfig::with_cases(96)
+    })]
     #[test]
     fn dual_derivatives_equal_finite_differences(
         x in 0.5f64..1.5,

@@ -1,0 +1,491 @@
+//! ONNX in: a decoded graph → the dense MLP it computes ([`Mlp`]), or an error naming the
+//! first node it cannot take.
+//!
+//! Accepted: one chain from the single graph input `x` ([N, nx], N symbolic or fixed) to the
+//! single output,
+//! ```text
+//! x → (Sub | Div | Mul | Add by constants)* → Gemm | MatMul [+ Add bias]
+//!   → (Tanh | Relu | Softplus → Gemm | MatMul [+ Add bias])* → (Mul | Add | Sub | Div)* → u
+//! ```
+//! with `Constant` and `Identity` nodes anywhere, weights as initializers or `Constant`s
+//! (raw little-endian or typed data, float or double). The leading element-wise ops become
+//! the input scaling `a₀ = (x − c) ⊘ h`, the trailing ones the output scaling `u = o + s ∘ y`
+//! (as `torch.onnx.export` writes `(x − mean)/std` and `y·std + mean`; those two patterns
+//! map exactly, other orders are composed in f64). Gemm: `alpha·A·op(B) + beta·C`,
+//! `transA = 0`. All hidden activations must be the same. Files written by
+//! `trainer export --onnx` (metadata `ampc.hash`) may also hold the domain projection and
+//! the output clamp (`Clip`, with `Split`/`Concat` per component): they are recognised and
+//! dropped — the projection is the identity on X, and the clamp band contains U_d ⊇ κ(X),
+//! so the certificate of the unclamped net bounds the clamped one too.
+
+use super::graph::{Node, OnnxModel, Tensor};
+use crate::learn::mlp::{Activation, Layer, Mlp};
+use std::collections::HashMap;
+
+/// What the importer found besides the network.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ImportNotes {
+    /// Producer of the file.
+    pub producer: String,
+    /// Highest default-domain opset.
+    pub opset: i64,
+    /// Whether the file is an `trainer export --onnx` file (metadata `ampc.hash`).
+    pub ampc_export: bool,
+    /// Number of `Clip` nodes dropped (projection and clamp of an ampc export).
+    pub clips_dropped: usize,
+}
+
+/// One step of the chain.
+#[derive(Debug, Clone)]
+enum Step {
+    /// `x − v`, `x + v`, `x · v`, `x / v`, `v − x` (element-wise, broadcast).
+    Elem(char, Vec<f64>, String),
+    /// A dense layer (w row-major out × in, bias); `true` while a MatMul's bias (the next
+    /// Add) may still come.
+    Linear(Layer, String, bool),
+    /// An activation.
+    Act(Activation, String),
+}
+
+type R<T> = Result<T, String>;
+
+fn scalar_attr(n: &Node, name: &str, default: f64) -> f64 {
+    n.attr(name)
+        .and_then(|a| a.f.map(f64::from))
+        .unwrap_or(default)
+}
+
+fn int_attr(n: &Node, name: &str, default: i64) -> i64 {
+    n.attr(name).and_then(|a| a.i).unwrap_or(default)
+}
+
+/// The constant of a `Constant` node.
+fn constant_value(n: &Node, label: &str) -> R<Tensor> {
+    for a in &n.attributes {
+        match a.name.as_str() {
+            "value" => {
+                if let Some(t) = &a.t {
+                    return Ok(t.clone());
+                }
+            }
+            "value_float" => {
+                return Ok(Tensor {
+                    values: vec![f64::from(a.f.unwrap_or(0.0))],
+                    data_type: super::graph::FLOAT,
+                    ..Default::default()
+                })
+            }
+            "value_floats" => {
+                return Ok(Tensor {
+                    dims: vec![a.floats.len() as i64],
+                    values: a.floats.iter().map(|v| f64::from(*v)).collect(),
+                    data_type: super::graph::FLOAT,
+                    ..Default::default()
+                })
+            }
+            "value_int" | "value_ints" => {
+                let ints = if a.name == "value_int" {
+                    vec![a.i.unwrap_or(0)]
+                } else {
+                    a.ints.clone()
+                };
+                return Ok(Tensor {
+                    dims: vec![ints.len() as i64],
+                    ints,
+                    data_type: super::graph::INT64,
+                    ..Default::default()
+                });
+            }
+            _ => {}
+        }
+    }
+    Err(format!(
+        "{label}: a Constant without a supported value attribute"
+    ))
+}
+
+/// Reads the graph as a dense MLP; errors name the node (or tensor) at fault.
+pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
+    let ampc = m.meta("ampc.hash").is_some();
+    let mut notes = ImportNotes {
+        producer: m.producer.clone(),
+        opset: m
+            .opsets
+            .iter()
+            .filter(|(d, _)| d.is_empty() || d == "ai.onnx")
+            .map(|o| o.1)
+            .max()
+            .unwrap_or(0),
+        ampc_export: ampc,
+        clips_dropped: 0,
+    };
+    let mut consts: HashMap<String, Tensor> = m
+        .initializers
+        .iter()
+        .map(|t| (t.name.clone(), t.clone()))
+        .collect();
+    let inputs: Vec<_> = m
+        .inputs
+        .iter()
+        .filter(|v| !consts.contains_key(&v.name))
+        .collect();
+    let [input] = inputs.as_slice() else {
+        return Err(format!(
+            "the graph has {} inputs besides its weights (a controller has one: the state)",
+            inputs.len()
+        ));
+    };
+    let [output] = m.outputs.as_slice() else {
+        return Err(format!(
+            "the graph has {} outputs (a controller has one: the input u)",
+            m.outputs.len()
+        ));
+    };
+    let mut current = input.name.clone();
+    // Components of `current` after a Split (projection / clamp of an ampc export).
+    let mut parts: Option<Vec<String>> = None;
+    let mut steps: Vec<Step> = Vec::new();
+    for (k, n) in m.nodes.iter().enumerate() {
+        let label = n.label(k);
+        if !(n.domain.is_empty() || n.domain == "ai.onnx") {
+            return Err(format!(
+                "{label}: operator domain '{}' is not supported",
+                n.domain
+            ));
+        }
+        if n.op == "Constant" {
+            let t = constant_value(n, &label)?;
+            consts.insert(n.outputs.first().cloned().unwrap_or_default(), t);
+            continue;
+        }
+        let out = n.outputs.first().cloned().unwrap_or_default();
+        // Nodes on constants only (e.g. an Identity of a weight).
+        if n.op == "Identity" && n.inputs.first().is_some_and(|i| consts.contains_key(i)) {
+            let t = consts[&n.inputs[0]].clone();
+            consts.insert(out, t);
+            continue;
+        }
+        if ampc {
+            // The ampc export's per-component Clip: Split → Clip each → Concat.
+            match n.op.as_str() {
+                "Split" if n.inputs.first() == Some(&current) && parts.is_none() => {
+                    parts = Some(n.outputs.clone());
+                    continue;
+                }
+                "Clip" => {
+                    if let Some(p) = parts.as_mut() {
+                        if let Some(slot) = p.iter_mut().find(|s| **s == n.inputs[0]) {
+                            *slot = out;
+                            notes.clips_dropped += 1;
+                            continue;
+                        }
+                    } else if n.inputs[0] == current {
+                        current = out;
+                        notes.clips_dropped += 1;
+                        continue;
+                    }
+                }
+                "Concat" if parts.as_deref() == Some(&n.inputs[..]) => {
+                    parts = None;
+                    current = out;
+                    continue;
+                }
+                _ => {}
+            }
+        }
+        let pos = n.inputs.iter().position(|i| *i == current);
+        let Some(pos) = pos.filter(|_| parts.is_none()) else {
+            return Err(format!(
+                "{label}: does not take the network's running value ({current}); only a \
+                 single chain of dense layers is supported"
+            ));
+        };
+        let other = |i: usize| constant(&consts, n, i, &label);
+        let step = match n.op.as_str() {
+            "Identity" => {
+                current = out;
+                continue;
+            }
+            "Tanh" => Step::Act(Activation::Tanh, label.clone()),
+            "Relu" => Step::Act(Activation::Relu, label.clone()),
+            "Softplus" => Step::Act(Activation::Softplus, label.clone()),
+            "Gemm" | "MatMul" => {
+                if pos != 0 {
+                    return Err(format!(
+                        "{label}: the running value must be the first operand"
+                    ));
+                }
+                let gemm = n.op == "Gemm";
+                if gemm && int_attr(n, "transA", 0) != 0 {
+                    return Err(format!("{label}: transA = 1 is not supported"));
+                }
+                let b = other(1)?;
+                let &[r, c] = &b.dims[..] else {
+                    return Err(format!(
+                        "{label}: weight of shape {:?} (2-D expected)",
+                        b.dims
+                    ));
+                };
+                let (r, c) = (r as usize, c as usize);
+                let trans = gemm && int_attr(n, "transB", 0) != 0;
+                let (out_w, in_w) = if trans { (r, c) } else { (c, r) };
+                let alpha = if gemm {
+                    scalar_attr(n, "alpha", 1.0)
+                } else {
+                    1.0
+                };
+                let mut w = vec![0.0; out_w * in_w];
+                for o in 0..out_w {
+                    for i in 0..in_w {
+                        let v = if trans {
+                            b.values[o * c + i]
+                        } else {
+                            b.values[i * c + o]
+                        };
+                        w[o * in_w + i] = if alpha == 1.0 { v } else { alpha * v };
+                    }
+                }
+                let mut bias = vec![0.0; out_w];
+                if gemm && n.inputs.get(2).is_some_and(|s| !s.is_empty()) {
+                    let beta = scalar_attr(n, "beta", 1.0);
+                    let cb = broadcast(other(2)?, out_w, &label)?;
+                    for (b, v) in bias.iter_mut().zip(cb) {
+                        *b = if beta == 1.0 { v } else { beta * v };
+                    }
+                }
+                Step::Linear(
+                    Layer {
+                        inp: in_w,
+                        out: out_w,
+                        w,
+                        b: bias,
+                    },
+                    label.clone(),
+                    !gemm,
+                )
+            }
+            "Add" | "Sub" | "Mul" | "Div" => {
+                let t = other(1 - pos.min(1))?;
+                let op = match (n.op.as_str(), pos) {
+                    ("Add", _) => '+',
+                    ("Mul", _) => '*',
+                    ("Sub", 0) => '-',
+                    ("Sub", _) => 'r',
+                    ("Div", 0) => '/',
+                    _ => {
+                        return Err(format!(
+                            "{label}: a constant divided by the running value is not an affine map"
+                        ))
+                    }
+                };
+                // A MatMul followed by Add is a layer with its bias.
+                if let (Some(Step::Linear(l, _, open @ true)), '+') = (steps.last_mut(), op) {
+                    l.b = broadcast(t, l.out, &label)?;
+                    *open = false;
+                    current = out;
+                    continue;
+                }
+                Step::Elem(op, t.values.clone(), label.clone())
+            }
+            op => {
+                return Err(format!(
+                    "{label}: unsupported operator {op} (supported: Gemm, MatMul, Add, Sub, \
+                     Mul, Div by constants, Tanh, Relu, Softplus, Constant, Identity)"
+                ))
+            }
+        };
+        steps.push(step);
+        current = out;
+    }
+    if current != output.name {
+        return Err(format!(
+            "the graph output '{}' is not the end of the chain ('{current}')",
+            output.name
+        ));
+    }
+    assemble(steps, notes, input.dims.last().copied().flatten())
+}
+
+/// Input `i` of node `n`, which must be a constant.
+fn constant<'a>(
+    consts: &'a HashMap<String, Tensor>,
+    n: &Node,
+    i: usize,
+    label: &str,
+) -> R<&'a Tensor> {
+    let name = n
+        .inputs
+        .get(i)
+        .ok_or_else(|| format!("{label}: missing input {i}"))?;
+    consts.get(name).ok_or_else(|| {
+        format!(
+            "{label}: input '{name}' is not a constant (weights must be initializers or \
+             Constants)"
+        )
+    })
+}
+
+/// The values of `t` broadcast to length `n` (a scalar or a vector of `n`).
+fn broadcast(t: &Tensor, n: usize, label: &str) -> R<Vec<f64>> {
+    match t.values.len() {
+        1 => Ok(vec![t.values[0]; n]),
+        l if l == n => Ok(t.values.clone()),
+        l => Err(format!("{label}: a constant of {l} values for width {n}")),
+    }
+}
+
+fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Mlp, ImportNotes)> {
+    let first = steps
+        .iter()
+        .position(|s| matches!(s, Step::Linear(..)))
+        .ok_or("the graph has no dense layer (Gemm or MatMul)")?;
+    let last = steps
+        .iter()
+        .rposition(|s| matches!(s, Step::Linear(..)))
+        .expect("one exists");
+    let mut layers: Vec<Layer> = Vec::new();
+    let mut act: Option<Activation> = None;
+    let mut expect_act = false;
+    for s in &steps[first..=last] {
+        match s {
+            Step::Linear(l, label, _) => {
+                if expect_act {
+                    return Err(format!(
+                        "{label}: two dense layers without an activation between them"
+                    ));
+                }
+                if let Some(p) = layers.last() {
+                    if p.out != l.inp {
+                        return Err(format!(
+                            "{label}: takes {} inputs, the layer before gives {}",
+                            l.inp, p.out
+                        ));
+                    }
+                }
+                layers.push(l.clone());
+                expect_act = true;
+            }
+            Step::Act(a, label) => {
+                if !expect_act {
+                    return Err(format!("{label}: two activations in a row"));
+                }
+                if act.is_some_and(|b| b != *a) {
+                    return Err(format!(
+                        "{label}: hidden layers with different activations ({:?} and {a:?})",
+                        act.unwrap_or(*a)
+                    ));
+                }
+                act = Some(*a);
+                expect_act = false;
+            }
+            Step::Elem(_, _, label) => {
+                return Err(format!(
+                    "{label}: element-wise op between the layers (only input and output \
+                     scaling are supported)"
+                ))
+            }
+        }
+    }
+    let nx = layers[0].inp;
+    let nu = layers.last().map_or(0, |l| l.out);
+    if let Some(d) = nx_decl.filter(|d| *d as usize != nx) {
+        return Err(format!(
+            "the graph input has {d} components, the first layer takes {nx}"
+        ));
+    }
+    // Input scaling a₀ = (x − c) ⊘ h from the leading element-wise ops.
+    let (mut c, mut h) = (vec![0.0; nx], vec![1.0; nx]);
+    for s in &steps[..first] {
+        let Step::Elem(op, v, label) = s else {
+            let Step::Act(_, label) = s else {
+                unreachable!()
+            };
+            return Err(format!("{label}: an activation before the first layer"));
+        };
+        let v = broadcast(
+            &Tensor {
+                values: v.clone(),
+                ..Default::default()
+            },
+            nx,
+            label,
+        )?;
+        for i in 0..nx {
+            match op {
+                '-' => c[i] += v[i] * h[i],
+                '+' => c[i] -= v[i] * h[i],
+                '/' => h[i] *= v[i],
+                '*' => h[i] /= v[i],
+                _ => {
+                    c[i] += v[i] * h[i];
+                    h[i] = -h[i];
+                }
+            }
+        }
+    }
+    // Output scaling u = o + s ∘ y from the trailing ones.
+    let (mut o, mut sc) = (vec![0.0; nu], vec![1.0; nu]);
+    for s in &steps[last + 1..] {
+        let Step::Elem(op, v, label) = s else {
+            let Step::Act(_, label) = s else {
+                unreachable!()
+            };
+            return Err(format!(
+                "{label}: an activation after the last layer (the output must be linear)"
+            ));
+        };
+        let v = broadcast(
+            &Tensor {
+                values: v.clone(),
+                ..Default::default()
+            },
+            nu,
+            label,
+        )?;
+        for j in 0..nu {
+            match op {
+                '-' => o[j] -= v[j],
+                '+' => o[j] += v[j],
+                '*' => {
+                    o[j] *= v[j];
+                    sc[j] *= v[j];
+                }
+                '/' => {
+                    o[j] /= v[j];
+                    sc[j] /= v[j];
+                }
+                _ => {
+                    o[j] = v[j] - o[j];
+                    sc[j] = -sc[j];
+                }
+            }
+        }
+    }
+    if let Some(i) = h
+        .iter()
+        .chain(&sc)
+        .position(|v| *v == 0.0 || !v.is_finite())
+    {
+        return Err(format!("scaling {i}: zero or non-finite scale"));
+    }
+    let finite = layers
+        .iter()
+        .all(|l| l.w.iter().chain(&l.b).all(|v| v.is_finite()))
+        && c.iter().chain(&o).all(|v| v.is_finite());
+    if !finite {
+        return Err("non-finite weights".into());
+    }
+    // A net without hidden layers has no activation: any will do.
+    let activation = act.unwrap_or(Activation::Tanh);
+    Ok((
+        Mlp {
+            layers,
+            activation,
+            in_center: c,
+            in_half: h,
+            out_center: o,
+            out_half: sc,
+        },
+        notes,
+    ))
+}

@@ -1,0 +1,124 @@
+//! The report's first section: the verdict in words — what ε the exported controller has,
+//! its tier (sound / statistical / estimated, [`crate::certify::tier`]) and what it rests
+//! on, ε against the input range U, and the band the exported controller clamps to.
+//!
+//! ε is measured against the largest distance two inputs of U can have, d_U = ‖u_hi − u_lo‖₂:
+//! since both κ and the clamped network lie in U, ‖κ − u‖ ≤ d_U holds without any
+//! certificate, so ε ≥ d_U says nothing (vacuous); ε ≥ d_U / 5 is called weak.
+
+use super::sections::{boxed, num};
+use super::{Artifacts, Block};
+use crate::certify::tier::theorem1;
+use crate::problem::ProblemConfig;
+
+/// The band the exported controller clamps to: `export_report.json`'s `clamp_lo`/`clamp_hi`
+/// (written by the export stage), else (U ⊕ ε) ∩ U = U from the certificate (the exporter's
+/// actuator limits are U).
+pub(super) fn exported_band(a: &Artifacts) -> (Vec<f64>, Vec<f64>) {
+    let get = |k: &str| -> Option<Vec<f64>> {
+        a.export[k]
+            .as_array()
+            .map(|v| v.iter().filter_map(serde_json::Value::as_f64).collect())
+    };
+    match (get("clamp_lo"), get("clamp_hi")) {
+        (Some(lo), Some(hi)) if lo.len() == a.cert.u_lo.len() && hi.len() == lo.len() => (lo, hi),
+        _ => {
+            let lo = (a.cert.clamp_lo.iter().zip(&a.cert.u_lo))
+                .map(|(c, u)| c.max(*u))
+                .collect();
+            let hi = (a.cert.clamp_hi.iter().zip(&a.cert.u_hi))
+                .map(|(c, u)| c.min(*u))
+                .collect();
+            (lo, hi)
+        }
+    }
+}
+
+/// How ε compares with d_U (module doc): `(ratio, word)`.
+pub fn judge(eps: f64, u_lo: &[f64], u_hi: &[f64]) -> (f64, &'static str) {
+    let d = u_lo
+        .iter()
+        .zip(u_hi)
+        .map(|(l, h)| (h - l) * (h - l))
+        .sum::<f64>()
+        .sqrt();
+    let r = eps / d;
+    let word = if r.is_nan() || r >= 1.0 {
+        "vacuous"
+    } else if r >= 0.2 {
+        "weak"
+    } else {
+        "informative"
+    };
+    (r, word)
+}
+
+/// The verdict section (module doc).
+pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let c = &a.cert;
+    let g = theorem1(c);
+    let tier = g.guarantee.name();
+    let allowance = a.export["f32_allowance_libm"].as_f64().unwrap_or(f64::NAN);
+    let (_, inputs) = crate::study::plots::axis_names(&cfg.system);
+    let unit = inputs
+        .first()
+        .and_then(|s| s.split('[').nth(1))
+        .map(|s| format!(" {}", s.trim_end_matches(']')))
+        .unwrap_or_default();
+    let (ratio, word) = judge(c.eps, &c.u_lo, &c.u_hi);
+    let range = boxed(&c.u_lo, &c.u_hi);
+    let meaning = match word {
+        "vacuous" => format!(
+            "**the bound is vacuous**: ε is {:.0} % of the largest distance between two inputs of U = {range}, which the clamp alone guarantees — this certificate says nothing useful; tighten it with `trainer refine` (local certificates) or `--statistical N`",
+            100.0 * ratio
+        ),
+        "weak" => format!(
+            "**the bound is weak**: ε is {:.0} % of the largest distance between two inputs of U = {range}; `trainer refine` (local certificates) tightens it",
+            100.0 * ratio
+        ),
+        _ => format!(
+            "ε is {:.1} % of the largest distance between two inputs of U = {range}",
+            100.0 * ratio
+        ),
+    };
+    let rests_on = if g.assumptions.is_empty() {
+        "every term is proven by the code's arithmetic".to_string()
+    } else {
+        format!("it rests on: {}", g.assumptions.join("; "))
+    };
+    let (blo, bhi) = exported_band(a);
+    vec![
+        Block::Heading(2, "Verdict".into()),
+        Block::Para(format!(
+            "**ε = {}{unit}, {tier}** (Theorem 1, the exported regularized net): for every state in X = {}, the MPC's input and the network's differ by at most ε (on the device: ε + f32 allowance {} = {}{unit}). Tier **{tier}**: {rests_on}.",
+            num(c.eps),
+            boxed(&c.domain_lo, &c.domain_hi),
+            num(allowance),
+            num(c.eps + allowance),
+        )),
+        Block::Para(format!("Against the input range: {meaning}.")),
+        Block::Para(format!(
+            "The exported controller projects the state onto X and clamps its output to u ∈ {}.",
+            boxed(&blo, &bhi)
+        )),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::judge;
+
+    #[test]
+    fn judge_compares_eps_with_the_diagonal_of_u() {
+        // |u| ≤ 15: d_U = 30.
+        assert_eq!(judge(31.0, &[-15.0], &[15.0]).1, "vacuous");
+        assert_eq!(judge(30.0, &[-15.0], &[15.0]).1, "vacuous");
+        assert_eq!(judge(6.0, &[-15.0], &[15.0]).1, "weak");
+        assert_eq!(judge(0.748, &[-15.0], &[15.0]).1, "informative");
+        assert!((judge(0.75, &[-15.0], &[15.0]).0 - 0.025).abs() < 1e-15);
+        // Two inputs: the diagonal, not one side (5 = ‖(3, 4)‖).
+        assert_eq!(judge(4.5, &[0.0, 0.0], &[3.0, 4.0]).1, "weak");
+        assert_eq!(judge(5.0, &[0.0, 0.0], &[3.0, 4.0]).1, "vacuous");
+        assert_eq!(judge(f64::NAN, &[-1.0], &[1.0]).1, "vacuous");
+    }
+}
