@@ -1,35 +1,28 @@
-//! Where the MPC is a QP (the double integrator), `trainer refine` proves the MPC part of
-//! every cell (critical regions checked at the vertices) and its certificate says
-//! `"guarantee": "sound"` with no assumption; the deployed (clamped) controller's error at
-//! fresh MPC solves never exceeds that ε.
+//! Where the MPC is a QP (the 3-state DC motor of `configs/dc_motor.toml`, a linear ODE
+//! with a general affine constraint), `trainer refine` proves the MPC part of every cell
+//! (critical regions checked at the vertices) and its certificate says `"guarantee":
+//! "sound"` with no assumption; the deployed (clamped) controller's error at fresh MPC
+//! solves never exceeds that ε.
 
 use ampc_tests::{tempdir, trainer};
 
 #[test]
-fn the_double_integrator_certificate_is_sound_and_holds_at_sampled_states() {
+fn the_dc_motor_certificate_is_sound_and_holds_at_sampled_states() {
     let dir = tempdir();
     let d = dir.path();
-    let base = std::fs::read_to_string(concat!(
+    let cfg = std::path::PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../configs/double_integrator.toml"
-    ))
-    .unwrap();
-    let cfg = d.join("di.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "{base}\n[refine]\ntarget_eps = 0.3\nbudget = 6000\ninitial = [9, 5]\nmax_rounds = 40\n\n\
-             [refine.training]\nhidden = [16, 16]\nepochs = 300\nbatch_size = 64\n\
-             learning_rate = 3e-3\nschedule = \"cosine\"\nlambda = [1.0, 0.1, 0.0]\n\
-             validation_n = 0\nlog_every = 1000000\nsaturation_aware = true\n"
-        ),
-    )
-    .unwrap();
+        "/../configs/dc_motor.toml"
+    ));
     let out = d.join("r");
     let o = trainer(&[
         "refine",
         "--config",
         cfg.to_str().unwrap(),
+        "--target-eps",
+        "1.0",
+        "--budget",
+        "8000",
         "--out",
         out.to_str().unwrap(),
         "--quiet",
@@ -47,7 +40,7 @@ fn the_double_integrator_certificate_is_sound_and_holds_at_sampled_states() {
     assert_eq!(cert["tiers"]["mpc_range"], "sound");
     assert_eq!(cert["local"]["cells_exact"], cert["local"]["cells"]);
     let eps = cert["eps"].as_f64().unwrap();
-    assert!(eps.is_finite() && eps <= 0.3, "ε = {eps}");
+    assert!(eps.is_finite() && eps <= 1.0, "ε = {eps}");
     // Fresh MPC solves at seeded uniform states: the clamped net never errs by more than ε.
     let problem = trainer::problem::ProblemConfig::load(&cfg).unwrap();
     let model = trainer::certify::Model::load(&out.join("model.bin")).unwrap();
@@ -55,7 +48,7 @@ fn the_double_integrator_certificate_is_sound_and_holds_at_sampled_states() {
     let (lo, hi) = (&problem.domain.lo, &problem.domain.hi);
     let mut worst = 0.0f64;
     for i in 0..3000u64 {
-        let x: Vec<f64> = (0..2)
+        let x: Vec<f64> = (0..lo.len())
             .map(|k| lo[k] + (hi[k] - lo[k]) * trainer::rng::uniform(77, i, k as u64))
             .collect();
         let (l, _) = law.solve(&x, None);
@@ -64,7 +57,8 @@ fn the_double_integrator_certificate_is_sound_and_holds_at_sampled_states() {
             trainer::mpc::sqp::SqpStatus::Converged,
             "at {x:?}"
         );
-        let u = model.mlp.predict(&x)[0].clamp(-1.0, 1.0);
+        let (ulo, uhi) = problem.ocp.u_bounds(0);
+        let u = model.mlp.predict(&x)[0].clamp(ulo[0], uhi[0]);
         let e = (l.u[0] - u).abs();
         assert!(e <= eps, "at {x:?}: error {e} > ε {eps}");
         worst = worst.max(e);
