@@ -99,6 +99,10 @@ pub struct CellBound {
     pub form: Form,
     /// Per-axis contributions to the remainder, summed over the outputs (where to split).
     pub axis_terms: Vec<f64>,
+    /// The MPC part is exact (κ proven affine piecewise on the cell, see
+    /// [`exact_cell_bound`]). Not stored in checkpoints (recomputed every round).
+    #[serde(skip)]
+    pub exact: bool,
 }
 
 /// The estimated range of ∂κ_i/∂x_k over a cell (corner sensitivities and k-edge secant
@@ -157,8 +161,146 @@ pub fn cell_bound(
     s: &LocalSettings,
 ) -> CellBound {
     let nx = lo.len();
-    let nu = net.value.len();
     debug_assert_eq!(corners.len(), 1 << nx);
+    let finite = corners
+        .iter()
+        .all(|c| c.u.iter().chain(c.du).all(|v| v.is_finite()));
+    let smooth = corners
+        .iter()
+        .all(|c| c.regular && c.piece == corners[0].piece);
+    let w: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| b - a).collect();
+    bound_with(
+        lo,
+        hi,
+        finite,
+        |c, i| corners[c].u[i],
+        0.0,
+        |i, k| {
+            let (kr, q) = mpc_slope_estimate(corners, w[k], nx, i, k, s.safety);
+            (kr, s.safety * q)
+        },
+        smooth,
+        net_u,
+        net,
+        band,
+    )
+}
+
+/// One affine piece κ(x) = K x + k of the MPC law on a cell, known up to stated errors
+/// (from [`crate::certify::critical`]): `u` its values at the 2ⁿ corners (2ⁿ × nu, f64),
+/// `u_err` a bound on |κ_true(v) − u_v| at every corner, `gain` = K̂ (nu × nx) and
+/// `gain_err[k]` a bound on |K_ik − K̂_ik|.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExactPiece {
+    /// κ̂ at the corners (2ⁿ × nu).
+    pub u: Vec<f64>,
+    /// Bound on the error of every corner value.
+    pub u_err: f64,
+    /// K̂, row-major nu × nx.
+    pub gain: Vec<f64>,
+    /// Bound on the error of K̂'s column k, per k.
+    pub gain_err: Vec<f64>,
+}
+
+/// ε_C of a cell on which κ is, at every point, one of the affine `pieces` (proven by
+/// [`crate::certify::critical`]): the MPC part is exact — ∂_k κ of a piece is the point
+/// K_ik (± its rounding bound) and ∂²κ = 0 — so ε_C = max over pieces of the bound of
+/// |κ_piece − sat(κ_NN)| over the whole box (each piece is bounded on the whole cell, a
+/// superset of where it holds). Empty `pieces`: no bound (∞).
+pub fn exact_cell_bound(
+    lo: &[f64],
+    hi: &[f64],
+    pieces: &[ExactPiece],
+    net_u: &[f64],
+    net: &BoxBounds,
+    band: (&[f64], &[f64]),
+) -> CellBound {
+    let nx = lo.len();
+    let mut best: Option<CellBound> = None;
+    for p in pieces {
+        let finite =
+            p.u.iter()
+                .chain(&p.gain)
+                .chain(&p.gain_err)
+                .chain([&p.u_err])
+                .all(|v| v.is_finite());
+        let b = bound_with(
+            lo,
+            hi,
+            finite,
+            |c, i| p.u[c * (p.gain.len() / nx) + i],
+            p.u_err,
+            |i, k| {
+                let g = p.gain[i * nx + k];
+                let d = p.gain_err[k];
+                (
+                    Iv {
+                        lo: g - d,
+                        hi: g + d,
+                    },
+                    0.0,
+                )
+            },
+            true,
+            net_u,
+            net,
+            band,
+        );
+        best = Some(match best {
+            None => b,
+            Some(a) => {
+                let axis_terms = a
+                    .axis_terms
+                    .iter()
+                    .zip(&b.axis_terms)
+                    .map(|(x, y)| x.max(*y))
+                    .collect();
+                let form = if b.eps > a.eps { b.form } else { a.form };
+                CellBound {
+                    eps: a.eps.max(b.eps),
+                    corner: a.corner.max(b.corner),
+                    remainder: a.remainder.max(b.remainder),
+                    form,
+                    axis_terms,
+                    exact: true,
+                }
+            }
+        });
+    }
+    let mut b = best.unwrap_or_else(|| infinite(nx));
+    b.exact = !pieces.is_empty() && b.eps.is_finite();
+    b
+}
+
+fn infinite(nx: usize) -> CellBound {
+    CellBound {
+        eps: f64::INFINITY,
+        corner: f64::INFINITY,
+        remainder: f64::INFINITY,
+        form: Form::FirstOrder,
+        axis_terms: vec![f64::INFINITY; nx],
+        exact: false,
+    }
+}
+
+/// The bound of the module doc with the MPC part given: `corner_u(c, i)` = κ_i at corner
+/// c (known to ± `corner_tol`), `slope(i, k)` = (range of ∂_k κ_i on the cell, bound on
+/// |∂²_kk κ_i| on it), `smooth`: κ is C² on the cell (the second-order form may be used).
+#[allow(clippy::too_many_arguments)]
+fn bound_with(
+    lo: &[f64],
+    hi: &[f64],
+    mpc_finite: bool,
+    corner_u: impl Fn(usize, usize) -> f64,
+    corner_tol: f64,
+    slope: impl Fn(usize, usize) -> (Iv, f64),
+    smooth: bool,
+    net_u: &[f64],
+    net: &BoxBounds,
+    band: (&[f64], &[f64]),
+) -> CellBound {
+    let nx = lo.len();
+    let nu = net.value.len();
     let w: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| b - a).collect();
     // A non-finite network output or enclosure (a diverged net) or label: no bound.
     let finite = net_u.iter().all(|v| v.is_finite())
@@ -167,21 +309,10 @@ pub fn cell_bound(
             .iter()
             .all(|v| v.lo.is_finite() && v.hi.is_finite())
         && net.jac.iter().all(|v| v.lo.is_finite() && v.hi.is_finite())
-        && corners
-            .iter()
-            .all(|c| c.u.iter().chain(c.du).all(|v| v.is_finite()));
+        && mpc_finite;
     if !finite {
-        return CellBound {
-            eps: f64::INFINITY,
-            corner: f64::INFINITY,
-            remainder: f64::INFINITY,
-            form: Form::FirstOrder,
-            axis_terms: vec![f64::INFINITY; nx],
-        };
+        return infinite(nx);
     }
-    let smooth = corners
-        .iter()
-        .all(|c| c.regular && c.piece == corners[0].piece);
     let mut axis_terms = vec![0.0; nx];
     let (mut corner2, mut rem2, mut eps2) = (0.0, 0.0, 0.0);
     let mut form = Form::FirstOrder;
@@ -189,10 +320,11 @@ pub fn cell_bound(
         let (blo, bhi) = (band.0[i], band.1[i]);
         // Corner errors after the clamp.
         let mut e0 = 0.0f64;
-        for (c, cv) in corners.iter().enumerate() {
-            let e = cv.u[i] - net_u[c * nu + i].clamp(blo, bhi);
+        for c in 0..1usize << nx {
+            let e = corner_u(c, i) - net_u[c * nu + i].clamp(blo, bhi);
             e0 = e0.max(e.abs());
         }
+        e0 += corner_tol;
         let v = net.value[i];
         let clamp = if v.lo > blo && v.hi < bhi {
             Clamp::Inside
@@ -208,7 +340,7 @@ pub fn cell_bound(
             if w[k] <= 0.0 {
                 continue;
             }
-            let (kr, q) = mpc_slope_estimate(corners, w[k], nx, i, k, s.safety);
+            let (kr, sq) = slope(i, k);
             let j = net.jac[i * nx + k];
             let jr = match clamp {
                 Clamp::Inside => j,
@@ -230,7 +362,7 @@ pub fn cell_bound(
                         0.0
                     }
                 };
-                let m = s.safety * q + h;
+                let m = sq + h;
                 term_b[k] = m * w[k] * w[k] / 8.0;
             }
         }
@@ -261,6 +393,7 @@ pub fn cell_bound(
         remainder: rem2.sqrt(),
         form,
         axis_terms,
+        exact: false,
     }
 }
 

@@ -9,6 +9,7 @@
 //! - [`netbounds`]: sound interval enclosures of κ_NN, ∂κ_NN/∂x, ∂²κ_NN/∂x² over a box.
 //! - [`certificate`]: Theorem 1 and its inverse (what a target ε requires).
 //! - [`local`]: the cell bound ε_C from corner labels, enclosures and a remainder.
+//! - [`critical`]: where the MPC is a QP, the proof that κ is affine on a cell (exact MPC part).
 //! - [`refine`]: adaptive refinement of the cells until the target ε is met.
 //! - [`tier`]: sound / statistical / estimated, per term and for ε as a whole.
 //! - [`statistical`]: the Clopper–Pearson bound on P(‖κ − sat κ_NN‖ > ε) from i.i.d. states.
@@ -16,6 +17,7 @@
 //! Imports `problem`, `mpc`, `data` and `learn`.
 
 pub mod certificate;
+pub mod critical;
 pub mod lipschitz;
 pub mod local;
 pub mod netbounds;

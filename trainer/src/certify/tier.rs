@@ -12,7 +12,9 @@
 //! sound upper bound for scattered data, and L_MPC is sampled unless given (estimated: a
 //! value passed with `--l-mpc` is the user's assumption, not something the code proves).
 //! For a local certificate (refinement) the corner errors and the network's enclosures are
-//! sound, the MPC's range inside a cell is estimated from its corners.
+//! sound, the MPC's range inside a cell is estimated from its corners — except where the
+//! MPC is a QP and the cell's critical-region proof succeeds (`certify::critical`): there
+//! the MPC part is exact, and a certificate all of whose cells are exact is sound.
 
 use super::certificate::Certificate;
 use serde::{Deserialize, Serialize};
@@ -123,6 +125,34 @@ pub fn local() -> Guarantee {
     ])
 }
 
+/// The tiers of a local certificate of which `exact` of `cells` cells have an exact MPC
+/// part ([`crate::certify::critical`]: the MPC is a QP and κ is proven affine piecewise on
+/// the cell). All exact: every term is sound and nothing is assumed. None: [`local`].
+pub fn local_exact(exact: usize, cells: usize) -> Guarantee {
+    if exact == 0 || cells == 0 {
+        return local();
+    }
+    if exact == cells {
+        return Guarantee::from_terms(&[
+            ("corner_errors", Tier::Sound, ""),
+            ("network_enclosures", Tier::Sound, ""),
+            ("mpc_range", Tier::Sound, ""),
+            ("f32_allowance", Tier::Sound, ""),
+        ]);
+    }
+    let why = format!(
+        "the MPC's variation inside {} of {cells} cells, estimated from their corners' \
+         sensitivities with a safety factor ({exact} cells are exact: κ proven affine on them)",
+        cells - exact
+    );
+    Guarantee::from_terms(&[
+        ("corner_errors", Tier::Sound, ""),
+        ("network_enclosures", Tier::Sound, ""),
+        ("mpc_range", Tier::Estimated, &why),
+        ("f32_allowance", Tier::Sound, ""),
+    ])
+}
+
 /// A Theorem 1 certificate as JSON: its keys plus `"guarantee"`, `"tiers"` and
 /// `"assumptions"`.
 pub fn certificate_json(c: &Certificate) -> serde_json::Value {
@@ -155,5 +185,22 @@ mod tests {
             serde_json::json!("statistical")
         );
         assert_eq!(local().guarantee, Tier::Estimated);
+    }
+
+    #[test]
+    fn a_local_certificate_is_sound_only_when_every_cell_is_exact() {
+        assert_eq!(local_exact(0, 10), local());
+        let g = local_exact(10, 10);
+        assert_eq!(g.guarantee, Tier::Sound);
+        assert!(g.assumptions.is_empty());
+        assert_eq!(g.tiers["mpc_range"], Tier::Sound);
+        let g = local_exact(9, 10);
+        assert_eq!(g.guarantee, Tier::Estimated);
+        assert_eq!(g.assumptions.len(), 1);
+        assert!(
+            g.assumptions[0].contains("1 of 10 cells"),
+            "{:?}",
+            g.assumptions
+        );
     }
 }

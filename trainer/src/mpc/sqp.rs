@@ -439,18 +439,33 @@ impl SqpSolver {
             }
             let Some(sol) = kkt.solve(&rhs) else {
                 // Singular: LICQ fails when an active row is implied by others (e.g. a
-                // state bound reached exactly by saturated inputs). Drop the active row
-                // with the smallest multiplier and retry; the Newton point still has to
-                // satisfy the dropped row to pass the residual check.
-                let (k, _) = active
-                    .iter()
-                    .enumerate()
-                    .min_by(|a, b| start.nu[*a.1].total_cmp(&start.nu[*b.1]))?;
+                // state bound reached exactly by saturated inputs: v₀ + h·Σu = v_max on a
+                // lattice point). Drop the active row with the smallest multiplier whose
+                // removal makes the system regular (a row outside the dependent set does
+                // not; dropping it would only lose the right active set), else the
+                // smallest; the Newton point still has to satisfy every dropped row to
+                // pass the residual check.
                 drops += 1;
-                if drops > 8 {
+                if drops > 8 || active.is_empty() {
                     return None;
                 }
-                active.remove(k);
+                let mut order: Vec<usize> = (0..active.len()).collect();
+                order.sort_by(|&a, &b| {
+                    start.nu[active[a]]
+                        .total_cmp(&start.nu[active[b]])
+                        .then(a.cmp(&b))
+                });
+                let regular = order.iter().copied().find(|&k| {
+                    let mut fewer = active.clone();
+                    fewer.remove(k);
+                    let mut b = rhs.clone();
+                    let keep: Vec<usize> = (0..b.len()).filter(|&i| i != nv + ne + k).collect();
+                    b = b.select_rows(&keep);
+                    ActiveSetKkt::new(ocp, &ev.hess, &ev.jac_x, &ev.jac_u, fewer)
+                        .solve(&b)
+                        .is_some()
+                });
+                active.remove(regular.unwrap_or(order[0]));
                 continue;
             };
             it += 1;

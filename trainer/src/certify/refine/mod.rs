@@ -100,6 +100,11 @@ pub struct Point {
     pub degeneracy: Option<crate::mpc::sensitivity::Degeneracy>,
     /// Largest slack (soft labels).
     pub max_slack: f64,
+    /// The strongly active rows of the solution (`None`: not known, e.g. an imported label
+    /// or a point read back from a checkpoint). Candidates for the critical-region proof of
+    /// [`crate::certify::critical`]; not stored in checkpoints (refilled on resume).
+    #[serde(skip)]
+    pub active: Option<Vec<usize>>,
 }
 
 impl Point {
@@ -291,12 +296,38 @@ fn label(cfg: &ProblemConfig, points: &mut [Point], idx: &[usize]) {
 fn set_label(p: &mut Point, l: Label) {
     p.regular = l.status == SqpStatus::Converged && l.degeneracy.is_none();
     p.piece = fnv(&l.active);
+    // Hard solutions only (a soft label's rows are those of another problem).
+    p.active = (l.status == SqpStatus::Converged).then(|| l.active.clone());
     p.u = l.u;
     p.du = l.du_dx;
     p.status = Some(l.status);
     p.cost = l.cost;
     p.degeneracy = l.degeneracy;
     p.max_slack = l.max_slack;
+}
+
+/// Gives every labelled point whose active set is unknown (an imported label, a point read
+/// back from a checkpoint) the active set of a fresh cold solve at its state (in parallel):
+/// only the critical-region proof of a QP problem uses it. Returns the number of solves.
+fn fill_active(cfg: &ProblemConfig, points: &mut [Point]) -> usize {
+    let idx: Vec<usize> = (0..points.len())
+        .filter(|&i| points[i].active.is_none() && points[i].labelled())
+        .collect();
+    let xs: Vec<Vec<f64>> = idx.iter().map(|&i| points[i].x.clone()).collect();
+    let sets: Vec<Option<Vec<usize>>> = xs
+        .par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, x| {
+                let l = law.solve(x, None).0;
+                (l.status == SqpStatus::Converged).then_some(l.active)
+            },
+        )
+        .collect();
+    for (&i, a) in idx.iter().zip(sets) {
+        points[i].active = a;
+    }
+    idx.len()
 }
 
 /// The labelled records of `data` with a finite Jacobian that sit on the initial grid
@@ -398,6 +429,7 @@ impl Ctx<'_> {
             cost: f64::NAN,
             degeneracy: None,
             max_slack: f64::NAN,
+            active: None,
         });
         self.index.insert(key, i);
         new.push(i);

@@ -91,6 +91,10 @@ pub struct LocalSummary {
     pub sparsification: Option<f64>,
     /// What is sound and what is estimated.
     pub note: String,
+    /// Where the MPC is a QP: cells whose MPC part is exact (κ proven affine piecewise on
+    /// them, `certify::critical`); absent for other problems.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cells_exact: Option<usize>,
 }
 
 /// The certificate JSON of a refinement run: the design's keys plus [`LocalSummary`].
@@ -163,6 +167,8 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         None => (String::new(), (vec![], vec![])),
     };
     let solves = st.points.len();
+    let qp = crate::certify::critical::QpCertifier::detect(cfg).is_ok();
+    let n_exact = st.bounds.iter().filter(|(_, b)| b.exact).count();
     let base = Certificate {
         eps,
         eps_d,
@@ -233,12 +239,20 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
              secants, widened ×{s}) and |∂²κ/∂x²| where all corners share one active set \
              (×{s} the edge difference quotients); κ constant where all corners saturate.",
             s = rs.safety
-        ),
+        ) + if qp {
+            " The MPC is a convex QP: on a cell whose critical-region proof succeeds (the \
+             active sets of its corners, checked for primal and dual feasibility at every \
+             vertex with rounding bounds), κ is affine piecewise and the MPC part is exact \
+             (cells_exact); the estimate applies to the other cells only."
+        } else {
+            ""
+        },
+        cells_exact: qp.then_some(n_exact),
     };
     LocalCertificate {
         base,
         local,
-        guarantee: crate::certify::tier::local(),
+        guarantee: crate::certify::tier::local_exact(n_exact, st.bounds.len()),
         statistical: None,
     }
 }

@@ -4,7 +4,8 @@
 //! is given and never retrained: only the cells are split (their corners solved).
 
 use super::*;
-use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
+use crate::certify::critical::QpCertifier;
+use crate::certify::local::{cell_bound, exact_cell_bound, CellBound, Corner, Form, LocalSettings};
 use crate::certify::netbounds::NetBounder;
 use crate::certify::Model;
 use crate::data::dataset::DatasetError;
@@ -91,13 +92,16 @@ pub(super) fn train_set(
     s
 }
 
-/// Bounds every leaf; returns (leaf, bound) in leaf order.
-fn bound_leaves(
+/// Bounds every leaf; returns (leaf, bound) in leaf order. Where the MPC is a QP (`qp`), a
+/// cell whose critical-region proof succeeds gets the exact bound
+/// ([`exact_cell_bound`]), the others the estimate ([`cell_bound`]).
+pub(super) fn bound_leaves(
     st: &RefineState,
     lat: &Lattice,
     mlp: &Mlp,
     band: (&[f64], &[f64]),
     ls: &LocalSettings,
+    qp: Option<&QpCertifier>,
 ) -> Vec<(usize, CellBound)> {
     let nb = NetBounder::new(mlp);
     let nu = mlp.nu();
@@ -128,6 +132,23 @@ fn bound_leaves(
             let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
             let hi = lat.x(&hi_key);
             let pts: Vec<&Point> = node.corners.iter().map(|&c| &st.points[c]).collect();
+            let nu_c: Vec<f64> = node
+                .corners
+                .iter()
+                .flat_map(|&c| net_u[c * nu..(c + 1) * nu].iter().copied())
+                .collect();
+            // Where the MPC is a QP: the exact bound if the cell's proof succeeds (it needs
+            // no labels, only candidate active sets from some corners).
+            if let Some(q) = qp {
+                let sets: Vec<Option<&[usize]>> = pts.iter().map(|p| p.active.as_deref()).collect();
+                if let Some(laws) = q.prove_from_corners(&lo, &hi, &sets) {
+                    let pieces = q.pieces(&lo, &hi, &laws);
+                    let b = exact_cell_bound(&lo, &hi, &pieces, &nu_c, &nb.bounds(&lo, &hi), band);
+                    if b.exact {
+                        return (n, b);
+                    }
+                }
+            }
             if !pts.iter().all(|p| p.labelled()) {
                 let b = CellBound {
                     eps: f64::INFINITY,
@@ -135,6 +156,7 @@ fn bound_leaves(
                     remainder: f64::INFINITY,
                     form: Form::FirstOrder,
                     axis_terms: vec![f64::INFINITY; lo.len()],
+                    exact: false,
                 };
                 return (n, b);
             }
@@ -146,11 +168,6 @@ fn bound_leaves(
                     regular: p.regular,
                     piece: p.piece,
                 })
-                .collect();
-            let nu_c: Vec<f64> = node
-                .corners
-                .iter()
-                .flat_map(|&c| net_u[c * nu..(c + 1) * nu].iter().copied())
                 .collect();
             (
                 n,
@@ -184,6 +201,8 @@ pub fn refine(
     }
     let band = cfg.ocp.u_bounds(0);
     let ls = LocalSettings { safety: rs.safety };
+    // Where the MPC is a QP, cells are proven exact and refinement goes on until all are.
+    let qp = QpCertifier::detect(cfg).ok();
     // Every retrained net holds the setpoint (`refine.training.hold_setpoint`).
     let hold = match opts.fixed {
         Some(_) => None,
@@ -217,11 +236,13 @@ pub fn refine(
         let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
         let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
         if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
-            return Ok(Refined {
-                met,
-                state: st.clone(),
-                model,
-            });
+            let mut state = st.clone();
+            if let Some(q) = &qp {
+                // Which cells are exact is not stored: prove them again.
+                fill_active(cfg, &mut state.points);
+                state.bounds = bound_leaves(&state, &lat, &model.mlp, band, &ls, Some(q));
+            }
+            return Ok(Refined { met, state, model });
         }
     }
     let mut st = match resumed {
@@ -274,6 +295,10 @@ pub fn refine(
         let round = st.log.len();
         label(cfg, &mut st.points, &pending);
         pending.clear();
+        if qp.is_some() {
+            // Resumed or imported points: their active sets, for the proofs.
+            fill_active(cfg, &mut st.points);
+        }
         // Retrain when a failing cell's corner (fit) error is a large part of the target:
         // splitting cannot help there. Otherwise keep the net and only split (retraining
         // would move every cell's bound).
@@ -325,7 +350,7 @@ pub fn refine(
             ));
         }
         let model = st.model.clone().expect("trained above");
-        st.bounds = bound_leaves(&st, &lat, &model.mlp, band, &ls);
+        st.bounds = bound_leaves(&st, &lat, &model.mlp, band, &ls, qp.as_ref());
         let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
         let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
         let ok = st
@@ -356,12 +381,14 @@ pub fn refine(
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
         }
-        let met = ok == st.bounds.len();
+        // A QP problem's cells are also split until their MPC part is proven exact.
+        let unproven = |b: &CellBound| qp.is_some() && !b.exact;
+        let met = ok == st.bounds.len() && !st.bounds.iter().any(|(_, b)| unproven(b));
         // Split the failing cells, worst first, within the budget.
         let mut bad: Vec<(usize, CellBound)> = st
             .bounds
             .iter()
-            .filter(|(_, b)| b.eps > rs.target_eps)
+            .filter(|(_, b)| b.eps > rs.target_eps || unproven(b))
             .cloned()
             .collect();
         bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
@@ -395,7 +422,10 @@ pub fn refine(
                         axis = k;
                     }
                 }
-                if b.remainder < 0.25 * b.corner || !b.axis_terms[axis].is_finite() {
+                if b.remainder < 0.25 * b.corner
+                    || !b.axis_terms[axis].is_finite()
+                    || b.eps <= rs.target_eps
+                {
                     axis = cand
                         .iter()
                         .copied()
@@ -424,7 +454,7 @@ pub fn refine(
             // Not met: the best model so far, bounded on the final (finer) tree, may do
             // better than the last one.
             if let Some((_, best)) = st.best.clone() {
-                let b = bound_leaves(&st, &lat, &best.mlp, band, &ls);
+                let b = bound_leaves(&st, &lat, &best.mlp, band, &ls, qp.as_ref());
                 let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
                 if e < eps {
                     st.bounds = b;

@@ -64,6 +64,12 @@ impl ExprModel {
             .filter(|i| i.op.name() == f)
             .count()
     }
+    /// Whether every output (ẋ or x⁺) is affine in (x, u), decided exactly on the tape
+    /// (see `Tape::is_affine`): then RK4 of an ODE, a composition of affine maps with u held
+    /// over the step, is affine too.
+    pub fn is_affine(&self) -> bool {
+        self.tape.is_affine()
+    }
     /// Number of registers: the length `scratch` grows to in [`ExprModel::eval`].
     pub fn n_registers(&self) -> usize {
         self.tape.n_registers()

@@ -279,6 +279,65 @@ impl Tape {
         }
     }
 
+    /// Whether every output is affine in the inputs (states and inputs), decided on the
+    /// instructions: a register is constant, affine or other; `+`, `−`, negation, products
+    /// and quotients with a constant keep affinity, every other operation of a non-constant
+    /// operand is "other". Exact (no evaluation): an affine tape computes an affine function
+    /// in real arithmetic.
+    pub fn is_affine(&self) -> bool {
+        // 0: constant, 1: affine, 2: other. Inputs are affine; unwritten registers "other".
+        let mut k = vec![2u8; self.n_regs];
+        for v in k.iter_mut().take(self.n_in) {
+            *v = 1;
+        }
+        for ins in &self.instrs {
+            let g = |r: R| k.get(r as usize).copied().unwrap_or(2);
+            let unary = |a: u8| if a == 0 { 0 } else { 2 };
+            let v = match ins.op {
+                Op::Const(_) => 0,
+                Op::Add(a, b) | Op::Sub(a, b) => g(a).max(g(b)),
+                Op::Mul(a, b) => match (g(a), g(b)) {
+                    (0, x) | (x, 0) => x,
+                    _ => 2,
+                },
+                Op::Div(a, b) => match (g(a), g(b)) {
+                    (x, 0) => x,
+                    _ => 2,
+                },
+                Op::AddC(a, _) | Op::CSub(_, a) | Op::MulC(a, _) | Op::DivC(a, _) | Op::Neg(a) => {
+                    g(a)
+                }
+                Op::CDiv(_, a)
+                | Op::Sq(a)
+                | Op::Recip(a)
+                | Op::Powi(a, _)
+                | Op::Powf(a, _)
+                | Op::Sin(a)
+                | Op::Cos(a)
+                | Op::Tan(a)
+                | Op::Asin(a)
+                | Op::Acos(a)
+                | Op::Atan(a)
+                | Op::Exp(a)
+                | Op::Log(a)
+                | Op::Sqrt(a)
+                | Op::Sinh(a)
+                | Op::Cosh(a)
+                | Op::Tanh(a)
+                | Op::Abs(a) => unary(g(a)),
+                Op::Pow(a, b) | Op::Atan2(a, b) | Op::Min(a, b) | Op::Max(a, b) => {
+                    unary(g(a).max(g(b)))
+                }
+            };
+            if let Some(d) = k.get_mut(ins.dst as usize) {
+                *d = v;
+            }
+        }
+        self.outs
+            .iter()
+            .all(|&r| k.get(r as usize).is_some_and(|&v| v <= 1))
+    }
+
     /// The instructions.
     pub fn instrs(&self) -> &[Instr] {
         &self.instrs
