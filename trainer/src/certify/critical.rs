@@ -312,7 +312,8 @@ impl QpCertifier {
             rho = rho.max(s * (1.0 + gd));
             xnorm = xnorm.max(t * (1.0 + gd));
         }
-        if !(rho < 0.5) {
+        // NaN fails too: the proof needs ρ < 0.5 established, not merely not refuted.
+        if rho.is_nan() || rho >= 0.5 {
             return None;
         }
         let minv = xnorm / (1.0 - rho) * (1.0 + gd);
@@ -369,7 +370,9 @@ impl QpCertifier {
         for v in verts {
             let (y, err) = l.eval(v);
             for (a, r) in l.set.iter().enumerate() {
-                if w.binary_search(r).is_ok() && !(y[nv + ne + a] - err[nv + ne + a] >= 0.0) {
+                // A NaN multiplier bound is a failed check, like a negative one.
+                let nu_lo = y[nv + ne + a] - err[nv + ne + a];
+                if w.binary_search(r).is_ok() && (nu_lo.is_nan() || nu_lo < 0.0) {
                     fails.push(*r);
                 }
             }
