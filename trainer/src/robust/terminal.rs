@@ -295,7 +295,7 @@ pub fn terminal_region(cfg: &ProblemConfig, t: &Tube) -> Option<TerminalRegion> 
     let offset = p_norm(&p, &d);
     let margin = t.s[n] - t.s[n - 1];
     let cmax = radius_max(cfg, t);
-    if !(cmax > 0.0) || !cmax.is_finite() {
+    if !cmax.is_finite() || cmax <= 0.0 {
         return None;
     }
     let mut c = cmax;
