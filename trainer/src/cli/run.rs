@@ -138,7 +138,7 @@ fn robust_run(cfg: &ProblemConfig, opts: &RunOptions, out: &Path, quiet: bool) -
         "  robust/nominal MPC cost: mean {:.4}, upswing {:.4}; upswing feasible: {}; study {:.1} s",
         r.cost_ratio_mean, r.cost_ratio_upswing, r.upswing_feasible, r.study_seconds
     );
-    println!("{}", r.verdict.message);
+    println!("{}", r.verdict_detail.message);
     if !quiet {
         eprintln!(
             "robust run -> {}",

@@ -45,6 +45,12 @@ pub struct RobustSettings {
     /// settings) on the tightened MPC with the design ε as target, and use the refined net
     /// as the robust design's net (default false: minutes of solves).
     pub refine: bool,
+    /// Add the proven terminal region `(x − x_r)ᵀP(x − x_r) ≤ α` (`robust::terminal`) to the
+    /// tightened OCP as a terminal constraint, which makes recursive feasibility follow
+    /// (default false: the region shrinks the MPC's feasible set, e.g. the full pendulum's
+    /// upswing is no longer feasible within the horizon; without it recursive feasibility
+    /// is reported `unknown`).
+    pub terminal_constraint: bool,
 }
 
 impl Default for RobustSettings {
@@ -61,6 +67,7 @@ impl Default for RobustSettings {
             monte_carlo_states: 1000,
             disturbed_states: 100,
             refine: false,
+            terminal_constraint: false,
         }
     }
 }

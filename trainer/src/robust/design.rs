@@ -1,7 +1,15 @@
 //! A robust design: the ancillary LQR gain (the input weight that tightens least), its tube,
-//! the tightened problem, and the verdict of a certified ε against the design ε.
+//! the tightened problem with its terminal region, and the verdict of a certified ε against
+//! the design ε:
+//!
+//! ```text
+//! certified  ⇔  ε_cert + a_f32 ≤ ε_design      (a_f32: the exported f32 allowance)
+//! ```
+//! Corollary 1 applies when, in addition, recursive feasibility of the tightened OCP is
+//! proven ([`Feasibility::Proven`], `terminal`).
 
 use super::jacobians::*;
+use super::terminal::{terminal_region, Feasibility, TerminalRegion};
 use super::tube::*;
 use super::RobustError;
 use crate::problem::model::Discrete;
@@ -16,6 +24,26 @@ pub struct Design {
     pub tube: Tube,
     /// The tightened OCP bounds.
     pub stages: StageBounds,
+    /// The terminal region enforced as a terminal constraint (None: none was found, and
+    /// recursive feasibility is not established).
+    #[serde(default)]
+    pub terminal: Option<TerminalRegion>,
+}
+
+impl Design {
+    /// How recursive feasibility of the hard tightened OCP is established: proven when the
+    /// terminal region is enforced and the tube's ρ, w̄ and the region's ρ_f are all sound,
+    /// sampled when one of them is an estimate, unknown without an enforced region.
+    pub fn recursive_feasibility(&self) -> Feasibility {
+        match &self.terminal {
+            Some(t) if !t.enforced => Feasibility::Unknown,
+            None => Feasibility::Unknown,
+            Some(t) if t.proven() && self.tube.bound != JacobianBound::SampledEstimate => {
+                Feasibility::Proven
+            }
+            Some(_) => Feasibility::Sampled,
+        }
+    }
 }
 
 /// Designs the tube (LQR gain of the linearisation at the setpoint — the origin without
@@ -85,52 +113,91 @@ pub fn design(cfg: &ProblemConfig) -> Result<Design, RobustError> {
         }
     };
     let stages = tube.tighten(cfg)?;
-    Ok(Design { tube, stages })
+    let terminal = terminal_region(cfg, &tube);
+    Ok(Design {
+        tube,
+        stages,
+        terminal,
+    })
 }
 
 /// The data-generating problem of a design: `cfg` with the tightened stage bounds, named
-/// `robust` (so a run goes to `DIR/<name>/robust/`). The constant bounds remain the true
-/// constraints (actuator limits and the violation check of the closed loop).
+/// `robust` (so a run goes to `DIR/<name>/robust/`), and the terminal region as its terminal
+/// constraint when enforced (`robust.terminal_constraint`). The constant bounds remain the true constraints (actuator limits and the
+/// violation check of the closed loop).
 pub fn robust_config(cfg: &ProblemConfig, d: &Design) -> ProblemConfig {
     let mut r = cfg.clone();
     r.name = "robust".into();
     r.ocp.stages = Some(d.stages.clone());
+    if let Some(t) = d.terminal.as_ref().filter(|t| t.enforced) {
+        r.ocp.terminal_constraints.push(t.constraint.clone());
+    }
     r
 }
 
-/// Whether a trained net's certified ε covers the design ε.
+/// Whether a trained net's certified ε (plus the exported f32 allowance) covers the design ε.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Verdict {
     /// The ε the MPC was made robust against.
     pub design_eps: f64,
     /// The certified ε of the net (Theorem 1, or a tighter certificate).
     pub certified_eps: f64,
-    /// certified_eps ≤ design_eps: Corollary 1 applies.
+    /// The exported controller's f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64|).
+    #[serde(default)]
+    pub f32_allowance: f64,
+    /// How recursive feasibility of the tightened OCP is established.
+    #[serde(default = "unknown")]
+    pub recursive_feasibility: Feasibility,
+    /// certified_eps + f32_allowance ≤ design_eps.
     pub certified: bool,
-    /// One line for humans, with the numbers.
+    /// One line for humans, with the numbers and what is missing.
     pub message: String,
 }
 
-/// The verdict of a certificate against a design: the hook for local certificates /
-/// adaptive refinement, which only need to supply a smaller `certified_eps`.
-pub fn verdict(design_eps: f64, certified_eps: f64) -> Verdict {
-    let certified = certified_eps.is_finite() && certified_eps <= design_eps;
-    let message = if certified {
+fn unknown() -> Feasibility {
+    Feasibility::Unknown
+}
+
+/// The verdict of a certificate against a design (module doc): `certified` iff
+/// `certified_eps + f32_allowance ≤ design_eps` (all finite); the message says that
+/// Corollary 1 applies only when recursive feasibility is also proven, otherwise what is
+/// missing.
+pub fn verdict(
+    design_eps: f64,
+    certified_eps: f64,
+    f32_allowance: f64,
+    recursive_feasibility: Feasibility,
+) -> Verdict {
+    let total = certified_eps + f32_allowance;
+    let certified = total.is_finite() && f32_allowance >= 0.0 && total <= design_eps;
+    let rf = recursive_feasibility;
+    let message = if certified && rf == Feasibility::Proven {
         format!(
-            "certified: ε = {certified_eps:.4} ≤ design ε = {design_eps:.4}; Corollary 1 \
-             applies (closed loop stays in the robust MPC's feasible set)"
+            "certified: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} ≤ design ε = \
+             {design_eps:.4} and recursive feasibility is proven (terminal region); Corollary 1 \
+             applies (the closed loop stays in the robust MPC's feasible set)"
+        )
+    } else if certified {
+        format!(
+            "certified ε: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} ≤ design \
+             ε = {design_eps:.4}, but recursive feasibility is {} (no proven terminal region): \
+             Corollary 1 is not established, only the Monte Carlo evidence below",
+            rf.name()
         )
     } else {
         format!(
-            "NOT certified: certified ε = {certified_eps:.4} exceeds the design ε = \
-             {design_eps:.4} (factor {:.1}); the closed-loop guarantee does not hold, \
-             only the Monte Carlo evidence below",
-            certified_eps / design_eps
+            "NOT certified: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} exceeds \
+             the design ε = {design_eps:.4} (factor {:.1}); recursive feasibility {}; the \
+             closed-loop guarantee does not hold, only the Monte Carlo evidence below",
+            total / design_eps,
+            rf.name()
         )
     };
     Verdict {
         design_eps,
         certified_eps,
+        f32_allowance,
+        recursive_feasibility,
         certified,
         message,
     }

@@ -51,23 +51,29 @@
 //! `x_{t+1}` satisfies the tightened bounds of stages k = 0..N−2 (the margins
 //! `s_{k+1} − s_k = ρ^k w̄` absorb the deviation) and the true state satisfies X. The
 //! last stage of the candidate needs a terminal set that is invariant under K with the
-//! tightened constraints; the problem files have only a terminal cost, so **recursive
-//! feasibility is not proven here** — it is checked by closed-loop Monte Carlo
-//! (`mpc_soft_steps` counts the steps where the robust MPC had become infeasible).
+//! tightened constraints: [`terminal`] computes the sublevel set
+//! `X_f = {(x − x_r)ᵀP(x − x_r) ≤ α}` of the tube's Lyapunov function, proves (a) X_f ⊆ X_N,
+//! (b) κ_f(X_f) ⊆ U_N and (c) robust invariance `ρ_f(√α + ρ^{N−1}w̄) + d₀ ≤ √α`, and the
+//! tightened problem gets it as a terminal constraint. Recursive feasibility of the **hard**
+//! tightened OCP is then `proven` (linear plants, the pendulum), `sampled` (a sampled ρ, w̄
+//! or ρ_f) or `unknown` (no region found); the closed-loop Monte Carlo still counts the
+//! steps where the soft fallback was needed (`mpc_soft_steps`).
 //!
 //! Files: [`jacobians`] (the family of (A, B) and how its sup is bounded), [`tube`] (ρ, w̄,
-//! the radii s_k and the tightening), [`design`](mod@design) (the LQR choice, the tightened problem, the
+//! the radii s_k and the tightening), [`terminal`] (the terminal region X_f), [`design`](mod@design) (the LQR choice, the tightened problem, the
 //! verdict of a certificate against the design ε). The robust closed-loop study is
 //! `study::robust`; the design loop that runs the pipeline on the tightened problem is
 //! `pipeline::robust`. Imports `problem`, `mpc` and `certify`.
 
 pub mod design;
 pub mod jacobians;
+pub mod terminal;
 pub mod tube;
 
 pub use crate::problem::{RobustMethod, RobustSettings};
 pub use design::{design, robust_config, verdict, Design, Verdict};
 pub use jacobians::{jacobian_set, pendulum_rk4_jacobian, JacobianBound, JacobianSet};
+pub use terminal::{terminal_region, Feasibility, TerminalCheck, TerminalRegion};
 pub use tube::{contraction, dare, Tube};
 
 /// Errors of the robust design.

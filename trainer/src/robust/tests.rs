@@ -280,12 +280,31 @@ fn settings_defaults_serialise_as_before_and_validate_with_keys() {
 }
 
 #[test]
-fn verdict_compares_certified_with_design_eps() {
-    assert!(verdict(0.5, 0.4).certified);
-    assert!(verdict(0.5, 0.5).certified);
-    let v = verdict(0.5, 31.0);
+fn verdict_compares_certified_plus_allowance_with_design_eps() {
+    use super::Feasibility::*;
+    assert!(verdict(0.5, 0.4, 0.0, Proven).certified);
+    assert!(verdict(0.5, 0.5, 0.0, Proven).certified);
+    // The f32 allowance counts: 0.5 + 1e-6 > 0.5.
+    let v = verdict(0.5, 0.5, 1e-6, Proven);
+    assert!(
+        !v.certified && v.message.contains("NOT certified"),
+        "{}",
+        v.message
+    );
+    let v = verdict(0.5, 31.0, 0.0, Proven);
     assert!(!v.certified && v.message.contains("NOT certified") && v.message.contains("31"));
-    assert!(!verdict(0.5, f64::NAN).certified);
+    assert!(!verdict(0.5, f64::NAN, 0.0, Proven).certified);
+    assert!(!verdict(0.5, 0.4, f64::NAN, Proven).certified);
+    // Corollary 1 is claimed only with recursive feasibility proven.
+    assert!(verdict(0.5, 0.4, 1e-6, Proven)
+        .message
+        .contains("Corollary 1 applies"));
+    for rf in [Sampled, Unknown] {
+        let v = verdict(0.5, 0.4, 1e-6, rf);
+        assert!(v.certified, "the ε inequality holds");
+        assert!(!v.message.contains("Corollary 1 applies"), "{}", v.message);
+        assert!(v.message.contains(rf.name()), "{}", v.message);
+    }
 }
 
 /// Path and terminal constraints are not tightened by the tube: a design is refused, naming
