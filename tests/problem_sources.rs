@@ -308,7 +308,7 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
     std::fs::write(d.join("cert4.json"), cert.to_string()).unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
-            vec![
+            args(&[
                 "solve",
                 "--config",
                 &di,
@@ -316,14 +316,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("x4.csv"),
                 "--out",
                 &s("o.csv"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "x4.csv",
         ),
         (
-            vec![
+            args(&[
                 "eval",
                 "--model",
                 &s("m.bin"),
@@ -331,14 +328,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("x4.csv"),
                 "--out",
                 &s("o.csv"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "x4.csv",
         ),
         (
-            vec![
+            args(&[
                 "eval",
                 "--raw",
                 "--model",
@@ -347,14 +341,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("x4.csv"),
                 "--out",
                 &s("o.csv"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "x4.csv",
         ),
         (
-            vec![
+            args(&[
                 "eval",
                 "--model",
                 &s("m.bin"),
@@ -364,14 +355,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("x2.csv"),
                 "--out",
                 &s("o.csv"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cert4.json",
         ),
         (
-            vec![
+            args(&[
                 "eval",
                 "--config",
                 &cp,
@@ -381,21 +369,15 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("x4.csv"),
                 "--out",
                 &s("o.csv"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "m.bin",
         ),
         (
-            vec!["certify", "--model", &s("m.bin"), "--data", &s("cp.bin")]
-                .into_iter()
-                .map(String::from)
-                .collect(),
+            args(&["certify", "--model", &s("m.bin"), "--data", &s("cp.bin")]),
             "cp.bin",
         ),
         (
-            vec![
+            args(&[
                 "certify",
                 "--config",
                 &cp,
@@ -403,14 +385,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("m.bin"),
                 "--data",
                 &s("cp.bin"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "m.bin",
         ),
         (
-            vec![
+            args(&[
                 "train",
                 "--config",
                 &di,
@@ -418,14 +397,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("cp.bin"),
                 "--out",
                 &s("o.bin"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cp.bin",
         ),
         (
-            vec![
+            args(&[
                 "train",
                 "--data",
                 &s("cp.bin"),
@@ -433,14 +409,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("di.bin"),
                 "--out",
                 &s("o.bin"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "di.bin",
         ),
         (
-            vec![
+            args(&[
                 "compare",
                 "--config",
                 &di,
@@ -448,14 +421,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("cp.bin"),
                 "--seeds",
                 "1",
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cp.bin",
         ),
         (
-            vec![
+            args(&[
                 "export",
                 "--model",
                 &s("m.bin"),
@@ -465,14 +435,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("o.rs"),
                 "--postcard",
                 &s("o.pc"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cert4.json",
         ),
         (
-            vec![
+            args(&[
                 "export",
                 "--config",
                 &cp,
@@ -480,14 +447,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 &s("m.bin"),
                 "--onnx",
                 &s("o.onnx"),
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "m.bin",
         ),
         (
-            vec![
+            args(&[
                 "refine",
                 "--config",
                 &cp,
@@ -497,14 +461,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 "--out",
                 &s("rf"),
                 "--quiet",
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "m.bin",
         ),
         (
-            vec![
+            args(&[
                 "refine",
                 "--config",
                 &di,
@@ -513,14 +474,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 "--out",
                 &s("rf"),
                 "--quiet",
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cp.bin",
         ),
         (
-            vec![
+            args(&[
                 "import",
                 "--config",
                 &di,
@@ -529,24 +487,15 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
                 "--out",
                 &s("o.bin"),
                 "--quiet",
-            ]
-            .into_iter()
-            .map(String::from)
-            .collect(),
+            ]),
             "cp.csv",
         ),
         (
-            vec!["merge", "--config", &di, &s("o.bin"), &s("cp.bin")]
-                .into_iter()
-                .map(String::from)
-                .collect(),
+            args(&["merge", "--config", &di, &s("o.bin"), &s("cp.bin")]),
             "cp.bin",
         ),
         (
-            vec!["sample", "--config", &cp, "--out", &s("o.bin"), "--quiet"]
-                .into_iter()
-                .map(String::from)
-                .collect(),
+            args(&["sample", "--config", &cp, "--out", &s("o.bin"), "--quiet"]),
             "",
         ),
     ];
@@ -561,4 +510,9 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
     for f in ["o.csv", "o.bin", "o.rs", "o.pc", "o.onnx"] {
         assert!(!d.join(f).exists(), "{f} written");
     }
+}
+
+/// A command line as owned strings.
+fn args(a: &[&str]) -> Vec<String> {
+    a.iter().map(|s| s.to_string()).collect()
 }
