@@ -224,19 +224,16 @@ fn integrity_through_the_cli() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("no --config given"));
 
     // Export with the certificate of another model: refused, nothing written.
-    std::fs::write(
-        d.join("p_cert.json"),
-        serde_json::to_string(&json(&[
-            "certify",
-            "--model",
-            &s("p_model.bin"),
-            "--data",
-            &s("p.bin"),
-            "--json",
-        ]))
-        .unwrap(),
-    )
-    .unwrap();
+    let o = trainer(&[
+        "certify",
+        "--model",
+        &s("p_model.bin"),
+        "--data",
+        &s("p.bin"),
+        "--json",
+    ]);
+    ok(&o);
+    std::fs::write(d.join("p_cert.json"), &o.stdout).unwrap();
     let o = trainer(&[
         "export",
         "--model",
@@ -251,4 +248,62 @@ fn integrity_through_the_cli() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("another network"));
     assert!(!d.join("w.rs").exists() && !d.join("w.bin").exists());
+
+    // The certificate's own numbers are checksummed: its own certificate exports; the same
+    // file with ε lowered by hand (or its tier raised) is refused, naming the file.
+    let o = trainer(&[
+        "certify",
+        "--model",
+        &s("di_model.bin"),
+        "--data",
+        &s("di.bin"),
+        "--json",
+    ]);
+    ok(&o);
+    let text = String::from_utf8(o.stdout).unwrap();
+    std::fs::write(d.join("di_cert.json"), &text).unwrap();
+    let export = |cert: &str| {
+        trainer(&[
+            "export",
+            "--model",
+            &s("di_model.bin"),
+            "--certificate",
+            &s(cert),
+            "--rust",
+            &s("w.rs"),
+            "--postcard",
+            &s("w.bin"),
+        ])
+    };
+    ok(&export("di_cert.json"));
+    let _ = std::fs::remove_file(d.join("w.rs"));
+    let _ = std::fs::remove_file(d.join("w.bin"));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let eps = v["eps"].to_string();
+    let tier = format!("\"guarantee\": {}", v["guarantee"]);
+    for (from, to) in [
+        (
+            format!("\"eps\": {eps}"),
+            format!("\"eps\": {}", v["eps"].as_f64().unwrap() / 2.0),
+        ),
+        (
+            tier.clone(),
+            if v["guarantee"] == "sound" {
+                "\"guarantee\": \"statistical\"".to_string()
+            } else {
+                "\"guarantee\": \"sound\"".to_string()
+            },
+        ),
+    ] {
+        assert!(text.contains(&from), "{from} not in {text}");
+        std::fs::write(d.join("edited.json"), text.replacen(&from, &to, 1)).unwrap();
+        let o = export("edited.json");
+        assert!(!o.status.success(), "{from} → {to} was accepted");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("edited.json") && err.contains("checksum mismatch"),
+            "{err}"
+        );
+        assert!(!d.join("w.rs").exists() && !d.join("w.bin").exists());
+    }
 }

@@ -404,8 +404,18 @@ fn certificate(cases: u32) {
             (
                 serde_json::from_str::<Certificate>(t),
                 trainer::deploy::export::Guarantee::declared_in(t, "fuzz.json"),
+                trainer::certify::seal::verify(t, "fuzz.json"),
             )
         })?;
+        // The checksum accepts the certificate as written (up to trailing whitespace) and
+        // nothing else.
+        match r.2 {
+            Ok(trainer::certify::seal::Seal::Verified) => {
+                prop_assert_eq!(t.trim_end(), v.certificate.trim_end())
+            }
+            Ok(trainer::certify::seal::Seal::Absent) => {}
+            Err(e) => names(&e.to_string(), "fuzz.json")?,
+        }
         if let Ok(c) = r.0 {
             let again = serde_json::to_string(&c).unwrap();
             let back: Certificate = serde_json::from_str(&again).unwrap();
@@ -794,6 +804,10 @@ fn valid_inputs_are_accepted() {
     assert!(RefineState::from_bytes(&v.refine_state, Path::new("r.bin")).is_ok());
     assert!(trainer::deploy::onnx::import_bytes(&v.onnx, "m.onnx").is_ok());
     assert!(serde_json::from_str::<Certificate>(&v.certificate).is_ok());
+    assert_eq!(
+        trainer::certify::seal::verify(&v.certificate, "c.json"),
+        Ok(trainer::certify::seal::Seal::Verified)
+    );
     assert!(serde_json::from_str::<trainer::pipeline::manifest::Manifest>(&v.manifest).is_ok());
     for (n, t) in &v.problems {
         assert!(ProblemConfig::from_toml_str(t, n).is_ok(), "{n}");

@@ -13,6 +13,7 @@
 //! - [`refine`]: adaptive refinement of the cells until the target ε is met.
 //! - [`tier`]: sound / statistical / estimated, per term and for ε as a whole.
 //! - [`statistical`]: the Clopper–Pearson bound on P(‖κ − sat κ_NN‖ > ε) from i.i.d. states.
+//! - [`seal`]: the checksum `certificate.json` carries over its own bytes.
 //!
 //! Imports `problem`, `mpc`, `data` and `learn`.
 
@@ -22,6 +23,7 @@ pub mod lipschitz;
 pub mod local;
 pub mod netbounds;
 pub mod refine;
+pub mod seal;
 pub mod statistical;
 pub mod tier;
 

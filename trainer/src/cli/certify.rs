@@ -109,7 +109,7 @@ pub(super) fn execute(
         if let (Some(st), Some(o)) = (&statistical, v.as_object_mut()) {
             o.insert("statistical".into(), serde_json::to_value(st)?);
         }
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", trainer::certify::seal::sealed_json(&v)?);
         return Ok(());
     }
     println!(

@@ -193,6 +193,15 @@ pub(super) fn load_certificate(
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("cannot read {}", p.display()))?;
+            if trainer::certify::seal::verify(&text, &p.display().to_string())?
+                == trainer::certify::seal::Seal::Absent
+            {
+                eprintln!(
+                    "warning: {} carries no checksum (written before certificates had one): \
+                     its numbers are not verified",
+                    p.display()
+                );
+            }
             let cert = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not a certificate", p.display()))?;
             (

@@ -114,7 +114,7 @@ pub(super) fn execute(
         cert.statistical = Some(s);
         trainer::io::write_atomic(
             &dir.join("certificate.json"),
-            refine::pretty(&cert).as_bytes(),
+            trainer::certify::seal::sealed_json(&cert)?.as_bytes(),
         )?;
     }
     if cfg.system.nx() >= 2 {

@@ -108,6 +108,8 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let mut net = Model::load(&model_path).map_err(|e| io(&model_path, e))?;
     let cpath = dir.join("certificate.json");
     let ctext = std::fs::read_to_string(&cpath).map_err(|e| io(&cpath, e))?;
+    crate::certify::seal::verify(&ctext, &cpath.display().to_string())
+        .map_err(|e| RobustRunError::Io(e.to_string()))?;
     let cert: Certificate = serde_json::from_str(&ctext).map_err(|e| io(&cpath, e))?;
     net.certificate = Some(cert.clone());
     let mut cert = cert;

@@ -274,7 +274,7 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             },
         )
         .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
-        let text = serde_json::to_string_pretty(&crate::certify::tier::certificate_json(&c))
+        let text = crate::certify::seal::sealed_json(&crate::certify::tier::certificate_json(&c))
             .map_err(|e| fail("certify", e))?;
         write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
         out += &format!(
@@ -297,6 +297,8 @@ fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
     let c: Certificate = load_json("export", &cert_path)?;
     let text = std::fs::read_to_string(&cert_path)
         .map_err(|e| fail("export", format!("{}: {e}", cert_path.display())))?;
+    crate::certify::seal::verify(&text, &cert_path.display().to_string())
+        .map_err(|e| fail("export", e))?;
     let declared = crate::deploy::export::Guarantee::declared_in(&text, "certificate.json")
         .map_err(|e| fail("export", e))?;
     let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c)

@@ -278,7 +278,11 @@ pub fn write_outputs(
     let ds = dataset(cfg, &r.state);
     ds.save(&dir.join("dataset.bin"))?;
     write_atomic(&dir.join("dataset.csv"), ds.to_csv().as_bytes())?;
-    write_atomic(&dir.join("certificate.json"), pretty(&cert).as_bytes())?;
+    let sealed = crate::certify::seal::sealed_json(&cert).map_err(|e| DatasetError::Format {
+        path: dir.join("certificate.json").display().to_string(),
+        reason: e.to_string(),
+    })?;
+    write_atomic(&dir.join("certificate.json"), sealed.as_bytes())?;
     write_atomic(
         &dir.join("refine_log.json"),
         pretty(&r.state.log).as_bytes(),

@@ -142,9 +142,15 @@ impl Artifacts {
     }
 }
 
-/// Reads a JSON file.
+/// Reads a JSON file (a certificate's checksum verified).
 fn load<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T, ReportError> {
     let t = std::fs::read_to_string(p).map_err(|e| ReportError(format!("{}: {e}", p.display())))?;
+    if p.file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with("certificate"))
+    {
+        crate::certify::seal::verify(&t, &p.display().to_string())
+            .map_err(|e| ReportError(e.to_string()))?;
+    }
     serde_json::from_str(&t).map_err(|e| ReportError(format!("{}: {e}", p.display())))
 }
 
