@@ -124,7 +124,7 @@ pub(super) fn execute(
             "  labels           imported from {} (sha256 {}…): {} of {} rows re-solved by ampc, \
              max |Δu| {:.3e}{}",
             l.file,
-            &l.sha256[..12.min(l.sha256.len())],
+            super::common::short(&l.sha256),
             l.resolved,
             l.rows,
             l.max_disagreement,

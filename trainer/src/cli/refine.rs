@@ -161,7 +161,7 @@ fn first_round_labels(cfg: &ProblemConfig, path: &Path, quiet: bool) -> Result<D
             "{} was labelled for problem `{}` (hash {}…), not for the refined problem `{}`",
             path.display(),
             d.header.problem,
-            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            super::common::short(&d.header.problem_hash),
             cfg.name
         );
     }

@@ -31,9 +31,9 @@ pub(super) fn execute(
         bail!(
             "{} was labelled for another problem (hash {}…) than the config's {} ({}…)",
             data.display(),
-            &d.header.problem_hash[..12.min(d.header.problem_hash.len())],
+            super::common::short(&d.header.problem_hash),
             cfg.name,
-            &cfg.problem_hash()[..12]
+            super::common::short(&cfg.problem_hash())
         );
     }
     if let Some(l) = d.labels.as_ref().filter(|l| !l.jacobian && !nominal) {

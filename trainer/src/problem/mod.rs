@@ -66,8 +66,10 @@ pub enum ConfigError {
         message: String,
     },
     /// A value is out of range or inconsistent.
-    #[error("invalid setting `{key}`: {reason}")]
+    #[error("{}invalid setting `{key}`: {reason}", in_file(.path))]
     Invalid {
+        /// The problem file it was read from (empty for a config built in code).
+        path: String,
         /// The dotted key at fault, e.g. `ocp.q`.
         key: String,
         /// What is wrong with it.
@@ -75,10 +77,33 @@ pub enum ConfigError {
     },
 }
 
+fn in_file(path: &str) -> String {
+    if path.is_empty() {
+        String::new()
+    } else {
+        format!("problem file {path}: ")
+    }
+}
+
 pub(crate) fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ConfigError {
     ConfigError::Invalid {
+        path: String::new(),
         key: key.into(),
         reason: reason.into(),
+    }
+}
+
+impl ConfigError {
+    /// The same error, naming the problem file `origin` it was read from.
+    fn in_file(self, origin: &str) -> Self {
+        match self {
+            ConfigError::Invalid { key, reason, .. } => ConfigError::Invalid {
+                path: origin.to_string(),
+                key,
+                reason,
+            },
+            e => e,
+        }
     }
 }
 
@@ -150,7 +175,7 @@ impl ProblemConfig {
                 path: origin.to_string(),
                 message: e.to_string(),
             })?;
-        cfg.validate()?;
+        cfg.validate().map_err(|e| e.in_file(origin))?;
         Ok(cfg)
     }
 

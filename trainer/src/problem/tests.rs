@@ -35,6 +35,27 @@ fn err_key(edit: impl Fn(&mut ProblemConfig)) -> String {
 }
 
 #[test]
+fn a_problem_file_with_an_invalid_setting_is_named() {
+    let text = PENDULUM_TOML.replacen("horizon = 20", "horizon = 0", 1);
+    assert_ne!(text, PENDULUM_TOML);
+    let e = ProblemConfig::from_toml_str(&text, "configs/mine.toml").unwrap_err();
+    assert!(matches!(&e, ConfigError::Invalid { key, .. } if key == "ocp.horizon"));
+    assert!(
+        e.to_string()
+            .starts_with("problem file configs/mine.toml: invalid setting `ocp.horizon`"),
+        "{e}"
+    );
+    // A config built in code has no file to name.
+    let mut c = ProblemConfig::default();
+    c.ocp.horizon = 0;
+    assert!(c
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .starts_with("invalid setting `ocp.horizon`"));
+}
+
+#[test]
 fn validation_names_the_key_at_fault() {
     assert_eq!(err_key(|c| c.ocp.horizon = 0), "ocp.horizon");
     // `validation_n = 0` used to be accepted and hung the plots stage on R² = NaN.

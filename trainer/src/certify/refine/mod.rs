@@ -183,6 +183,71 @@ impl RefineState {
             reason: e.to_string(),
         })
     }
+
+    /// Checks that a decoded checkpoint is consistent with a lattice of `lat_max` (the
+    /// largest key per axis), `roots` initial cells and `nu` inputs: every vector has its
+    /// dimension, every index points into its table, the tree's splits are well formed. The
+    /// checksum catches damage; this catches a file written by another build or by hand,
+    /// which would otherwise index out of bounds later. Errors name `path` and the entry.
+    pub(crate) fn check_consistent(
+        &self,
+        lat_max: &[u64],
+        roots: usize,
+        nu: usize,
+        path: &std::path::Path,
+    ) -> Result<(), RefineError> {
+        let nx = lat_max.len();
+        let bad = |what: String| {
+            Err(RefineError::Corrupt {
+                path: path.to_path_buf(),
+                reason: format!("inconsistent contents: {what}"),
+            })
+        };
+        for (i, p) in self.points.iter().enumerate() {
+            if p.key.len() != nx || p.x.len() != nx || p.u.len() != nu || p.du.len() != nu * nx {
+                return bad(format!("point {i} has the wrong dimensions"));
+            }
+            if p.key.iter().zip(lat_max).any(|(k, m)| k > m) {
+                return bad(format!("point {i} lies outside the lattice"));
+            }
+        }
+        if self.roots.len() != roots {
+            return bad(format!(
+                "{} roots, the grid has {roots} cells",
+                self.roots.len()
+            ));
+        }
+        let n = self.nodes.len();
+        if let Some(r) = self.roots.iter().find(|&&r| r >= n) {
+            return bad(format!("root {r} of {n} nodes"));
+        }
+        for (i, node) in self.nodes.iter().enumerate() {
+            if node.lo.len() != nx || node.size.len() != nx || node.corners.len() != 1 << nx {
+                return bad(format!("node {i} has the wrong dimensions"));
+            }
+            if node.corners.iter().any(|&c| c >= self.points.len()) {
+                return bad(format!("node {i} names a corner beyond the points"));
+            }
+            if let Some((a, b, axis)) = node.split {
+                if a >= n || b >= n || a <= i || b <= i || axis >= nx {
+                    return bad(format!("node {i} has a malformed split"));
+                }
+            }
+        }
+        if let Some((leaf, _)) = self.bounds.iter().find(|(l, _)| *l >= n) {
+            return bad(format!("a bound of node {leaf} of {n} nodes"));
+        }
+        let models = self.model.iter().chain(self.best.iter().map(|(_, m)| m));
+        if models
+            .into_iter()
+            .any(|m| (m.mlp.nx(), m.mlp.nu()) != (nx, nu))
+        {
+            return bad(format!(
+                "a network that does not map {nx} states to {nu} inputs"
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The geometry of the lattice.

@@ -235,6 +235,8 @@ pub fn refine(
                     path: p.to_path_buf(),
                 });
             }
+            let roots = counts.iter().map(|c| c - 1).product();
+            st.check_consistent(&lat.max, roots, cfg.system.nu(), p)?;
             Some(st)
         }
         None => None,

@@ -71,6 +71,36 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
     // The domain's upper corner belongs to a cell too.
     let leaf = leaf_of(&st, &lat, &counts, &cfg.domain.hi);
     assert!(st.nodes[leaf].split.is_none());
+
+    // A checkpoint whose contents do not fit the lattice is refused, naming the file.
+    let path = std::path::Path::new("runs/x/refine_state.bin");
+    let nu = cfg.system.nu();
+    assert!(st.check_consistent(&lat.max, 6, nu, path).is_ok());
+    let last = st.nodes.len() - 1;
+    let edits: [(&str, Box<dyn Fn(&mut RefineState)>); 6] = [
+        ("roots", Box::new(|s| s.roots[0] = 1 << 40)),
+        ("roots", Box::new(|s| s.roots.pop().map(drop).unwrap_or(()))),
+        ("split", Box::new(|s| s.nodes[last].split = Some((0, 1, 0)))),
+        (
+            "split",
+            Box::new(|s| s.nodes[0].split = Some((last, last, 2))),
+        ),
+        (
+            "dims",
+            Box::new(|s| s.points[3].du.pop().map(drop).unwrap_or(())),
+        ),
+        ("lattice", Box::new(|s| s.points[2].key[1] = u64::MAX)),
+    ];
+    for (what, edit) in edits {
+        let mut bad = st.clone();
+        edit(&mut bad);
+        let e = bad.check_consistent(&lat.max, 6, nu, path).unwrap_err();
+        let m = e.to_string();
+        assert!(
+            m.contains("runs/x/refine_state.bin") && m.contains("inconsistent"),
+            "{what}: {m}"
+        );
+    }
 }
 
 /// `--data`: corners of the initial grid take the labels of records at their states (within
