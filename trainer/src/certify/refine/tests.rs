@@ -77,7 +77,8 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
     let nu = cfg.system.nu();
     assert!(st.check_consistent(&lat.max, 6, nu, path).is_ok());
     let last = st.nodes.len() - 1;
-    let edits: [(&str, Box<dyn Fn(&mut RefineState)>); 6] = [
+    type Edit = Box<dyn Fn(&mut RefineState)>;
+    let edits: [(&str, Edit); 6] = [
         ("roots", Box::new(|s| s.roots[0] = 1 << 40)),
         ("roots", Box::new(|s| s.roots.pop().map(drop).unwrap_or(()))),
         ("split", Box::new(|s| s.nodes[last].split = Some((0, 1, 0)))),
