@@ -81,7 +81,10 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
     let edits: [(&str, Edit); 6] = [
         ("roots", Box::new(|s| s.roots[0] = 1 << 40)),
         ("roots", Box::new(|s| s.roots.pop().map(drop).unwrap_or(()))),
-        ("split", Box::new(|s| s.nodes[last].split = Some((0, 1, 0)))),
+        (
+            "split",
+            Box::new(move |s| s.nodes[last].split = Some((0, 1, 0))),
+        ),
         (
             "split",
             Box::new(|s| s.nodes[0].split = Some((last, last, 2))),
