@@ -87,7 +87,7 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
         ),
         (
             "split",
-            Box::new(|s| s.nodes[0].split = Some((last, last, 2))),
+            Box::new(move |s| s.nodes[0].split = Some((last, last, 2))),
         ),
         (
             "dims",
