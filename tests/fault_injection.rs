@@ -1,4 +1,5 @@
-//! Fault injection through the CLI (issue 14): every command killed (SIGKILL) at random times
+//! Fault injection through the CLI (issue 14): every command (`trainer run` included) killed
+//! (SIGKILL) at random times
 //! and rerun, and random bytes flipped in every input file type. Each outcome must be the
 //! clean run's result byte for byte, or a nonzero exit whose message names the file — never
 //! exit 0 with another result, never a panic. Flips that change a user-written input into
@@ -103,6 +104,27 @@ fn commands() -> Vec<Cmd> {
                 "ref/certificate.json",
             ],
         ),
+        // The whole pipeline; its result is every output but the manifests and the report
+        // (they record stage timings).
+        c(
+            "run",
+            &["run", "--config", "p.toml", "--out", "runs", "--quiet"],
+            &["p.toml"],
+            &[
+                "runs/double_integrator/dataset.bin",
+                "runs/double_integrator/dataset.csv",
+                "runs/double_integrator/validation.bin",
+                "runs/double_integrator/model_nominal.bin",
+                "runs/double_integrator/model_regularized.bin",
+                "runs/double_integrator/certificate.json",
+                "runs/double_integrator/certificate_nominal.json",
+                "runs/double_integrator/weights.rs",
+                "runs/double_integrator/weights.bin",
+                "runs/double_integrator/closed_loop.json",
+                "runs/double_integrator/seeds.json",
+                "runs/double_integrator/plots/figures.json",
+            ],
+        ),
         c(
             "solve",
             &[
@@ -135,7 +157,8 @@ fn setup(dir: &Path) {
         format!(
             "{small}\n# fault injection: a small problem\n[training]\nepochs = 20\nvalidation_n = 10\n\
              log_every = 50\n\n[refine]\nbudget = 120\ninitial = [4, 3]\nmax_rounds = 3\n\
-             target_eps = 100.0\n\n[refine.training]\nhidden = [6]\nepochs = 30\nvalidation_n = 10\n"
+             target_eps = 100.0\n\n[refine.training]\nhidden = [6]\nepochs = 30\nvalidation_n = 10\n\n\
+             [closed_loop]\nrandom_initial_states = 3\nnoise_runs = 1\nseeds = 2\n"
         ),
     )
     .unwrap();
@@ -207,10 +230,18 @@ fn print(title: &str, t: &BTreeMap<String, Counts>) {
 
 /// Kills each command `seeds` times at a random time within its clean run time (×1.2), reruns
 /// it, and compares the rerun's result with the clean one.
-fn kills(clean: &Path, seeds: u64, failures: &mut Vec<String>) -> BTreeMap<String, Counts> {
+fn kills(
+    clean: &Path,
+    seeds: u64,
+    only: Option<&str>,
+    failures: &mut Vec<String>,
+) -> BTreeMap<String, Counts> {
     let mut table = BTreeMap::new();
     let scratch = clean.parent().unwrap().join("kill");
-    for c in commands() {
+    for c in commands()
+        .into_iter()
+        .filter(|c| only.is_none_or(|o| o == c.name))
+    {
         let t0 = Instant::now();
         fresh(clean, &scratch, &c);
         let o = run_in(&scratch, &c.args);
@@ -347,12 +378,20 @@ fn partial(clean: &Path) -> Vec<u8> {
 }
 
 /// Flips `n` random bytes (one per trial) in each input file type and classifies the outcome.
-fn flips(clean: &Path, n: usize, failures: &mut Vec<String>) -> BTreeMap<String, Counts> {
+fn flips(
+    clean: &Path,
+    n: usize,
+    only: Option<&str>,
+    failures: &mut Vec<String>,
+) -> BTreeMap<String, Counts> {
     let mut table = BTreeMap::new();
     let scratch = clean.parent().unwrap().join("flip");
     let cmds = commands();
     std::fs::write(clean.join("d.bin.partial"), partial(clean)).unwrap();
-    for t in &TARGETS {
+    for t in TARGETS
+        .iter()
+        .filter(|t| only.is_none_or(|o| o == t.command))
+    {
         let c = cmds.iter().find(|c| c.name == t.command).unwrap();
         let want = {
             fresh(clean, &scratch, c);
@@ -406,16 +445,18 @@ fn flips(clean: &Path, n: usize, failures: &mut Vec<String>) -> BTreeMap<String,
     table
 }
 
-fn campaign(seeds: u64, n: usize) {
+/// `seeds` kills per command and `n` flips per file type (only those of command `only`, if
+/// given).
+fn campaign(seeds: u64, n: usize, only: Option<&str>) {
     let dir = tempdir();
     let clean = dir.path().join("clean");
     std::fs::create_dir_all(&clean).unwrap();
     let t = Instant::now();
     setup(&clean);
     let mut failures = Vec::new();
-    let k = kills(&clean, seeds, &mut failures);
+    let k = kills(&clean, seeds, only, &mut failures);
     print(&format!("kills ({seeds} seeds per command)"), &k);
-    let f = flips(&clean, n, &mut failures);
+    let f = flips(&clean, n, only, &mut failures);
     print(&format!("byte flips ({n} per file type)"), &f);
     println!("campaign: {:.1} s", t.elapsed().as_secs_f64());
     let bad: usize = k.values().chain(f.values()).map(Counts::bad).sum();
@@ -428,11 +469,23 @@ fn campaign(seeds: u64, n: usize) {
 
 #[test]
 fn fault_injection_subset() {
-    campaign(2, 6);
+    campaign(2, 6, None);
 }
 
 #[test]
 #[ignore = "the full campaign (minutes): cargo test -p ampc-tests --test fault_injection -- --ignored --nocapture"]
 fn fault_injection_full() {
-    campaign(50, 100);
+    campaign(50, 100, None);
+}
+
+#[test]
+#[ignore = "50 kills of `trainer run` alone (minutes): cargo test -p ampc-tests --test fault_injection kill_run -- --ignored --nocapture"]
+fn kill_run_full() {
+    campaign(50, 0, Some("run"));
+}
+
+#[test]
+#[ignore = "50 kills of `export` and 100 flips of the certificate it reads: cargo test -p ampc-tests --test fault_injection export_full -- --ignored --nocapture"]
+fn export_full() {
+    campaign(50, 100, Some("export"));
 }
