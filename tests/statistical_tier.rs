@@ -166,4 +166,38 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     assert!(!store.exists());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v.get("statistical").is_none());
+    assert!(v.get("statistical_closed_loop").is_none());
+
+    // The closed loop's tier: n trajectories, k violating, the Clopper–Pearson bound of
+    // (n, k); the same seed gives the same bytes; the certificate stays sealed.
+    let o = certify(&["--statistical-closed-loop", "120"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert_eq!(
+        trainer::certify::seal::verify(&text, "stdout"),
+        Ok(trainer::certify::seal::Seal::Verified)
+    );
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let b = &v["statistical_closed_loop"];
+    for part in ["all", "feasible_starts"] {
+        let (n, k) = (
+            b[part]["trajectories"].as_u64().unwrap(),
+            b[part]["violating"].as_u64().unwrap(),
+        );
+        assert!(k <= n && n <= 120, "{b}");
+        let p = trainer::certify::statistical::clopper_pearson_upper(n, k, 0.99);
+        assert_eq!(b[part]["p_violation_upper"].as_f64().unwrap(), p, "{b}");
+    }
+    assert_eq!(b["all"]["trajectories"], 120);
+    assert_eq!(b["confidence"], 0.99);
+    let again = certify(&["--statistical-closed-loop", "120"]);
+    assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
+    let o = certify(&[
+        "--statistical-closed-loop",
+        "5",
+        "--closed-loop-confidence",
+        "1",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--closed-loop-confidence"));
 }

@@ -34,6 +34,39 @@ pub(super) struct StatisticalArgs {
     statistical_store: Option<PathBuf>,
 }
 
+/// `--statistical-closed-loop N`: the closed-loop statistical tier
+/// ([`trainer::study::statistical_loop`]).
+#[derive(clap::Args, Debug, Clone)]
+pub(super) struct ClosedLoopArgs {
+    /// Also bound P(a closed-loop trajectory of the deployed controller from a uniform random
+    /// initial state violates a constraint) from this many trajectories (Clopper–Pearson).
+    #[arg(long, value_name = "N")]
+    statistical_closed_loop: Option<usize>,
+    /// Confidence 1 − β of the closed-loop bound.
+    #[arg(long, default_value_t = 0.99, requires = "statistical_closed_loop")]
+    closed_loop_confidence: f64,
+    /// Seed of the closed loop's initial states.
+    #[arg(long, default_value_t = DEFAULT_SEED, requires = "statistical_closed_loop")]
+    closed_loop_seed: u64,
+}
+
+impl ClosedLoopArgs {
+    /// (trajectories, seed, confidence), checked; None without the flag.
+    pub(super) fn options(&self) -> Result<Option<(usize, u64, f64)>> {
+        let Some(n) = self.statistical_closed_loop else {
+            return Ok(None);
+        };
+        if n == 0 {
+            bail!("--statistical-closed-loop must be at least 1");
+        }
+        let c = self.closed_loop_confidence;
+        if !(c > 0.0 && c < 1.0) {
+            bail!("--closed-loop-confidence must be in (0, 1), got {c}");
+        }
+        Ok(Some((n, self.closed_loop_seed, c)))
+    }
+}
+
 impl StatisticalArgs {
     /// The options and the store path (`default_store` unless `--statistical-store`), or
     /// None without `--statistical`.
@@ -65,6 +98,7 @@ pub(super) fn execute(
     l_mpc: Option<f64>,
     json: bool,
     stat: Option<&(StatisticalOptions, PathBuf)>,
+    closed_loop: Option<(usize, u64, f64)>,
 ) -> Result<()> {
     let m = super::common::load_model(model)?;
     let d = Dataset::load(data)?;
@@ -101,8 +135,27 @@ pub(super) fn execute(
         }
         None => None,
     };
+    let loop_bound = closed_loop.map(|(n, seed, conf)| {
+        if !json {
+            eprintln!(
+                "closed loop: {n} trajectories of {} steps …",
+                cfg.closed_loop.steps
+            );
+        }
+        trainer::study::statistical_loop::closed_loop_statistical(
+            &cfg,
+            &m.mlp,
+            (&c.clamp_lo, &c.clamp_hi),
+            n,
+            seed,
+            conf,
+        )
+    });
     if json {
         let mut v = trainer::certify::tier::certificate_json(&c);
+        if let (Some(b), Some(o)) = (&loop_bound, v.as_object_mut()) {
+            o.insert("statistical_closed_loop".into(), serde_json::to_value(b)?);
+        }
         if let (Some(r), Some(o)) = (req, v.as_object_mut()) {
             o.insert("requirement".into(), serde_json::to_value(r)?);
         }
@@ -140,6 +193,22 @@ pub(super) fn execute(
     }
     if let Some(st) = &statistical {
         print_statistical(st);
+    }
+    if let Some(b) = &loop_bound {
+        println!(
+            "  closed loop      P(trajectory violates) ≤ {:.3e} with confidence {} ({} of {} \
+             trajectories of {} steps; from MPC-feasible starts: ≤ {:.3e}, {} of {}; largest \
+             violation {:.3e}; statistical, Clopper–Pearson)",
+            b.all.p_violation_upper,
+            b.confidence,
+            b.all.violating,
+            b.all.trajectories,
+            b.steps,
+            b.feasible_starts.p_violation_upper,
+            b.feasible_starts.violating,
+            b.feasible_starts.trajectories,
+            b.max_violation
+        );
     }
     if let Some(r) = req {
         match (r.delta, r.spacing, r.solves) {

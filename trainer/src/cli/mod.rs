@@ -18,7 +18,7 @@ mod solve;
 mod train;
 
 use anyhow::Result;
-use certify::StatisticalArgs;
+use certify::{ClosedLoopArgs, StatisticalArgs};
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use trainer::data::dataset::csv_path;
@@ -138,6 +138,8 @@ enum Cmd {
         json: bool,
         #[command(flatten)]
         statistical: StatisticalArgs,
+        #[command(flatten)]
+        closed_loop: ClosedLoopArgs,
     },
     /// Evaluate a model at the states of a CSV file: outputs and Jacobians.
     Eval {
@@ -359,6 +361,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             l_mpc,
             json,
             statistical,
+            closed_loop,
         } => {
             let stat = statistical.options(model.with_extension("statistical.bin"))?;
             certify::execute(
@@ -369,6 +372,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 l_mpc,
                 json,
                 stat.as_ref(),
+                closed_loop.options()?,
             )
         }
         Cmd::Eval {

@@ -5,6 +5,8 @@
 //! - [`plots`]: the figures (trajectories, error box plots, the error map, training curves,
 //!   the local-certificate map), SVG and PNG.
 //! - [`report`]: the run report in Markdown and self-contained HTML.
+//! - [`statistical_loop`]: the Clopper–Pearson bound on P(a closed-loop trajectory from a
+//!   uniform random x₀ violates a constraint).
 //!
 //! Imports every earlier stage; nothing but `pipeline` and `cli` imports it.
 
@@ -14,3 +16,4 @@ pub mod report;
 pub mod robust;
 pub mod scenarios;
 pub mod seeds;
+pub mod statistical_loop;

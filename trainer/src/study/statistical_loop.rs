@@ -1,0 +1,212 @@
+//! [`ClosedLoopStatistical`]: the statistical tier for the closed loop — how likely a
+//! trajectory of the deployed controller from a random initial state violates a constraint.
+//!
+//! n initial states x₀ i.i.d. uniform on X (seeded); each runs `closed_loop.steps` steps of
+//!
+//! ```text
+//! x_{k+1} = F(x_k, sat_U(clamp_band(κ_NN(x_k))))          (nominal plant, no noise)
+//! ```
+//!
+//! and counts as violating if any step violates a state bound or a path constraint by more
+//! than [`VIOLATION_TOL`] ([`step_violation`], the closed-loop study's rule). With k
+//! violating trajectories, the Clopper–Pearson upper bound p̄ on
+//! p = P(trajectory violates) at confidence 1 − β is
+//! [`clopper_pearson_upper`](crate::certify::statistical::clopper_pearson_upper)(n, k, 1 − β).
+//! It rests on the x₀ being i.i.d. uniform on X and on the plant model; nothing else. Starts
+//! where the MPC itself has no hard-feasible solution (its label is soft) violate for
+//! reasons no controller can remove, so the bound is also given over the feasible starts
+//! alone (the conditional distribution: still i.i.d.).
+
+use crate::certify::statistical::clopper_pearson_upper;
+use crate::learn::mlp::Mlp;
+use crate::mpc::law::MpcLaw;
+use crate::mpc::sqp::SqpStatus;
+use crate::problem::model::Discrete;
+use crate::problem::ProblemConfig;
+use crate::rng::uniform;
+use crate::study::closed_loop::{step_violation, VIOLATION_TOL};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// A Clopper–Pearson bound from n trials with k events.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Bound {
+    /// n: trajectories.
+    pub trajectories: u64,
+    /// k: of which violated a constraint.
+    pub violating: u64,
+    /// Upper bound on P(violation) at the confidence.
+    pub p_violation_upper: f64,
+}
+
+impl Bound {
+    fn new(n: u64, k: u64, confidence: f64) -> Self {
+        Bound {
+            trajectories: n,
+            violating: k,
+            p_violation_upper: clopper_pearson_upper(n, k, confidence),
+        }
+    }
+}
+
+/// The closed-loop statistical tier (`"statistical_closed_loop"` in `certificate.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ClosedLoopStatistical {
+    /// Over all initial states of X.
+    pub all: Bound,
+    /// Over the initial states where the MPC is hard-feasible.
+    pub feasible_starts: Bound,
+    /// 1 − β.
+    pub confidence: f64,
+    /// Steps per trajectory.
+    pub steps: usize,
+    /// Seed of the initial states (`crate::rng::uniform` streams).
+    pub seed: u64,
+    /// Largest violation seen.
+    pub max_violation: f64,
+    /// What the bound rests on, in words.
+    pub rests_on: String,
+}
+
+/// One trajectory: whether it violated, its largest violation.
+fn trajectory(
+    cfg: &ProblemConfig,
+    plant: &Discrete,
+    net: &Mlp,
+    band: (&[f64], &[f64]),
+    x0: &[f64],
+) -> f64 {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let constraints = cfg.constraint_set().ok().flatten();
+    let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
+    let mut x = x0.to_vec();
+    let mut next = vec![0.0; nx];
+    let mut worst = 0.0f64;
+    for k in 0..cfg.closed_loop.steps {
+        let mut u = net.predict(&x);
+        for j in 0..nu {
+            // The deployed controller: clamp to the band, then the actuator saturates; a
+            // non-finite output is the band's centre (controller-core's fallback rule).
+            u[j] = if u[j].is_finite() {
+                u[j].clamp(band.0[j], band.1[j]).clamp(ulo[j], uhi[j])
+            } else {
+                0.5 * (ulo[j] + uhi[j])
+            };
+        }
+        plant.step(&x, &u, &mut next);
+        let v = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
+        worst = worst.max(if v.is_nan() { f64::INFINITY } else { v });
+        x.copy_from_slice(&next);
+    }
+    worst
+}
+
+/// Runs `n` trajectories of the controller `net` clamped to `band` from seeded uniform
+/// initial states and bounds the violation probability at `confidence`.
+pub fn closed_loop_statistical(
+    cfg: &ProblemConfig,
+    net: &Mlp,
+    band: (&[f64], &[f64]),
+    n: usize,
+    seed: u64,
+    confidence: f64,
+) -> ClosedLoopStatistical {
+    let nx = cfg.system.nx();
+    let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    let results: Vec<(bool, f64)> = (0..n as u64)
+        .into_par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, i| {
+                let x0: Vec<f64> = (0..nx)
+                    .map(|k| {
+                        let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
+                        lo + (hi - lo) * uniform(seed, i, k as u64)
+                    })
+                    .collect();
+                let feasible = law.solve(&x0, None).0.status == SqpStatus::Converged;
+                (feasible, trajectory(cfg, &plant, net, band, &x0))
+            },
+        )
+        .collect();
+    let violates = |v: f64| v > VIOLATION_TOL;
+    let k_all = results.iter().filter(|(_, v)| violates(*v)).count() as u64;
+    let feas: Vec<f64> = results
+        .iter()
+        .filter(|(f, _)| *f)
+        .map(|(_, v)| *v)
+        .collect();
+    let k_feas = feas.iter().filter(|v| violates(**v)).count() as u64;
+    ClosedLoopStatistical {
+        all: Bound::new(n as u64, k_all, confidence),
+        feasible_starts: Bound::new(feas.len() as u64, k_feas, confidence),
+        confidence,
+        steps: cfg.closed_loop.steps,
+        seed,
+        max_violation: results.iter().map(|(_, v)| *v).fold(0.0, f64::max),
+        rests_on: format!(
+            "initial states i.i.d. uniform on X (seed {seed}); the nominal plant model; the \
+             controller as deployed (clamp band, actuator saturation), f64 arithmetic; \
+             {} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a state bound or \
+             path constraint",
+            cfg.closed_loop.steps
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A net of constant output `u` (output half-width 0).
+    fn constant(cfg: &ProblemConfig, u: f64) -> Mlp {
+        let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+        let act = crate::learn::mlp::Activation::Tanh;
+        Mlp::new(&[cfg.system.nx(), 3, 1], act, 1, lo, hi, &[u], &[u])
+    }
+
+    /// Counted against an independent count: every trajectory re-simulated here with the
+    /// plant stepped by hand, and the bound against the closed form of k = 0.
+    #[test]
+    fn counts_match_a_direct_simulation() {
+        let mut cfg = ProblemConfig::default();
+        cfg.closed_loop.steps = 30;
+        let band = (cfg.ocp.u_lo.clone(), cfg.ocp.u_hi.clone());
+        for u in [0.0, 15.0] {
+            let net = constant(&cfg, u);
+            let s = closed_loop_statistical(&cfg, &net, (&band.0, &band.1), 40, 7, 0.99);
+            let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+            let mut k = 0;
+            for i in 0..40u64 {
+                let mut x: Vec<f64> = (0..2)
+                    .map(|j| {
+                        let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
+                        lo + (hi - lo) * uniform(7, i, j as u64)
+                    })
+                    .collect();
+                let mut bad = false;
+                let mut next = vec![0.0; 2];
+                for _ in 0..30 {
+                    plant.step(&x, &[u], &mut next);
+                    bad |= (0..2).any(|j| {
+                        next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6
+                    });
+                    x.copy_from_slice(&next);
+                }
+                k += bad as u64;
+            }
+            assert_eq!(s.all.violating, k, "u = {u}");
+            assert_eq!(s.all.trajectories, 40);
+            assert!(s.feasible_starts.trajectories <= 40);
+            assert!(s.feasible_starts.violating <= s.all.violating);
+            if k == 0 {
+                assert!((s.all.p_violation_upper - (1.0 - 0.01f64.powf(1.0 / 40.0))).abs() < 1e-12);
+            }
+        }
+        // A constant full torque drives the pendulum's velocity out of its bound from
+        // most states: the two inputs cannot both give no violations.
+        let full =
+            closed_loop_statistical(&cfg, &constant(&cfg, 15.0), (&band.0, &band.1), 40, 7, 0.99);
+        assert!(full.all.violating > 0, "{full:?}");
+    }
+}
