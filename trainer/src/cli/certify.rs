@@ -67,6 +67,14 @@ impl ClosedLoopArgs {
     }
 }
 
+/// The statistical tiers asked for on the command line.
+pub(super) struct Tiers<'a> {
+    /// `--statistical N` and its store.
+    pub statistical: Option<&'a (StatisticalOptions, PathBuf)>,
+    /// `--statistical-closed-loop N`: (trajectories, seed, confidence).
+    pub closed_loop: Option<(usize, u64, f64)>,
+}
+
 impl StatisticalArgs {
     /// The options and the store path (`default_store` unless `--statistical-store`), or
     /// None without `--statistical`.
@@ -97,9 +105,12 @@ pub(super) fn execute(
     target: Option<f64>,
     l_mpc: Option<f64>,
     json: bool,
-    stat: Option<&(StatisticalOptions, PathBuf)>,
-    closed_loop: Option<(usize, u64, f64)>,
+    tiers: Tiers<'_>,
 ) -> Result<()> {
+    let Tiers {
+        statistical: stat,
+        closed_loop,
+    } = tiers;
     let m = super::common::load_model(model)?;
     let d = Dataset::load(data)?;
     let cfg = problem_for_data(config, data, &d)?;

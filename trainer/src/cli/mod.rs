@@ -371,8 +371,10 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 target_eps,
                 l_mpc,
                 json,
-                stat.as_ref(),
-                closed_loop.options()?,
+                certify::Tiers {
+                    statistical: stat.as_ref(),
+                    closed_loop: closed_loop.options()?,
+                },
             )
         }
         Cmd::Eval {
