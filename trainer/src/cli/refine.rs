@@ -105,7 +105,8 @@ pub(super) fn execute(
                 checked = Some(c);
                 break;
             }
-            let split = refine::reopen(&cfg, &rs, &r, &p.leaves, &p.jump_states, &checkpoint)?;
+            let split =
+                refine::reopen(&cfg, &rs, &r.state, &p.leaves, &p.jump_states, &checkpoint)?;
             if !quiet {
                 eprintln!(
                     "per-cell check failed (miss rate {:.4} > {}, {} over ε_C, {} jumps in {} \

@@ -254,3 +254,137 @@ fn remainder_shrinks_quadratically_where_smooth_and_linearly_across_a_kink() {
         prev = Some(b.remainder);
     }
 }
+
+/// Bound of the cell [lo, hi] of `law` (corners only) with a given centre sample and
+/// neighbourhood.
+fn bound_with_extras(
+    law: &Law,
+    m: &Mlp,
+    lo: [f64; 2],
+    hi: [f64; 2],
+    centre: Option<(f64, [f64; 2], u64)>,
+    reg: &Regional,
+    s: &LocalSettings,
+) -> CellBound {
+    let nb = NetBounder::new(m);
+    let mut data = Vec::new();
+    let mut net_u = Vec::new();
+    for c in 0..4 {
+        let x = [
+            if c & 1 == 0 { lo[0] } else { hi[0] },
+            if c & 2 == 0 { lo[1] } else { hi[1] },
+        ];
+        let (u, g, p) = law(&x);
+        data.push(([u], g, p));
+        net_u.push(m.predict(&x)[0]);
+    }
+    let corners: Vec<Corner> = data
+        .iter()
+        .map(|(u, g, p)| Corner {
+            u,
+            du: g,
+            regular: true,
+            piece: *p,
+        })
+        .collect();
+    let cd = centre.map(|(u, g, p)| ([u], g, p));
+    let cc = cd.as_ref().map(|(u, g, p)| Corner {
+        u,
+        du: g,
+        regular: true,
+        piece: *p,
+    });
+    cell_bound(
+        &lo,
+        &hi,
+        &corners,
+        cc.as_ref(),
+        reg,
+        &net_u,
+        &nb.bounds(&lo, &hi),
+        (&[-2.0], &[2.0]),
+        s,
+    )
+}
+
+/// The regional floor: a cell whose corners agree (κ constant there, ∂κ = 0) gets no MPC
+/// term from its corners, but a nonzero one once its neighbourhood varies — the same
+/// bound as the network alone without the floor, a larger one with it, growing with c.
+#[test]
+fn the_floor_gives_a_cell_with_equal_corners_a_nonzero_mpc_term() {
+    let m = net();
+    let flat = |_: &[f64]| (1.0, [0.0, 0.0], 0u64);
+    let (lo, hi) = ([0.1, 0.1], [0.3, 0.3]);
+    let reg = Regional {
+        spread: vec![3.0, 0.5],
+        quotient: vec![15.0, 2.5],
+    };
+    let off = LocalSettings {
+        floor: 0.0,
+        ..Default::default()
+    };
+    let none = bound_with_extras(&flat, &m, lo, hi, None, &Regional::default(), &off);
+    let ignored = bound_with_extras(&flat, &m, lo, hi, None, &reg, &off);
+    assert_eq!(none, ignored, "floor 0: the neighbourhood changes nothing");
+    let mut prev = none.remainder;
+    for c in [0.25, 0.5, 1.0] {
+        let s = LocalSettings {
+            floor: c,
+            ..Default::default()
+        };
+        let b = bound_with_extras(&flat, &m, lo, hi, None, &reg, &s);
+        assert!(
+            b.remainder > prev,
+            "floor {c}: remainder {} not above {prev}",
+            b.remainder
+        );
+        prev = b.remainder;
+    }
+}
+
+/// The centre check: a smooth cell uses the second-order form when its solved centre has
+/// the corners' active set and agrees with the curvature estimate, and falls back to the
+/// first-order form when the centre is in another active set (a pocket at the centre) or
+/// departs from the corners' interpolant by more than the estimate allows.
+#[test]
+fn the_second_order_form_needs_a_consistent_centre() {
+    let m = net();
+    let sm = |x: &[f64]| {
+        let (u, g) = smooth(x);
+        (u, g, 0u64)
+    };
+    let s = LocalSettings::default();
+    let (lo, hi) = ([0.1, 0.1], [0.15, 0.15]);
+    let c = [0.125, 0.125];
+    let (uc, gc) = smooth(&c);
+    let reg = Regional::default();
+    let unchecked = bound_with_extras(&sm, &m, lo, hi, None, &reg, &s);
+    assert_eq!(unchecked.form, Form::SecondOrder);
+    let good = bound_with_extras(&sm, &m, lo, hi, Some((uc, gc, 0)), &reg, &s);
+    assert_eq!(good.form, Form::SecondOrder, "the true centre agrees");
+    let other_set = bound_with_extras(&sm, &m, lo, hi, Some((uc, gc, 9)), &reg, &s);
+    assert_eq!(
+        other_set.form,
+        Form::FirstOrder,
+        "another active set at the centre"
+    );
+    // A centre value off by 10× the interpolation error the estimate allows there.
+    let mean: f64 = (0..4)
+        .map(|k| {
+            smooth(&[
+                if k & 1 == 0 { lo[0] } else { hi[0] },
+                if k & 2 == 0 { lo[1] } else { hi[1] },
+            ])
+            .0
+        })
+        .sum::<f64>()
+        / 4.0;
+    let allowed = (uc - mean).abs().max(1e-6) * 20.0;
+    let off = bound_with_extras(&sm, &m, lo, hi, Some((mean + allowed, gc, 0)), &reg, &s);
+    assert_eq!(
+        off.form,
+        Form::FirstOrder,
+        "curvature inconsistent with the estimate"
+    );
+    assert!(off.eps >= good.eps);
+}

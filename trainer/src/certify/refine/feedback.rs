@@ -8,18 +8,18 @@ use crate::io::write_atomic;
 use crate::problem::RefineSettings;
 use std::path::Path;
 
-/// Splits the leaves `leaves` of `r`'s state (those still splittable: at least two lattice
+/// Splits the leaves `leaves` of the finished state `state` (those still splittable: at least two lattice
 /// steps and `min_width` along the chosen side), adds `jumps` to its jump states and writes
 /// the reopened state to `checkpoint`. Returns the number of cells split.
 pub fn reopen(
     cfg: &ProblemConfig,
     rs: &RefineSettings,
-    r: &rounds::Refined,
+    state: &RefineState,
     leaves: &[usize],
     jumps: &[Vec<f64>],
     checkpoint: &Path,
 ) -> Result<usize, RefineError> {
-    let mut st = r.state.clone();
+    let mut st = state.clone();
     let counts = rs.initial_counts(cfg.system.nx());
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let mut ctx = Ctx {

@@ -471,4 +471,6 @@ impl Ctx<'_> {
 }
 
 #[cfg(test)]
+mod cellcheck_tests;
+#[cfg(test)]
 mod tests;
