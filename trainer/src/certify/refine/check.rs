@@ -228,7 +228,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             seed,
         },
         || MpcLaw::new(cfg),
-        |law, x, near| mpc_sample(law, x, near),
+        mpc_sample,
     );
     Check {
         per_cell,
