@@ -225,3 +225,63 @@ fn a_jump_of_kappa_is_flagged_and_its_cell_never_certified() {
         assert_eq!(b.eps.is_infinite(), jumped.contains(n), "leaf {n}: {b:?}");
     }
 }
+
+/// The regional floor on a refinement state: the cell [0, 0.4]² of the law
+/// κ = 3·max(0, x₁ − 0.45) has equal corners (κ = 0, ∂κ = 0), its outward neighbours at
+/// x₁ = 0.8 have ∂₁κ = 3: G = (3, 0), Q = (3/0.4, 0); with the floor the cell's bound has an
+/// MPC term (a larger remainder than the network's alone), without it none.
+#[test]
+fn the_floor_reads_the_neighbours_of_a_cell_with_equal_corners() {
+    let (cfg, mut rs, m) = setup();
+    let law = |x: &[f64]| {
+        let on = x[0] > 0.45;
+        (
+            3.0 * (x[0] - 0.45).max(0.0),
+            [if on { 3.0 } else { 0.0 }, 0.0],
+            on as u64,
+        )
+    };
+    let (st, lat) = labelled_state(&cfg, &rs, &m, &law);
+    let leaf = check::leaf_of(&st, &lat, &rs.initial_counts(2), &[0.2, 0.2]);
+    let idx = region::index(&st);
+    let reg = region::regional(&st, &idx, &lat, &st.nodes[leaf], 0.5);
+    assert_eq!(reg.spread, vec![3.0, 0.0]);
+    assert!((reg.quotient[0] - 3.0 / 0.4).abs() < 1e-12 && reg.quotient[1] == 0.0);
+    let with = st
+        .bounds
+        .iter()
+        .find(|(n, _)| *n == leaf)
+        .unwrap()
+        .1
+        .clone();
+    rs.floor = 0.0;
+    let mut st0 = st.clone();
+    bound(&mut st0, &lat, &rs, &m);
+    let without = st0
+        .bounds
+        .iter()
+        .find(|(n, _)| *n == leaf)
+        .unwrap()
+        .1
+        .clone();
+    let zero = |_: &[f64]| (0.0, [0.0, 0.0], 0u64);
+    let (mut stz, _) = labelled_state(&cfg, &rs, &m, &zero);
+    bound(&mut stz, &lat, &rs, &m);
+    let net_only = stz
+        .bounds
+        .iter()
+        .find(|(n, _)| *n == leaf)
+        .unwrap()
+        .1
+        .clone();
+    assert_eq!(
+        without.remainder, net_only.remainder,
+        "no floor: no MPC term"
+    );
+    assert!(
+        with.remainder > net_only.remainder + 0.05,
+        "floor: {} vs network alone {}",
+        with.remainder,
+        net_only.remainder
+    );
+}
