@@ -116,6 +116,14 @@ fn refine_meets_its_target_and_passes_the_check() {
     assert_eq!(check["over_cell"], 0);
     assert_eq!(check["labelled"], 2000);
     assert_eq!(check["certified"].as_f64().unwrap(), eps);
+    // The per-cell check: every cell visited, its verdict passed (the command fails
+    // otherwise), the miss rate within the tolerance.
+    let pc = &check["per_cell"];
+    assert_eq!(pc["cells"], cert["local"]["cells"]);
+    assert!(pc["states"].as_u64().unwrap() >= pc["cells"].as_u64().unwrap());
+    assert_eq!(pc["passed"], true, "{pc}");
+    assert!(pc["miss_rate"].as_f64().unwrap() <= pc["tolerance"].as_f64().unwrap());
+    assert_eq!(pc["jumps"], 0);
     // The statistical tier: 1000 other i.i.d. states; ε held at all of them (as at the
     // check's), so the bound is the closed form 1 − β^{1/n}.
     let st = &cert["statistical"];

@@ -27,19 +27,29 @@
 //! 0); otherwise the clamp may kink inside C, ∂_k sat(κ_NN) ∈ hull(J_k ∪ {0}) and only the
 //! first-order form applies.
 //!
-//! **MPC parts (estimates, with a safety factor s).** κ is known only at solved points:
-//! - range of ∂_k κ on C: the hull of the corner sensitivities ∂_k κ(v) and of the secant
+//! **MPC parts (estimates, with a safety factor s and a regional floor c).** κ is known
+//! only at solved points:
+//! - range of ∂_k κ on C: the hull of the corner sensitivities ∂_k κ(v), of the secant
 //!   slopes (κ(v + w_k e_k) − κ(v))/w_k along the k-edges (by the mean-value theorem each
 //!   secant is a value of ∂_k κ on its edge, so an active-set change inside C shows up in
-//!   them), widened about its centre by the factor s;
+//!   them) and, where solved, of the centre's sensitivity, widened about its centre by the
+//!   factor s; its half-width is at least c·G_k (the **floor**), where G_k is the spread
+//!   max − min of ∂_k κ over the corners and the labelled points one cell width outside
+//!   them (the cell's neighbourhood, [`Regional`]): corners that agree no longer mean "no
+//!   variation" when the neighbourhood varies;
 //! - |∂²_kk κ| on C, only where all corners are regular hard solutions with the same
 //!   strongly active set (κ is smooth where the active set is constant — assumed to hold on
-//!   the whole cell): s × the largest edge difference quotient |∂_kκ(v + w_k e_k) −
-//!   ∂_kκ(v)| / w_k (each is a mean of ∂²_kk κ along its edge).
+//!   the whole cell) and, where the centre was solved, the centre too has that active set
+//!   and its value agrees with the curvature estimate (|κ(c) − Iκ(c)| ≤ Σ_k M_k w_k²/8, the
+//!   interpolation error the estimate allows at the centre); otherwise the first-order form
+//!   alone: M_k = max(s × the largest edge difference quotient |∂_kκ(v + w_k e_k) −
+//!   ∂_kκ(v)| / w_k (each is a mean of ∂²_kk κ along its edge), c × the largest such
+//!   quotient between a corner and its outward neighbour along k).
 //!
 //! These are estimates: a region of another active set strictly inside C, touching no
-//! corner, is not seen. The soundness check (`trainer refine --check`) measures how often
-//! the estimated ranges miss sampled values.
+//! corner and missing the centre, is not seen. The soundness check (`trainer refine
+//! --check`) samples every cell and measures how often the estimated ranges miss sampled
+//! sensitivities; it fails above a stated rate and names the cells.
 
 use crate::certify::netbounds::{BoxBounds, Iv};
 use serde::{Deserialize, Serialize};
@@ -55,11 +65,35 @@ pub const LABEL_TOL: f64 = 1e-6;
 pub struct LocalSettings {
     /// Safety factor s ≥ 1 on the estimated MPC parts (default 2).
     pub safety: f64,
+    /// Regional floor c ≥ 0 (default 0.5): the estimated range of ∂_kκ has half-width at
+    /// least c·G_k and the curvature estimate is at least c·Q_k ([`Regional`]).
+    pub floor: f64,
 }
 
 impl Default for LocalSettings {
     fn default() -> Self {
-        LocalSettings { safety: 2.0 }
+        LocalSettings {
+            safety: 2.0,
+            floor: 0.5,
+        }
+    }
+}
+
+/// What a cell's neighbourhood says about the MPC (per output i and axis k, row-major
+/// nu × nx; empty: nothing known, no floor). Built from the cell's corners and the labelled
+/// points one cell width outside them (`certify::refine`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Regional {
+    /// G_ik: the spread (max − min) of ∂_kκ_i over those points.
+    pub spread: Vec<f64>,
+    /// Q_ik: the largest |∂_kκ_i(v ± w_k e_k) − ∂_kκ_i(v)| / w_k over the corners v and
+    /// their labelled outward neighbours along k.
+    pub quotient: Vec<f64>,
+}
+
+impl Regional {
+    fn at(v: &[f64], i: usize, nx: usize, k: usize) -> f64 {
+        v.get(i * nx + k).copied().unwrap_or(0.0)
     }
 }
 
@@ -105,16 +139,20 @@ pub struct CellBound {
     pub exact: bool,
 }
 
-/// The estimated range of ∂κ_i/∂x_k over a cell (corner sensitivities and k-edge secant
-/// slopes, widened about their centre by `safety`) and the largest k-edge difference
-/// quotient of ∂κ_i/∂x_k (unscaled). `wk` is the cell's width along k.
+/// The estimated range of ∂κ_i/∂x_k over a cell (corner sensitivities, k-edge secant
+/// slopes and the centre's sensitivity if solved, widened about their centre by the safety
+/// factor, half-width at least floor·G_ik) and the curvature estimate M_ik (see the module
+/// doc). `wk` is the cell's width along k.
+#[allow(clippy::too_many_arguments)]
 pub fn mpc_slope_estimate(
     corners: &[Corner],
+    centre: Option<&Corner>,
+    reg: &Regional,
     wk: f64,
     nx: usize,
     i: usize,
     k: usize,
-    safety: f64,
+    s: &LocalSettings,
 ) -> (Iv, f64) {
     let (mut kmin, mut kmax) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut q = 0.0f64;
@@ -130,14 +168,53 @@ pub fn mpc_slope_estimate(
             q = q.max((d.du[i * nx + k] - g).abs() / wk);
         }
     }
-    let (mid, half) = (0.5 * (kmin + kmax), 0.5 * (kmax - kmin) * safety);
+    if let Some(&g) = centre
+        .and_then(|c| c.du.get(i * nx + k))
+        .filter(|g| g.is_finite())
+    {
+        kmin = kmin.min(g);
+        kmax = kmax.max(g);
+    }
+    let half = (0.5 * (kmax - kmin) * s.safety).max(s.floor * Regional::at(&reg.spread, i, nx, k));
+    let mid = 0.5 * (kmin + kmax);
+    let m = (s.safety * q).max(s.floor * Regional::at(&reg.quotient, i, nx, k));
     (
         Iv {
             lo: mid - half,
             hi: mid + half,
         },
-        q,
+        m,
     )
+}
+
+/// Whether a solved centre sample supports the second-order form on the cell: a regular
+/// hard solution with the corners' strongly active set, whose value departs from the
+/// corners' multilinear interpolant (at the centre: their mean) by at most the
+/// interpolation error the curvature estimate allows there, Σ_k M_ik w_k²/8 (+ the label
+/// allowance), for every output i.
+pub fn centre_consistent(
+    corners: &[Corner],
+    centre: &Corner,
+    reg: &Regional,
+    w: &[f64],
+    s: &LocalSettings,
+) -> bool {
+    let nx = w.len();
+    let nu = centre.u.len();
+    if !(centre.regular && centre.piece == corners[0].piece) {
+        return false;
+    }
+    (0..nu).all(|i| {
+        let mean = corners.iter().map(|c| c.u[i]).sum::<f64>() / corners.len() as f64;
+        let allowed: f64 = (0..nx)
+            .filter(|&k| w[k] > 0.0)
+            .map(|k| {
+                let (_, m) = mpc_slope_estimate(corners, None, reg, w[k], nx, i, k, s);
+                m * w[k] * w[k] / 8.0
+            })
+            .sum();
+        (centre.u[i] - mean).abs() <= allowed + 2.0 * LABEL_TOL
+    })
 }
 
 /// Where the clamp leaves κ_NN,i over the cell.
@@ -149,12 +226,17 @@ enum Clamp {
 }
 
 /// ε_C of the box [lo, hi] with corners `corners` (corner c has x_k = hi_k iff bit k of c
-/// is set), the network's outputs at the corners `net_u` (2ⁿ × nu, f64 evaluation), its
-/// enclosures `net` over the box and the clamp `band`.
+/// is set), the solved centre sample if any (`centre`; `None`: not checked, the corners
+/// alone decide the second-order form), the neighbourhood `reg`, the network's outputs at
+/// the corners `net_u` (2ⁿ × nu, f64 evaluation), its enclosures `net` over the box and the
+/// clamp `band`.
+#[allow(clippy::too_many_arguments)]
 pub fn cell_bound(
     lo: &[f64],
     hi: &[f64],
     corners: &[Corner],
+    centre: Option<&Corner>,
+    reg: &Regional,
     net_u: &[f64],
     net: &BoxBounds,
     band: (&[f64], &[f64]),
@@ -165,20 +247,18 @@ pub fn cell_bound(
     let finite = corners
         .iter()
         .all(|c| c.u.iter().chain(c.du).all(|v| v.is_finite()));
+    let w: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| b - a).collect();
     let smooth = corners
         .iter()
-        .all(|c| c.regular && c.piece == corners[0].piece);
-    let w: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| b - a).collect();
+        .all(|c| c.regular && c.piece == corners[0].piece)
+        && centre.is_none_or(|c| centre_consistent(corners, c, reg, &w, s));
     bound_with(
         lo,
         hi,
         finite,
         |c, i| corners[c].u[i],
         0.0,
-        |i, k| {
-            let (kr, q) = mpc_slope_estimate(corners, w[k], nx, i, k, s.safety);
-            (kr, s.safety * q)
-        },
+        |i, k| mpc_slope_estimate(corners, centre, reg, w[k], nx, i, k, s),
         smooth,
         net_u,
         net,
@@ -398,257 +478,4 @@ fn bound_with(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::certify::netbounds::NetBounder;
-    use crate::learn::mlp::{Activation, Mlp, Workspace};
-    use crate::rng::uniform;
-
-    /// A smooth "MPC law" with exact derivatives: κ(x) = 3 sin(x₁) + x₁x₂ + 0.5 x₂².
-    fn smooth(x: &[f64]) -> (f64, [f64; 2]) {
-        (
-            3.0 * x[0].sin() + x[0] * x[1] + 0.5 * x[1] * x[1],
-            [3.0 * x[0].cos() + x[1], x[0] + x[1]],
-        )
-    }
-    /// A kinked law (an active-set change along x₁ + 0.3 x₂ = 0.2), saturated at ±2.
-    fn kinked(x: &[f64]) -> (f64, [f64; 2], u64) {
-        let s = x[0] + 0.3 * x[1] - 0.2;
-        let (v, g, p) = if s > 0.0 {
-            (4.0 * s, [4.0, 1.2], 1)
-        } else {
-            (s, [1.0, 0.3], 0)
-        };
-        if v > 2.0 {
-            (2.0, [0.0, 0.0], 2)
-        } else if v < -2.0 {
-            (-2.0, [0.0, 0.0], 3)
-        } else {
-            (v, g, p)
-        }
-    }
-
-    fn net() -> Mlp {
-        Mlp::new(
-            &[2, 8, 8, 1],
-            Activation::Tanh,
-            3,
-            &[-2.0, -2.0],
-            &[2.0, 2.0],
-            &[-2.0],
-            &[2.0],
-        )
-    }
-
-    /// A test law: x ↦ (κ, ∂κ/∂x, active-set id).
-    type Law = dyn Fn(&[f64]) -> (f64, [f64; 2], u64);
-
-    /// Bounds a cell of `law`; returns (bound, max sampled |e|).
-    fn check_cell(law: &Law, m: &Mlp, lo: [f64; 2], hi: [f64; 2], seed: u64) -> (CellBound, f64) {
-        let nb = NetBounder::new(m);
-        let band = ([-2.0], [2.0]);
-        let mut us = Vec::new();
-        let mut dus = Vec::new();
-        let mut pieces = Vec::new();
-        let mut net_u = Vec::new();
-        for c in 0..4 {
-            let x = [
-                if c & 1 == 0 { lo[0] } else { hi[0] },
-                if c & 2 == 0 { lo[1] } else { hi[1] },
-            ];
-            let (u, g, p) = law(&x);
-            us.push([u]);
-            dus.push(g);
-            pieces.push(p);
-            net_u.push(m.predict(&x)[0]);
-        }
-        let corners: Vec<Corner> = (0..4)
-            .map(|c| Corner {
-                u: &us[c],
-                du: &dus[c],
-                regular: true,
-                piece: pieces[c],
-            })
-            .collect();
-        let b = cell_bound(
-            &lo,
-            &hi,
-            &corners,
-            &net_u,
-            &nb.bounds(&lo, &hi),
-            (&band.0, &band.1),
-            &LocalSettings::default(),
-        );
-        let mut worst = 0.0f64;
-        let mut ws = Workspace::default();
-        for s in 0..400u64 {
-            let x = [
-                lo[0] + (hi[0] - lo[0]) * uniform(seed, s, 0),
-                lo[1] + (hi[1] - lo[1]) * uniform(seed, s, 1),
-            ];
-            let (mut u, mut j) = ([0.0], [0.0; 2]);
-            m.eval(&x, &mut u, &mut j, &mut ws);
-            worst = worst.max((law(&x).0 - u[0].clamp(-2.0, 2.0)).abs());
-        }
-        (b, worst)
-    }
-
-    #[test]
-    fn bounds_hold_on_random_cells_of_smooth_and_kinked_laws() {
-        let m = net();
-        let sm = |x: &[f64]| {
-            let (u, g) = smooth(x);
-            (
-                u.clamp(-2.0, 2.0),
-                if u.abs() < 2.0 { g } else { [0.0; 2] },
-                (u.abs() >= 2.0) as u64 * (1 + (u > 0.0) as u64),
-            )
-        };
-        let mut second = 0;
-        for (li, law) in [&sm as &Law, &kinked].into_iter().enumerate() {
-            for cell in 0..300u64 {
-                let c = [
-                    -1.8 + 3.6 * uniform(40 + li as u64, cell, 0),
-                    -1.8 + 3.6 * uniform(40 + li as u64, cell, 1),
-                ];
-                let w = [0.4, 0.1, 0.02][cell as usize % 3];
-                let lo = [c[0] - w / 2.0, c[1] - w];
-                let hi = [c[0] + w / 2.0, c[1] + w];
-                let (b, worst) = check_cell(law, &m, lo, hi, cell);
-                assert!(
-                    worst <= b.eps,
-                    "law {li} cell {lo:?}..{hi:?}: observed {worst} > bound {b:?}"
-                );
-                second += (b.form == Form::SecondOrder) as usize;
-            }
-        }
-        assert!(
-            second > 50,
-            "the second-order form was used on {second} cells only"
-        );
-    }
-
-    /// Centre, radius and height of the pocket of [`pocket`].
-    const POCKET: ([f64; 2], f64, f64) = ([0.23, 0.21], 0.15, 5.0);
-
-    /// A law with an interior pocket: the linear κ₀ = x₁ + 0.3x₂ (active set 0), and on the
-    /// disk |x − p| < ρ another active set (1) that lifts κ by a cone H·(1 − |x − p|/ρ),
-    /// touching neither the corners nor the edges of the cell [0, 0.4]². With `lift` false:
-    /// κ₀ everywhere, but the active set still reported (the corner data a code would see
-    /// if it used only the corners' values and sensitivities).
-    fn pocket_law(x: &[f64], lift: bool) -> (f64, [f64; 2], u64) {
-        let ([p0, p1], rho, h) = POCKET;
-        let d = ((x[0] - p0).powi(2) + (x[1] - p1).powi(2)).sqrt();
-        let (mut u, mut g) = (x[0] + 0.3 * x[1], [1.0, 0.3]);
-        if lift && d < rho {
-            u += h * (1.0 - d / rho);
-            if d > 0.0 {
-                g[0] -= h / rho * (x[0] - p0) / d;
-                g[1] -= h / rho * (x[1] - p1) / d;
-            }
-        }
-        (u, g, (d < rho) as u64)
-    }
-
-    /// The pocket inside a cell: its corners (and edges) see only κ₀, so the cell's bound
-    /// equals that of κ₀ — the documented blind spot of corner data. One split, as the
-    /// refinement makes while ε_C is above its target, puts a corner into the pocket, and
-    /// then every child's bound covers the error sampled in it. In the child holding the
-    /// pocket's apex, the corner errors plus the network's part of the remainder alone are
-    /// exceeded by the samples: the bound must use the MPC's slope range on the cell (here
-    /// the pocket corner's sensitivity, which sees the cone's slope; the edge secants see
-    /// it too — a pocket corner with κ₀'s sensitivity would need the secants alone, not
-    /// tested here) and the change of active set (first-order form).
-    #[test]
-    fn a_pocket_inside_a_cell_is_covered_once_a_split_puts_a_corner_in_it() {
-        let m = net();
-        let pocket = |x: &[f64]| pocket_law(x, true);
-        let flat = |x: &[f64]| pocket_law(x, false);
-        let kappa0 = |x: &[f64]| (x[0] + 0.3 * x[1], [1.0, 0.3], 0u64);
-        let (parent, worst_parent) = check_cell(&pocket, &m, [0.0, 0.0], [0.4, 0.4], 5);
-        let (parent0, _) = check_cell(&kappa0, &m, [0.0, 0.0], [0.4, 0.4], 5);
-        assert_eq!(parent, parent0, "corner data cannot see the pocket");
-        eprintln!(
-            "parent cell: bound {} vs sampled max {worst_parent}",
-            parent.eps
-        );
-        for (lo, hi) in [
-            ([0.0, 0.0], [0.2, 0.2]),
-            ([0.2, 0.0], [0.4, 0.2]),
-            ([0.0, 0.2], [0.2, 0.4]),
-            ([0.2, 0.2], [0.4, 0.4]),
-        ] {
-            let (b, worst) = check_cell(&pocket, &m, lo, hi, 7);
-            assert_eq!(b.form, Form::FirstOrder, "{lo:?}: the active set changes");
-            assert!(
-                worst <= b.eps,
-                "child {lo:?}..{hi:?}: sampled {worst} > bound {b:?}"
-            );
-            // The network's part of the first-order remainder (κ₀'s secants equal its
-            // sensitivities, the active set change forces the first-order form).
-            let (b0, _) = check_cell(&flat, &m, lo, hi, 7);
-            let corners_only = b.corner + b0.remainder + LABEL_TOL;
-            eprintln!(
-                "child {lo:?}: bound {} (corner {}, remainder {}), sampled {worst}, \
-                 corners only {corners_only}",
-                b.eps, b.corner, b.remainder
-            );
-            if lo == [0.2, 0.2] {
-                assert!(
-                    worst > corners_only,
-                    "the apex's child does not discriminate: sampled {worst} ≤ {corners_only}"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn a_non_finite_network_gets_no_bound() {
-        let mut m = net();
-        let (lo, hi) = ([0.1, 0.1], [0.2, 0.2]);
-        let (b, _) = check_cell(&kinked, &m, lo, hi, 3);
-        assert!(b.eps.is_finite());
-        m.layers[0].b[0] = f64::NAN;
-        let (b, _) = check_cell(&kinked, &m, lo, hi, 3);
-        assert!(b.eps.is_infinite() && b.corner.is_infinite());
-    }
-
-    #[test]
-    fn remainder_shrinks_quadratically_where_smooth_and_linearly_across_a_kink() {
-        let m = net();
-        let sm = |x: &[f64]| {
-            let (u, g) = smooth(x);
-            (u, g, 0u64)
-        };
-        let mut prev: Option<f64> = None;
-        for e in 0..4 {
-            let w = 0.2 / f64::powi(2.0, e);
-            let (b, _) = check_cell(&sm, &m, [0.1, 0.1], [0.1 + w, 0.1 + w], 1);
-            assert_eq!(b.form, Form::SecondOrder);
-            if let Some(p) = prev {
-                let ratio = p / b.remainder;
-                assert!((3.5..4.5).contains(&ratio), "ratio {ratio}");
-            }
-            prev = Some(b.remainder);
-        }
-        // Across the kink (x₁ + 0.3x₂ = 0.2 through the cell centre): first order, ratio ≈ 2.
-        let mut prev: Option<f64> = None;
-        for e in 0..4 {
-            let w = 0.2 / f64::powi(2.0, e);
-            let (b, worst) = check_cell(
-                &kinked,
-                &m,
-                [0.2 - w / 2.0, -w / 2.0],
-                [0.2 + w / 2.0, w / 2.0],
-                2,
-            );
-            assert_eq!(b.form, Form::FirstOrder);
-            assert!(worst <= b.eps);
-            if let Some(p) = prev {
-                let ratio = p / b.remainder;
-                assert!((1.8..2.2).contains(&ratio), "ratio {ratio}");
-            }
-            prev = Some(b.remainder);
-        }
-    }
-}
+mod tests;

@@ -93,7 +93,36 @@ pub(super) fn execute(
         fixed,
     };
     let checkpoint = dir.join("refine_state.bin");
-    let r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
+    let mut r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
+    // `--check`: a failed per-cell check splits its offending cells and refines again, up
+    // to `[refine.check] feedback` times; the last check is the verdict.
+    let mut checked = None;
+    if let Some((n, check_seed)) = check {
+        for pass in 0..=rs.check.feedback {
+            let c = refine::check(&cfg, &rs, &r, n, check_seed);
+            let p = &c.per_cell;
+            if p.passed || pass == rs.check.feedback || p.leaves.is_empty() {
+                checked = Some(c);
+                break;
+            }
+            let split =
+                refine::reopen(&cfg, &rs, &r.state, &p.leaves, &p.jump_states, &checkpoint)?;
+            if !quiet {
+                eprintln!(
+                    "per-cell check failed (miss rate {:.4} > {}, {} over ε_C, {} jumps in {} \
+                     cells): {split} cells split, refining again (pass {}/{})",
+                    p.miss_rate,
+                    p.tolerance,
+                    p.over_cell,
+                    p.jumps,
+                    p.offending_cells,
+                    pass + 1,
+                    rs.check.feedback
+                );
+            }
+            r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
+        }
+    }
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
     if let Some((o, store)) = &stat {
         let s = trainer::certify::statistical::certify_statistically(
@@ -123,8 +152,8 @@ pub(super) fn execute(
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
-    if let Some((n, check_seed)) = check {
-        check_certificate(&cfg, &rs, &r, n, check_seed, &dir, quiet)?;
+    if let Some(c) = checked {
+        check_certificate(&c, &dir, quiet)?;
     }
     if let Some((design, rf)) = robust_design {
         // The exported controller's f32 allowance counts against the design ε too.
@@ -274,19 +303,13 @@ fn print_summary(
     );
 }
 
-/// `--check`: the certificate at `n` random states (seeded) solved by the MPC, written to
-/// `check.json` in `dir`; fails if a state is above ε or above its cell's ε_C.
-fn check_certificate(
-    cfg: &ProblemConfig,
-    rs: &RefineSettings,
-    r: &Refined,
-    n: usize,
-    seed: u64,
-    dir: &Path,
-    quiet: bool,
-) -> Result<()> {
-    let c = refine::check(cfg, rs, r, n, seed);
-    trainer::io::write_atomic(&dir.join("check.json"), refine::pretty(&c).as_bytes())?;
+/// `--check`: the certificate at N random states (seeded) and at every cell
+/// (`refine::check`), written to `check.json` in `dir`; fails if a state is above ε or above
+/// its cell's ε_C, if a jump of κ was found, or if the per-cell miss rate of the estimated
+/// ranges exceeds the tolerance (naming the offending cells).
+fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
+    trainer::io::write_atomic(&dir.join("check.json"), refine::pretty(c).as_bytes())?;
+    let p = &c.per_cell;
     if !quiet {
         println!(
             "check at {} random states ({} labelled): max observed {:.4} vs certified {:.4} \
@@ -305,12 +328,56 @@ fn check_certificate(
             c.max_slope_excess,
             c.seconds
         );
+        println!(
+            "per-cell check: {} states in {} cells ({} near the target): range misses {}/{} \
+             (rate {:.4}, tolerance {}), over ε_C {}, jumps {} (max |Δu| {:.2e} of the band): {}",
+            p.states,
+            p.cells,
+            p.near_cells,
+            p.range_misses,
+            p.regular,
+            p.miss_rate,
+            p.tolerance,
+            p.over_cell,
+            p.jumps,
+            p.max_jump,
+            if p.passed { "passed" } else { "FAILED" }
+        );
     }
     if c.over_eps > 0 || c.over_cell > 0 {
         bail!(
             "certificate check failed: {} states above ε, {} above their cell's ε_C (see {})",
             c.over_eps,
             c.over_cell,
+            dir.join("check.json").display()
+        );
+    }
+    if !p.passed {
+        let cells: Vec<String> = p
+            .offending
+            .iter()
+            .take(5)
+            .map(|o| {
+                format!(
+                    "{:?}..{:?} ({} of {} states missed{}{})",
+                    o.lo,
+                    o.hi,
+                    o.range_misses,
+                    o.states,
+                    if o.over_cell > 0 { ", over ε_C" } else { "" },
+                    if o.jump { ", jump of κ" } else { "" }
+                )
+            })
+            .collect();
+        bail!(
+            "per-cell check failed: range miss rate {:.4} (tolerance {}), {} states over ε_C, \
+             {} jumps of κ, in {} offending cells, e.g. {} (all in {})",
+            p.miss_rate,
+            p.tolerance,
+            p.over_cell,
+            p.jumps,
+            p.offending_cells,
+            cells.join("; "),
             dir.join("check.json").display()
         );
     }

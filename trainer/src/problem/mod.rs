@@ -27,7 +27,7 @@ pub mod training;
 mod validate;
 
 pub use ocp::{MatrixSpec, OcpSettings, StageBounds};
-pub use refine::RefineSettings;
+pub use refine::{CheckSettings, RefineSettings};
 pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{QpSolverKind, SolverSettings};

@@ -26,6 +26,18 @@ pub struct RefineSettings {
     pub retrain_at: f64,
     /// Safety factor on the estimated MPC parts of the local certificate (default 2).
     pub safety: f64,
+    /// Regional floor c of the local certificate (default 0.5; 0 = off): a cell's estimated
+    /// range of ∂_kκ has half-width at least c × the spread of ∂_kκ over its corners and the
+    /// labelled points one cell width outside them, and its curvature estimate is at least
+    /// c × the difference quotients of ∂_kκ towards those points
+    /// (`certify::local::Regional`).
+    pub floor: f64,
+    /// Use the second-order form on a cell only where its centre, solved, has the corners'
+    /// active set and agrees with the curvature estimate (default true; the centre solves
+    /// count against the budget and join the data).
+    pub centre_check: bool,
+    /// The per-cell check of `trainer refine --check` (`[refine.check]`).
+    pub check: CheckSettings,
     /// Points whose error exceeds this fraction of the target are repeated `emphasis`
     /// times in the training set (default 0.5).
     pub emphasis_at: f64,
@@ -50,6 +62,9 @@ impl Default for RefineSettings {
             round_learning_rate: 1e-3,
             retrain_at: 0.6,
             safety: 2.0,
+            floor: 0.5,
+            centre_check: true,
+            check: CheckSettings::default(),
             emphasis_at: 0.5,
             emphasis: 4,
             min_width: 1e-5,
@@ -65,6 +80,41 @@ impl Default for RefineSettings {
                 saturation_aware: true,
                 ..TrainSettings::default()
             },
+        }
+    }
+}
+
+/// `[refine.check]`: the per-cell (stratified) check of `trainer refine --check N`: every
+/// leaf cell gets at least one fresh MPC solve at a seeded random state inside it, cells
+/// whose ε_C is near the target get more, and the check fails when the sampled
+/// sensitivities miss their cells' estimated ranges more often than `tolerance`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CheckSettings {
+    /// Extra states in every cell whose ε_C is at least `near` × the target (default 3).
+    pub extra: usize,
+    /// The fraction of the target above which a cell is "near" it (default 0.8).
+    pub near: f64,
+    /// Largest tolerated share of the per-cell states (regular labels) whose ∂κ/∂x lies
+    /// outside their cell's estimated range (default 0.01).
+    pub tolerance: f64,
+    /// Times a failed check splits its offending cells and refines again before the verdict
+    /// (default 2; 0 = report only).
+    pub feedback: usize,
+    /// Two converged solves at a check state (cold, and warm-started from the cell's nearest
+    /// corner) differing by more than this fraction of the input band mark a jump of κ
+    /// (different local optima); the cell is never certified (default 1e-3).
+    pub jump_tol: f64,
+}
+
+impl Default for CheckSettings {
+    fn default() -> Self {
+        CheckSettings {
+            extra: 3,
+            near: 0.8,
+            tolerance: 0.01,
+            feedback: 2,
+            jump_tol: 1e-3,
         }
     }
 }
@@ -106,6 +156,22 @@ impl RefineSettings {
         }
         if !(self.safety.is_finite() && self.safety >= 1.0) {
             return Err(invalid("refine.safety", "must be at least 1"));
+        }
+        if !(self.floor.is_finite() && self.floor >= 0.0) {
+            return Err(invalid("refine.floor", "must be ≥ 0 and finite"));
+        }
+        let c = &self.check;
+        if !(c.near.is_finite() && c.near >= 0.0) {
+            return Err(invalid("refine.check.near", "must be ≥ 0 and finite"));
+        }
+        if !(c.tolerance.is_finite() && (0.0..1.0).contains(&c.tolerance)) {
+            return Err(invalid("refine.check.tolerance", "must be in [0, 1)"));
+        }
+        if !(c.jump_tol.is_finite() && c.jump_tol > 0.0) {
+            return Err(invalid(
+                "refine.check.jump_tol",
+                "must be positive and finite",
+            ));
         }
         if !(self.round_learning_rate.is_finite() && self.round_learning_rate > 0.0) {
             return Err(invalid("refine.round_learning_rate", "must be positive"));

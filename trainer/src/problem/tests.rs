@@ -98,6 +98,17 @@ fn validation_names_the_key_at_fault() {
         "refine.initial[1]"
     );
     assert_eq!(err_key(|c| c.refine.safety = 0.5), "refine.safety");
+    assert_eq!(err_key(|c| c.refine.floor = -0.1), "refine.floor");
+    assert_eq!(err_key(|c| c.refine.floor = f64::NAN), "refine.floor");
+    assert_eq!(
+        err_key(|c| c.refine.check.tolerance = 1.0),
+        "refine.check.tolerance"
+    );
+    assert_eq!(
+        err_key(|c| c.refine.check.jump_tol = 0.0),
+        "refine.check.jump_tol"
+    );
+    assert_eq!(err_key(|c| c.refine.check.near = -1.0), "refine.check.near");
     assert_eq!(
         err_key(|c| c.sampling.sampler = SamplerKind::Adaptive),
         "sampling.sampler"

@@ -1,5 +1,6 @@
 //! The local certificate against fresh MPC solves at independent random states: the error of
-//! the clamped net against its cell's ε_C, and how much of each cell's remainder is used.
+//! the clamped net against its cell's ε_C, and how much of each cell's remainder is used —
+//! uniformly over X, and per cell ([`super::cellcheck`]: every cell visited, the verdict).
 
 use super::*;
 use crate::certify::local::{CellBound, Corner};
@@ -86,6 +87,8 @@ pub struct Check {
     pub max_slope_excess: f64,
     /// Up to 20 states whose error exceeds their cell's ε_C.
     pub offenders: Vec<Offender>,
+    /// The per-cell (stratified) check and its verdict.
+    pub per_cell: super::CellCheck,
     /// Wall time, seconds.
     pub seconds: f64,
 }
@@ -101,6 +104,10 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let band = cfg.ocp.u_bounds(0);
     let bound_of: HashMap<usize, &CellBound> = st.bounds.iter().map(|(n, b)| (*n, b)).collect();
     let certified = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+    let ls = super::rounds::local_settings(rs);
+    let centre_check =
+        rs.centre_check && crate::certify::critical::QpCertifier::detect(cfg).is_err();
+    let idx = super::region::index(st);
     #[derive(Default, Clone)]
     struct Acc {
         labelled: usize,
@@ -160,21 +167,22 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                         let corners: Vec<Corner> = node
                             .corners
                             .iter()
-                            .map(|&c| {
-                                let p = &st.points[c];
-                                Corner {
-                                    u: &p.u,
-                                    du: &p.du,
-                                    regular: p.regular,
-                                    piece: p.piece,
-                                }
-                            })
+                            .map(|&c| super::region::corner(&st.points[c]))
                             .collect();
+                        let centre = super::region::centre(st, &idx, node, centre_check);
+                        let reg = super::region::regional(st, &idx, &lat, node, ls.floor);
                         for r in 0..nu {
                             for k in 0..nx {
                                 let wk = node.size[k] as f64 * lat.step[k];
                                 let (kr, _) = crate::certify::local::mpc_slope_estimate(
-                                    &corners, wk, nx, r, k, rs.safety,
+                                    &corners,
+                                    centre.as_ref(),
+                                    &reg,
+                                    wk,
+                                    nx,
+                                    r,
+                                    k,
+                                    &ls,
                                 );
                                 a.checks += 1;
                                 let g = l.du_dx[r * nx + k];
@@ -207,7 +215,23 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             checks: x.checks + y.checks,
             excess: x.excess.max(y.excess),
         });
+    let per_cell = super::cellcheck::per_cell(
+        &super::cellcheck::Setup {
+            st,
+            lat: &lat,
+            mlp,
+            band,
+            ls,
+            centre_check,
+            settings: &rs.check,
+            target: rs.target_eps,
+            seed,
+        },
+        || MpcLaw::new(cfg),
+        mpc_sample,
+    );
     Check {
+        per_cell,
         states: n,
         labelled: acc.labelled,
         seed,
@@ -238,4 +262,25 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             .collect(),
         seconds: t0.elapsed().as_secs_f64(),
     }
+}
+
+/// A check state solved by the MPC: cold, and (converged) warm-started from `near`.
+fn mpc_sample(law: &mut MpcLaw, x: &[f64], near: &[f64]) -> super::cellcheck::Sample {
+    let (l, _) = law.solve(x, None);
+    let mut s = super::cellcheck::Sample::default();
+    if !l.u.iter().all(|v| v.is_finite()) {
+        return s;
+    }
+    let hard = l.status == SqpStatus::Converged;
+    if hard && l.degeneracy.is_none() && l.du_dx.iter().all(|v| v.is_finite()) {
+        s.du = Some(l.du_dx.clone());
+    }
+    if hard {
+        s.warm = law
+            .solve_from_neighbour(x, near)
+            .filter(|w| w.status == SqpStatus::Converged)
+            .map(|w| w.u);
+    }
+    s.u = Some(l.u);
+    s
 }

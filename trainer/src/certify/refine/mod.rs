@@ -20,11 +20,16 @@
 //! `rounds` the refinement loop ([`refine`]); `outputs` the local certificate and the
 //! files of a run; `check` the certificate against fresh MPC solves.
 
+mod cellcheck;
 mod check;
+mod feedback;
 mod outputs;
+mod region;
 mod rounds;
 
+pub use cellcheck::{CellCheck, OffendingCell};
 pub use check::{check, Check, Offender};
+pub use feedback::reopen;
 pub use outputs::{
     cell_views, certificate, dataset, pretty, write_outputs, CellView, LocalCertificate,
     LocalSummary,
@@ -168,6 +173,9 @@ pub struct RefineState {
     pub bounds: Vec<(usize, CellBound)>,
     /// The run ended (target met, or nothing left to split within budget and rounds).
     pub finished: bool,
+    /// States where the check found a jump of κ (cold- and warm-started solves converged to
+    /// different local optima): the leaf containing one is never certified (ε_C = ∞).
+    pub jumps: Vec<Vec<f64>>,
 }
 
 impl RefineState {
@@ -527,5 +535,7 @@ impl Ctx<'_> {
     }
 }
 
+#[cfg(test)]
+mod cellcheck_tests;
 #[cfg(test)]
 mod tests;

@@ -77,6 +77,11 @@ pub struct LocalSummary {
     pub rounds: usize,
     /// Safety factor on the estimated MPC parts.
     pub safety: f64,
+    /// Regional floor c under the estimated MPC parts (`[refine] floor`).
+    pub floor: f64,
+    /// States where `--check` found a jump of κ (two local optima); their cells are never
+    /// certified (ε_C = ∞).
+    pub jumps: usize,
     /// The largest remainder bound of any cell.
     pub max_remainder: f64,
     /// What binds in the cell with the largest ε_C: `corner` (the fit at its corners is the
@@ -222,6 +227,8 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         solves,
         rounds: st.log.len(),
         safety: rs.safety,
+        floor: rs.floor,
+        jumps: st.jumps.len(),
         max_remainder: st
             .bounds
             .iter()
@@ -235,10 +242,17 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
             "ε = max over cells of max_corners |κ − sat(κ_NN)| + interpolation remainder. \
              Sound: the corner errors (solved points), the network's value/Jacobian/curvature \
              enclosures (interval bound propagation), the interpolation inequalities. \
-             Estimated: the range of ∂κ/∂x on each cell (hull of corner sensitivities and edge \
-             secants, widened ×{s}) and |∂²κ/∂x²| where all corners share one active set \
-             (×{s} the edge difference quotients); κ constant where all corners saturate.",
-            s = rs.safety
+             Estimated: the range of ∂κ/∂x on each cell (hull of corner sensitivities, edge \
+             secants and the solved centre's sensitivity, widened ×{s}, half-width at least \
+             {c} × the spread of ∂κ/∂x over the corners and their outward neighbours) and \
+             |∂²κ/∂x²| where all corners (and the solved centre{centre}) share one active set \
+             (×{s} the edge difference quotients, at least {c} × those towards the \
+             neighbours); κ continuous on each cell (a cell where `refine --check` found a \
+             jump of κ is never certified). Not sound for a nonlinear MPC: the tier is \
+             estimated.",
+            s = rs.safety,
+            c = rs.floor,
+            centre = if rs.centre_check { "" } else { ": off" }
         ) + if qp {
             " The MPC is a convex QP: on a cell whose critical-region proof succeeds (the \
              active sets of its corners, checked for primal and dual feasibility at every \

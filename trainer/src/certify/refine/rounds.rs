@@ -45,7 +45,8 @@ pub struct Refined {
 }
 
 /// What a checkpoint must match: the labels (problem), the domain, the initial grid, the
-/// network's shape and the safety factor (the certificate's meaning). Target, budget,
+/// network's shape, the safety factor, the regional floor and the centre check (the
+/// certificate's meaning). Target, budget,
 /// rounds and training rates may change on resume (e.g. a larger budget continues a run).
 fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
     use sha2::{Digest, Sha256};
@@ -58,9 +59,19 @@ fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
         &rs.training.hidden,
         rs.training.activation,
         rs.safety.to_bits(),
+        rs.floor.to_bits(),
+        rs.centre_check,
     );
     h.update(postcard::to_allocvec(&key).unwrap_or_default());
     crate::io::hex(&h.finalize())
+}
+
+/// The local certificate's settings of a refinement.
+pub(super) fn local_settings(rs: &RefineSettings) -> LocalSettings {
+    LocalSettings {
+        safety: rs.safety,
+        floor: rs.floor,
+    }
 }
 
 pub(super) fn train_set(
@@ -102,8 +113,10 @@ pub(super) fn bound_leaves(
     mlp: &Mlp,
     band: (&[f64], &[f64]),
     ls: &LocalSettings,
+    centre_check: bool,
     qp: Option<(&QpCertifier, f64)>,
 ) -> Vec<(usize, CellBound)> {
+    let idx = region::index(st);
     let target = qp.map_or(f64::INFINITY, |(_, t)| t);
     let qp = qp.map(|(q, _)| q);
     let nb = NetBounder::new(mlp);
@@ -163,16 +176,29 @@ pub(super) fn bound_leaves(
                 };
                 return (n, b);
             }
-            let corners: Vec<Corner> = pts
-                .iter()
-                .map(|p| Corner {
-                    u: &p.u,
-                    du: &p.du,
-                    regular: p.regular,
-                    piece: p.piece,
-                })
-                .collect();
-            let estimated = cell_bound(&lo, &hi, &corners, &nu_c, &nb.bounds(&lo, &hi), band, ls);
+            let corners: Vec<Corner> = pts.iter().map(|p| region::corner(p)).collect();
+            let centre = region::centre(st, &idx, node, centre_check);
+            let reg = region::regional(st, &idx, lat, node, ls.floor);
+            let mut estimated = cell_bound(
+                &lo,
+                &hi,
+                &corners,
+                centre.as_ref(),
+                &reg,
+                &nu_c,
+                &nb.bounds(&lo, &hi),
+                band,
+                ls,
+            );
+            // A jump of κ found inside the cell: the continuity the estimate assumes fails.
+            if st.jumps.iter().any(|x| region::contains(&lo, &hi, x)) {
+                estimated = CellBound {
+                    eps: f64::INFINITY,
+                    remainder: f64::INFINITY,
+                    axis_terms: vec![f64::INFINITY; lo.len()],
+                    ..estimated
+                };
+            }
             // The exact bound bounds every candidate law over the whole cell, also where a
             // law does not hold: on a cell at a steep region boundary it can be far looser
             // than the estimate. It is kept when it meets the target (`target`) or beats
@@ -210,9 +236,11 @@ pub fn refine(
         );
     }
     let band = cfg.ocp.u_bounds(0);
-    let ls = LocalSettings { safety: rs.safety };
+    let ls = local_settings(rs);
     // Where the MPC is a QP, cells are proven exact and refinement goes on until all are.
     let qp = QpCertifier::detect(cfg).ok();
+    // The centre check is for the estimated (nonlinear) MPC; a QP's cells are proven.
+    let centre_check = rs.centre_check && qp.is_none();
     // Every retrained net holds the setpoint (`refine.training.hold_setpoint`).
     let hold = match opts.fixed {
         Some(_) => None,
@@ -258,6 +286,7 @@ pub fn refine(
                     &model.mlp,
                     band,
                     &ls,
+                    centre_check,
                     Some((q, rs.target_eps)),
                 );
             }
@@ -286,6 +315,7 @@ pub fn refine(
                 log: Vec::new(),
                 bounds: Vec::new(),
                 finished: false,
+                jumps: Vec::new(),
             };
             // The initial grid's cells.
             let cells: Vec<usize> = counts.iter().map(|c| c - 1).collect();
@@ -314,6 +344,12 @@ pub fn refine(
         let round = st.log.len();
         label(cfg, &mut st.points, &pending);
         pending.clear();
+        if centre_check {
+            // The centres of the cells that may use the second-order form (see
+            // `certify::local::centre_consistent`).
+            let new = region::add_centres(&mut ctx, &mut st, rs.budget);
+            label(cfg, &mut st.points, &new);
+        }
         if qp.is_some() {
             // Resumed or imported points: their active sets, for the proofs.
             fill_active(cfg, &mut st.points);
@@ -375,6 +411,7 @@ pub fn refine(
             &model.mlp,
             band,
             &ls,
+            centre_check,
             qp.as_ref().map(|q| (q, rs.target_eps)),
         );
         let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
@@ -489,6 +526,7 @@ pub fn refine(
                     &best.mlp,
                     band,
                     &ls,
+                    centre_check,
                     qp.as_ref().map(|q| (q, rs.target_eps)),
                 );
                 let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);

@@ -23,6 +23,7 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
         log: vec![],
         bounds: vec![],
         finished: false,
+        jumps: vec![],
     };
     let mut new = Vec::new();
     for r in 0..6u64 {
@@ -131,6 +132,7 @@ fn first_round_corners_take_the_labels_of_records_at_their_states() {
         log: vec![],
         bounds: vec![],
         finished: false,
+        jumps: vec![],
     };
     let mut pending = Vec::new();
     for r in 0..6u64 {
