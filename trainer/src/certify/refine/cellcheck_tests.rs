@@ -42,30 +42,8 @@ fn labelled_state(
     law: &Law,
 ) -> (RefineState, Lattice) {
     let counts = rs.initial_counts(2);
-    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
-    let mut ctx = Ctx {
-        cfg,
-        lat: lat.clone(),
-        index: HashMap::new(),
-    };
-    let mut st = RefineState {
-        hash: String::new(),
-        points: vec![],
-        nodes: vec![],
-        roots: vec![],
-        model: None,
-        best: None,
-        log: vec![],
-        bounds: vec![],
-        finished: true,
-        jumps: vec![],
-    };
-    let mut new = Vec::new();
-    for r in 0..16u64 {
-        let lo = vec![(r / 4) << LEVELS, (r % 4) << LEVELS];
-        let n = ctx.node(&mut st, lo, vec![1 << LEVELS; 2], &mut new);
-        st.roots.push(n);
-    }
+    let (_, mut st, lat) = super::tests::grid(cfg, [counts[0], counts[1]]);
+    st.finished = true;
     for p in st.points.iter_mut() {
         let (u, g, piece) = law(&p.x);
         p.u = vec![u];

@@ -39,14 +39,7 @@ pub fn reopen(
             .filter(|&k| node.size[k] >= 2 && rel(k) >= rs.min_width)
             .max_by(|&a, &b| rel(a).total_cmp(&rel(b)).then(b.cmp(&a)));
         let Some(axis) = axis else { continue };
-        let half = node.size[axis] / 2;
-        let mut size = node.size.clone();
-        size[axis] = half;
-        let a = ctx.node(&mut st, node.lo.clone(), size.clone(), &mut pending);
-        let mut lo2 = node.lo.clone();
-        lo2[axis] += half;
-        let b = ctx.node(&mut st, lo2, size, &mut pending);
-        st.nodes[n].split = Some((a, b, axis));
+        ctx.split(&mut st, n, axis, &mut pending);
         split += 1;
     }
     st.jumps.extend(jumps.iter().cloned());

@@ -533,6 +533,20 @@ impl Ctx<'_> {
         });
         st.nodes.len() - 1
     }
+
+    /// Bisects leaf `n` along `axis`: its two halves become new nodes (their new corner
+    /// points pushed onto `new`) and `n` records the split.
+    fn split(&mut self, st: &mut RefineState, n: usize, axis: usize, new: &mut Vec<usize>) {
+        let node = st.nodes[n].clone();
+        let half = node.size[axis] / 2;
+        let mut size = node.size.clone();
+        size[axis] = half;
+        let a = self.node(st, node.lo.clone(), size.clone(), new);
+        let mut lo2 = node.lo;
+        lo2[axis] += half;
+        let b = self.node(st, lo2, size, new);
+        st.nodes[n].split = Some((a, b, axis));
+    }
 }
 
 #[cfg(test)]

@@ -503,14 +503,7 @@ pub fn refine(
                 if st.points.len() + needed > rs.budget {
                     break;
                 }
-                let half = node.size[axis] / 2;
-                let mut size = node.size.clone();
-                size[axis] = half;
-                let a = ctx.node(&mut st, node.lo.clone(), size.clone(), &mut pending);
-                let mut lo2 = node.lo.clone();
-                lo2[axis] += half;
-                let b2 = ctx.node(&mut st, lo2, size, &mut pending);
-                st.nodes[n].split = Some((a, b2, axis));
+                ctx.split(&mut st, n, axis, &mut pending);
                 split_any = true;
             }
         }

@@ -3,13 +3,12 @@
 use super::check::leaf_of;
 use super::*;
 
-#[test]
-fn leaf_lookup_finds_the_cell_containing_the_state() {
-    let cfg = ProblemConfig::default();
-    let counts = [4usize, 3];
+/// The refinement state of a 2-D initial grid of `counts` points per axis over the
+/// problem's X (roots in row-major order, no label yet), its context and lattice.
+pub(super) fn grid(cfg: &ProblemConfig, counts: [usize; 2]) -> (Ctx<'_>, RefineState, Lattice) {
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let mut ctx = Ctx {
-        cfg: &cfg,
+        cfg,
         lat: lat.clone(),
         index: HashMap::new(),
     };
@@ -26,11 +25,22 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
         jumps: vec![],
     };
     let mut new = Vec::new();
-    for r in 0..6u64 {
-        let lo = vec![(r / 2) << LEVELS, (r % 2) << LEVELS];
-        let n = ctx.node(&mut st, lo, vec![1 << LEVELS; 2], &mut new);
-        st.roots.push(n);
+    for i in 0..counts[0] as u64 - 1 {
+        for j in 0..counts[1] as u64 - 1 {
+            let lo = vec![i << LEVELS, j << LEVELS];
+            let n = ctx.node(&mut st, lo, vec![1 << LEVELS; 2], &mut new);
+            st.roots.push(n);
+        }
     }
+    (ctx, st, lat)
+}
+
+#[test]
+fn leaf_lookup_finds_the_cell_containing_the_state() {
+    let cfg = ProblemConfig::default();
+    let counts = [4usize, 3];
+    let (mut ctx, mut st, lat) = grid(&cfg, counts);
+    let mut new = Vec::new();
     // Random splits.
     for s in 0..300u64 {
         let leaves: Vec<usize> = (0..st.nodes.len())
@@ -38,15 +48,7 @@ fn leaf_lookup_finds_the_cell_containing_the_state() {
             .collect();
         let n = leaves[(crate::rng::uniform(5, s, 0) * leaves.len() as f64) as usize];
         let axis = (crate::rng::uniform(5, s, 1) * 2.0) as usize;
-        let node = st.nodes[n].clone();
-        let half = node.size[axis] / 2;
-        let mut size = node.size.clone();
-        size[axis] = half;
-        let a = ctx.node(&mut st, node.lo.clone(), size.clone(), &mut new);
-        let mut lo2 = node.lo.clone();
-        lo2[axis] += half;
-        let b = ctx.node(&mut st, lo2, size, &mut new);
-        st.nodes[n].split = Some((a, b, axis));
+        ctx.split(&mut st, n, axis, &mut new);
     }
     for s in 0..5000u64 {
         let x: Vec<f64> = (0..2)
