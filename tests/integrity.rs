@@ -223,45 +223,20 @@ fn integrity_through_the_cli() {
     ]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("no --config given"));
 
-    // Export with the certificate of another model: refused, nothing written.
-    let o = trainer(&[
-        "certify",
-        "--model",
-        &s("p_model.bin"),
-        "--data",
-        &s("p.bin"),
-        "--json",
-    ]);
-    ok(&o);
-    std::fs::write(d.join("p_cert.json"), &o.stdout).unwrap();
-    let o = trainer(&[
-        "export",
-        "--model",
-        &s("di_model.bin"),
-        "--certificate",
-        &s("p_cert.json"),
-        "--rust",
-        &s("w.rs"),
-        "--postcard",
-        &s("w.bin"),
-    ]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("another network"));
-    assert!(!d.join("w.rs").exists() && !d.join("w.bin").exists());
-
-    // The certificate's own numbers are checksummed: its own certificate exports; the same
-    // file with ε lowered by hand (or its tier raised) is refused, naming the file.
-    let o = trainer(&[
-        "certify",
-        "--model",
-        &s("di_model.bin"),
-        "--data",
-        &s("di.bin"),
-        "--json",
-    ]);
-    ok(&o);
-    let text = String::from_utf8(o.stdout).unwrap();
-    std::fs::write(d.join("di_cert.json"), &text).unwrap();
+    // `certify --json` of a model on a dataset (must succeed), and `export` of the DI model
+    // with a certificate file.
+    let certify_json = |model: &str, data: &str| {
+        let o = trainer(&[
+            "certify",
+            "--model",
+            &s(model),
+            "--data",
+            &s(data),
+            "--json",
+        ]);
+        ok(&o);
+        o.stdout
+    };
     let export = |cert: &str| {
         trainer(&[
             "export",
@@ -275,6 +250,17 @@ fn integrity_through_the_cli() {
             &s("w.bin"),
         ])
     };
+    // Export with the certificate of another model: refused, nothing written.
+    std::fs::write(d.join("p_cert.json"), certify_json("p_model.bin", "p.bin")).unwrap();
+    let o = export("p_cert.json");
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("another network"));
+    assert!(!d.join("w.rs").exists() && !d.join("w.bin").exists());
+
+    // The certificate's own numbers are checksummed: its own certificate exports; the same
+    // file with ε lowered by hand (or its tier raised) is refused, naming the file.
+    let text = String::from_utf8(certify_json("di_model.bin", "di.bin")).unwrap();
+    std::fs::write(d.join("di_cert.json"), &text).unwrap();
     ok(&export("di_cert.json"));
     let _ = std::fs::remove_file(d.join("w.rs"));
     let _ = std::fs::remove_file(d.join("w.bin"));
