@@ -63,6 +63,7 @@ fn second_net() -> ExportModel {
         hash: "placeholder-3-6-2-seed-c0ffee".into(),
         placeholder: true,
         guarantee: Guarantee::Estimated,
+        statistical: None,
     }
 }
 

@@ -142,6 +142,64 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     assert!((k2 as f64) < 0.02 * n as f64, "{k2} exceedances of {e2}");
     assert!(errors.iter().filter(|e| **e >= e2).count() > k2 || e2 == 0.0);
 
+    // That level as the exported ε and clamp band (`export --statistical-band`): tier
+    // statistical, ε = level + the f32 allowance, band U_d ⊕ ε; refused without the block.
+    let c2 = d.join("c2.json");
+    std::fs::write(&c2, &o2.stdout).unwrap();
+    let export = |cert: &Path, tag: &str| {
+        let (rs, pc) = (d.join(format!("{tag}.rs")), d.join(format!("{tag}.bin")));
+        let o = trainer(&[
+            "export",
+            "--model",
+            model,
+            "--certificate",
+            cert.to_str().unwrap(),
+            "--rust",
+            rs.to_str().unwrap(),
+            "--postcard",
+            pc.to_str().unwrap(),
+            "--statistical-band",
+        ]);
+        (o, rs)
+    };
+    let (o, rs) = export(&c2, "w2");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rust = std::fs::read_to_string(&rs).unwrap();
+    let lit = |key: &str| -> f64 {
+        let at = rust.find(&format!("    {key}: ")).unwrap() + key.len() + 6;
+        let end = at + rust[at..].find([',', '\n']).unwrap();
+        rust[at..end].parse().unwrap()
+    };
+    assert!(rust.contains("guarantee: Guarantee::Statistical"), "{rust}");
+    assert!(rust.contains("statistical level"), "{rust}");
+    assert_eq!(lit("eps_nn"), e2);
+    let total = lit("eps");
+    let allowance = total - e2;
+    assert!(allowance > 0.0 && allowance < 1e-3, "allowance {allowance}");
+    // The band (U_d ⊕ ε) ∩ actuator (the actuator limits are U_d here): contains U_d and
+    // lies within U_d ⊕ ε.
+    let u_lo = v2["u_lo"][0].as_f64().unwrap();
+    let at = rust.find("clamp_lo: [").unwrap() + 11;
+    let lo: f64 = rust[at..at + rust[at..].find([',', ']']).unwrap()]
+        .trim()
+        .parse()
+        .unwrap();
+    assert!(
+        lo <= u_lo && lo >= u_lo - total - 1e-5,
+        "{lo} vs {u_lo} − {total}"
+    );
+    let (o, _) = export(&d.join("nonexistent.json"), "w3");
+    assert!(!o.status.success());
+    // A sealed certificate without the block: a clear error naming the file and the key.
+    let c1 = d.join("c1.json");
+    std::fs::write(&c1, &certify(&[]).stdout).unwrap();
+    let (o, _) = export(&c1, "w4");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("c1.json") && err.contains("\"statistical\""),
+        "{err}"
+    );
+
     // Reused, not re-solved: the store is untouched and the answer the same.
     let before = std::fs::metadata(&store).unwrap().modified().unwrap();
     let o3 = certify(&["--statistical", &ns, "--confidence", "0.95"]);

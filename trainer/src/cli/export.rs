@@ -8,6 +8,12 @@
 //! the actuator limits = U_d, i.e. to U_d. The certificate's tier is the weaker of its JSON's
 //! `"guarantee"` (if any) and what its numbers rest on (`Guarantee`).
 //!
+//! With `--statistical-band` ε is the statistical level of the certificate's `"statistical"`
+//! block (`eps_at_p_target`: P(error > ε) ≤ its `p_target` at its confidence), the tier
+//! `statistical` ([`StatisticalClaim`]); the block must be about this certificate (its `eps`
+//! is the certificate's: the errors were counted with the certificate's clamp band, which
+//! contains the narrower band exported, so each error can only shrink).
+//!
 //! The problem: `--config` (the model and the certificate must be of it), else the one
 //! stored in the model (`learn::model_file`). The generated files' name (`--name`, default
 //! that problem's name, else the model file's stem) is made an identifier ([`identifier`]).
@@ -15,8 +21,11 @@
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 use trainer::certify::certificate::Certificate;
+use trainer::certify::statistical::Statistical;
 use trainer::certify::Model;
-use trainer::deploy::export::{certify_f32, export_files, render_c_header, ExportModel, Guarantee};
+use trainer::deploy::export::{
+    certify_f32, export_files, render_c_header, ExportModel, Guarantee, StatisticalClaim,
+};
 use trainer::learn::mlp::Activation;
 
 /// The output files of an export.
@@ -37,6 +46,7 @@ pub(super) fn execute(
     certificate: Option<&Path>,
     out: &Outputs<'_>,
     name: Option<&str>,
+    statistical_band: bool,
 ) -> Result<()> {
     if out.rust.is_some() != out.postcard.is_some() {
         bail!("--rust and --postcard go together (the Rust file and the blob of one export)");
@@ -50,6 +60,18 @@ pub(super) fn execute(
     let m = super::common::load_model(model)?;
     let problem = super::common::problem_for_model(config, model, &m)?;
     let (cert, declared) = load_certificate(model, &m, certificate)?;
+    let band = match (statistical_band, certificate) {
+        (true, Some(p)) => Some(statistical_level(p, &cert)?),
+        _ => None,
+    };
+    // The model to export: the certificate's ε and tier, or its statistical level.
+    let prepare = |em: ExportModel| -> Result<ExportModel> {
+        let em = em.with_declared_guarantee(declared);
+        Ok(match &band {
+            Some((eps_p, claim)) => em.with_statistical_eps(*eps_p, claim.clone())?,
+            None => em,
+        })
+    };
     if let Some(cfg) = &problem {
         check_certificate_problem(&cert, model, certificate, cfg)?;
     }
@@ -58,43 +80,43 @@ pub(super) fn execute(
     let tanh = m.mlp.activation == Activation::Tanh;
     let mut allowance = None;
     if let (Some(rust), Some(postcard)) = (out.rust, out.postcard) {
-        let em = ExportModel::from_trained(name, &m, &cert)
-            .with_context(|| {
-                format!(
-                    "cannot export {} for controller-core with the certificate of {}",
-                    model.display(),
-                    certificate.unwrap_or(model).display()
-                )
-            })?
-            .with_declared_guarantee(declared);
+        let em = ExportModel::from_trained(name, &m, &cert).with_context(|| {
+            format!(
+                "cannot export {} for controller-core with the certificate of {}",
+                model.display(),
+                certificate.unwrap_or(model).display()
+            )
+        })?;
+        let em = prepare(em)?;
         let r = export_files(&em, rust, postcard)?;
         if let Some(h) = out.c_header {
             trainer::io::write_atomic(h, render_c_header(&em, &r)?.as_bytes())?;
         }
         eprintln!(
-            "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | certified ε {:.4} + {:.3e} ({})",
+            "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | {} ε {:.4} + {:.3e} ({}{})",
             model.display(),
             rust.display(),
             postcard.display(),
             r.f32_allowance[0],
             r.samples,
             r.f32_observed[0],
-            cert.eps,
+            if em.statistical.is_some() { "statistical" } else { "certified" },
+            em.eps,
             r.f32_allowance[0],
-            em.guarantee.name()
+            em.guarantee.name(),
+            em.statistical.as_ref().map_or(String::new(), |s| format!(": {}", s.words()))
         );
         allowance = Some(r.f32_allowance[0]);
     }
     if let Some(onnx) = out.onnx {
-        let em = ExportModel::from_certified(name, &m, &cert)
-            .with_context(|| {
-                format!(
-                    "cannot export {} with the certificate of {}",
-                    model.display(),
-                    certificate.unwrap_or(model).display()
-                )
-            })?
-            .with_declared_guarantee(declared);
+        let em = ExportModel::from_certified(name, &m, &cert).with_context(|| {
+            format!(
+                "cannot export {} with the certificate of {}",
+                model.display(),
+                certificate.unwrap_or(model).display()
+            )
+        })?;
+        let em = prepare(em)?;
         em.validate()?;
         if allowance.is_none() && tanh {
             allowance = Some(certify_f32(&em)?.f32_allowance[0]);
@@ -108,7 +130,7 @@ pub(super) fn execute(
             trainer::deploy::onnx::write::OPSET,
             m.mlp.activation,
             m.mlp.widths(),
-            cert.eps,
+            em.eps,
             match allowance {
                 Some(a) => format!(" + f32 allowance {a:.3e} (controller-core's libm arithmetic)"),
                 None => " (f32 allowance not analysed for this activation)".into(),
@@ -117,6 +139,61 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// The statistical level of the certificate JSON at `path` and what it rests on: its
+/// `"statistical"` block's `eps_at_p_target` (an error naming the file and the key when the
+/// block is missing, about another ε, or has no level).
+fn statistical_level(path: &Path, cert: &Certificate) -> Result<(f64, StatisticalClaim)> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let Some(block) = v.get("statistical") else {
+        bail!(
+            "{}: --statistical-band needs a \"statistical\" block: make the certificate with \
+             `trainer certify … --statistical N --json {}`",
+            path.display(),
+            path.display()
+        );
+    };
+    let st: Statistical = serde_json::from_value(block.clone())
+        .with_context(|| format!("{}: key \"statistical\" is malformed", path.display()))?;
+    if st.eps != cert.eps {
+        bail!(
+            "{}: the \"statistical\" block counts exceedances of ε = {}, not of this \
+             certificate's ε = {}: it is about another certificate",
+            path.display(),
+            st.eps,
+            cert.eps
+        );
+    }
+    let Some(eps_p) = st.eps_at_p_target else {
+        bail!(
+            "{}: \"statistical\".eps_at_p_target is null: {} states are too few for \
+             P ≤ {:e} at confidence {} (need more --statistical states)",
+            path.display(),
+            st.samples,
+            st.p_target,
+            st.confidence
+        );
+    };
+    if eps_p > cert.eps {
+        eprintln!(
+            "warning: the statistical level {eps_p:.4} is above the certificate's ε {:.4} \
+             ({}): exporting the weaker, larger band as asked",
+            cert.eps,
+            path.display()
+        );
+    }
+    Ok((
+        eps_p,
+        StatisticalClaim {
+            p_exceed_upper: st.p_target,
+            confidence: st.confidence,
+            samples: st.samples,
+        },
+    ))
 }
 
 /// The generated files' name: `--name`, else the problem's name, else the model file's

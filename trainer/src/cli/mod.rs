@@ -213,6 +213,11 @@ enum Cmd {
         /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
         #[arg(long)]
         c_header: Option<PathBuf>,
+        /// Use the certificate's statistical level as ε (and so as the clamp band): the
+        /// `"statistical"` block's `eps_at_p_target` of `--certificate` (from `trainer certify
+        /// --statistical N --json`), tier `statistical`, instead of its certified ε.
+        #[arg(long, requires = "certificate")]
+        statistical_band: bool,
     },
     /// Adaptive refinement with local certificates: grow the data and the net until every
     /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
@@ -412,6 +417,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             onnx,
             name,
             c_header,
+            statistical_band,
         } => {
             common::refuse_overwrite(
                 &[opt(&rust), opt(&postcard), opt(&onnx), opt(&c_header)],
@@ -429,6 +435,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 certificate.as_deref(),
                 &out,
                 name.as_deref(),
+                statistical_band,
             )
         }
         Cmd::Refine {

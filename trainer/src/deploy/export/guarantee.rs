@@ -5,6 +5,13 @@
 //! estimate, `l_mpc_is_estimate`, or the network is the untrained placeholder; `sound`
 //! otherwise — ε_D is a maximum over the data, L_NN and r are sound upper bounds). A claim
 //! is never rounded up: a declaration stronger than the numbers allow is lowered.
+//!
+//! **A statistical ε** ([`StatisticalClaim`], `trainer export --statistical-band`): ε is the
+//! level ε_p of the certificate's `"statistical"` block (the (k*+1)-th largest of n i.i.d.
+//! errors, k* the largest count whose Clopper–Pearson bound is ≤ p): with confidence 1 − β
+//! over the draw of the states, P(‖κ − sat κ_NN‖ > ε_p) ≤ p (the exceedance probability of
+//! an order statistic is Beta(k*+1, n−k*) distributed). It rests on no Lipschitz constant,
+//! so its tier is `statistical` whatever L_MPC is — never `sound`.
 
 use serde::{Deserialize, Serialize};
 
@@ -21,6 +28,49 @@ pub enum Guarantee {
     /// An ingredient is a sampled estimate (the weakest tier, and the default).
     #[default]
     Estimated,
+}
+
+/// What a statistical ε rests on (module doc): P(‖κ − sat κ_NN‖ > ε) ≤ `p_exceed_upper`
+/// with confidence `confidence`, from `samples` i.i.d. uniform states of X.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StatisticalClaim {
+    /// Upper bound p on the probability that a uniform state's error exceeds ε.
+    pub p_exceed_upper: f64,
+    /// 1 − β.
+    pub confidence: f64,
+    /// n: the i.i.d. uniform states.
+    pub samples: u64,
+}
+
+impl StatisticalClaim {
+    /// Checks p ∈ (0, 1], 1 − β ∈ (0, 1), n ≥ 1; the message names the field.
+    pub fn validate(&self) -> Result<(), ExportError> {
+        let bad = |m: String| Err(ExportError::Invalid(m));
+        if !(self.p_exceed_upper > 0.0 && self.p_exceed_upper <= 1.0) {
+            return bad(format!(
+                "statistical.p_exceed_upper must lie in (0, 1], got {}",
+                self.p_exceed_upper
+            ));
+        }
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return bad(format!(
+                "statistical.confidence must lie in (0, 1), got {}",
+                self.confidence
+            ));
+        }
+        if self.samples == 0 {
+            return bad("statistical.samples must be at least 1".into());
+        }
+        Ok(())
+    }
+
+    /// The claim in words, for the generated files.
+    pub fn words(&self) -> String {
+        format!(
+            "P(‖κ − u‖ > ε) ≤ {:.3e} with confidence {} (Clopper–Pearson, {} i.i.d. uniform states of X)",
+            self.p_exceed_upper, self.confidence, self.samples
+        )
+    }
 }
 
 impl Guarantee {
@@ -55,6 +105,18 @@ impl Guarantee {
             Guarantee::Estimated
         } else {
             Guarantee::Sound
+        }
+    }
+
+    /// The tier the numbers support: `estimated` for a placeholder network, `statistical`
+    /// for a statistical ε (it rests on no Lipschitz constant), else [`Guarantee::derived`].
+    pub fn supported(l_mpc_is_estimate: bool, placeholder: bool, statistical: bool) -> Self {
+        if placeholder {
+            Guarantee::Estimated
+        } else if statistical {
+            Guarantee::Statistical
+        } else {
+            Guarantee::derived(l_mpc_is_estimate, false)
         }
     }
 

@@ -47,7 +47,7 @@ pub use allowance::{certify_f32, eval_f32, f32_allowance, sampled_max_diff, SAMP
 use allowance::{f32_down, f32_up};
 pub use blob::{crc32, render_postcard, BLOB_MAGIC, BLOB_VERSION};
 pub use c_header::render_c_header;
-pub use guarantee::Guarantee;
+pub use guarantee::{Guarantee, StatisticalClaim};
 pub use rust::render_rust;
 pub use tanh::{Tanh, TANH_FAST_ERR_BINS};
 
@@ -130,6 +130,10 @@ pub struct ExportModel {
     /// Tier of the certificate's claim (default: the weakest, `estimated`).
     #[serde(default)]
     pub guarantee: Guarantee,
+    /// Set when `eps` is a statistical level ([`ExportModel::with_statistical_eps`]): what
+    /// it rests on. `None` for a certificate's ε.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub statistical: Option<StatisticalClaim>,
 }
 
 /// What can go wrong in an export.
@@ -287,11 +291,18 @@ impl ExportModel {
                 }
             }
         }
-        let supported = Guarantee::derived(self.l_mpc_is_estimate, self.placeholder);
+        if let Some(s) = &self.statistical {
+            s.validate()?;
+        }
+        let supported = Guarantee::supported(
+            self.l_mpc_is_estimate,
+            self.placeholder,
+            self.statistical.is_some(),
+        );
         if self.guarantee < supported {
             return inv(format!(
-                "guarantee: {} claims more than the numbers support ({}: L_MPC is sampled or \
-                 the network is a placeholder)",
+                "guarantee: {} claims more than the numbers support ({}: L_MPC is sampled, \
+                 ε is a statistical level or the network is a placeholder)",
                 self.guarantee.name(),
                 supported.name()
             ));
@@ -476,6 +487,7 @@ pub fn placeholder_pendulum() -> ExportModel {
         hash: "placeholder-2-10-10-1-seed-5eed".into(),
         placeholder: true,
         guarantee: Guarantee::Estimated,
+        statistical: None,
     }
 }
 
@@ -567,6 +579,7 @@ impl ExportModel {
             hash: cert.hash.clone(),
             placeholder: false,
             guarantee: Guarantee::derived(cert.l_mpc_is_estimate, false),
+            statistical: None,
         })
     }
 
@@ -577,5 +590,33 @@ impl ExportModel {
             self.guarantee = self.guarantee.weakest(d);
         }
         self
+    }
+
+    /// This model with ε replaced by the statistical level `eps_p` of a certificate's
+    /// `"statistical"` block (P(‖κ − sat κ_NN‖ > eps_p) ≤ `claim.p_exceed_upper` with
+    /// confidence `claim.confidence`) and the tier `statistical` (see [`StatisticalClaim`]).
+    /// The clamp band becomes (U_d ⊕ [−ε_p − allowance, ε_p + allowance]) ∩ actuator: κ lies
+    /// in U_d, so a band narrower than the one the errors were counted with (the
+    /// certificate's, which contains it) can only shrink each error.
+    pub fn with_statistical_eps(
+        mut self,
+        eps_p: f64,
+        claim: StatisticalClaim,
+    ) -> Result<Self, ExportError> {
+        claim.validate()?;
+        if !(eps_p.is_finite() && eps_p >= 0.0) {
+            return Err(ExportError::Invalid(format!(
+                "statistical ε must be finite and ≥ 0, got {eps_p}"
+            )));
+        }
+        if self.placeholder {
+            return Err(ExportError::Invalid(
+                "a placeholder network has no statistical ε".into(),
+            ));
+        }
+        self.eps = eps_p;
+        self.guarantee = Guarantee::Statistical;
+        self.statistical = Some(claim);
+        Ok(self)
     }
 }

@@ -162,6 +162,13 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
         report.f32_observed[1],
         model.guarantee.name()
     );
+    if let Some(s) = &model.statistical {
+        let _ = writeln!(
+            o,
+            "// ε is a statistical level (eps_nn + the f32 allowance): {}.",
+            s.words()
+        );
+    }
     o.push_str(
         "//\n// Compile it with `controller_core::include_controller!(\"weights.rs\")` (it provides\n\
          // `Certificate`, `Guarantee`, `Dense` and `Hidden`).\n\n",

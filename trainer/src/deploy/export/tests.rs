@@ -131,3 +131,69 @@ fn a_tier_above_what_the_numbers_support_is_refused() {
         Guarantee::Statistical
     );
 }
+
+#[test]
+fn a_statistical_eps_is_statistical_and_narrows_the_band() {
+    let mut m = placeholder_pendulum();
+    let claim = StatisticalClaim {
+        p_exceed_upper: 1e-3,
+        confidence: 0.99,
+        samples: 5000,
+    };
+    // A placeholder has no statistical ε.
+    let e = m
+        .clone()
+        .with_statistical_eps(0.5, claim.clone())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("placeholder"), "{e}");
+    m.placeholder = false;
+    m.eps = 40.0;
+    m.actuator_lo = vec![-60.0];
+    m.actuator_hi = vec![60.0];
+    let wide = m.clamp_band(m.eps);
+    let s = m.clone().with_statistical_eps(0.5, claim.clone()).unwrap();
+    assert_eq!((s.eps, s.guarantee), (0.5, Guarantee::Statistical));
+    assert!(s.validate().is_ok(), "statistical with a sampled L_MPC");
+    let narrow = s.clamp_band(s.eps);
+    assert!(narrow.0[0] > wide.0[0] && narrow.1[0] < wide.1[0]);
+    assert!(narrow.0[0] as f64 <= -15.5 && narrow.1[0] as f64 >= 15.5);
+    // Never sound, even with a proven L_MPC and a sound declaration.
+    let mut t = s.clone();
+    t.l_mpc_is_estimate = false;
+    t.guarantee = Guarantee::Sound;
+    let e = t.validate().unwrap_err().to_string();
+    assert!(e.contains("statistical"), "{e}");
+    // A declared weaker tier still lowers it.
+    let low = s
+        .clone()
+        .with_declared_guarantee(Some(Guarantee::Estimated));
+    assert_eq!(low.guarantee, Guarantee::Estimated);
+    // Bad claims and levels name the field.
+    for (eps, p, c, n, key) in [
+        (f64::NAN, 1e-3, 0.99, 10, "statistical ε"),
+        (0.5, 0.0, 0.99, 10, "p_exceed_upper"),
+        (0.5, 1e-3, 1.0, 10, "confidence"),
+        (0.5, 1e-3, 0.99, 0, "samples"),
+    ] {
+        let bad = StatisticalClaim {
+            p_exceed_upper: p,
+            confidence: c,
+            samples: n,
+        };
+        let e = m
+            .clone()
+            .with_statistical_eps(eps, bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
+    // The generated file says what ε rests on.
+    let r = certify_f32(&s).unwrap();
+    let text = render_rust(&s, &r);
+    assert!(
+        text.contains("statistical level") && text.contains("1.000e-3"),
+        "rust file"
+    );
+    assert!(text.contains("Guarantee::Statistical"));
+}

@@ -164,7 +164,9 @@ pub fn guarantee(model: &ExportModel, allowance: Option<f64>) -> String {
         ),
         None => s += "; no f32 allowance was computed for this activation (add the runtime's f32 error)",
     }
-    if model.l_mpc_is_estimate {
+    if let Some(st) = &model.statistical {
+        s += &format!("; ε is a statistical level: {}", st.words());
+    } else if model.l_mpc_is_estimate {
         s += "; L_MPC is a sampled estimate, not a proven bound";
     }
     s
