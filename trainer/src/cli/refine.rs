@@ -265,8 +265,12 @@ fn print_round(l: &RoundLog, budget: usize) {
 
 /// The map of the cells' ε_C: `eps_map.svg` and `eps_map.png` in `dir`.
 fn write_eps_map(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, dir: &Path) -> Result<()> {
-    let fig =
-        trainer::study::plots::eps_map(cfg, &refine::cell_views(cfg, rs, &r.state), rs.target_eps)?;
+    let fig = trainer::study::plots::eps_map(
+        cfg,
+        &refine::cell_views(cfg, rs, &r.state),
+        rs.target_eps,
+        &refine::sensitivity_spread(cfg, &r.state),
+    )?;
     let png = trainer::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
     trainer::io::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
     trainer::io::write_atomic(&dir.join("eps_map.png"), &png)?;

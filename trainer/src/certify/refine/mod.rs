@@ -31,7 +31,8 @@ pub use cellcheck::{CellCheck, OffendingCell};
 pub use check::{check, Check, Offender};
 pub use feedback::reopen;
 pub use outputs::{
-    cell_views, certificate, dataset, pretty, write_outputs, CellView, LocalCertificate,
+    cell_views, certificate, dataset, pretty, sensitivity_spread, write_outputs, CellView,
+    LocalCertificate,
     LocalSummary,
 };
 pub use rounds::{refine, RefineOptions, Refined};

@@ -374,6 +374,25 @@ pub fn cell_views(cfg: &ProblemConfig, rs: &RefineSettings, st: &RefineState) ->
         .collect()
 }
 
+/// Per state axis i, `s_i = mean ‖∂κ/∂x_i‖₂ · (hi_i − lo_i)` over the labelled points of
+/// the refinement (the change of κ across X along axis i; NaN without a labelled point): the
+/// ε_C map of nx > 2 slices along the two largest, as the run's error map does.
+pub fn sensitivity_spread(cfg: &ProblemConfig, st: &RefineState) -> Vec<f64> {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let mut sum = vec![0.0; nx];
+    let mut n = 0usize;
+    for p in st.points.iter().filter(|p| p.labelled() && p.du.len() == nu * nx) {
+        for (i, s) in sum.iter_mut().enumerate() {
+            *s += (0..nu).map(|j| p.du[j * nx + i].powi(2)).sum::<f64>().sqrt();
+        }
+        n += 1;
+    }
+    sum.iter()
+        .enumerate()
+        .map(|(i, s)| s / n as f64 * (cfg.domain.hi[i] - cfg.domain.lo[i]))
+        .collect()
+}
+
 /// Pretty JSON of a serialisable value.
 pub fn pretty<T: Serialize>(v: &T) -> String {
     serde_json::to_string_pretty(v).unwrap_or_default()

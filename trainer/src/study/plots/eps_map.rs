@@ -1,6 +1,14 @@
-//! `eps_map` (written by `trainer refine`): the local certificate over the first two axes
-//! of X — ε_C per cell as a heat map, and which term of ε_C binds in each cell.
+//! `eps_map` (written by `trainer refine`): the local certificate over two axes of X — ε_C
+//! per cell as a heat map, and which term of ε_C binds in each cell.
+//!
+//! For nx = 2 every cell is drawn. For nx > 2 the map is a 2-D slice, chosen as the run's
+//! error map chooses it ([`super::error_map::top_two`] of the per-axis spread of κ,
+//! `s_i = mean ‖∂κ/∂x_i‖₂ · (hi_i − lo_i)`, other states at the setpoint clamped into X,
+//! [`super::error_map::slice_base`]): the cells whose box contains the slice's base point in
+//! every other coordinate (half-open, the upper face of X included), drawn over the two
+//! axes; title and caption name the slice.
 
+use super::error_map::{slice_base, top_two};
 use super::{
     axis_names, colour_bar, draw_err, input_unit, register_font, viridis, Figure, PlotError, FONT,
     MISSING_COLOR,
@@ -13,15 +21,38 @@ use plotters::prelude::*;
 const NAME: &str = "eps_map";
 
 /// The local certificate over X: ε_C per cell (left, colour scale up to max(target, max ε_C))
-/// and the term that binds in each cell (right).
-pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<Figure, PlotError> {
+/// and the term that binds in each cell (right). `spread`: the per-axis spread of κ
+/// (`certify::refine::sensitivity_spread`) that picks the slice for nx > 2 (module doc).
+pub fn eps_map(
+    cfg: &ProblemConfig,
+    cells: &[CellView],
+    target: f64,
+    spread: &[f64],
+) -> Result<Figure, PlotError> {
     register_font();
-    if cells.is_empty() || cfg.system.nx() < 2 {
+    let nx = cfg.system.nx();
+    if cells.is_empty() || nx < 2 {
         return Err(PlotError::Data {
             figure: NAME.into(),
             cause: "no cells, or a one-dimensional state".into(),
         });
     }
+    let (a0, a1) = if nx > 2 && spread.len() == nx {
+        let t = top_two(spread);
+        (t[0], t[1])
+    } else {
+        (0, 1)
+    };
+    let base = slice_base(cfg);
+    let in_slice = |c: &CellView| {
+        (0..nx).filter(|k| *k != a0 && *k != a1).all(|k| {
+            c.lo[k] <= base[k]
+                && (base[k] < c.hi[k] || (base[k] == c.hi[k] && c.hi[k] >= cfg.domain.hi[k]))
+        })
+    };
+    let all = cells.len();
+    let all_max = cells.iter().map(|c| c.eps).fold(0.0, f64::max);
+    let cells: Vec<&CellView> = cells.iter().filter(|c| in_slice(c)).collect();
     let (xnames, _) = axis_names(&cfg.system);
     let unit = input_unit(&cfg.system);
     let emax = cells
@@ -29,7 +60,11 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
         .map(|c| c.eps)
         .filter(|v| v.is_finite())
         .fold(target, f64::max);
-    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let slice = slice_words(cfg, &xnames, [a0, a1], &base, all);
+    let (lo, hi) = (
+        [cfg.domain.lo[a0], cfg.domain.lo[a1]],
+        [cfg.domain.hi[a0], cfg.domain.hi[a1]],
+    );
     let (w, h) = (1500u32, 560u32);
     let mut svg = String::new();
     let bind_colors = [
@@ -50,7 +85,7 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
         for (panel, title) in [
             (
                 &main,
-                format!("ε_C per cell ({n} cells, {over} above the target {target})"),
+                format!("ε_C per cell ({n} cells, {over} above the target {target}){slice}"),
             ),
             (&right, "which term of ε_C binds".to_string()),
         ] {
@@ -64,8 +99,8 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
             chart
                 .configure_mesh()
                 .disable_mesh()
-                .x_desc(xnames[0].as_str())
-                .y_desc(xnames[1].as_str())
+                .x_desc(xnames[a0].as_str())
+                .y_desc(xnames[a1].as_str())
                 .axis_desc_style((FONT, 17))
                 .label_style((FONT, 14))
                 .draw()
@@ -86,8 +121,8 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
                     let (ox, oy) = (1e-3 * (hi[0] - lo[0]), 1e-3 * (hi[1] - lo[1]));
                     Rectangle::new(
                         [
-                            ((c.lo[0] - ox).max(lo[0]), (c.lo[1] - oy).max(lo[1])),
-                            ((c.hi[0] + ox).min(hi[0]), (c.hi[1] + oy).min(hi[1])),
+                            ((c.lo[a0] - ox).max(lo[0]), (c.lo[a1] - oy).max(lo[1])),
+                            ((c.hi[a0] + ox).min(hi[0]), (c.hi[a1] + oy).min(hi[1])),
                         ],
                         color.filled(),
                     )
@@ -116,18 +151,38 @@ pub fn eps_map(cfg: &ProblemConfig, cells: &[CellView], target: f64) -> Result<F
         colour_bar(&bar, emax, format!("ε_C {unit}"), NAME)?;
         root.present().map_err(draw_err(NAME))?;
     }
-    let slice = if cfg.system.nx() > 2 {
-        " (projected on the first two state axes)"
-    } else {
-        ""
-    };
     Ok(Figure {
         name: NAME,
-        caption: format!(
-            "Local certificate over X{slice}: ε_C of each of the {} cells (max {:.4}, target {target}) and the binding term.",
-            cells.len(),
-            cells.iter().map(|c| c.eps).fold(0.0, f64::max),
-        ),
+        caption: if nx > 2 {
+            format!(
+                "Local certificate over X{slice}: ε_C of the {} cells the slice cuts (max {:.4}, target {target}; max over all {all} cells {all_max:.4}) and the binding term.",
+                cells.len(),
+                cells.iter().map(|c| c.eps).fold(0.0, f64::max),
+            )
+        } else {
+            format!(
+                "Local certificate over X: ε_C of each of the {all} cells (max {all_max:.4}, target {target}) and the binding term."
+            )
+        },
         svg,
     })
+}
+
+/// The slice in words (empty for nx = 2): " — slice x3 = 0, x4 = 0 (N of M cells)".
+fn slice_words(
+    cfg: &ProblemConfig,
+    names: &[String],
+    axes: [usize; 2],
+    base: &[f64],
+    all: usize,
+) -> String {
+    let nx = cfg.system.nx();
+    if nx <= 2 {
+        return String::new();
+    }
+    let held: Vec<String> = (0..nx)
+        .filter(|k| !axes.contains(k))
+        .map(|k| format!("{} = {}", names[k], base[k]))
+        .collect();
+    format!(" — slice {} ({all} cells in X)", held.join(", "))
 }

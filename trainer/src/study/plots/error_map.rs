@@ -28,7 +28,16 @@ pub fn slice_axes(cfg: &ProblemConfig, train: &TrainSet) -> [usize; 2] {
     if nx <= 2 {
         return [0, 1];
     }
-    let s = sensitivity_spread(cfg, train);
+    top_two(&sensitivity_spread(cfg, train))
+}
+
+/// The two axes with the largest score `s` (ties and NaN: the lower index), in increasing
+/// order; `[0, 1]` for fewer than three axes.
+pub fn top_two(s: &[f64]) -> [usize; 2] {
+    let nx = s.len();
+    if nx <= 2 {
+        return [0, 1];
+    }
     let mut order: Vec<usize> = (0..nx).collect();
     // Descending score, NaN last, stable on ties (lower index first).
     order.sort_by(|&a, &b| {

@@ -18,8 +18,8 @@
 //!   nx > 2, over a 2-D slice: the two states along which κ changes most over X, the others
 //!   held at the setpoint (named in the figure and its caption), dataset points overlaid;
 //! - `training` (`training_curves.rs`): loss terms, ε_D and validation R² per logged epoch;
-//! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over the first two
-//!   axes of X, and which term of ε_C binds there.
+//! - `eps_map` (`trainer refine`): the local certificate's ε_C per cell over two
+//!   axes of X (a slice for nx > 2), and which term of ε_C binds there.
 //!
 //! This file holds what the figures share: the figure types ([`Figure`], [`FigureEntry`],
 //! [`PlotInputs`], [`PlotError`]), the list [`PLOTS`] and [`all`] of them, [`to_png`], and

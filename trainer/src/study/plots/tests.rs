@@ -135,3 +135,59 @@ fn error_grid_of_a_slice_spans_the_chosen_axes() {
     assert_eq!(g.err.len(), 6);
     assert!(g.err.iter().all(|e| e.is_finite()), "{:?}", g.err);
 }
+
+#[test]
+fn eps_map_of_nx_above_two_draws_the_cells_its_slice_cuts() {
+    use crate::certify::refine::CellView;
+    // dc_motor: 3 states, X = lo..hi; a 2 × 2 × 2 grid of cells split at each axis' middle.
+    let cfg = load_config("dc_motor.toml");
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let mid: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| 0.5 * (a + b)).collect();
+    let mut cells = Vec::new();
+    for c in 0..8usize {
+        let pick = |k: usize| {
+            if c >> k & 1 == 0 {
+                (lo[k], mid[k])
+            } else {
+                (mid[k], hi[k])
+            }
+        };
+        cells.push(CellView {
+            lo: (0..3).map(|k| pick(k).0).collect(),
+            hi: (0..3).map(|k| pick(k).1).collect(),
+            eps: 0.1 * (c + 1) as f64,
+            binding: 0,
+        });
+    }
+    // κ changes most along axes 0 and 2: the slice holds axis 1 at the setpoint (clamped).
+    let base = slice_base(&cfg)[1];
+    let fig = eps_map(&cfg, &cells, 0.5, &[3.0, 0.1, 2.0]).unwrap();
+    let cut = cells
+        .iter()
+        .filter(|c| c.lo[1] <= base && (base < c.hi[1] || c.hi[1] >= hi[1]))
+        .count();
+    assert!(cut > 0 && cut < 8, "{cut}");
+    assert!(
+        fig.caption.contains(&format!("of the {cut} cells the slice cuts"))
+            && fig.caption.contains("(8 cells in X)")
+            && fig.caption.contains(&format!(" = {base}")),
+        "{}",
+        fig.caption
+    );
+    let names = axis_names(&cfg.system).0;
+    assert!(fig.svg.contains(names[0].as_str()) && fig.svg.contains(names[2].as_str()));
+    // The largest ε_C of all cells is named even when the slice misses its cell.
+    assert!(fig.caption.contains("max over all 8 cells 0.8000"), "{}", fig.caption);
+    // nx = 2: every cell, no slice.
+    let cfg2 = load_config("pendulum_ode.toml");
+    let two: Vec<CellView> = cells
+        .iter()
+        .map(|c| CellView {
+            lo: c.lo[..2].to_vec(),
+            hi: c.hi[..2].to_vec(),
+            ..c.clone()
+        })
+        .collect();
+    let fig = eps_map(&cfg2, &two, 0.5, &[]).unwrap();
+    assert!(fig.caption.contains("each of the 8 cells") && !fig.caption.contains("slice"));
+}
