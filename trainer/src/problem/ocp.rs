@@ -101,6 +101,12 @@ pub struct StageBounds {
     pub u_lo: Vec<Vec<f64>>,
     /// Upper input bounds of u_0..u_{N−1} (N rows of nu).
     pub u_hi: Vec<Vec<f64>>,
+    /// Per affine `[ocp]` constraint (in the order of the compiled constraint set: path
+    /// constraints, then terminal ones), per stage k = 0..N: how much its right-hand side is
+    /// tightened (row `aᵀ(x_k, u_k) ≤ b − margins[c][k]`). Empty (and then not serialised):
+    /// no tightening; a missing entry is 0.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub margins: Vec<Vec<f64>>,
 }
 
 impl OcpSettings {
@@ -119,6 +125,16 @@ impl OcpSettings {
             Some(s) => (&s.x_lo[k - 1], &s.x_hi[k - 1]),
             None => (&self.x_lo, &self.x_hi),
         }
+    }
+    /// How much constraint `c` of the compiled set is tightened at stage k (0 without
+    /// [`stages`](Self::stages) or a margin for it).
+    pub fn constraint_margin(&self, c: usize, k: usize) -> f64 {
+        self.stages
+            .as_ref()
+            .and_then(|s| s.margins.get(c))
+            .and_then(|m| m.get(k))
+            .copied()
+            .unwrap_or(0.0)
     }
     /// Bounds `(lo, hi)` on the input u_k, k = 0..N−1.
     pub fn u_bounds(&self, k: usize) -> (&[f64], &[f64]) {

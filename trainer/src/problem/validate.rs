@@ -180,6 +180,20 @@ impl ProblemConfig {
                     check_vec(&format!("{key}[{k}]"), r, dim, true)?;
                 }
             }
+            for (c, m) in st.margins.iter().enumerate() {
+                if m.len() != o.horizon + 1 {
+                    return Err(invalid(
+                        format!("ocp.stages.margins[{c}]"),
+                        format!("expected {} stages (N + 1), got {}", o.horizon + 1, m.len()),
+                    ));
+                }
+                if let Some(k) = m.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                    return Err(invalid(
+                        format!("ocp.stages.margins[{c}][{k}]"),
+                        format!("must be finite and ≥ 0, got {}", m[k]),
+                    ));
+                }
+            }
             for k in 0..o.horizon {
                 check_bounds(
                     &format!("ocp.stages.x_lo[{k}]"),

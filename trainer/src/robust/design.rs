@@ -49,18 +49,10 @@ impl Design {
 /// Designs the tube (LQR gain of the linearisation at the setpoint — the origin without
 /// one —, its Riccati matrix as P,
 /// the input weight chosen from `robust.lqr_r_scales` to minimise [`Tube::score`]) or the
-/// Lipschitz tightening, and tightens the bounds for `cfg.robust.eps`. A problem with
-/// `[ocp]` path or terminal constraints is refused ([`RobustError::UntightenedConstraints`]):
-/// the tube tightens the boxes only.
+/// Lipschitz tightening, and tightens the bounds for `cfg.robust.eps`: the boxes and the
+/// affine `[ocp]` path and terminal constraints (`tube` module doc); a nonlinear constraint
+/// is refused ([`RobustError::UntightenedConstraints`]).
 pub fn design(cfg: &ProblemConfig) -> Result<Design, RobustError> {
-    for (key, list) in [
-        ("ocp.constraints", &cfg.ocp.constraints),
-        ("ocp.terminal_constraints", &cfg.ocp.terminal_constraints),
-    ] {
-        if !list.is_empty() {
-            return Err(RobustError::UntightenedConstraints { key: key.into() });
-        }
-    }
     let rs = &cfg.robust;
     let js = jacobian_set(cfg);
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());

@@ -74,7 +74,7 @@ pub use crate::problem::{RobustMethod, RobustSettings};
 pub use design::{design, robust_config, verdict, Design, Verdict};
 pub use jacobians::{jacobian_set, pendulum_rk4_jacobian, JacobianBound, JacobianSet};
 pub use terminal::{terminal_region, Feasibility, TerminalCheck, TerminalRegion};
-pub use tube::{contraction, dare, Tube};
+pub use tube::{contraction, dare, AffineConstraint, Tube};
 
 /// Errors of the robust design.
 #[derive(Debug, thiserror::Error)]
@@ -87,16 +87,18 @@ pub enum RobustError {
         /// Which bound became empty, with the numbers.
         reason: String,
     },
-    /// The problem has `[ocp]` path or terminal constraints, which the tube does not
-    /// tighten (only the state and input boxes are tightened).
+    /// An `[ocp]` constraint the tube cannot tighten (a nonlinear one): a robust guarantee
+    /// would not cover it.
     #[error(
-        "robust design: `{key}` is not tightened by the tube (only the boxes x_lo/x_hi/u_lo/u_hi \
-         are): a robust guarantee would not cover it. Remove the constraints or use the nominal \
+        "robust design: `{key}` is not tightened by the tube ({reason}): a robust guarantee \
+         would not cover it. Write it as an affine constraint, remove it, or use the nominal \
          design"
     )]
     UntightenedConstraints {
-        /// `ocp.constraints` or `ocp.terminal_constraints`.
+        /// The constraint's key, e.g. `ocp.constraints[1]`.
         key: String,
+        /// Why.
+        reason: String,
     },
 }
 

@@ -14,7 +14,13 @@
 //! (b) u_r,j ± τ_j c  ∈ [u_lo,j + ε + τ_j s_N, u_hi,j − ε − τ_j s_N]  (κ_f(X_f) ⊆ U_N)
 //! (c) ρ_f · (c + m) + d₀ ≤ c                                        (robust invariance)
 //! ```
-//! (a), (b) are exact: the largest value of a row aᵀ(x − x_r) over the ellipsoid is its
+//! (d) every affine `[ocp]` constraint aₓᵀx + a_uᵀu ≤ b (path and terminal) holds on X_f
+//! under κ_f with its stage-N margin (`tube` module doc):
+//! `aₓᵀx_r + a_uᵀu_r + c·‖P^{−1/2}(aₓ + Kᵀa_u)‖₂ ≤ b − s_N‖P^{−1/2}(aₓ + Kᵀa_u)‖₂ − ε‖a_u‖₂`
+//! (covering the shifted candidate's stage N − 1, whose deviation m = s_N − s_{N−1} the
+//! margin's extra s_N − s_{N−1} absorbs, and its stage N).
+//!
+//! (a), (b), (d) are exact: the largest value of a row aᵀ(x − x_r) over the ellipsoid is its
 //! support function `c·√(aᵀP⁻¹a)`, i.e. `σ_i c` and `τ_j c` with the tube's σ, τ. For (c):
 //! a state within `m` of X_f, `‖y − x_r‖_P ≤ c + m`, is mapped by the local feedback to
 //! `F(y, κ_f(y))` with
@@ -238,7 +244,8 @@ fn local_rate(cfg: &ProblemConfig, t: &Tube, r: f64) -> (f64, TerminalCheck) {
     }
 }
 
-/// The largest radius allowed by the tightened boxes at stage N, (a) and (b).
+/// The largest radius allowed by the tightened boxes and constraints at stage N, (a), (b)
+/// and (d).
 fn radius_max(cfg: &ProblemConfig, t: &Tube) -> f64 {
     let (xr, ur) = centre(cfg);
     let o = &cfg.ocp;
@@ -260,6 +267,17 @@ fn radius_max(cfg: &ProblemConfig, t: &Tube) -> f64 {
     for j in 0..ur.len() {
         let m = t.u_margin[j];
         fit(ur[j], o.u_lo[j], o.u_hi[j], m, t.eps + m * sn);
+    }
+    // (d) the affine `[ocp]` constraints under the local feedback, tightened as at stage N.
+    match t.affine_constraints(cfg) {
+        Ok(rows) => {
+            for a in &rows {
+                let at_ref: f64 = a.a_x.iter().zip(&xr).map(|(a, x)| a * x).sum::<f64>()
+                    + a.a_u.iter().zip(&ur).map(|(a, u)| a * u).sum::<f64>();
+                fit(at_ref, f64::NEG_INFINITY, a.b, a.per, t.margin(a, n));
+            }
+        }
+        Err(_) => c = f64::NEG_INFINITY,
     }
     c
 }

@@ -307,20 +307,19 @@ fn verdict_compares_certified_plus_allowance_with_design_eps() {
     }
 }
 
-/// Path and terminal constraints are not tightened by the tube: a design is refused, naming
-/// the key, rather than certifying a problem whose constraints it does not cover.
+/// A nonlinear constraint is refused, naming its key; affine ones are tightened.
 #[test]
-fn constraints_are_refused_by_the_design() {
+fn nonlinear_constraints_are_refused_affine_ones_tightened() {
     for (path, terminal, key) in [
         (
-            vec!["position + velocity <= 3".to_string()],
+            vec!["position * velocity <= 3".to_string()],
             vec![],
-            "ocp.constraints",
+            "ocp.constraints[0]",
         ),
         (
-            vec![],
+            vec!["position + velocity <= 3".to_string()],
             vec!["position^2 <= 1".to_string()],
-            "ocp.terminal_constraints",
+            "ocp.terminal_constraints[0]",
         ),
     ] {
         let mut cfg = di(0.01);
@@ -328,10 +327,114 @@ fn constraints_are_refused_by_the_design() {
         cfg.ocp.terminal_constraints = terminal;
         cfg.validate().unwrap();
         let e = design::design(&cfg).unwrap_err().to_string();
-        assert!(e.contains(&format!("`{key}`")), "{e}");
-        cfg.ocp.constraints.clear();
+        assert!(
+            e.contains(&format!("`{key}`")) && e.contains("nonlinear"),
+            "{e}"
+        );
         cfg.ocp.terminal_constraints.clear();
-        assert!(design::design(&cfg).is_ok());
+        cfg.ocp.constraints = vec!["position + velocity <= 3".into()];
+        let d = design::design(&cfg).unwrap();
+        assert_eq!(d.stages.margins.len(), 1);
+        assert_eq!(d.stages.margins[0].len(), cfg.ocp.horizon + 1);
+    }
+}
+
+/// The margin of an affine constraint: a constraint that is a box gets the box's
+/// tightening; a mixed one is never exceeded by sampled tube deviations and input errors
+/// (KΔ + e), and is approached by them (the support function is attained); the OCP's row
+/// carries it.
+#[test]
+fn affine_constraint_margins_are_the_support_function_of_the_tube() {
+    let mut cfg = di(0.05);
+    cfg.ocp.x_hi = vec![f64::INFINITY, 1.5];
+    cfg.ocp.constraints = vec![
+        "velocity <= 1.5".into(),
+        "0.7*position - 0.4*velocity + 0.3*force <= 2".into(),
+        "force >= -0.8".into(),
+    ];
+    cfg.validate().unwrap();
+    let d = design::design(&cfg).unwrap();
+    let t = &d.tube;
+    let n = cfg.ocp.horizon;
+    // The box x₂ ≤ 1.5 and the constraint "velocity <= 1.5": the same tightening.
+    for k in 1..=n {
+        let box_hi = d.stages.x_hi[k - 1][1];
+        assert!(
+            (1.5 - d.stages.margins[0][k] - box_hi).abs() < 1e-12,
+            "stage {k}"
+        );
+    }
+    // "force >= -0.8": the input box's ε + τ s_k.
+    for k in 0..n {
+        let want = t.eps + t.u_margin[0] * t.s[k];
+        assert!((d.stages.margins[2][k] - want).abs() < 1e-12, "stage {k}");
+    }
+    // The mixed one against samples of (aₓ + Kᵀa_u)ᵀΔ + a_uᵀe.
+    let (ax, au) = ([0.7, -0.4], 0.3);
+    let p = DMatrix::from_fn(2, 2, |i, j| t.p[i][j]);
+    let l = p.clone().cholesky().unwrap().l(); // P = L Lᵀ: Δ = L⁻ᵀ w, ‖w‖ ≤ s
+    let linv_t = l.transpose().try_inverse().unwrap();
+    for k in [1usize, n / 2, n] {
+        let m = d.stages.margins[1][k];
+        let mut best = f64::NEG_INFINITY;
+        for i in 0..20_000u64 {
+            // Half the samples on the boundary ‖Δ‖_P = s_k with e = ±ε (where the maximum
+            // lies), half inside with e uniform.
+            let r: Vec<f64> = (0..3).map(|c| uniform(1234 + k as u64, i, c)).collect();
+            let ang = std::f64::consts::TAU * r[0];
+            let (rad, e) = if i % 2 == 0 {
+                (1.0, if r[2] < 0.5 { -t.eps } else { t.eps })
+            } else {
+                (r[1].sqrt(), t.eps * (2.0 * r[2] - 1.0))
+            };
+            let w = nalgebra::DVector::from_vec(vec![ang.cos(), ang.sin()]) * (t.s[k] * rad);
+            let delta = &linv_t * w;
+            assert!((delta.transpose() * &p * &delta)[(0, 0)].sqrt() <= t.s[k] * (1.0 + 1e-12));
+            let du = (0..2).map(|j| t.k[0][j] * delta[j]).sum::<f64>() + e;
+            let v = ax[0] * delta[0] + ax[1] * delta[1] + au * du;
+            assert!(v <= m * (1.0 + 1e-12), "stage {k}: {v} > margin {m}");
+            best = best.max(v);
+        }
+        assert!(
+            best >= 0.995 * m,
+            "stage {k}: the margin {m} is loose (max {best})"
+        );
+    }
+    // The OCP's row of the mixed constraint at stage 1 has b − margin.
+    let rc = design::robust_config(&cfg, &d);
+    let ocp = crate::mpc::ocp::Ocp::new(&rc, false);
+    let rhs: Vec<f64> = ocp
+        .constraint_rows()
+        .iter()
+        .map(|&r| ocp.rows[r].rhs)
+        .collect();
+    let want = 2.0 - d.stages.margins[1][1];
+    assert!(
+        rhs.iter().any(|h| (h - want).abs() < 1e-12),
+        "no row with rhs {want}: {rhs:?}"
+    );
+    // The terminal region satisfies every constraint with its stage-N margin under the
+    // local feedback, on its boundary.
+    let tr = d
+        .terminal
+        .as_ref()
+        .expect("a terminal region of the double integrator");
+    {
+        let c = tr.radius;
+        for i in 0..2000u64 {
+            let ang = std::f64::consts::TAU * i as f64 / 2000.0;
+            let w = nalgebra::DVector::from_vec(vec![ang.cos(), ang.sin()]) * c;
+            let dx = &linv_t * w;
+            let x = [tr.x_ref[0] + dx[0], tr.x_ref[1] + dx[1]];
+            let u = tr.u_ref[0] + t.k[0][0] * dx[0] + t.k[0][1] * dx[1];
+            let g = 0.7 * x[0] - 0.4 * x[1] + 0.3 * u;
+            let room = [
+                2.0 - d.stages.margins[1][n] - g,
+                1.5 - d.stages.margins[0][n] - x[1],
+                u - (-0.8 + d.stages.margins[2][n]),
+            ];
+            assert!(room.iter().all(|r| *r >= -1e-9), "{room:?}");
+        }
     }
 }
 

@@ -1,5 +1,14 @@
 //! The tube: ρ = sup‖P^{1/2}(A + BK)P^{−1/2}‖₂, w̄ = ε·sup‖P^{1/2}B‖₂,
 //! s_k = w̄ Σ_{j<k} ρ^j, and the tightened bounds X ⊖ {σ_i s_k}, U ⊖ {ε + τ_j s_k}.
+//!
+//! **Affine `[ocp]` constraints** aₓᵀx + a_uᵀu ≤ b ([`AffineConstraint`]): with the true
+//! state x_k = z_k + Δ (‖Δ‖_P ≤ s_k) and the applied input u_k = v_k + KΔ + e (‖e‖₂ ≤ ε),
+//! aₓᵀx_k + a_uᵀu_k = aₓᵀz_k + a_uᵀv_k + (aₓ + Kᵀa_u)ᵀΔ + a_uᵀe, and the largest value of the
+//! last two terms is exactly `s_k·‖P^{−1/2}(aₓ + Kᵀa_u)‖₂ + ε‖a_u‖₂` (support functions of
+//! the ellipsoid and the ball) — the margin subtracted from b at stage k
+//! (`StageBounds::margins`). The boxes are the special case a = ±e_i (σ_i, τ_j). A nonlinear
+//! constraint is refused ([`RobustError::UntightenedConstraints`]): its margin would need a
+//! bound on its gradient over the tube, which is not computed.
 
 use super::jacobians::{JacobianBound, JacobianSet};
 use super::RobustError;
@@ -61,6 +70,23 @@ pub fn dare(
         }
     }
     None
+}
+
+/// An affine `[ocp]` constraint aₓᵀx + a_uᵀu ≤ b with its tube factors (module doc).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AffineConstraint {
+    /// Its key, e.g. `ocp.constraints[0]`.
+    pub key: String,
+    /// aₓ.
+    pub a_x: Vec<f64>,
+    /// a_u.
+    pub a_u: Vec<f64>,
+    /// b.
+    pub b: f64,
+    /// ‖P^{−1/2}(aₓ + Kᵀa_u)‖₂: margin per unit of the tube radius s.
+    pub per: f64,
+    /// ‖a_u‖₂: margin per unit of ε.
+    pub a_u_norm: f64,
 }
 
 /// The tube of a design: gain, Lyapunov matrix, rates and the per-stage radii.
@@ -172,6 +198,7 @@ impl Tube {
             x_hi: vec![],
             u_lo: vec![],
             u_hi: vec![],
+            margins: vec![],
         };
         for k in 1..=n {
             let (l, h) = shrink(&o.x_lo, &o.x_hi, &|i| self.x_margin[i] * self.s[k], "x", k)?;
@@ -189,7 +216,71 @@ impl Tube {
             st.u_lo.push(l);
             st.u_hi.push(h);
         }
+        st.margins = self
+            .affine_constraints(cfg)?
+            .iter()
+            .map(|c| (0..=n).map(|k| self.margin(c, k)).collect())
+            .collect();
         Ok(st)
+    }
+
+    /// The margin of an affine constraint at stage k: `s_k·per + ε‖a_u‖₂` (module doc).
+    pub fn margin(&self, c: &AffineConstraint, k: usize) -> f64 {
+        self.s[k] * c.per + self.eps * c.a_u_norm
+    }
+
+    /// The `[ocp]` constraints of `cfg` (path, then terminal: the compiled set's order) as
+    /// affine rows with their tube factors; an error names the first nonlinear one.
+    pub fn affine_constraints(
+        &self,
+        cfg: &ProblemConfig,
+    ) -> Result<Vec<AffineConstraint>, RobustError> {
+        let cs = match cfg.constraint_set() {
+            Ok(Some(cs)) => cs,
+            Ok(None) => return Ok(vec![]),
+            Err(e) => {
+                return Err(RobustError::UntightenedConstraints {
+                    key: e.key.clone(),
+                    reason: e.reason(),
+                })
+            }
+        };
+        let (nx, nu) = (cs.nx(), cs.nu());
+        let (mut g0, mut jac) = (vec![0.0; cs.len()], vec![0.0; cs.len() * (nx + nu)]);
+        cs.linearize(&vec![0.0; nx], &vec![0.0; nu], &mut g0, &mut jac);
+        let p = DMatrix::from_fn(nx, nx, |i, j| self.p[i][j]);
+        let pinv = p
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::from_element(nx, nx, f64::NAN));
+        let k = DMatrix::from_fn(nu, nx, |i, j| self.k[i][j]);
+        cs.items
+            .iter()
+            .enumerate()
+            .map(|(c, item)| {
+                if !item.affine {
+                    return Err(RobustError::UntightenedConstraints {
+                        key: item.key.clone(),
+                        reason: format!(
+                            "`{}` is nonlinear: the tube tightens affine constraints only",
+                            item.text
+                        ),
+                    });
+                }
+                let row = &jac[c * (nx + nu)..(c + 1) * (nx + nu)];
+                let (a_x, a_u) = (row[..nx].to_vec(), row[nx..].to_vec());
+                let v = nalgebra::DVector::from_fn(nx, |i, _| {
+                    a_x[i] + (0..nu).map(|j| k[(j, i)] * a_u[j]).sum::<f64>()
+                });
+                Ok(AffineConstraint {
+                    key: item.key.clone(),
+                    b: -g0[c],
+                    per: (v.transpose() * &pinv * &v)[(0, 0)].max(0.0).sqrt(),
+                    a_u_norm: a_u.iter().map(|a| a * a).sum::<f64>().sqrt(),
+                    a_x,
+                    a_u,
+                })
+            })
+            .collect()
     }
 
     /// The largest tightening relative to the half-width of each finite bound (the

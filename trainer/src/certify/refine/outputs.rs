@@ -381,9 +381,16 @@ pub fn sensitivity_spread(cfg: &ProblemConfig, st: &RefineState) -> Vec<f64> {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let mut sum = vec![0.0; nx];
     let mut n = 0usize;
-    for p in st.points.iter().filter(|p| p.labelled() && p.du.len() == nu * nx) {
+    for p in st
+        .points
+        .iter()
+        .filter(|p| p.labelled() && p.du.len() == nu * nx)
+    {
         for (i, s) in sum.iter_mut().enumerate() {
-            *s += (0..nu).map(|j| p.du[j * nx + i].powi(2)).sum::<f64>().sqrt();
+            *s += (0..nu)
+                .map(|j| p.du[j * nx + i].powi(2))
+                .sum::<f64>()
+                .sqrt();
         }
         n += 1;
     }

@@ -14,6 +14,9 @@
 //! | states and inputs | (x_k, u_k), k = 1 … N−1 |
 //! | `terminal_constraints` | x_N |
 //!
+//! A robust design's margins (`ocp.stages.margins`) lower the right-hand side of an affine
+//! constraint's row per stage.
+//!
 //! In the soft problem every row that involves a state gets its own slack s ≥ 0
 //! (`g − s ≤ 0`), as the state boxes do; input-only rows stay hard, as the input boxes.
 
@@ -184,7 +187,15 @@ pub(super) fn build(
                 });
             }
             constraint_rows.push(rows.len());
-            rows.push(LinRow::new(&entries, -g0[ci]));
+            // A robust design tightens affine constraints by a per-stage margin
+            // (`robust::Tube::tighten`); nonlinear rows are re-linearised without one, and a
+            // design never gives them one.
+            let margin = if c.affine {
+                o.constraint_margin(ci, k)
+            } else {
+                0.0
+            };
+            rows.push(LinRow::new(&entries, -g0[ci] - margin));
             if with_slack {
                 rows.push(LinRow::new(&[(nw + n_slack, -1.0)], 0.0));
                 n_slack += 1;

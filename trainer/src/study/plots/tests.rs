@@ -168,7 +168,8 @@ fn eps_map_of_nx_above_two_draws_the_cells_its_slice_cuts() {
         .count();
     assert!(cut > 0 && cut < 8, "{cut}");
     assert!(
-        fig.caption.contains(&format!("of the {cut} cells the slice cuts"))
+        fig.caption
+            .contains(&format!("of the {cut} cells the slice cuts"))
             && fig.caption.contains("(8 cells in X)")
             && fig.caption.contains(&format!(" = {base}")),
         "{}",
@@ -177,7 +178,11 @@ fn eps_map_of_nx_above_two_draws_the_cells_its_slice_cuts() {
     let names = axis_names(&cfg.system).0;
     assert!(fig.svg.contains(names[0].as_str()) && fig.svg.contains(names[2].as_str()));
     // The largest ε_C of all cells is named even when the slice misses its cell.
-    assert!(fig.caption.contains("max over all 8 cells 0.8000"), "{}", fig.caption);
+    assert!(
+        fig.caption.contains("max over all 8 cells 0.8000"),
+        "{}",
+        fig.caption
+    );
     // nx = 2: every cell, no slice.
     let cfg2 = load_config("pendulum_ode.toml");
     let two: Vec<CellView> = cells
