@@ -145,8 +145,9 @@ fn core_matches_the_exporters_f32_model_bit_for_bit() {
 }
 
 /// `trainer eval` (default: the controller) computes what the core computes, flags and all,
-/// bit for bit — inside X, outside it (projection) and where the clamp acts; `--raw` is the
-/// bare network (no projection: its output differs outside X).
+/// bit for bit (with the core's default tanh; within the f32 allowances with `fast-tanh`) —
+/// inside X, outside it (projection) and where the clamp acts; `--raw` is the bare network
+/// (no projection: its output differs outside X).
 #[test]
 fn eval_gives_the_cores_output_and_flags() {
     let (_, run_dir) = ampc_tests::trained_pendulum();
@@ -194,14 +195,29 @@ fn eval_gives_the_cores_output_and_flags() {
     let ctrl = run("c.csv", false);
     let mut lines = ctrl.lines();
     assert_eq!(lines.next(), Some("x1,x2,u1,flags"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("export_report.json")).unwrap())
+            .unwrap();
+    // `trainer eval` computes the default (accurate) tanh's device arithmetic: with the core
+    // built with `fast-tanh` the two agree only within both f32 allowances (each bounds the
+    // distance to the same f64 network; projection and clamp do not widen it), and the
+    // CLAMPED flag may differ at the band's edge.
+    let fast = activation::TANH_KIND == "fast";
+    let both = report["f32_allowance_libm"].as_f64().unwrap()
+        + report["f32_allowance_fast_tanh"].as_f64().unwrap();
     let (mut outside, mut clamped) = (0, 0);
     for (x, l) in xs.iter().zip(lines) {
         let f: Vec<&str> = l.split(',').collect();
         let u: f64 = f[2].parse().unwrap();
         let flags: u8 = f[3].parse().unwrap();
         let core = controller_core::evaluate(x);
-        assert_eq!(u, f64::from(core.u[0]), "x = {x:?}");
-        assert_eq!(flags, core.flags.0, "x = {x:?}");
+        if fast {
+            assert!((u - f64::from(core.u[0])).abs() <= both, "x = {x:?}");
+            assert_eq!(flags & !4, core.flags.0 & !4, "x = {x:?}");
+        } else {
+            assert_eq!(u, f64::from(core.u[0]), "x = {x:?}");
+            assert_eq!(flags, core.flags.0, "x = {x:?}");
+        }
         outside += usize::from(flags & 1 != 0);
         clamped += usize::from(flags & 4 != 0);
     }
@@ -210,9 +226,6 @@ fn eval_gives_the_cores_output_and_flags() {
     assert!(raw.starts_with("x1,x2,u1,du1_dx1,du1_dx2\n"));
     // Where the controller neither projected nor clamped, it is the f64 network within the
     // sound f32 allowance of the export.
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run_dir.join("export_report.json")).unwrap())
-            .unwrap();
     let allowance = report["f32_allowance_libm"].as_f64().unwrap();
     let mut inside = 0;
     for (r, c) in raw.lines().skip(1).zip(ctrl.lines().skip(1)) {

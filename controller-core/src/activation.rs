@@ -11,11 +11,18 @@
 //!
 //!   About 15 f32 operations on either branch, one division, no table, no libm; odd by
 //!   construction (the first branch is an odd expression, the second copies the sign bit).
-//! - [`tanh_fast`] (feature `fast-tanh`): Lambert's continued fraction truncated to a
-//!   (7, 6) rational, `r(x) = x (135135 + 17325 x² + 378 x⁴ + x⁶) / (135135 + 62370 x² +
-//!   3150 x⁴ + 28 x⁶)`, evaluated on `x` clipped to `[−FAST_CLIP, FAST_CLIP]`: one division,
-//!   no branch (the clip is two conditional moves; the result provably stays inside
-//!   `(−1, 1)`, so it needs no clamp).
+//! - [`tanh_fast`] (feature `fast-tanh`): a (7, 6) rational, near-minimax for the absolute
+//!   error on `[0, 8]`, in a scaled variable:
+//!   `r = y (a₀ + a₁w + a₂w² + w³) / (b₀ + b₁w + b₂w² + w³)`, `w = y²`, `y = K·c(x)`, where
+//!   `c(x) = ((x·2²⁸) as i32) as f32 · 2⁻²⁸` clips `x` to `[−FAST_CLIP, FAST_CLIP] = [−8, 8]`
+//!   by the saturating float-to-integer conversion (one `vcvt` each way on the Cortex-M4, no
+//!   compare or branch; NaN → 0; it truncates `|x| < 2⁻⁴` to a multiple of 2⁻²⁸), and the
+//!   scale `K ≈ 0.026` makes both polynomials monic (the two multiplications by `K` and 2⁻²⁸
+//!   are one, by the f32 constant `FAST_Y`). About 17 f32 instructions, one division; the
+//!   result provably stays inside `(−1, 1)`, so it needs no clamp. Coefficients: a linear
+//!   programme (minimise the largest absolute error on a grid of `[0, 8]`, with `r ≤ 1 − 10⁻⁶`),
+//!   rounded to f32 (`controller-core/tools/fit_fast_tanh.py`); the bound below is not the
+//!   fit's but the exhaustive check's.
 //!
 //! Error bounds: [`TANH_ACCURATE_MAX_ABS_ERR`] and [`TANH_FAST_MAX_ABS_ERR`] bound
 //! `|t(x) − tanh(x)|` over **every** f32 input `x` (NaN excepted), where `tanh` is exact.
@@ -24,7 +31,9 @@
 //! < 2⁻⁵² relative, far below the margins) and checks the constants. `.ci/run` runs it in
 //! release mode. Measured there: `tanh_accurate` max 7.07·10⁻⁸ absolute (at x ≈ 0.8734),
 //! at most 1.19 ulp of the correctly rounded result; the constant keeps the 1.2·10⁻⁷ that
-//! libm's `tanhf` (the default before) had, so certificates exported for it stay valid.
+//! libm's `tanhf` (the default before) had, so certificates exported for it stay valid;
+//! `tanh_fast` max 3.22·10⁻⁶ (at x ≈ 7.63), bound 3.3·10⁻⁶ (the Padé form it replaced had
+//! 10⁻⁴, reached at its clip).
 //! The trainer's exporter mirrors both functions operation by operation
 //! (`trainer::deploy::export::Tanh`) and uses the same constants for the certificate's f32
 //! allowance (the `tests/` crate checks that code and constants agree).
@@ -33,33 +42,42 @@
 //! `f32_allowance_libm`): a file-format name for "the default, accurate tanh", kept so that
 //! exported controllers and reports keep working.
 
-/// `FAST_CLIP`: the fast tanh evaluates its rational on `x` clamped to ±4.97, where
-/// `r(4.97) ≈ 1 − 6·10⁻⁷`.
-pub const FAST_CLIP: f32 = 4.97;
+/// `FAST_CLIP`: the fast tanh evaluates its rational on `x` clipped to ±8 (where
+/// `1 − tanh 8 ≈ 2.3·10⁻⁷`); the clip is the saturation of `(x·2²⁸) as i32` at ±2³¹.
+pub const FAST_CLIP: f32 = 8.0;
+/// `2²⁸ = 2³¹ / FAST_CLIP`: the fixed-point scale of the fast tanh's clip.
+const FAST_FIX: f32 = 268_435_456.0;
+/// `K·2⁻²⁸` rounded to f32 (`K = 0.025984265`): fixed-point integer → the scaled variable `y`.
+const FAST_Y: f32 = 9.679_893e-11;
+/// `a₀, a₁, a₂` of the fast tanh's numerator `y (a₀ + a₁w + a₂w² + w³)`.
+const FAST_A: [f32; 3] = [9.280_053e-5, 0.016_684_914, 0.435_023_87];
+/// `b₀, b₁, b₂` of its denominator `b₀ + b₁w + b₂w² + w³`.
+const FAST_B: [f32; 3] = [2.411_385_4e-6, 0.001_623_884_7, 0.107_925_8];
 
 /// Bound on `|tanh_accurate(x) − tanh(x)|` for every f32 `x` (verified exhaustively; the
 /// largest error seen is 7.07·10⁻⁸, see the module doc).
 pub const TANH_ACCURATE_MAX_ABS_ERR: f64 = 1.2e-7;
 
-/// Bound on `|tanh_fast(x) − tanh(x)|` for every f32 `x` (verified exhaustively).
-pub const TANH_FAST_MAX_ABS_ERR: f64 = 1.0e-4;
+/// Bound on `|tanh_fast(x) − tanh(x)|` for every f32 `x` (verified exhaustively; the
+/// largest error seen is 3.22·10⁻⁶, at x ≈ 7.63).
+pub const TANH_FAST_MAX_ABS_ERR: f64 = 3.3e-6;
 
 /// Piecewise bound for [`tanh_fast`]: entry `(a_k, δ_k)` bounds `|tanh_fast(x) − tanh(x)|`
-/// by `δ_k` for `a_{k−1} ≤ |x| < a_k` (`a_{−1} = 0`, the last `a` is +∞). The rational is
-/// accurate near 0 and loses accuracy towards the clip, so a network whose pre-activations
-/// stay small gets a much smaller allowance than the uniform bound gives. Verified
-/// exhaustively with the uniform bounds.
+/// by `δ_k` for `a_{k−1} ≤ |x| < a_k` (`a_{−1} = 0`, the last `a` is +∞). The near-minimax
+/// rational's error is nearly level on `[0, 8]`, so the bins differ little (2.3–3.3·10⁻⁶;
+/// the Padé form before had 4·10⁻⁷ below |x| = 2 and 10⁻⁴ near its clip at 4.97). Verified
+/// exhaustively with the uniform bounds (each bin is the largest error seen, rounded up).
 pub const TANH_FAST_ERR_BINS: [(f32, f64); 10] = [
-    (0.5, 4.0e-7),
-    (1.0, 4.0e-7),
-    (1.5, 4.0e-7),
-    (2.0, 4.0e-7),
-    (2.5, 5.0e-7),
-    (3.0, 1.2e-6),
-    (3.5, 4.6e-6),
-    (4.0, 1.52e-5),
-    (4.5, 4.25e-5),
-    (f32::INFINITY, 1.0e-4),
+    (0.5, 3.0e-6),
+    (1.0, 2.8e-6),
+    (1.5, 3.0e-6),
+    (2.0, 3.1e-6),
+    (2.5, 3.2e-6),
+    (3.0, 2.3e-6),
+    (3.5, 3.1e-6),
+    (4.0, 2.9e-6),
+    (4.5, 2.6e-6),
+    (f32::INFINITY, 3.3e-6),
 ];
 
 /// Certificate label of the tanh this build uses (`"libm"`: the default [`tanh_accurate`],
@@ -136,33 +154,33 @@ pub fn tanh_accurate(x: f32) -> f32 {
     f32::from_bits(t.to_bits() | (x.to_bits() & 0x8000_0000))
 }
 
-/// The clipped (7, 6) rational approximation (see the module doc). Odd, monotone on
-/// the clipped range, finite for every input (NaN maps to `r(−FAST_CLIP)`).
+/// The clipped (7, 6) rational approximation (see the module doc). Exactly odd
+/// (`t(−x) = −t(x)`, the truncation and the saturation are symmetric), finite for every input
+/// (±inf → ±t(8), NaN → 0).
 ///
-/// No clamp of the result to `[−1, 1]`: on the clipped range the f32 rational never leaves
-/// `(−1, 1)` (its largest value there is 0.9999995), checked on every f32 of
-/// `[0, FAST_CLIP]` by the test `rational_stays_inside_unit_interval` (the rational is exactly
-/// odd in f32, so that covers the negative half), so a clamp would never change a bit.
+/// No clamp of the result to `[−1, 1]`: on every f32 of `[0, FAST_CLIP]` (which reaches
+/// every value the clip produces, up to sign) the result stays in `[0, 1)` (its largest value
+/// is 0.9999992), checked by the test `rational_stays_inside_unit_interval`, so a clamp would
+/// never change a bit.
 #[inline]
 #[cfg_attr(feature = "no-panic", no_panic::no_panic)]
 pub fn tanh_fast(x: f32) -> f32 {
-    // Comparisons, not `f32::max`/`min` (a libcall on Cortex-M4) nor `clamp` (which would
-    // propagate NaN). The first keeps `x ≥ −FAST_CLIP` and sends NaN to −FAST_CLIP, the
-    // second is then a plain upper clip: the same as `if x > C { C } else if x >= −C { x }
-    // else { −C }`, as two conditional moves without a branch.
-    let x = if x >= -FAST_CLIP { x } else { -FAST_CLIP };
-    let x = if x > FAST_CLIP { FAST_CLIP } else { x };
-    rational(x)
+    // `as i32` saturates (and sends NaN to 0): the clip without compares, `f32::min`/`max`
+    // (a libcall on the Cortex-M4) or a branch. `x·2²⁸` is exact (power of two).
+    let y = ((x * FAST_FIX) as i32) as f32 * FAST_Y;
+    rational(y)
 }
 
-/// `r(x)` of the module doc, unclipped: Horner in `x²`, one division. The operation order is
-/// the one the exporter's f32 model (`trainer::export`) mirrors.
+/// `r(y)` of the module doc: Horner in `w = y²`, both polynomials monic, one division. The
+/// operation order is the one the exporter's f32 model (`trainer::deploy::export`) mirrors.
 #[inline(always)]
-fn rational(x: f32) -> f32 {
-    let x2 = x * x;
-    let p = x * (135_135.0 + x2 * (17_325.0 + x2 * (378.0 + x2)));
-    let q = 135_135.0 + x2 * (62_370.0 + x2 * (3_150.0 + x2 * 28.0));
-    // q ≥ 135135 and x is finite, so r is never NaN.
+fn rational(y: f32) -> f32 {
+    let [a0, a1, a2] = FAST_A;
+    let [b0, b1, b2] = FAST_B;
+    let w = y * y;
+    let p = y * (a0 + w * (a1 + w * (a2 + w)));
+    let q = b0 + w * (b1 + w * (b2 + w));
+    // q ≥ b0 > 0 and y is finite, so r is never NaN.
     p / q
 }
 
@@ -196,7 +214,9 @@ mod tests {
             assert!(err(tanh_fast, x) <= TANH_FAST_MAX_ABS_ERR);
         }
         assert_eq!(tanh_fast(f32::INFINITY), tanh_fast(FAST_CLIP));
-        assert!(tanh_fast(f32::NAN).is_finite());
+        assert_eq!(tanh_fast(f32::NEG_INFINITY), -tanh_fast(FAST_CLIP));
+        assert_ne!(tanh_fast(FAST_CLIP), tanh_fast(7.9));
+        assert_eq!(tanh_fast(f32::NAN), 0.0);
         assert_eq!(tanh_accurate(f32::INFINITY), 1.0);
         assert_eq!(tanh_accurate(f32::NEG_INFINITY), -1.0);
         assert!(tanh_accurate(f32::NAN).is_finite());
@@ -233,21 +253,26 @@ mod tests {
         assert!(worst > 0.5 * TANH_ACCURATE_MAX_ABS_ERR / 2.0, "{worst:e}");
     }
 
-    /// Why `tanh_fast` needs no output clamp: every f32 of `[0, FAST_CLIP]` gives a rational
-    /// in `[0, 1)` (and `r(−x) = −r(x)` exactly). About 10⁹ divisions: a few seconds.
+    /// Why `tanh_fast` needs no output clamp: every f32 of `[0, FAST_CLIP]` gives a result
+    /// in `[0, 1)`. The clip's outputs for these inputs are all its non-negative outputs
+    /// (inputs above 8 give the same as 8, NaN the same as 0), and `t(−x) = −t(x)` exactly
+    /// (checked on a stride), so that covers every input. About 10⁹ divisions: a few seconds.
     #[test]
     fn rational_stays_inside_unit_interval() {
         let mut max = 0.0f32;
         for bits in 0..=FAST_CLIP.to_bits() {
             let x = f32::from_bits(bits);
-            let r = rational(x);
-            assert!((0.0..1.0).contains(&r), "r({x:e}) = {r:e}");
+            let r = tanh_fast(x);
+            assert!((0.0..1.0).contains(&r), "t({x:e}) = {r:e}");
             max = max.max(r);
-            if bits % 65_537 == 0 {
-                assert_eq!(rational(-x).to_bits(), (-r).to_bits());
+            if bits % 65_537 == 1 {
+                // `==`: a tiny x truncates to +0 on both sides.
+                assert_eq!(tanh_fast(-x), -r);
             }
         }
         assert!(max < 1.0);
+        assert_eq!(tanh_fast(9.0e30), tanh_fast(FAST_CLIP));
+        assert_eq!(rational(0.0), 0.0);
     }
 
     /// The proof of the two bounds: every non-negative f32 (both functions are odd, which
