@@ -535,6 +535,7 @@ impl QpCertifier {
                 continue;
             }
             let Some(l) = self.law(&set) else {
+                if std::env::var("AMPC_DIAG2").is_ok() { eprintln!("NOLAW {set:?} mask={mask}"); }
                 return Err(Vec::new());
             };
             let (f, wit) = self.checks(&l, w, d, &skip, &verts);
@@ -549,9 +550,17 @@ impl QpCertifier {
         if !fails.is_empty() {
             return Err(fails);
         }
+        // A vertex no law witnesses within its f64 error bounds (e.g. on a degenerate
+        // region boundary): P_D's feasibility there decided exactly (`witness.rs`), with
+        // the rows W ∪ S as equalities for some S ⊆ D (a point of that system satisfying
+        // D ∖ S is one of P_D), the free inputs from a law's value.
+        for (v, ok) in verts.iter().zip(witnessed.iter_mut()) {
+            *ok = *ok || self.exact_witness_any(v, w, d, &laws);
+        }
         if witnessed.iter().all(|&b| b) {
             Ok(laws)
         } else {
+            if std::env::var("AMPC_DIAG2").is_ok() { eprintln!("NOWIT {witnessed:?} nlaws={}", laws.len()); }
             Err(Vec::new())
         }
     }
@@ -570,7 +579,11 @@ impl QpCertifier {
         // Rows whose check fails (a row weakly active at a corner, a region the corners
         // miss) are moved into D and the proof is tried again.
         for _ in 0..3 {
-            match self.attempt(lo, hi, &w, &d) {
+            let r = self.attempt(lo, hi, &w, &d);
+            if std::env::var("AMPC_DIAG2").is_ok() {
+                eprintln!("PROVE {lo:?} {hi:?} sets={sets:?} w={w:?} d={d:?} -> {:?}", r.as_ref().map(|l| l.len()));
+            }
+            match r {
                 Ok(laws) => return Some(laws),
                 Err(f) if f.is_empty() => return None,
                 Err(f) => {
@@ -646,6 +659,10 @@ impl QpCertifier {
         )
     }
 }
+
+mod restrict;
+mod witness;
+pub use restrict::{LawRegion, MAX_DEPTH};
 
 #[cfg(test)]
 mod tests;

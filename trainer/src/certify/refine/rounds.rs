@@ -5,7 +5,7 @@
 
 use super::*;
 use crate::certify::critical::QpCertifier;
-use crate::certify::local::{cell_bound, exact_cell_bound, CellBound, Corner, Form, LocalSettings};
+use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
 use crate::certify::netbounds::NetBounder;
 use crate::certify::Model;
 use crate::data::dataset::DatasetError;
@@ -158,8 +158,9 @@ pub(super) fn bound_leaves(
             let exact = qp.and_then(|q| {
                 let sets: Vec<Option<&[usize]>> = pts.iter().map(|p| p.active.as_deref()).collect();
                 let laws = q.prove_from_corners(&lo, &hi, &sets)?;
-                let pieces = q.pieces(&lo, &hi, &laws);
-                let b = exact_cell_bound(&lo, &hi, &pieces, &nu_c, &nb.bounds(&lo, &hi), band);
+                // Each law bounded only where it can be the solution (bisected towards
+                // the target).
+                let b = q.restricted_bound(&lo, &hi, &laws, mlp, &nb, band, target);
                 b.exact.then_some(b)
             });
             if !pts.iter().all(|p| p.labelled()) {
@@ -205,6 +206,17 @@ pub(super) fn bound_leaves(
             // the estimate; otherwise the estimate is (the cell counts as not exact, so
             // the tier says "estimated" and refinement splits it further): the proof never
             // makes a QP's ε miss a target the estimate meets.
+            if std::env::var("AMPC_DIAG").is_ok() {
+                eprintln!(
+                    "DIAG {:?} {:?} proven={} exact={:?} est={} corner={}",
+                    lo,
+                    hi,
+                    exact.is_some(),
+                    exact.as_ref().map(|b| b.eps),
+                    estimated.eps,
+                    estimated.corner
+                );
+            }
             match exact {
                 Some(b) if b.eps <= estimated.eps.max(target) => (n, b),
                 _ => (n, estimated),
