@@ -30,9 +30,13 @@
 //! [E; G_W] is independent (M_W proven nonsingular), that for every S ⊆ D either the rows
 //! W ∪ S are exactly dependent ([`QpCertifier::dependent`], rational arithmetic) or M_{W∪S}
 //! is proven nonsingular and at every vertex v of B the law W∪S has ν_i ≥ 0 for i ∈ W and
-//! satisfies every row outside W ∪ D, and that at every vertex some of these laws satisfies
-//! all rows of D — all affine in x, so the vertices decide for the whole box; each value is
-//! checked with its rounding and truncation bound. Then at every x ∈ B the QP's solution is
+//! satisfies every row outside W ∪ D, and that P_D(v) is feasible at every vertex — all
+//! affine in x, so the vertices decide for the whole box; each value is checked with its
+//! rounding and truncation bound, and P_D(v)'s feasibility is witnessed by a law that
+//! satisfies all rows of D there or, where no f64 bound decides (a vertex on a degenerate
+//! region boundary), by a point computed in rational arithmetic (`critical/exact.rs`).
+//! (Independence of W ∪ S needs no separate test where M_{W∪S} is proven nonsingular.)
+//! Then at every x ∈ B the QP's solution is
 //! y_{W∪S}(x) for one of the checked S. Proof: the problem P_D(x) (W rows as equalities, D
 //! rows as inequalities, the others dropped) is feasible at the vertices (the witnesses),
 //! hence on B (its feasible parameters form a convex set), and strictly convex (R ≻ 0), so
@@ -47,6 +51,9 @@
 //! sits on a region boundary (a weakly active row) or a region touches no corner: then
 //! [`QpCertifier::prove_from_corners`] moves the failing rows into D and tries again, and
 //! failing that, refinement splits the cell.
+//!
+//! **The cell bound** ([`QpCertifier::restricted_bound`], `critical/restrict.rs`): each
+//! law bounded only on outer boxes of the part of B where it can be the solution.
 //!
 //! The QP is the one with the f64 data the code holds (A, B, c from the plant's AD at 0,
 //! H, g, G, h from the OCP's rows), the same data the SQP solves.
@@ -494,7 +501,6 @@ impl QpCertifier {
         if witnessed.iter().all(|&b| b) {
             Ok(laws)
         } else {
-            if std::env::var("AMPC_DIAG2").is_ok() { eprintln!("NOWIT {witnessed:?} nlaws={}", laws.len()); }
             Err(Vec::new())
         }
     }
@@ -513,11 +519,7 @@ impl QpCertifier {
         // Rows whose check fails (a row weakly active at a corner, a region the corners
         // miss) are moved into D and the proof is tried again.
         for _ in 0..3 {
-            let r = self.attempt(lo, hi, &w, &d);
-            if std::env::var("AMPC_DIAG2").is_ok() {
-                eprintln!("PROVE {lo:?} {hi:?} sets={sets:?} w={w:?} d={d:?} -> {:?}", r.as_ref().map(|l| l.len()));
-            }
-            match r {
+            match self.attempt(lo, hi, &w, &d) {
                 Ok(laws) => return Some(laws),
                 Err(f) if f.is_empty() => return None,
                 Err(f) => {

@@ -206,17 +206,6 @@ pub(super) fn bound_leaves(
             // the estimate; otherwise the estimate is (the cell counts as not exact, so
             // the tier says "estimated" and refinement splits it further): the proof never
             // makes a QP's ε miss a target the estimate meets.
-            if std::env::var("AMPC_DIAG").is_ok() {
-                eprintln!(
-                    "DIAG {:?} {:?} proven={} exact={:?} est={} corner={}",
-                    lo,
-                    hi,
-                    exact.is_some(),
-                    exact.as_ref().map(|b| b.eps),
-                    estimated.eps,
-                    estimated.corner
-                );
-            }
             match exact {
                 Some(b) if b.eps <= estimated.eps.max(target) => (n, b),
                 _ => (n, estimated),
