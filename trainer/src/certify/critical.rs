@@ -596,8 +596,8 @@ impl QpCertifier {
     }
 }
 
-mod restrict;
 mod exact;
+mod restrict;
 pub use restrict::{LawRegion, MAX_DEPTH};
 
 #[cfg(test)]

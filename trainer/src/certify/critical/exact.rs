@@ -53,7 +53,12 @@ impl QpCertifier {
         self.exact.get_or_init(|| {
             let (nx, nu, n) = (self.nx, self.nu, self.horizon);
             let (nz, cols) = (nx + nu, n * nu);
-            let finite = self.a.iter().chain(&self.b).chain(&self.e0).all(|v| v.is_finite())
+            let finite = self
+                .a
+                .iter()
+                .chain(&self.b)
+                .chain(&self.e0)
+                .all(|v| v.is_finite())
                 && self
                     .rows
                     .iter()

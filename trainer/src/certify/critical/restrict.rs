@@ -292,22 +292,13 @@ impl Bisect<'_> {
             net_u.extend_from_slice(&u);
         }
         let pieces = self.q.pieces(lo, hi, std::slice::from_ref(l));
-        let b = exact_cell_bound(
-            lo,
-            hi,
-            &pieces,
-            &net_u,
-            &self.nb.bounds(lo, hi),
-            self.band,
-        );
+        let b = exact_cell_bound(lo, hi, &pieces, &net_u, &self.nb.bounds(lo, hi), self.band);
         if depth == 0 || b.eps <= self.goal || !b.eps.is_finite() || self.hopeless(l, lo, hi) {
             return Some(b);
         }
-        let axis = (0..nx)
-            .filter(|&k| self.width[k] > 0.0)
-            .max_by(|&a, &c| {
-                ((hi[a] - lo[a]) / self.width[a]).total_cmp(&((hi[c] - lo[c]) / self.width[c]))
-            })?;
+        let axis = (0..nx).filter(|&k| self.width[k] > 0.0).max_by(|&a, &c| {
+            ((hi[a] - lo[a]) / self.width[a]).total_cmp(&((hi[c] - lo[c]) / self.width[c]))
+        })?;
         let mid = 0.5 * (lo[axis] + hi[axis]);
         let mut halves: Option<CellBound> = None;
         for (a, c) in [(lo[axis], mid), (mid, hi[axis])] {

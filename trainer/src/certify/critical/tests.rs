@@ -375,7 +375,11 @@ fn the_restricted_bound_holds_against_dense_sampling() {
         let whole = q.restricted_bound(&lo, &hi, &laws, &m, &nb, band, f64::INFINITY);
         let split = q.restricted_bound(&lo, &hi, &laws, &m, &nb, band, worst + 0.01);
         for b in [&whole, &split] {
-            assert!(b.exact && b.eps >= worst, "{lo:?}: ε_C {} < sampled {worst}", b.eps);
+            assert!(
+                b.exact && b.eps >= worst,
+                "{lo:?}: ε_C {} < sampled {worst}",
+                b.eps
+            );
         }
         assert!(split.eps <= whole.eps);
         let nu_c: Vec<f64> = QpCertifier::vertices(&lo, &hi)
@@ -394,7 +398,10 @@ fn the_restricted_bound_holds_against_dense_sampling() {
             tighter += 1;
         }
     }
-    assert!(tighter >= 1, "the restriction never tightened a disputed box");
+    assert!(
+        tighter >= 1,
+        "the restriction never tightened a disputed box"
+    );
 }
 
 /// A vertex on a degenerate region boundary of the double integrator (v₀ = −0.5: four
