@@ -316,9 +316,7 @@ impl Bisect<'_> {
             }
         }
         // Both halves empty: the region misses the box (each half proven empty).
-        let Some(h) = halves else {
-            return None;
-        };
+        let h = halves?;
         Some(if h.eps < b.eps { h } else { b })
     }
 
