@@ -200,9 +200,9 @@ pub(super) fn bound_leaves(
                     ..estimated
                 };
             }
-            // The exact bound bounds every candidate law over the whole cell, also where a
-            // law does not hold: on a cell at a steep region boundary it can be far looser
-            // than the estimate. It is kept when it meets the target (`target`) or beats
+            // The exact bound bounds each candidate law on outer boxes of its region (a
+            // superset of where it holds): at a steep region boundary it can still be
+            // looser than the estimate. It is kept when it meets the target (`target`) or beats
             // the estimate; otherwise the estimate is (the cell counts as not exact, so
             // the tier says "estimated" and refinement splits it further): the proof never
             // makes a QP's ε miss a target the estimate meets.
