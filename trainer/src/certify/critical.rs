@@ -30,9 +30,13 @@
 //! [E; G_W] is independent (M_W proven nonsingular), that for every S ⊆ D either the rows
 //! W ∪ S are exactly dependent ([`QpCertifier::dependent`], rational arithmetic) or M_{W∪S}
 //! is proven nonsingular and at every vertex v of B the law W∪S has ν_i ≥ 0 for i ∈ W and
-//! satisfies every row outside W ∪ D, and that at every vertex some of these laws satisfies
-//! all rows of D — all affine in x, so the vertices decide for the whole box; each value is
-//! checked with its rounding and truncation bound. Then at every x ∈ B the QP's solution is
+//! satisfies every row outside W ∪ D, and that P_D(v) is feasible at every vertex — all
+//! affine in x, so the vertices decide for the whole box; each value is checked with its
+//! rounding and truncation bound, and P_D(v)'s feasibility is witnessed by a law that
+//! satisfies all rows of D there or, where no f64 bound decides (a vertex on a degenerate
+//! region boundary), by a point computed in rational arithmetic (`critical/exact.rs`).
+//! (Independence of W ∪ S needs no separate test where M_{W∪S} is proven nonsingular.)
+//! Then at every x ∈ B the QP's solution is
 //! y_{W∪S}(x) for one of the checked S. Proof: the problem P_D(x) (W rows as equalities, D
 //! rows as inequalities, the others dropped) is feasible at the vertices (the witnesses),
 //! hence on B (its feasible parameters form a convex set), and strictly convex (R ≻ 0), so
@@ -48,6 +52,9 @@
 //! [`QpCertifier::prove_from_corners`] moves the failing rows into D and tries again, and
 //! failing that, refinement splits the cell.
 //!
+//! **The cell bound** ([`QpCertifier::restricted_bound`], `critical/restrict.rs`): each
+//! law bounded only on outer boxes of the part of B where it can be the solution.
+//!
 //! The QP is the one with the f64 data the code holds (A, B, c from the plant's AD at 0,
 //! H, g, G, h from the OCP's rows), the same data the SQP solves.
 
@@ -60,7 +67,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 /// Most disputed rows in one cell (2^this laws are checked).
-pub const MAX_DISPUTED: usize = 4;
+pub const MAX_DISPUTED: usize = 6;
 
 /// Unit roundoff of f64.
 const U: f64 = f64::EPSILON / 2.0;
@@ -138,6 +145,8 @@ pub struct QpCertifier {
     horizon: usize,
     cache: Mutex<HashMap<Vec<usize>, Option<Arc<AffineLaw>>>>,
     dependent: Mutex<HashMap<Vec<usize>, bool>>,
+    /// The rational data of `exact.rs`, built on first use.
+    exact: std::sync::OnceLock<exact::Exact>,
 }
 
 /// Exact test of symmetric positive (semi)definiteness by diagonal dominance: every
@@ -244,6 +253,7 @@ impl QpCertifier {
             horizon: n,
             cache: Mutex::new(HashMap::new()),
             dependent: Mutex::new(HashMap::new()),
+            exact: std::sync::OnceLock::new(),
         })
     }
 
@@ -425,76 +435,6 @@ impl QpCertifier {
         v
     }
 
-    fn exact_rank_deficient(&self, set: &[usize]) -> bool {
-        use num_rational::BigRational;
-        use num_traits::{One, Zero};
-        let (nx, nu, n) = (self.nx, self.nu, self.horizon);
-        let q = |v: f64| BigRational::from_float(v).unwrap_or_else(BigRational::zero);
-        let a: Vec<BigRational> = self.a.iter().map(|&v| q(v)).collect();
-        // p[j] = A^j B (nx × nu), j < n.
-        let mut p: Vec<Vec<BigRational>> = vec![self.b.iter().map(|&v| q(v)).collect()];
-        for _ in 1..n {
-            let last = p.last().cloned().unwrap_or_default();
-            let mut next = vec![BigRational::zero(); nx * nu];
-            for i in 0..nx {
-                for c in 0..nu {
-                    let mut s = BigRational::zero();
-                    for k in 0..nx {
-                        s += &a[i * nx + k] * &last[k * nu + c];
-                    }
-                    next[i * nu + c] = s;
-                }
-            }
-            p.push(next);
-        }
-        let nz = nx + nu;
-        let cols = n * nu;
-        let mut m: Vec<Vec<BigRational>> = Vec::with_capacity(set.len());
-        for &r in set {
-            let row = &self.rows[r];
-            let mut out = vec![BigRational::zero(); cols];
-            for t in 0..row.len {
-                let (idx, cf) = (row.idx[t], q(row.coef[t]));
-                let (k, off) = (idx / nz, idx % nz);
-                if off < nx {
-                    // x_k[off] = Σ_{j<k} (A^{k−1−j} B)[off, :] u_j
-                    for j in 0..k.min(n) {
-                        for c in 0..nu {
-                            out[j * nu + c] += &cf * &p[k - 1 - j][off * nu + c];
-                        }
-                    }
-                } else if k < n {
-                    out[k * nu + off - nx] += cf;
-                }
-            }
-            m.push(out);
-        }
-        // Gaussian elimination over Q.
-        let mut rank = 0;
-        for c in 0..cols {
-            let Some(piv) = (rank..m.len()).find(|&i| !m[i][c].is_zero()) else {
-                continue;
-            };
-            m.swap(rank, piv);
-            let inv = BigRational::one() / m[rank][c].clone();
-            for i in rank + 1..m.len() {
-                if m[i][c].is_zero() {
-                    continue;
-                }
-                let f = &m[i][c] * &inv;
-                for j in c..cols {
-                    let t = &f * &m[rank][j];
-                    m[i][j] -= t;
-                }
-            }
-            rank += 1;
-            if rank == m.len() {
-                break;
-            }
-        }
-        rank < set.len()
-    }
-
     /// Proves that on [lo, hi] the QP's solution is, at every point, that of one of the
     /// laws W ∪ S, S ⊆ D (see the module doc); returns those laws, or `None` if a check
     /// fails. `w` and `d` ascending and disjoint, |D| ≤ [`MAX_DISPUTED`].
@@ -531,10 +471,12 @@ impl QpCertifier {
             set.sort_unstable();
             // A set whose rows are exactly dependent is never the support of P_D's
             // multipliers (see the module doc): skipped. W itself must be independent.
-            if mask != 0 && self.dependent(&set) {
-                continue;
-            }
+            // (A proven nonsingular M_{W∪S} shows independence: the exact test only runs
+            // where the verified inverse fails.)
             let Some(l) = self.law(&set) else {
+                if mask != 0 && self.dependent(&set) {
+                    continue;
+                }
                 return Err(Vec::new());
             };
             let (f, wit) = self.checks(&l, w, d, &skip, &verts);
@@ -548,6 +490,13 @@ impl QpCertifier {
         fails.dedup();
         if !fails.is_empty() {
             return Err(fails);
+        }
+        // A vertex no law witnesses within its f64 error bounds (e.g. on a degenerate
+        // region boundary): P_D's feasibility there decided exactly (`witness.rs`), with
+        // the rows W ∪ S as equalities for some S ⊆ D (a point of that system satisfying
+        // D ∖ S is one of P_D), the free inputs from a law's value.
+        for (v, ok) in verts.iter().zip(witnessed.iter_mut()) {
+            *ok = *ok || self.exact_witness_any(v, w, d, &laws);
         }
         if witnessed.iter().all(|&b| b) {
             Ok(laws)
@@ -646,6 +595,10 @@ impl QpCertifier {
         )
     }
 }
+
+mod exact;
+mod restrict;
+pub use restrict::{LawRegion, MAX_DEPTH};
 
 #[cfg(test)]
 mod tests;

@@ -277,3 +277,169 @@ fn the_exact_cell_bound_holds_at_sampled_points() {
     }
     assert!(checked >= 2, "only {checked} boxes proven");
 }
+
+/// The vertices of [lo, hi] (bit k of the index: hi_k) and the SQP's active set at each.
+fn corner_sets(law: &mut MpcLaw, lo: &[f64], hi: &[f64]) -> Vec<Vec<usize>> {
+    QpCertifier::vertices(lo, hi)
+        .iter()
+        .map(|v| solve(law, v).1)
+        .collect()
+}
+
+/// The region of a law ([`LawRegion`]): across a region boundary, each side's law is cut
+/// to a box that still holds every sampled state where the SQP's solution is that law;
+/// on a box wholly on one side, the other side's law is dropped (its region is proven to
+/// miss the box) and the own law keeps the whole box.
+#[test]
+fn a_law_is_bounded_only_where_it_can_hold_and_dropped_where_it_cannot() {
+    let cfg = load("double_integrator.toml");
+    let q = QpCertifier::detect(&cfg).unwrap();
+    let mut law = MpcLaw::new(&cfg);
+    let (p, s_lo, s_hi) = boundary(&mut law);
+    let (l_lo, l_hi) = (q.law(&s_lo).unwrap(), q.law(&s_hi).unwrap());
+    // Wholly right of the boundary: the left law's region misses the box.
+    let (blo, bhi) = ([p + 0.01, 0.29], [p + 0.02, 0.31]);
+    assert!(q.law_region(&l_lo, &blo, &bhi).shrink(&blo, &bhi).is_none());
+    let own = q.law_region(&l_hi, &blo, &bhi);
+    assert_eq!(own.shrink(&blo, &bhi), Some((blo.to_vec(), bhi.to_vec())));
+    // Across it: both kept, each cut, and each cut box holds its law's states.
+    let (lo, hi) = ([p - 0.01, 0.29], [p + 0.01, 0.31]);
+    let mut cut = 0;
+    let mut boxes = Vec::new();
+    for l in [&l_lo, &l_hi] {
+        let (a, b) = q.law_region(l, &lo, &hi).shrink(&lo, &hi).expect("kept");
+        assert!((0..2).all(|k| lo[k] <= a[k] && a[k] <= b[k] && b[k] <= hi[k]));
+        cut += usize::from((0..2).any(|k| a[k] > lo[k] || b[k] < hi[k]));
+        boxes.push((l.set.clone(), a, b));
+    }
+    assert_eq!(cut, 2, "{boxes:?}");
+    let mut seen = [0; 2];
+    for i in 0..400u64 {
+        let x = random_in(&lo, &hi, 23, i);
+        let (_, set) = solve(&mut law, &x);
+        for (j, (s, a, b)) in boxes.iter().enumerate() {
+            if *s == set {
+                seen[j] += 1;
+                assert!(
+                    (0..2).all(|k| a[k] <= x[k] && x[k] <= b[k]),
+                    "{x:?} has set {set:?} outside its law's box {a:?}..{b:?}"
+                );
+            }
+        }
+    }
+    assert!(seen.iter().all(|&n| n > 0), "{seen:?}");
+}
+
+/// The restricted bound ([`QpCertifier::restricted_bound`]) holds against dense sampling
+/// of the true QP solution over proven boxes (with and without bisection), and across a
+/// region boundary it is below the bound of every law over the whole box.
+#[test]
+fn the_restricted_bound_holds_against_dense_sampling() {
+    let cfg = load("double_integrator.toml");
+    let q = QpCertifier::detect(&cfg).unwrap();
+    let mut law = MpcLaw::new(&cfg);
+    let m = Mlp::new(
+        &[2, 8, 8, 1],
+        Activation::Tanh,
+        11,
+        &cfg.domain.lo,
+        &cfg.domain.hi,
+        &[-1.0],
+        &[1.0],
+    );
+    let nb = NetBounder::new(&m);
+    let band: (&[f64], &[f64]) = (&[-1.0], &[1.0]);
+    let (p, _, _) = boundary(&mut law);
+    let boxes = [
+        ([p - 0.05, 0.25], [p + 0.05, 0.35]),
+        ([p - 0.01, 0.29], [p + 0.01, 0.31]),
+        ([-3.0, 0.5], [-2.8, 0.6]),
+    ];
+    let mut tighter = 0;
+    for (lo, hi) in boxes {
+        let sets = corner_sets(&mut law, &lo, &hi);
+        let refs: Vec<Option<&[usize]>> = sets.iter().map(|s| Some(s.as_slice())).collect();
+        let laws = q.prove_from_corners(&lo, &hi, &refs).expect("proven");
+        // The largest error at a 60 × 60 grid of true solutions.
+        let mut worst = 0.0f64;
+        for i in 0..60 {
+            for j in 0..60 {
+                let x = [
+                    lo[0] + (hi[0] - lo[0]) * i as f64 / 59.0,
+                    lo[1] + (hi[1] - lo[1]) * j as f64 / 59.0,
+                ];
+                let (u, _) = solve(&mut law, &x);
+                worst = worst.max((u[0] - m.predict(&x)[0].clamp(-1.0, 1.0)).abs());
+            }
+        }
+        let whole = q.restricted_bound(&lo, &hi, &laws, &m, &nb, band, f64::INFINITY);
+        let split = q.restricted_bound(&lo, &hi, &laws, &m, &nb, band, worst + 0.01);
+        for b in [&whole, &split] {
+            assert!(
+                b.exact && b.eps >= worst,
+                "{lo:?}: ε_C {} < sampled {worst}",
+                b.eps
+            );
+        }
+        assert!(split.eps <= whole.eps);
+        let nu_c: Vec<f64> = QpCertifier::vertices(&lo, &hi)
+            .iter()
+            .map(|v| m.predict(v)[0])
+            .collect();
+        let unrestricted = exact_cell_bound(
+            &lo,
+            &hi,
+            &q.pieces(&lo, &hi, &laws),
+            &nu_c,
+            &nb.bounds(&lo, &hi),
+            band,
+        );
+        if laws.len() > 1 && split.eps < unrestricted.eps {
+            tighter += 1;
+        }
+    }
+    assert!(
+        tighter >= 1,
+        "the restriction never tightened a disputed box"
+    );
+}
+
+/// A vertex on a degenerate region boundary of the double integrator (v₀ = −0.5: four
+/// saturated inputs and a fifth exactly at its bound bring the velocity to −1, so the input
+/// row and the velocity row are dependent): P_D's feasibility has a slack of the data's
+/// rounding there, proven exactly; just inside the other region it is refuted.
+#[test]
+fn exact_witnesses_decide_degenerate_vertices() {
+    let cfg = load("double_integrator.toml");
+    let q = QpCertifier::detect(&cfg).unwrap();
+    let mut law = MpcLaw::new(&cfg);
+    let below = [2.375, -0.51];
+    let (_, w) = solve(&mut law, &below);
+    let l = q.law(&w).expect("W's law");
+    let on = [2.375, -0.5];
+    // D: the rows outside W that W's law makes (nearly) tight on the boundary.
+    let (y, _) = l.eval(&on);
+    let d: Vec<usize> = (0..q.n_rows())
+        .filter(|r| w.binary_search(r).is_err())
+        .filter(|&r| {
+            let row = &q.rows[r];
+            let dot: f64 = (0..row.len).map(|t| row.coef[t] * y[row.idx[t]]).sum();
+            (row.rhs - dot).abs() < 1e-9
+        })
+        .collect();
+    assert!(!d.is_empty(), "no row tight at {on:?}");
+    let nz = q.nx + q.nu;
+    let hint = |x: &[f64]| -> Vec<f64> {
+        let (y, _) = l.eval(x);
+        (0..q.horizon).map(|k| y[k * nz + q.nx]).collect()
+    };
+    assert!(q.exact_witness(&on, &w, &d, &hint(&on)));
+    assert!(q.exact_witness(&below, &w, &d, &hint(&below)));
+    let above = [2.375, -0.45];
+    assert!(!q.exact_witness(&above, &w, &d, &hint(&above)));
+    // The cell with its top edge on the boundary is proven.
+    let (lo, hi) = ([2.3125, -0.515625], [2.375, -0.5]);
+    let sets = corner_sets(&mut law, &lo, &hi);
+    let refs: Vec<Option<&[usize]>> = sets.iter().map(|s| Some(s.as_slice())).collect();
+    assert!(q.prove_from_corners(&lo, &hi, &refs).is_some());
+}

@@ -5,7 +5,7 @@
 
 use super::*;
 use crate::certify::critical::QpCertifier;
-use crate::certify::local::{cell_bound, exact_cell_bound, CellBound, Corner, Form, LocalSettings};
+use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
 use crate::certify::netbounds::NetBounder;
 use crate::certify::Model;
 use crate::data::dataset::DatasetError;
@@ -158,8 +158,9 @@ pub(super) fn bound_leaves(
             let exact = qp.and_then(|q| {
                 let sets: Vec<Option<&[usize]>> = pts.iter().map(|p| p.active.as_deref()).collect();
                 let laws = q.prove_from_corners(&lo, &hi, &sets)?;
-                let pieces = q.pieces(&lo, &hi, &laws);
-                let b = exact_cell_bound(&lo, &hi, &pieces, &nu_c, &nb.bounds(&lo, &hi), band);
+                // Each law bounded only where it can be the solution (bisected towards
+                // the target).
+                let b = q.restricted_bound(&lo, &hi, &laws, mlp, &nb, band, target);
                 b.exact.then_some(b)
             });
             if !pts.iter().all(|p| p.labelled()) {
@@ -199,9 +200,9 @@ pub(super) fn bound_leaves(
                     ..estimated
                 };
             }
-            // The exact bound bounds every candidate law over the whole cell, also where a
-            // law does not hold: on a cell at a steep region boundary it can be far looser
-            // than the estimate. It is kept when it meets the target (`target`) or beats
+            // The exact bound bounds each candidate law on outer boxes of its region (a
+            // superset of where it holds): at a steep region boundary it can still be
+            // looser than the estimate. It is kept when it meets the target (`target`) or beats
             // the estimate; otherwise the estimate is (the cell counts as not exact, so
             // the tier says "estimated" and refinement splits it further): the proof never
             // makes a QP's ε miss a target the estimate meets.
