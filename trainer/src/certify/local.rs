@@ -328,23 +328,7 @@ pub fn exact_cell_bound(
         );
         best = Some(match best {
             None => b,
-            Some(a) => {
-                let axis_terms = a
-                    .axis_terms
-                    .iter()
-                    .zip(&b.axis_terms)
-                    .map(|(x, y)| x.max(*y))
-                    .collect();
-                let form = if b.eps > a.eps { b.form } else { a.form };
-                CellBound {
-                    eps: a.eps.max(b.eps),
-                    corner: a.corner.max(b.corner),
-                    remainder: a.remainder.max(b.remainder),
-                    form,
-                    axis_terms,
-                    exact: true,
-                }
-            }
+            Some(a) => CellBound::larger(a, b),
         });
     }
     let mut b = best.unwrap_or_else(|| infinite(nx));
@@ -479,3 +463,24 @@ fn bound_with(
 
 #[cfg(test)]
 mod tests;
+
+impl CellBound {
+    /// The larger of two cell bounds, field by field (the form of the larger ε; exact only
+    /// if both are).
+    pub(crate) fn larger(a: CellBound, b: CellBound) -> CellBound {
+        let form = if b.eps > a.eps { b.form } else { a.form };
+        CellBound {
+            eps: a.eps.max(b.eps),
+            corner: a.corner.max(b.corner),
+            remainder: a.remainder.max(b.remainder),
+            form,
+            axis_terms: a
+                .axis_terms
+                .iter()
+                .zip(&b.axis_terms)
+                .map(|(x, y)| x.max(*y))
+                .collect(),
+            exact: a.exact && b.exact,
+        }
+    }
+}

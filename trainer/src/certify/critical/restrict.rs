@@ -242,20 +242,7 @@ impl QpCertifier {
 
 /// The larger of two cell bounds, field by field.
 fn merge(a: CellBound, b: CellBound) -> CellBound {
-    let form = if b.eps > a.eps { b.form } else { a.form };
-    CellBound {
-        eps: a.eps.max(b.eps),
-        corner: a.corner.max(b.corner),
-        remainder: a.remainder.max(b.remainder),
-        form,
-        axis_terms: a
-            .axis_terms
-            .iter()
-            .zip(&b.axis_terms)
-            .map(|(x, y)| x.max(*y))
-            .collect(),
-        exact: a.exact && b.exact,
-    }
+    CellBound::larger(a, b)
 }
 
 struct Bisect<'a> {
