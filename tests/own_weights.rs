@@ -64,6 +64,7 @@ fn second_net() -> ExportModel {
         placeholder: true,
         guarantee: Guarantee::Estimated,
         statistical: None,
+        excluded: Vec::new(),
     }
 }
 

@@ -196,7 +196,9 @@ where
 }
 
 /// [`decode`], then checks that the blob holds the model `cert` is about (equal content
-/// hashes): a controller is only loaded under the certificate that covers it.
+/// hashes): a controller is only loaded under the certificate that covers it, and takes
+/// that certificate's excluded boxes ([`crate::Certificate::excluded`]; the blob itself does
+/// not carry them).
 ///
 /// ```
 /// use controller_core::{blob, generated::weights, CERTIFICATE};
@@ -217,10 +219,12 @@ pub fn decode_for<'a, const NX: usize, const NU: usize, N>(
 where
     N: Decode<NX> + Network<NX, Output = [f32; NU]>,
 {
-    let d = decode::<NX, NU, N>(blob)?;
+    let mut d = decode::<NX, NU, N>(blob)?;
     if d.hash != cert.hash {
         return Err(DecodeError::CertificateMismatch);
     }
+    d.controller = d.controller.with_excluded(cert.excluded);
+    d.controller.validate().map_err(DecodeError::Invalid)?;
     Ok(d)
 }
 

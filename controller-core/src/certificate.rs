@@ -57,6 +57,10 @@ pub struct Certificate<const NX: usize, const NU: usize> {
     pub domain_lo: [f64; NX],
     /// Upper corner of the certified domain X.
     pub domain_hi: [f64; NX],
+    /// Boxes of X the certificate does not cover (cells outside the MPC's feasible set,
+    /// `refine.exclude_infeasible`; f32, rounded outward): ε holds on X minus them, and the
+    /// controller flags states inside them ([`crate::Flags::EXCLUDED`]). Usually empty.
+    pub excluded: &'static [([f32; NX], [f32; NX])],
     /// Lower input bound U_d used for the data.
     pub u_lo: [f64; NU],
     /// Upper input bound U_d used for the data.

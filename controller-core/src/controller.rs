@@ -4,6 +4,7 @@
 //! evaluate(x):
 //!   any x_i NaN/±inf           → u = fallback,                       flags = NON_FINITE
 //!   x_p = Π_X(x)  (per axis)   → flag OUT_OF_DOMAIN if x_p ≠ x
+//!   x_p in an excluded box     → flag EXCLUDED   (u computed as below all the same)
 //!   y   = κ_NN(x_p)            (network in physical units, see below)
 //!   y_j NaN                    → u_j = fallback_j,                   flag NON_FINITE
 //!   u_j = clamp(y_j, clamp_lo_j, clamp_hi_j) → flag CLAMPED if u_j ≠ y_j
@@ -12,6 +13,11 @@
 //! `(U_d ⊕ [−ε, ε]) ∩ actuator limits`, rounded by the exporter so that it contains U_d and
 //! lies inside the actuator limits. Since κ(x) ∈ U_d and |κ − κ_NN,f32| ≤ ε on X, the clamp
 //! never increases the error and `u` is always finite and admissible.
+//!
+//! **Excluded boxes.** A certificate may cover X minus some boxes (cells outside the MPC's
+//! feasible set, `refine.exclude_infeasible`; [`crate::Certificate::excluded`]); a state
+//! in one (closed box, bounds rounded outward by the exporter) is flagged `EXCLUDED`: `u` is
+//! still finite and inside the band, but ε does not cover it.
 //!
 //! **Scaling.** The trainer normalises inputs and outputs (`x̃ = (x − m_x)/s_x`,
 //! `u = m_u + s_u ũ`). The exporter folds both affine maps into the first and the last
@@ -34,6 +40,9 @@ impl Flags {
     pub const NON_FINITE: Flags = Flags(2);
     /// The network output was outside the clamp band and was clamped.
     pub const CLAMPED: Flags = Flags(4);
+    /// The (projected) state lies in a box excluded from the certified domain (outside the
+    /// MPC's feasible set as the certificate estimates it): ε does not cover this state.
+    pub const EXCLUDED: Flags = Flags(8);
 
     /// Whether every flag in `other` is set.
     ///
@@ -86,6 +95,9 @@ pub struct Controller<const NX: usize, const NU: usize, N> {
     pub clamp_hi: [f32; NU],
     /// Input returned for a non-finite state (default: centre of U_d).
     pub fallback: [f32; NU],
+    /// Boxes (lower, upper corner) of X excluded from the certified domain; a state in one
+    /// is flagged [`Flags::EXCLUDED`]. Empty unless the certificate excludes cells.
+    pub excluded: &'static [([f32; NX], [f32; NX])],
 }
 
 const fn all_finite(mut s: &[f32]) -> bool {
@@ -135,11 +147,28 @@ impl<const NX: usize, const NU: usize, N> Controller<NX, NU, N> {
             clamp_lo,
             clamp_hi,
             fallback,
+            excluded: &[],
         }
     }
 
+    /// The same controller with `excluded` boxes (the certificate's
+    /// [`crate::Certificate::excluded`]): states in them are flagged [`Flags::EXCLUDED`].
+    ///
+    /// ```
+    /// use controller_core::{Controller, Flags, layer::Dense};
+    /// const C: Controller<1, 1, Dense<1, 1>> =
+    ///     Controller::new(Dense::new([[-2.0]], [0.0]), [-1.0], [1.0], [-1.5], [1.5], [0.0])
+    ///         .with_excluded(&[([0.5], [1.0])]);
+    /// assert_eq!(C.evaluate(&[0.75]).flags, Flags::EXCLUDED);
+    /// assert_eq!(C.evaluate(&[0.25]).flags, Flags::EMPTY);
+    /// ```
+    pub const fn with_excluded(mut self, excluded: &'static [([f32; NX], [f32; NX])]) -> Self {
+        self.excluded = excluded;
+        self
+    }
+
     /// Checks the invariants `evaluate` relies on: finite bounds and fallback, non-empty
-    /// boxes, fallback inside the band. (Weights are checked by the blob decoder; for the
+    /// boxes (the excluded ones too), fallback inside the band. (Weights are checked by the blob decoder; for the
     /// compiled-in weights the exporter guarantees them.)
     pub const fn validate(&self) -> Result<(), InvalidController> {
         if !(all_finite(&self.x_lo)
@@ -155,6 +184,16 @@ impl<const NX: usize, const NU: usize, N> Controller<NX, NU, N> {
         }
         if !(ordered(&self.clamp_lo, &self.fallback) && ordered(&self.fallback, &self.clamp_hi)) {
             return Err(InvalidController::FallbackOutsideBand);
+        }
+        let mut rest = self.excluded;
+        while let [(lo, hi), tail @ ..] = rest {
+            if !(all_finite(lo) && all_finite(hi)) {
+                return Err(InvalidController::NonFinite);
+            }
+            if !ordered(lo, hi) {
+                return Err(InvalidController::EmptyBox);
+            }
+            rest = tail;
         }
         Ok(())
     }
@@ -184,6 +223,14 @@ impl<const NX: usize, const NU: usize, N: Network<NX, Output = [f32; NU]>> Contr
             } else {
                 xi
             };
+        }
+        let inside = |(lo, hi): &([f32; NX], [f32; NX])| {
+            xp.iter()
+                .zip(lo.iter().zip(hi))
+                .all(|(v, (l, h))| *l <= *v && *v <= *h)
+        };
+        if self.excluded.iter().any(inside) {
+            flags = flags.union(Flags::EXCLUDED);
         }
         let y = self.net.forward(&xp);
         let mut u = self.fallback;
@@ -251,6 +298,35 @@ mod tests {
         };
         let o = c.evaluate(&[2.0, 2.0]); // +inf + (−inf) = NaN: fallback
         assert_eq!((o.u, o.flags), ([0.0], Flags::NON_FINITE));
+    }
+
+    #[test]
+    fn states_in_excluded_boxes_are_flagged_and_still_answered() {
+        const E: Controller<2, 1, Dense<2, 1>> = C.with_excluded(&[([0.5, -2.0], [1.0, 0.0])]);
+        // Inside (and on the boundary of) the box: flagged, same u as without the box.
+        for x in [[0.75, -1.0], [0.5, 0.0], [1.0, -2.0]] {
+            let (o, plain) = (E.evaluate(&x), C.evaluate(&x));
+            assert_eq!(o.flags, plain.flags.union(Flags::EXCLUDED), "{x:?}");
+            assert_eq!(o.u, plain.u);
+        }
+        // Outside it: not flagged.
+        for x in [[0.25, -1.0], [0.75, 0.5], [-1.0, -2.0]] {
+            assert!(!E.evaluate(&x).flags.contains(Flags::EXCLUDED), "{x:?}");
+        }
+        // A state projected into the box is flagged too (with OUT_OF_DOMAIN).
+        let o = E.evaluate(&[5.0, -1.0]);
+        assert!(o.flags.contains(Flags::EXCLUDED) && o.flags.contains(Flags::OUT_OF_DOMAIN));
+        // Non-finite state: the fallback alone, as before.
+        assert_eq!(E.evaluate(&[f32::NAN, 0.0]).flags, Flags::NON_FINITE);
+        assert_eq!(E.validate(), Ok(()));
+        assert_eq!(
+            C.with_excluded(&[([0.5, 0.0], [0.4, 1.0])]).validate(),
+            Err(InvalidController::EmptyBox)
+        );
+        assert_eq!(
+            C.with_excluded(&[([f32::NAN, 0.0], [0.4, 1.0])]).validate(),
+            Err(InvalidController::NonFinite)
+        );
     }
 
     #[test]

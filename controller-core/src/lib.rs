@@ -106,7 +106,8 @@ macro_rules! include_controller {
             CERTIFICATE.clamp_lo,
             CERTIFICATE.clamp_hi,
             CERTIFICATE.fallback,
-        );
+        )
+        .with_excluded(CERTIFICATE.excluded);
 
         // The invariants `evaluate` relies on, checked at compile time.
         const _: () = assert!(

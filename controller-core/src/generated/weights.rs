@@ -199,6 +199,7 @@ pub const CERTIFICATE_LIBM: Certificate<2, 1> = Certificate {
     clamp_lo: [-15.0],
     clamp_hi: [15.0],
     fallback: [0.0],
+    excluded: &[],
     hash: "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563",
     placeholder: false,
 };
@@ -227,6 +228,7 @@ pub const CERTIFICATE_FAST: Certificate<2, 1> = Certificate {
     clamp_lo: [-15.0],
     clamp_hi: [15.0],
     fallback: [0.0],
+    excluded: &[],
     hash: "5e063bcafb78cbc4e235951d02f64505ce91e61d6e7768b8980a1851c389e563",
     placeholder: false,
 };

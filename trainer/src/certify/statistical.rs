@@ -48,6 +48,15 @@ pub struct Statistical {
     pub p_target: f64,
     /// What the bound rests on, in words.
     pub rests_on: String,
+    /// States drawn inside the cells excluded from the certified domain
+    /// (`refine.exclude_infeasible`) and dropped: the n states above are uniform on X minus
+    /// those cells.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub excluded_states: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 /// ln P(Bin(n, p) ≤ k), summed in log space (no underflow for n up to 10⁸ or more).
@@ -156,6 +165,7 @@ pub fn from_errors(
         rests_on: "i.i.d. uniform states of X labelled by the MPC (an unlabelled state counts \
                    as an exceedance); Clopper–Pearson bound, no Lipschitz or cell assumption"
             .into(),
+        excluded_states: 0,
     }
 }
 
@@ -176,6 +186,10 @@ pub struct StatisticalOptions {
     pub p_target: f64,
     /// Show the labelling's progress bar.
     pub progress: bool,
+    /// Boxes excluded from the certified domain (lower, upper corner; a local certificate's
+    /// `local.excluded.boxes`): states drawn inside one are dropped, so the bound is about
+    /// the uniform distribution on X minus them.
+    pub excluded: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 impl Default for StatisticalOptions {
@@ -186,6 +200,7 @@ impl Default for StatisticalOptions {
             seed: DEFAULT_SEED,
             p_target: 1e-3,
             progress: false,
+            excluded: Vec::new(),
         }
     }
 }
@@ -259,9 +274,18 @@ pub fn certify_statistically(
     let nx = cfg.system.nx();
     let mut ws = Workspace::default();
     let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    let inside = |x: &[f64]| {
+        opts.excluded.iter().any(|(lo, hi)| {
+            x.iter()
+                .zip(lo.iter().zip(hi))
+                .all(|(v, (l, h))| *l <= *v && *v <= *h)
+        })
+    };
+    let dropped = data.records.iter().filter(|r| inside(&r.x)).count() as u64;
     let errors: Vec<f64> = data
         .records
         .iter()
+        .filter(|r| !inside(&r.x))
         .map(|r| {
             if !r.is_labelled() || r.u.iter().any(|v| !v.is_finite()) {
                 return f64::INFINITY;
@@ -279,13 +303,19 @@ pub fn certify_statistically(
             }
         })
         .collect();
-    Ok(from_errors(
-        &errors,
-        eps,
-        opts.confidence,
-        opts.seed,
-        opts.p_target,
-    ))
+    let mut s = from_errors(&errors, eps, opts.confidence, opts.seed, opts.p_target);
+    if dropped > 0 {
+        s.excluded_states = dropped;
+        s.rests_on = format!(
+            "i.i.d. uniform states of X minus the {} excluded boxes ({dropped} of the {} \
+             states drawn fell inside them and were dropped; the rest are uniform on the \
+             certified domain), labelled by the MPC (an unlabelled state counts as an \
+             exceedance); Clopper–Pearson bound, no Lipschitz or cell assumption",
+            opts.excluded.len(),
+            data.records.len()
+        );
+    }
+    Ok(s)
 }
 
 #[cfg(test)]

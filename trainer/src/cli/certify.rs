@@ -91,6 +91,7 @@ impl StatisticalArgs {
             seed: self.statistical_seed,
             p_target: self.p_target,
             progress: true,
+            excluded: Vec::new(),
         };
         o.validate().map_err(anyhow::Error::msg)?;
         let store = self.statistical_store.clone().unwrap_or(default_store);

@@ -64,9 +64,14 @@ pub(super) fn execute(
         (true, Some(p)) => Some(statistical_level(p, &cert)?),
         _ => None,
     };
+    let excluded = match certificate {
+        Some(p) => excluded_boxes(p)?,
+        None => Vec::new(),
+    };
     // The model to export: the certificate's ε and tier, or its statistical level.
     let prepare = |em: ExportModel| -> Result<ExportModel> {
-        let em = em.with_declared_guarantee(declared);
+        let mut em = em.with_declared_guarantee(declared);
+        em.excluded = excluded.clone();
         Ok(match &band {
             Some((eps_p, claim)) => em.with_statistical_eps(*eps_p, claim.clone())?,
             None => em,
@@ -139,6 +144,30 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// The boxes a local certificate excludes from its domain (`"local"."excluded"."boxes"`,
+/// `refine.exclude_infeasible`); none when the key is absent. A malformed entry is an error
+/// naming the file and the key: exporting without the exclusion would claim ε where the
+/// certificate does not.
+fn excluded_boxes(path: &Path) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a certificate", path.display()))?;
+    match v.pointer("/local/excluded") {
+        None | Some(serde_json::Value::Null) => Ok(Vec::new()),
+        Some(e) => {
+            let boxes = e.get("boxes").cloned().unwrap_or(serde_json::Value::Null);
+            serde_json::from_value(boxes).with_context(|| {
+                format!(
+                    "{}: key \"local\".\"excluded\".\"boxes\" is missing or malformed \
+                     (a list of [lower corner, upper corner] pairs)",
+                    path.display()
+                )
+            })
+        }
+    }
 }
 
 /// The statistical level of the certificate JSON at `path` and what it rests on: its

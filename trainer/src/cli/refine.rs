@@ -133,6 +133,11 @@ pub(super) fn execute(
             store,
             &StatisticalOptions {
                 progress: !quiet,
+                excluded: cert
+                    .local
+                    .excluded
+                    .as_ref()
+                    .map_or_else(Vec::new, |e| e.boxes.clone()),
                 ..o.clone()
             },
         )
@@ -305,6 +310,15 @@ fn print_summary(
         seconds,
         dir.display()
     );
+    if let Some(e) = &l.excluded {
+        println!(
+            "certified domain: X minus {} excluded cells ({:.1} % of X, {} boxes; every \
+             corner infeasible for the MPC) — listed in certificate.json (local.excluded)",
+            e.cells,
+            100.0 * e.volume_fraction,
+            e.boxes.len()
+        );
+    }
 }
 
 /// `--check`: the certificate at N random states (seeded) and at every cell
@@ -332,6 +346,21 @@ fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
             c.max_slope_excess,
             c.seconds
         );
+        if c.excluded_states > 0 {
+            println!(
+                "excluded cells: {} of the {} states fell in cells outside the certified \
+                 domain (not counted above); {} of them are feasible for the MPC{}",
+                c.excluded_states,
+                c.states,
+                c.feasible_in_excluded,
+                if c.feasible_in_excluded > 0 {
+                    " (the feasible set reaches into excluded cells: Corollary 1 does not \
+                     cover those states)"
+                } else {
+                    ""
+                }
+            );
+        }
         println!(
             "per-cell check: {} states in {} cells ({} near the target): range misses {}/{} \
              (rate {:.4}, tolerance {}), over ε_C {}, jumps {} (max |Δu| {:.2e} of the band): {}",

@@ -46,6 +46,14 @@ pub struct RefineSettings {
     /// Cells narrower than this fraction of the domain on every axis are not split
     /// (default 1e-5).
     pub min_width: f64,
+    /// Restrict the certified domain to the MPC's feasible set (default false): a leaf cell
+    /// whose corners are all hard-infeasible (the OCP's soft fallback needed slack, or no
+    /// label for infeasibility) is excluded — not bounded, not split, not trained on — and
+    /// listed in the certificate (`local.excluded_cells`). Whether a whole cell is outside
+    /// the feasible set is an estimate from its corners; `refine --check` counts the fresh
+    /// states that are feasible yet fall in an excluded cell. A robust design with an
+    /// enforced terminal region turns it on (`robust.terminal_constraint`).
+    pub exclude_infeasible: bool,
     /// The network and its first training (defaults: 2-32-32-1 tanh, 600 epochs, batch 64,
     /// learning rate 3e-3 with cosine decay, λ = (1, 0.1, 0), saturation-aware loss).
     pub training: TrainSettings,
@@ -68,6 +76,7 @@ impl Default for RefineSettings {
             emphasis_at: 0.5,
             emphasis: 4,
             min_width: 1e-5,
+            exclude_infeasible: false,
             training: TrainSettings {
                 hidden: vec![32, 32],
                 epochs: 600,

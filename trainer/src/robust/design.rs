@@ -115,7 +115,9 @@ pub fn design(cfg: &ProblemConfig) -> Result<Design, RobustError> {
 
 /// The data-generating problem of a design: `cfg` with the tightened stage bounds, named
 /// `robust` (so a run goes to `DIR/<name>/robust/`), and the terminal region as its terminal
-/// constraint when enforced (`robust.terminal_constraint`). The constant bounds remain the true constraints (actuator limits and the
+/// constraint when enforced (`robust.terminal_constraint`, which also turns on
+/// `refine.exclude_infeasible`: cells outside the tightened MPC's feasible set leave the
+/// certified domain). The constant bounds remain the true constraints (actuator limits and the
 /// violation check of the closed loop).
 pub fn robust_config(cfg: &ProblemConfig, d: &Design) -> ProblemConfig {
     let mut r = cfg.clone();
@@ -123,6 +125,10 @@ pub fn robust_config(cfg: &ProblemConfig, d: &Design) -> ProblemConfig {
     r.ocp.stages = Some(d.stages.clone());
     if let Some(t) = d.terminal.as_ref().filter(|t| t.enforced) {
         r.ocp.terminal_constraints.push(t.constraint.clone());
+        // The terminal region shrinks the feasible set below X: certify where the
+        // tightened MPC is feasible (Corollary 1 needs the bound there only), excluding
+        // the cells outside it.
+        r.refine.exclude_infeasible = true;
     }
     r
 }

@@ -65,6 +65,7 @@ fn bound(st: &mut RefineState, lat: &Lattice, rs: &RefineSettings, m: &Mlp) {
         &local_settings(rs),
         rs.centre_check,
         None,
+        false,
     );
 }
 

@@ -87,6 +87,14 @@ pub struct Check {
     pub max_slope_excess: f64,
     /// Up to 20 states whose error exceeds their cell's ε_C.
     pub offenders: Vec<Offender>,
+    /// With `refine.exclude_infeasible`: states that fell in an excluded cell (not counted
+    /// above: ε does not cover them).
+    #[serde(default)]
+    pub excluded_states: usize,
+    /// Of which the hard OCP was feasible (converged): where the feasible set reaches into an
+    /// excluded cell between its corners — the estimate behind the exclusion missed them.
+    #[serde(default)]
+    pub feasible_in_excluded: usize,
     /// The per-cell (stratified) check and its verdict.
     pub per_cell: super::CellCheck,
     /// Wall time, seconds.
@@ -120,6 +128,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         checks: usize,
         excess: f64,
         offenders: Vec<(Vec<f64>, f64, f64, usize)>,
+        excluded: usize,
+        feasible_excluded: usize,
     }
     let acc = (0..n)
         .into_par_iter()
@@ -137,7 +147,11 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     })
                     .collect();
                 let (l, _) = law.solve(&x, None);
-                if l.u.iter().all(|v| v.is_finite()) {
+                let leaf = leaf_of(st, &lat, &counts, &x);
+                if rs.exclude_infeasible && st.excluded(leaf) {
+                    a.excluded += 1;
+                    a.feasible_excluded += (l.status == SqpStatus::Converged) as usize;
+                } else if l.u.iter().all(|v| v.is_finite()) {
                     a.labelled += 1;
                     let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
                     mlp.eval(&x, &mut u, &mut j, &mut ws);
@@ -145,7 +159,6 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                         .map(|r| (l.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
                         .sum::<f64>()
                         .sqrt();
-                    let leaf = leaf_of(st, &lat, &counts, &x);
                     let b = bound_of.get(&leaf);
                     let ec = b.map_or(f64::INFINITY, |b| b.eps);
                     if let Some(b) = b.filter(|b| e > b.corner && b.eps > b.corner) {
@@ -214,6 +227,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             misses: x.misses + y.misses,
             checks: x.checks + y.checks,
             excess: x.excess.max(y.excess),
+            excluded: x.excluded + y.excluded,
+            feasible_excluded: x.feasible_excluded + y.feasible_excluded,
         });
     let per_cell = super::cellcheck::per_cell(
         &super::cellcheck::Setup {
@@ -245,6 +260,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         slope_misses: acc.misses,
         slope_checks: acc.checks,
         max_slope_excess: acc.excess,
+        excluded_states: acc.excluded,
+        feasible_in_excluded: acc.feasible_excluded,
         offenders: acc
             .offenders
             .iter()

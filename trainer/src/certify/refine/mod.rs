@@ -116,6 +116,15 @@ impl Point {
     fn labelled(&self) -> bool {
         self.u.iter().all(|v| v.is_finite()) && self.du.iter().all(|v| v.is_finite())
     }
+    /// Whether the hard OCP was found infeasible here: a soft label (the exact-penalty
+    /// solution needed slack) or no label because of infeasibility. A solver failure is not
+    /// infeasibility.
+    pub fn hard_infeasible(&self) -> bool {
+        matches!(
+            self.status,
+            Some(SqpStatus::Soft) | Some(SqpStatus::Infeasible)
+        )
+    }
 }
 
 /// A node of the k-d tree of cells.
@@ -179,6 +188,28 @@ pub struct RefineState {
 }
 
 impl RefineState {
+    /// Whether node `n` is a leaf excluded from the certified domain when
+    /// `refine.exclude_infeasible` is on: every corner hard-infeasible
+    /// ([`Point::hard_infeasible`]), so the cell is taken to lie outside the MPC's feasible
+    /// set (an estimate from its corners).
+    pub fn excluded(&self, n: usize) -> bool {
+        let node = &self.nodes[n];
+        node.split.is_none()
+            && node
+                .corners
+                .iter()
+                .all(|&c| self.points[c].hard_infeasible())
+    }
+
+    /// The leaves excluded from the certified domain (empty when `exclude` is off), in node
+    /// order.
+    pub fn excluded_leaves(&self, exclude: bool) -> Vec<usize> {
+        if !exclude {
+            return Vec::new();
+        }
+        (0..self.nodes.len()).filter(|&n| self.excluded(n)).collect()
+    }
+
     /// Decodes a checkpoint's bytes (`seal(postcard(state))`, see [`crate::io::seal`]); errors
     /// name `path` and the fault.
     pub fn from_bytes(bytes: &[u8], path: &std::path::Path) -> Result<Self, RefineError> {

@@ -100,6 +100,124 @@ pub struct LocalSummary {
     /// them, `certify::critical`); absent for other problems.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cells_exact: Option<usize>,
+    /// With `refine.exclude_infeasible`: the part of X excluded from the certified domain
+    /// (outside the MPC's feasible set as far as the cells' corners show); absent without.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excluded: Option<Excluded>,
+}
+
+/// The cells excluded from the certified domain (`refine.exclude_infeasible`): ε holds on
+/// X minus these boxes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Excluded {
+    /// Excluded leaf cells (every corner hard-infeasible).
+    pub cells: usize,
+    /// Their share of the volume of X.
+    pub volume_fraction: f64,
+    /// The excluded set as boxes (lower corner, upper corner): the excluded leaves merged
+    /// into maximal subtrees and then across shared faces (their union is exactly the
+    /// union of the excluded leaves).
+    pub boxes: Vec<(Vec<f64>, Vec<f64>)>,
+    /// What the exclusion rests on.
+    pub note: String,
+}
+
+/// The excluded set of a refinement as merged lattice boxes (lower key, size): maximal
+/// subtrees whose leaves are all excluded, then pairs of boxes that share a whole face
+/// merged until none does. Empty without `exclude`.
+pub(super) fn excluded_lattice_boxes(st: &RefineState, exclude: bool) -> Vec<(Vec<u64>, Vec<u64>)> {
+    if !exclude {
+        return Vec::new();
+    }
+    // Whole excluded subtrees, from the roots down.
+    fn all_excluded(st: &RefineState, n: usize, memo: &mut [Option<bool>]) -> bool {
+        if let Some(v) = memo[n] {
+            return v;
+        }
+        let v = match st.nodes[n].split {
+            Some((a, b, _)) => all_excluded(st, a, memo) & all_excluded(st, b, memo),
+            None => st.excluded(n),
+        };
+        memo[n] = Some(v);
+        v
+    }
+    let mut memo = vec![None; st.nodes.len()];
+    let mut boxes = Vec::new();
+    let mut stack: Vec<usize> = st.roots.iter().rev().copied().collect();
+    while let Some(n) = stack.pop() {
+        if all_excluded(st, n, &mut memo) {
+            boxes.push((st.nodes[n].lo.clone(), st.nodes[n].size.clone()));
+        } else if let Some((a, b, _)) = st.nodes[n].split {
+            stack.push(b);
+            stack.push(a);
+        }
+    }
+    // Merge boxes that share a whole face (same extent on every other axis, adjacent on
+    // one): each merge keeps the union exact.
+    let nx = st.nodes.first().map_or(0, |n| n.lo.len());
+    loop {
+        let mut merged = false;
+        let mut i = 0;
+        while i < boxes.len() {
+            let mut j = i + 1;
+            while j < boxes.len() {
+                let (a, b) = (&boxes[i], &boxes[j]);
+                let axis = (0..nx).find(|&k| {
+                    (0..nx).all(|m| m == k || (a.0[m] == b.0[m] && a.1[m] == b.1[m]))
+                        && (a.0[k] + a.1[k] == b.0[k] || b.0[k] + b.1[k] == a.0[k])
+                });
+                if let Some(k) = axis {
+                    let lo = a.0[k].min(b.0[k]);
+                    let size = a.1[k] + b.1[k];
+                    boxes[i].0[k] = lo;
+                    boxes[i].1[k] = size;
+                    boxes.swap_remove(j);
+                    merged = true;
+                } else {
+                    j += 1;
+                }
+            }
+            i += 1;
+        }
+        if !merged {
+            return boxes;
+        }
+    }
+}
+
+fn excluded_summary(cfg: &ProblemConfig, rs: &RefineSettings, st: &RefineState) -> Option<Excluded> {
+    if !rs.exclude_infeasible {
+        return None;
+    }
+    let nx = cfg.system.nx();
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(nx));
+    let leaves = st.excluded_leaves(true);
+    let volume = |size: &[u64]| -> f64 {
+        size.iter()
+            .zip(&lat.max)
+            .map(|(&s, &m)| s as f64 / m as f64)
+            .product()
+    };
+    let volume_fraction = leaves.iter().map(|&n| volume(&st.nodes[n].size)).sum();
+    let boxes = excluded_lattice_boxes(st, true)
+        .into_iter()
+        .map(|(lo, size)| {
+            let hi: Vec<u64> = lo.iter().zip(&size).map(|(a, s)| a + s).collect();
+            (lat.x(&lo), lat.x(&hi))
+        })
+        .collect();
+    Some(Excluded {
+        cells: leaves.len(),
+        volume_fraction,
+        boxes,
+        note: "A leaf cell is excluded when the hard OCP is infeasible at every corner (the \
+               soft fallback needed slack, or no label): taken to lie outside the MPC's \
+               feasible set — an estimate from its corners, not a proof; the feasible set \
+               may reach into an excluded cell between its corners (`refine --check` counts \
+               fresh feasible states found there). ε holds on X minus these boxes; the \
+               exported controller flags states inside them (EXCLUDED)."
+            .into(),
+    })
 }
 
 /// The certificate JSON of a refinement run: the design's keys plus [`LocalSummary`].
@@ -136,7 +254,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         (naive, LnnMethod::Naive)
     };
     let lower = lipschitz::sampled_lower_bound(mlp, lo, hi, 20_000, 7);
-    let set = train_set(st, nx, cfg.system.nu(), &[], 1);
+    let set = train_set(st, nx, cfg.system.nu(), &[], 1, rs.exclude_infeasible);
     let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
     let l_mpc = sl.max(q);
     let lat = Lattice::new(lo, hi, &rs.initial_counts(nx));
@@ -262,6 +380,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
             ""
         },
         cells_exact: qp.then_some(n_exact),
+        excluded: excluded_summary(cfg, rs, st),
     };
     LocalCertificate {
         base,
@@ -285,7 +404,10 @@ pub fn write_outputs(
     let cert = certificate(cfg, rs, r);
     if r.model.source_hash.is_none() {
         let mut model = r.model.clone();
-        model.certificate = Some(cert.base.clone());
+        // The model file's certificate has no room for excluded boxes: with them, the
+        // model stores none, and exporting needs `--certificate certificate.json` (which
+        // carries them) — the stored one would claim ε on all of X.
+        model.certificate = cert.local.excluded.is_none().then(|| cert.base.clone());
         model.problem_toml = cfg.to_toml_string().ok();
         model.save(&dir.join("model.bin"))?;
     }

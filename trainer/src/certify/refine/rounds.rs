@@ -63,6 +63,10 @@ fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
         rs.centre_check,
     );
     h.update(postcard::to_allocvec(&key).unwrap_or_default());
+    if rs.exclude_infeasible {
+        // Appended only when on: checkpoints of runs without exclusion keep their hash.
+        h.update(b"exclude_infeasible");
+    }
     crate::io::hex(&h.finalize())
 }
 
@@ -74,39 +78,88 @@ pub(super) fn local_settings(rs: &RefineSettings) -> LocalSettings {
     }
 }
 
+/// The training set: every labelled point, then the `extra` points `reps − 1` more times.
+/// With `exclude` (`refine.exclude_infeasible`) the data is restricted to the certified
+/// domain: a hard-infeasible point is kept only as a corner of a leaf that is not
+/// excluded (where its soft label bounds the cell).
 pub(super) fn train_set(
     st: &RefineState,
     nx: usize,
     nu: usize,
     extra: &[usize],
     reps: usize,
+    exclude: bool,
 ) -> TrainSet {
     let mut s = TrainSet {
         nx,
         nu,
         ..Default::default()
     };
+    let keep = kept_points(st, exclude);
     let mut push = |p: &Point| {
         s.x.extend(&p.x);
         s.u.extend(&p.u);
         s.du.extend(&p.du);
         s.use_jac.push(p.regular);
     };
-    for p in st.points.iter().filter(|p| p.labelled()) {
-        push(p);
+    for (i, p) in st.points.iter().enumerate() {
+        if p.labelled() && keep[i] {
+            push(p);
+        }
     }
     for _ in 1..reps {
-        for &i in extra {
+        for &i in extra.iter().filter(|&&i| keep[i]) {
             push(&st.points[i]);
         }
     }
     s
 }
 
+/// The bounding box of the leaves not excluded, when `exclude` is on and some leaf is.
+fn certified_box(st: &RefineState, lat: &Lattice, exclude: bool) -> Option<(Vec<f64>, Vec<f64>)> {
+    if !exclude {
+        return None;
+    }
+    let mut b: Option<(Vec<u64>, Vec<u64>)> = None;
+    for (n, node) in st.nodes.iter().enumerate() {
+        if node.split.is_some() || st.excluded(n) {
+            continue;
+        }
+        let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+        b = Some(match b {
+            None => (node.lo.clone(), hi),
+            Some((l, h)) => (
+                l.iter().zip(&node.lo).map(|(a, c)| *a.min(c)).collect(),
+                h.iter().zip(&hi).map(|(a, c)| *a.max(c)).collect(),
+            ),
+        });
+    }
+    b.map(|(l, h)| (lat.x(&l), lat.x(&h)))
+}
+
+/// Per point: whether it belongs to the data of the certified domain (every point without
+/// `exclude`; with it, the hard-feasible points and the corners of leaves not excluded).
+pub(super) fn kept_points(st: &RefineState, exclude: bool) -> Vec<bool> {
+    if !exclude {
+        return vec![true; st.points.len()];
+    }
+    let mut keep: Vec<bool> = st.points.iter().map(|p| !p.hard_infeasible()).collect();
+    for (n, node) in st.nodes.iter().enumerate() {
+        if node.split.is_none() && !st.excluded(n) {
+            for &c in &node.corners {
+                keep[c] = true;
+            }
+        }
+    }
+    keep
+}
+
 /// Bounds every leaf; returns (leaf, bound) in leaf order. Where the MPC is a QP (`qp`: the
 /// certifier and the target ε), a cell whose critical-region proof succeeds gets the exact
 /// bound ([`exact_cell_bound`]) if it meets the target or beats the estimate, the others
-/// the estimate ([`cell_bound`]).
+/// the estimate ([`cell_bound`]). With `exclude` (`refine.exclude_infeasible`), the
+/// excluded leaves ([`RefineState::excluded`]) are left out: they are not part of the
+/// certified domain.
 pub(super) fn bound_leaves(
     st: &RefineState,
     lat: &Lattice,
@@ -115,6 +168,7 @@ pub(super) fn bound_leaves(
     ls: &LocalSettings,
     centre_check: bool,
     qp: Option<(&QpCertifier, f64)>,
+    exclude: bool,
 ) -> Vec<(usize, CellBound)> {
     let idx = region::index(st);
     let target = qp.map_or(f64::INFINITY, |(_, t)| t);
@@ -138,7 +192,7 @@ pub(super) fn bound_leaves(
         })
         .collect();
     let leaves: Vec<usize> = (0..st.nodes.len())
-        .filter(|&i| st.nodes[i].split.is_none())
+        .filter(|&i| st.nodes[i].split.is_none() && !(exclude && st.excluded(i)))
         .collect();
     leaves
         .par_iter()
@@ -289,6 +343,7 @@ pub fn refine(
                     &ls,
                     centre_check,
                     Some((q, rs.target_eps)),
+                    rs.exclude_infeasible,
                 );
             }
             return Ok(Refined { met, state, model });
@@ -380,7 +435,12 @@ pub fn refine(
                     }
                 }
             }
-            let set = train_set(&st, nx, nu, &hard, rs.emphasis);
+            let set = train_set(&st, nx, nu, &hard, rs.emphasis, rs.exclude_infeasible);
+            // The input scaling of a new net (a warm start keeps its own): X, or with
+            // exclusions the bounding box of the certified domain (the net then resolves
+            // the part of X it is certified on).
+            let scale_box = certified_box(&st, &lat, rs.exclude_infeasible)
+                .unwrap_or_else(|| (cfg.domain.lo.clone(), cfg.domain.hi.clone()));
             let ts = match &st.model {
                 Some(_) => TrainSettings {
                     epochs: rs.round_epochs,
@@ -399,7 +459,7 @@ pub fn refine(
                 },
                 &set,
                 &TrainSet::default(),
-                (&cfg.domain.lo, &cfg.domain.hi),
+                (&scale_box.0, &scale_box.1),
                 band,
                 &cfg.problem_hash(),
                 &hash,
@@ -414,6 +474,7 @@ pub fn refine(
             &ls,
             centre_check,
             qp.as_ref().map(|q| (q, rs.target_eps)),
+            rs.exclude_infeasible,
         );
         let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
         let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
@@ -522,6 +583,7 @@ pub fn refine(
                     &ls,
                     centre_check,
                     qp.as_ref().map(|q| (q, rs.target_eps)),
+                    rs.exclude_infeasible,
                 );
                 let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
                 if e < eps {

@@ -253,3 +253,93 @@ fn cells_with_a_failed_corner_are_split_around_it() {
 fn inside(n: &Node, key: &[u64]) -> bool {
     (0..key.len()).all(|k| n.lo[k] <= key[k] && key[k] <= n.lo[k] + n.size[k])
 }
+
+/// `refine.exclude_infeasible`: on a problem where part of X is infeasible (the stiff
+/// spring's path and terminal constraints, soft fallback on), the excluded leaves are exactly
+/// those whose corners are all hard-infeasible, none of them is bounded, trained on or split,
+/// the certificate's boxes cover exactly their union, and `check` keeps their states apart.
+#[test]
+fn infeasible_cells_are_excluded_and_listed_exactly() {
+    let path = std::path::PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/stiff_spring_setpoint.toml"
+    ));
+    let cfg = ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let mut rs = crate::problem::RefineSettings {
+        initial: vec![9, 9],
+        budget: 400,
+        max_rounds: 4,
+        target_eps: 0.05,
+        round_epochs: 5,
+        exclude_infeasible: true,
+        ..Default::default()
+    };
+    rs.training.hidden = vec![8];
+    rs.training.epochs = 20;
+    let r = refine(&cfg, &rs, None, &RefineOptions::default()).unwrap();
+    let st = &r.state;
+    let excluded = st.excluded_leaves(true);
+    assert!(!excluded.is_empty(), "no infeasible cell: the test shows nothing");
+    let leaves: Vec<usize> = (0..st.nodes.len())
+        .filter(|&n| st.nodes[n].split.is_none())
+        .collect();
+    assert!(excluded.len() < leaves.len(), "everything excluded");
+    for &n in &leaves {
+        let all_infeasible = st.nodes[n]
+            .corners
+            .iter()
+            .all(|&c| st.points[c].hard_infeasible());
+        assert_eq!(st.excluded(n), all_infeasible);
+        // Bounded iff not excluded.
+        assert_eq!(st.bounds.iter().any(|(l, _)| *l == n), !all_infeasible);
+    }
+    // Training data: no point that is only a corner of excluded leaves.
+    let keep = super::rounds::kept_points(st, true);
+    for (i, p) in st.points.iter().enumerate() {
+        let in_included = leaves
+            .iter()
+            .any(|&n| !st.excluded(n) && st.nodes[n].corners.contains(&i));
+        if p.hard_infeasible() && !in_included {
+            assert!(!keep[i], "point {i} of an excluded cell is trained on");
+        }
+        if !p.hard_infeasible() {
+            assert!(keep[i]);
+        }
+    }
+    // The merged boxes: disjoint, inside X, and their volume is the excluded leaves'.
+    let boxes = super::outputs::excluded_lattice_boxes(st, true);
+    let vol = |s: &[u64]| s.iter().map(|&v| v as f64).product::<f64>();
+    let leaf_vol: f64 = excluded.iter().map(|&n| vol(&st.nodes[n].size)).sum();
+    let box_vol: f64 = boxes.iter().map(|(_, s)| vol(s)).sum();
+    assert_eq!(leaf_vol, box_vol);
+    assert!(boxes.len() <= excluded.len());
+    let overlap = |a: (&[u64], &[u64]), b: (&[u64], &[u64])| {
+        (0..2).all(|k| a.0[k] < b.0[k] + b.1[k] && b.0[k] < a.0[k] + a.1[k])
+    };
+    for (i, a) in boxes.iter().enumerate() {
+        for b in &boxes[i + 1..] {
+            assert!(!overlap((&a.0, &a.1), (&b.0, &b.1)), "{a:?} {b:?}");
+        }
+        // No included leaf reaches into a box.
+        for &n in leaves.iter().filter(|&&n| !st.excluded(n)) {
+            let node = &st.nodes[n];
+            assert!(!overlap((&a.0, &a.1), (&node.lo, &node.size)));
+        }
+    }
+    // The certificate lists them; the check keeps their states apart.
+    let cert = super::outputs::certificate(&cfg, &rs, &r);
+    let e = cert.local.excluded.as_ref().expect("excluded block");
+    assert_eq!((e.cells, e.boxes.len()), (excluded.len(), boxes.len()));
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &[9, 9]);
+    let total = vol(&lat.max);
+    assert!((e.volume_fraction - leaf_vol / total).abs() < 1e-12);
+    let c = super::check::check(&cfg, &rs, &r, 300, 5);
+    assert!(c.excluded_states > 0, "no check state fell in an excluded cell");
+    assert!(c.labelled + c.excluded_states <= c.states);
+    // Without the setting nothing is excluded (and every leaf is bounded).
+    let off = crate::problem::RefineSettings {
+        exclude_infeasible: false,
+        ..rs.clone()
+    };
+    assert!(super::outputs::certificate(&cfg, &off, &r).local.excluded.is_none());
+}

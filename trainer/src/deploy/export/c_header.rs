@@ -79,6 +79,9 @@ extern \"C\" {{
 #define AMPC_FLAG_NON_FINITE 0x02u
 /* The network output was outside the clamp band and was clamped. */
 #define AMPC_FLAG_CLAMPED 0x04u
+/* The state lies in a box the certificate excludes (outside the MPC's feasible set):
+   u is computed as usual, but eps does not cover this state. */
+#define AMPC_FLAG_EXCLUDED 0x08u
 /* x or u was NULL (see ampc_evaluate). */
 #define AMPC_FLAG_NULL_ARGUMENT 0x80u
 

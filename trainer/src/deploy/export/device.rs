@@ -6,7 +6,9 @@
 //! [`ExportModel::domain_f32`] (`OUT_OF_DOMAIN` when that moved it), the folded f32 network
 //! runs with the device tanh ([`eval_f32`]), and each output is clamped to the band
 //! [`ExportModel::clamp_band`]`(ε + f32 allowance)` (`CLAMPED` when that moved it; a NaN
-//! output takes the fallback and `NON_FINITE`). The same arithmetic, in the same order, as
+//! output takes the fallback and `NON_FINITE`); a projected state inside one of the
+//! certificate's excluded boxes ([`ExportModel::excluded_f32`]) is flagged `EXCLUDED`. The
+//! same arithmetic, in the same order, as
 //! `controller_core::Controller::evaluate`, so the results are bit-identical.
 
 use super::{eval_f32, f32_allowance, ExportError, ExportModel, Folded, Tanh};
@@ -17,6 +19,8 @@ pub const OUT_OF_DOMAIN: u8 = 1;
 pub const NON_FINITE: u8 = 2;
 /// Flag bit: the network's output was outside the clamp band and was clamped.
 pub const CLAMPED: u8 = 4;
+/// Flag bit: the state lies in a box the certificate excludes (ε does not cover it).
+pub const EXCLUDED: u8 = 8;
 
 /// The exported controller, ready to evaluate (see the module doc).
 #[derive(Clone, Debug)]
@@ -28,6 +32,8 @@ pub struct Device {
     pub band: (Vec<f32>, Vec<f32>),
     /// The fallback input (f32, inside the band).
     pub fallback: Vec<f32>,
+    /// The excluded boxes (f32, rounded outward).
+    pub excluded: Vec<(Vec<f32>, Vec<f32>)>,
     tanh: Tanh,
 }
 
@@ -45,6 +51,7 @@ impl Device {
             domain: model.domain_f32(),
             band,
             fallback,
+            excluded: model.excluded_f32(),
             tanh,
         })
     }
@@ -67,6 +74,14 @@ impl Device {
             } else {
                 xi
             });
+        }
+        let inside = |(l, h): &(Vec<f32>, Vec<f32>)| {
+            xp.iter()
+                .zip(l.iter().zip(h))
+                .all(|(v, (a, b))| *a <= *v && *v <= *b)
+        };
+        if self.excluded.iter().any(inside) {
+            flags |= EXCLUDED;
         }
         let y = eval_f32(&self.folded, lo, hi, &xp, self.tanh);
         let mut u = self.fallback.clone();
@@ -112,6 +127,29 @@ mod tests {
         for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
             assert_eq!(d.evaluate(&[bad, 0.0]), (d.fallback.clone(), NON_FINITE));
         }
+    }
+
+    #[test]
+    fn states_in_excluded_boxes_are_flagged_with_the_same_input() {
+        let plain = placeholder_pendulum();
+        let mut m = plain.clone();
+        // A box with bounds that are not f32 numbers: rounded outward, its edges stay in.
+        m.excluded = vec![(vec![0.1, -0.3], vec![0.7, 0.30000001])];
+        let (d, d0) = (
+            Device::new(&m, Tanh::Libm).unwrap(),
+            Device::new(&plain, Tanh::Libm).unwrap(),
+        );
+        for x in [[0.1f32, -0.3], [0.4, 0.0], [0.7, 0.3]] {
+            let ((u, f), (u0, f0)) = (d.evaluate(&x), d0.evaluate(&x));
+            assert_eq!((u, f), (u0, f0 | EXCLUDED), "{x:?}");
+        }
+        for x in [[0.09f32, 0.0], [0.4, 0.31], [-0.5, 0.0]] {
+            assert_eq!(d.evaluate(&x).1 & EXCLUDED, 0, "{x:?}");
+        }
+        // An empty box is refused naming it.
+        m.excluded = vec![(vec![0.5, 0.0], vec![0.4, 0.1])];
+        let e = Device::new(&m, Tanh::Libm).unwrap_err().to_string();
+        assert!(e.contains("excluded[0]"), "{e}");
     }
 
     #[test]

@@ -134,6 +134,11 @@ pub struct ExportModel {
     /// it rests on. `None` for a certificate's ε.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub statistical: Option<StatisticalClaim>,
+    /// Boxes (lower, upper corner) of X the certificate excludes (a local certificate's
+    /// `local.excluded.boxes`, `refine.exclude_infeasible`): ε holds on X minus them; the
+    /// generated controller flags states inside them (`Flags::EXCLUDED`). Usually empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub excluded: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 /// What can go wrong in an export.
@@ -294,6 +299,13 @@ impl ExportModel {
         if let Some(s) = &self.statistical {
             s.validate()?;
         }
+        for (k, (lo, hi)) in self.excluded.iter().enumerate() {
+            dims_ok(lo, nx, &format!("excluded[{k}].lo"))?;
+            dims_ok(hi, nx, &format!("excluded[{k}].hi"))?;
+            if (0..nx).any(|i| !(lo[i] <= hi[i])) {
+                return inv(format!("excluded[{k}]: an empty or non-finite box"));
+            }
+        }
         let supported = Guarantee::supported(
             self.l_mpc_is_estimate,
             self.placeholder,
@@ -376,6 +388,19 @@ impl ExportModel {
             })
             .collect();
         Folded { layers, f32_layers }
+    }
+
+    /// The excluded boxes rounded outward to f32 (every state of a box stays flagged).
+    pub fn excluded_f32(&self) -> Vec<(Vec<f32>, Vec<f32>)> {
+        self.excluded
+            .iter()
+            .map(|(lo, hi)| {
+                (
+                    lo.iter().map(|v| f32_down(*v)).collect(),
+                    hi.iter().map(|v| f32_up(*v)).collect(),
+                )
+            })
+            .collect()
     }
 
     /// The certified box rounded inward to f32.
@@ -488,6 +513,7 @@ pub fn placeholder_pendulum() -> ExportModel {
         placeholder: true,
         guarantee: Guarantee::Estimated,
         statistical: None,
+        excluded: Vec::new(),
     }
 }
 
@@ -580,6 +606,7 @@ impl ExportModel {
             placeholder: false,
             guarantee: Guarantee::derived(cert.l_mpc_is_estimate, false),
             statistical: None,
+            excluded: Vec::new(),
         })
     }
 

@@ -108,9 +108,26 @@ fn certificate_literal(
         arr("clamp_lo", v32(&clo)),
         arr("clamp_hi", v32(&chi)),
         arr("fallback", v32(&fb)),
+        arr_excluded(model),
         ("hash".into(), format!("{:?}", model.hash)),
         ("placeholder".into(), model.placeholder.to_string()),
     ]
+}
+
+/// The certificate's `excluded` field: `&[]`, or one `([lo…], [hi…])` box per line (f32,
+/// rounded outward).
+fn arr_excluded(model: &ExportModel) -> (String, String) {
+    let boxes = model.excluded_f32();
+    if boxes.is_empty() {
+        return ("excluded".into(), "&[]".into());
+    }
+    let list = |v: &[f32]| v.iter().map(|x| lit32(*x)).collect::<Vec<_>>().join(", ");
+    let mut s = String::from("&[\n");
+    for (lo, hi) in &boxes {
+        let _ = writeln!(s, "        ([{}], [{}]),", list(lo), list(hi));
+    }
+    s.push_str("    ]");
+    ("excluded".into(), s)
 }
 
 /// The generated Rust file `controller-core/src/generated/weights.rs`.

@@ -184,6 +184,14 @@ pub fn metadata(
         ("ampc.eps", num(model.eps)),
         ("ampc.guarantee", guarantee(model, allowance)),
         ("ampc.tier", model.guarantee.name().to_string()),
+        (
+            "ampc.excluded_boxes",
+            if model.excluded.is_empty() {
+                "[]".into()
+            } else {
+                serde_json::to_string(&model.excluded).unwrap_or_default()
+            },
+        ),
         ("ampc.hash", model.hash.clone()),
         ("ampc.eps_d", num(model.eps_d)),
         ("ampc.l_nn", num(model.l_nn)),
