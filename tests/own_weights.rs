@@ -64,7 +64,8 @@ fn second_net() -> ExportModel {
         placeholder: true,
         guarantee: Guarantee::Estimated,
         statistical: None,
-        excluded: Vec::new(),
+        // One box the certificate excludes: states in it are flagged (EXCLUDED).
+        excluded: vec![(vec![0.5, -0.5, 1.0], vec![2.0, 0.0, 3.0])],
     }
 }
 
@@ -203,14 +204,23 @@ fn a_separate_crate_compiles_its_own_exported_controller() {
     let (lo, hi) = model.domain_f32();
     let (clo, chi) = model.clamp_band(eps);
     let fallback = model.fallback_f32(&clo, &chi);
+    let boxes = model.excluded_f32();
     let mut n = 0;
     let mut clamped = 0;
+    let mut excluded = 0;
     for (x, line) in xs.iter().zip(lines) {
         let (mut want_u, mut flags) = (fallback.clone(), Flags::NON_FINITE);
         if x.iter().all(|v| v.is_finite()) {
             flags = Flags::EMPTY;
             if (0..3).any(|i| x[i] < lo[i] || x[i] > hi[i]) {
                 flags = flags.union(Flags::OUT_OF_DOMAIN);
+            }
+            let xp: Vec<f32> = (0..3).map(|i| x[i].clamp(lo[i], hi[i])).collect();
+            if boxes
+                .iter()
+                .any(|(l, h)| (0..3).all(|i| l[i] <= xp[i] && xp[i] <= h[i]))
+            {
+                flags = flags.union(Flags::EXCLUDED);
             }
             let y = export::eval_f32(&folded, &lo, &hi, x, tanh);
             for j in 0..2 {
@@ -228,8 +238,13 @@ fn a_separate_crate_compiles_its_own_exported_controller() {
         );
         assert_eq!(line, want, "x = {x:?}");
         clamped += usize::from(flags.contains(Flags::CLAMPED));
+        excluded += usize::from(flags.contains(Flags::EXCLUDED));
         n += 1;
     }
     assert_eq!(n, xs.len());
-    println!("{n} states bit-identical to the exporter's f32 model ({clamped} clamped)");
+    assert!(excluded > 0, "no state in the excluded box: the flag is not exercised");
+    println!(
+        "{n} states bit-identical to the exporter's f32 model ({clamped} clamped, {excluded} \
+         in the excluded box)"
+    );
 }

@@ -5,7 +5,7 @@
 //! exported model under its certificate (`--certificate` JSON, or the one stored in the
 //! model) — the state rounded to f32, projected onto the certified domain, the f32 network,
 //! the clamp band, and the flags (`deploy::export::device`): columns `x1..xn,u1..um,flags`
-//! (flags: 1 out of domain, 2 not finite, 4 clamped). With `--raw`, the bare f64 network
+//! (flags: 1 out of domain, 2 not finite, 4 clamped, 8 in a cell the certificate excludes). With `--raw`, the bare f64 network
 //! and its Jacobian: `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
 //!
 //! With `--config`, the model (and the certificate) must be of that problem; without it the

@@ -154,7 +154,8 @@ enum Cmd {
         #[arg(long)]
         states: PathBuf,
         /// Output CSV: the controller's `x1..xn,u1..um,flags` (flags: 1 out of domain, 2 not
-        /// finite, 4 clamped), or with --raw the bare network's
+        /// finite, 4 clamped, 8 in a box the certificate excludes), or with --raw the bare
+        /// network's
         /// `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
         #[arg(long)]
         out: PathBuf,

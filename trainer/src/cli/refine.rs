@@ -242,7 +242,8 @@ fn refine_config(
             rcfg.name = cfg.name.clone();
         }
         if target_eps.is_none() {
-            rcfg.refine.target_eps = eps;
+            // Room for the exported f32 allowance, which the verdict counts too.
+            rcfg.refine.target_eps = eps * trainer::robust::REFINE_TARGET_FRACTION;
         }
         robust_note = Some((eps, design.recursive_feasibility()));
         cfg = rcfg;

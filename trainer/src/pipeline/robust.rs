@@ -76,6 +76,11 @@ pub struct RobustReport {
     pub cost_ratio_upswing: f64,
     /// Wall time of the closed-loop study in s.
     pub study_seconds: f64,
+    /// When the refined net's certificate excludes cells (outside the tightened MPC's
+    /// feasible set, `refine.exclude_infeasible`): how many, their share of X and the boxes;
+    /// the certified ε holds on X minus them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excluded: Option<crate::certify::refine::Excluded>,
 }
 
 /// The sound f32 allowance (libm tanh) of the export of `net` with `cert`; NaN when the
@@ -114,6 +119,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     net.certificate = Some(cert.clone());
     let mut cert = cert;
     let rf = d.recursive_feasibility();
+    let mut excluded = None;
     let mut tier = crate::certify::tier::theorem1(&cert).guarantee;
     let mut v = verdict(
         cfg.robust.eps,
@@ -125,7 +131,8 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         // The design loop's second step: refine data and network with local certificates
         // until the certified ε meets the design ε (or the refinement budget is spent).
         let mut fcfg = rcfg.clone();
-        fcfg.refine.target_eps = cfg.robust.eps;
+        // Room for the exported f32 allowance, which the verdict counts too.
+        fcfg.refine.target_eps = cfg.robust.eps * crate::robust::REFINE_TARGET_FRACTION;
         let rdir = dir.join("refine");
         std::fs::create_dir_all(&rdir).map_err(|e| io(&rdir, e))?;
         let r = crate::certify::refine::refine(
@@ -142,6 +149,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             net.certificate = Some(lc.base.clone());
             cert = lc.base;
             tier = lc.guarantee.guarantee;
+            excluded = lc.local.excluded;
             v = verdict(
                 cfg.robust.eps,
                 cert.eps,
@@ -236,6 +244,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         cost_ratio_mean: ratio(rm, nm),
         cost_ratio_upswing: rm[0].cost / nm[0].cost,
         study_seconds,
+        excluded,
     };
     for (k, runs) in st {
         cl.insert(k, runs);
@@ -280,6 +289,17 @@ pub fn markdown(r: &RobustReport) -> String {
         r.guarantee.name(),
         r.recursive_feasibility.name()
     );
+    if let Some(e) = &r.excluded {
+        s += &format!(
+            "Certified domain: X minus {} excluded cells ({:.1} % of X, {} boxes in \
+             `certificate.json`), every corner of which is infeasible for the tightened MPC \
+             (an estimate from the corners): ε holds on the rest, the exported controller \
+             flags states in them.\n\n",
+            e.cells,
+            100.0 * e.volume_fraction,
+            e.boxes.len()
+        );
+    }
     s += &match &r.design.terminal {
         Some(t) => format!(
             "Terminal region (x − x_r)ᵀP(x − x_r) ≤ α = {:.4e} (radius {:.4}, at most {:.4} by the \

@@ -71,7 +71,7 @@ pub mod terminal;
 pub mod tube;
 
 pub use crate::problem::{RobustMethod, RobustSettings};
-pub use design::{design, robust_config, verdict, Design, Verdict};
+pub use design::{design, robust_config, verdict, Design, Verdict, REFINE_TARGET_FRACTION};
 pub use jacobians::{jacobian_set, pendulum_rk4_jacobian, JacobianBound, JacobianSet};
 pub use terminal::{terminal_region, Feasibility, TerminalCheck, TerminalRegion};
 pub use tube::{contraction, dare, AffineConstraint, Tube};

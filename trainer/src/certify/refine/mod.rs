@@ -32,7 +32,7 @@ pub use check::{check, Check, Offender};
 pub use feedback::reopen;
 pub use outputs::{
     cell_views, certificate, dataset, pretty, sensitivity_spread, write_outputs, CellView,
-    LocalCertificate, LocalSummary,
+    Excluded, LocalCertificate, LocalSummary,
 };
 pub use rounds::{refine, RefineOptions, Refined};
 
