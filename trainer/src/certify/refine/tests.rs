@@ -190,22 +190,9 @@ fn first_round_corners_take_the_labels_of_records_at_their_states() {
 /// rule skipped such cells and left them whole).
 #[test]
 fn cells_with_a_failed_corner_are_split_around_it() {
-    let path = std::path::PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../configs/stiff_spring_setpoint.toml"
-    ));
-    let mut cfg = ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let mut cfg = stiff_spring();
     cfg.solver.soft_fallback = false;
-    let mut rs = crate::problem::RefineSettings {
-        initial: vec![5, 5],
-        budget: 300,
-        max_rounds: 5,
-        target_eps: 0.5,
-        round_epochs: 5,
-        ..Default::default()
-    };
-    rs.training.hidden = vec![8];
-    rs.training.epochs = 20;
+    let rs = quick_refine([5, 5], 300, 5, 0.5);
     let r = refine(&cfg, &rs, None, &RefineOptions::default()).unwrap();
     let st = &r.state;
     let failed: Vec<usize> = (0..st.points.len())
@@ -249,6 +236,36 @@ fn cells_with_a_failed_corner_are_split_around_it() {
     }
 }
 
+/// `configs/stiff_spring_setpoint.toml`: its path and terminal constraints make part of X
+/// infeasible.
+fn stiff_spring() -> ProblemConfig {
+    let path = std::path::PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/stiff_spring_setpoint.toml"
+    ));
+    ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A small, fast refinement: an `initial` grid, `budget` solves, `rounds`, a 2-8-1 net.
+fn quick_refine(
+    initial: [usize; 2],
+    budget: usize,
+    rounds: usize,
+    target: f64,
+) -> crate::problem::RefineSettings {
+    let mut rs = crate::problem::RefineSettings {
+        initial: initial.to_vec(),
+        budget,
+        max_rounds: rounds,
+        target_eps: target,
+        round_epochs: 5,
+        ..Default::default()
+    };
+    rs.training.hidden = vec![8];
+    rs.training.epochs = 20;
+    rs
+}
+
 /// Whether the lattice point `key` lies in the closed box of `n`.
 fn inside(n: &Node, key: &[u64]) -> bool {
     (0..key.len()).all(|k| n.lo[k] <= key[k] && key[k] <= n.lo[k] + n.size[k])
@@ -260,22 +277,11 @@ fn inside(n: &Node, key: &[u64]) -> bool {
 /// the certificate's boxes cover exactly their union, and `check` keeps their states apart.
 #[test]
 fn infeasible_cells_are_excluded_and_listed_exactly() {
-    let path = std::path::PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../configs/stiff_spring_setpoint.toml"
-    ));
-    let cfg = ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    let mut rs = crate::problem::RefineSettings {
-        initial: vec![9, 9],
-        budget: 400,
-        max_rounds: 4,
-        target_eps: 0.05,
-        round_epochs: 5,
+    let cfg = stiff_spring();
+    let rs = crate::problem::RefineSettings {
         exclude_infeasible: true,
-        ..Default::default()
+        ..quick_refine([9, 9], 400, 4, 0.05)
     };
-    rs.training.hidden = vec![8];
-    rs.training.epochs = 20;
     let r = refine(&cfg, &rs, None, &RefineOptions::default()).unwrap();
     let st = &r.state;
     let excluded = st.excluded_leaves(true);
