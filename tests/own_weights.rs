@@ -242,7 +242,10 @@ fn a_separate_crate_compiles_its_own_exported_controller() {
         n += 1;
     }
     assert_eq!(n, xs.len());
-    assert!(excluded > 0, "no state in the excluded box: the flag is not exercised");
+    assert!(
+        excluded > 0,
+        "no state in the excluded box: the flag is not exercised"
+    );
     println!(
         "{n} states bit-identical to the exporter's f32 model ({clamped} clamped, {excluded} \
          in the excluded box)"

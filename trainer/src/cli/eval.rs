@@ -64,7 +64,11 @@ pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> 
         if let Some(cfg) = &problem {
             super::export::check_certificate_problem(&cert, model, certificate, cfg)?;
         }
-        let em = ExportModel::from_trained("eval", &m, &cert)?;
+        let mut em = ExportModel::from_trained("eval", &m, &cert)?;
+        // The certificate's excluded boxes, as the exported controller flags them.
+        if let Some(p) = certificate {
+            em.excluded = super::export::excluded_boxes(p)?;
+        }
         let dev = Device::new(&em, Tanh::Libm)?;
         let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
         head.extend((1..=nu).map(|j| format!("u{j}")));

@@ -111,6 +111,13 @@ pub(super) fn execute(
             em.guarantee.name(),
             em.statistical.as_ref().map_or(String::new(), |s| format!(": {}", s.words()))
         );
+        if !em.excluded.is_empty() {
+            eprintln!(
+                "the certificate excludes {} boxes of X (outside the MPC's feasible set): the \
+                 controller flags states in them (EXCLUDED)",
+                em.excluded.len()
+            );
+        }
         allowance = Some(r.f32_allowance[0]);
     }
     if let Some(onnx) = out.onnx {
@@ -150,7 +157,7 @@ pub(super) fn execute(
 /// `refine.exclude_infeasible`); none when the key is absent. A malformed entry is an error
 /// naming the file and the key: exporting without the exclusion would claim ε where the
 /// certificate does not.
-fn excluded_boxes(path: &Path) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
+pub(super) fn excluded_boxes(path: &Path) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)

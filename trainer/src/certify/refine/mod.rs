@@ -207,7 +207,9 @@ impl RefineState {
         if !exclude {
             return Vec::new();
         }
-        (0..self.nodes.len()).filter(|&n| self.excluded(n)).collect()
+        (0..self.nodes.len())
+            .filter(|&n| self.excluded(n))
+            .collect()
     }
 
     /// Decodes a checkpoint's bytes (`seal(postcard(state))`, see [`crate::io::seal`]); errors

@@ -185,7 +185,11 @@ pub(super) fn excluded_lattice_boxes(st: &RefineState, exclude: bool) -> Vec<(Ve
     }
 }
 
-fn excluded_summary(cfg: &ProblemConfig, rs: &RefineSettings, st: &RefineState) -> Option<Excluded> {
+fn excluded_summary(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    st: &RefineState,
+) -> Option<Excluded> {
     if !rs.exclude_infeasible {
         return None;
     }

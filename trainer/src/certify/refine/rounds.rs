@@ -160,6 +160,7 @@ pub(super) fn kept_points(st: &RefineState, exclude: bool) -> Vec<bool> {
 /// the estimate ([`cell_bound`]). With `exclude` (`refine.exclude_infeasible`), the
 /// excluded leaves ([`RefineState::excluded`]) are left out: they are not part of the
 /// certified domain.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn bound_leaves(
     st: &RefineState,
     lat: &Lattice,

@@ -285,7 +285,10 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
     let r = refine(&cfg, &rs, None, &RefineOptions::default()).unwrap();
     let st = &r.state;
     let excluded = st.excluded_leaves(true);
-    assert!(!excluded.is_empty(), "no infeasible cell: the test shows nothing");
+    assert!(
+        !excluded.is_empty(),
+        "no infeasible cell: the test shows nothing"
+    );
     let leaves: Vec<usize> = (0..st.nodes.len())
         .filter(|&n| st.nodes[n].split.is_none())
         .collect();
@@ -340,12 +343,18 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
     let total = vol(&lat.max);
     assert!((e.volume_fraction - leaf_vol / total).abs() < 1e-12);
     let c = super::check::check(&cfg, &rs, &r, 300, 5);
-    assert!(c.excluded_states > 0, "no check state fell in an excluded cell");
+    assert!(
+        c.excluded_states > 0,
+        "no check state fell in an excluded cell"
+    );
     assert!(c.labelled + c.excluded_states <= c.states);
     // Without the setting nothing is excluded (and every leaf is bounded).
     let off = crate::problem::RefineSettings {
         exclude_infeasible: false,
         ..rs.clone()
     };
-    assert!(super::outputs::certificate(&cfg, &off, &r).local.excluded.is_none());
+    assert!(super::outputs::certificate(&cfg, &off, &r)
+        .local
+        .excluded
+        .is_none());
 }

@@ -302,7 +302,8 @@ impl ExportModel {
         for (k, (lo, hi)) in self.excluded.iter().enumerate() {
             dims_ok(lo, nx, &format!("excluded[{k}].lo"))?;
             dims_ok(hi, nx, &format!("excluded[{k}].hi"))?;
-            if (0..nx).any(|i| !(lo[i] <= hi[i])) {
+            let ordered = |i: usize| lo[i].is_finite() && hi[i].is_finite() && lo[i] <= hi[i];
+            if !(0..nx).all(ordered) {
                 return inv(format!("excluded[{k}]: an empty or non-finite box"));
             }
         }
