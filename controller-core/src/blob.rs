@@ -137,7 +137,9 @@ pub struct Decoded<'a, const NX: usize, const NU: usize, N> {
     pub hash: &'a str,
 }
 
-/// Decodes and validates a blob for a network of type `N` (see the module doc).
+/// Decodes and validates a blob for a network of type `N` (see the module doc). The
+/// controller has no excluded boxes (the blob does not hold them): load it with
+/// [`decode_for`] to run it under its certificate, boxes included.
 ///
 /// ```
 /// use controller_core::{blob, generated::weights};

@@ -127,5 +127,7 @@ macro_rules! include_controller {
 pub use generated::{evaluate, CERTIFICATE, CONTROLLER, NU, NX};
 
 /// The same weights as a postcard blob (`generated/weights.bin`, written by `trainer export`
-/// next to `weights.rs`); [`blob::decode`] turns it into a controller equal to [`CONTROLLER`].
+/// next to `weights.rs`); [`blob::decode_for`] with [`CERTIFICATE`] turns it into a controller
+/// equal to [`CONTROLLER`] ([`blob::decode`] alone carries no excluded boxes: the blob does not
+/// hold them, the certificate does).
 pub const WEIGHTS_BLOB: &[u8] = include_bytes!("generated/weights.bin");

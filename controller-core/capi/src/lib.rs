@@ -29,7 +29,8 @@ const _: () = assert!(
     Flags::OUT_OF_DOMAIN.0 == 1
         && Flags::NON_FINITE.0 == 2
         && Flags::CLAMPED.0 == 4
-        && FLAG_NULL_ARGUMENT & 7 == 0
+        && Flags::EXCLUDED.0 == 8
+        && FLAG_NULL_ARGUMENT & 15 == 0
 );
 
 /// Capacity of [`AmpcCertificate::hash`] without the NUL (C: `AMPC_HASH_CAPACITY`).

@@ -101,12 +101,16 @@ pub(super) fn execute(
         for pass in 0..=rs.check.feedback {
             let c = refine::check(&cfg, &rs, &r, n, check_seed);
             let p = &c.per_cell;
-            if p.passed || pass == rs.check.feedback || p.leaves.is_empty() {
+            // Offending cells, and excluded cells where a feasible state was found: split
+            // both (an excluded cell's feasible part becomes cells of the domain).
+            let mut leaves = p.leaves.clone();
+            leaves.extend(&c.feasible_excluded_leaves);
+            let passed = p.passed && c.feasible_in_excluded == 0;
+            if passed || pass == rs.check.feedback || leaves.is_empty() {
                 checked = Some(c);
                 break;
             }
-            let split =
-                refine::reopen(&cfg, &rs, &r.state, &p.leaves, &p.jump_states, &checkpoint)?;
+            let split = refine::reopen(&cfg, &rs, &r.state, &leaves, &p.jump_states, &checkpoint)?;
             if !quiet {
                 eprintln!(
                     "per-cell check failed (miss rate {:.4} > {}, {} over ε_C, {} jumps in {} \
@@ -376,6 +380,15 @@ fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
             p.jumps,
             p.max_jump,
             if p.passed { "passed" } else { "FAILED" }
+        );
+    }
+    if c.feasible_in_excluded > 0 {
+        bail!(
+            "certificate check failed: {} of the states in excluded cells are feasible for the \
+             MPC — the excluded set reaches into the feasible set, which ε must cover (see {}; \
+             raise `refine.check.feedback` or the budget to split those cells)",
+            c.feasible_in_excluded,
+            dir.join("check.json").display()
         );
     }
     if c.over_eps > 0 || c.over_cell > 0 {

@@ -81,6 +81,10 @@ pub struct RobustReport {
     /// the certified ε holds on X minus them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub excluded: Option<crate::certify::refine::Excluded>,
+    /// Monte Carlo initial states (feasible for the tightened MPC) inside an excluded box;
+    /// any makes the verdict `not_certified`.
+    #[serde(default)]
+    pub feasible_in_excluded: usize,
 }
 
 /// The sound f32 allowance (libm tanh) of the export of `net` with `cert`; NaN when the
@@ -188,6 +192,32 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let t = std::time::Instant::now();
     let upswing_feasible = MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
     let mc = feasible_states(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
+    // Feasible states the certificate does not cover (inside an excluded box): Corollary 1
+    // needs ε on the whole feasible set, so the verdict cannot be `certified` then.
+    let feasible_in_excluded = excluded.as_ref().map_or(0, |e| {
+        mc.iter()
+            .filter(|x| {
+                e.boxes.iter().any(|(lo, hi)| {
+                    x.iter()
+                        .zip(lo.iter().zip(hi))
+                        .all(|(v, (l, h))| l <= v && v <= h)
+                })
+            })
+            .count()
+    });
+    if feasible_in_excluded > 0 && v.certified {
+        v.certified = false;
+        v.message = format!(
+            "NOT certified: {feasible_in_excluded} of the {} feasible Monte Carlo states lie in \
+             cells the certificate excludes (the exclusion, estimated from the cells' corners, \
+             reaches into the feasible set, which ε must cover); ε + f32 allowance = {:.4} + \
+             {:.2e} against the design ε = {:.4}",
+            mc.len(),
+            v.certified_eps,
+            v.f32_allowance,
+            v.design_eps
+        );
+    }
     // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
     let load_nominal = || -> Option<(Model, f64)> {
         let m = Model::load(&root.join("model_regularized.bin")).ok()?;
@@ -245,6 +275,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         cost_ratio_upswing: rm[0].cost / nm[0].cost,
         study_seconds,
         excluded,
+        feasible_in_excluded,
     };
     for (k, runs) in st {
         cl.insert(k, runs);
@@ -298,6 +329,10 @@ pub fn markdown(r: &RobustReport) -> String {
             e.cells,
             100.0 * e.volume_fraction,
             e.boxes.len()
+        );
+        s += &format!(
+            "Feasible Monte Carlo states inside an excluded box: {} of {}\n\n",
+            r.feasible_in_excluded, r.monte_carlo_states
         );
     }
     s += &match &r.design.terminal {

@@ -49,7 +49,7 @@ pub struct RefineSettings {
     /// Restrict the certified domain to the MPC's feasible set (default false): a leaf cell
     /// whose corners are all hard-infeasible (the OCP's soft fallback needed slack, or no
     /// label for infeasibility) is excluded — not bounded, not split, not trained on — and
-    /// listed in the certificate (`local.excluded_cells`). Whether a whole cell is outside
+    /// listed in the certificate (`local.excluded`). Whether a whole cell is outside
     /// the feasible set is an estimate from its corners; `refine --check` counts the fresh
     /// states that are feasible yet fall in an excluded cell. A robust design with an
     /// enforced terminal region turns it on (`robust.terminal_constraint`).

@@ -95,6 +95,10 @@ pub struct Check {
     /// excluded cell between its corners — the estimate behind the exclusion missed them.
     #[serde(default)]
     pub feasible_in_excluded: usize,
+    /// The excluded leaves those feasible states fell in (node indices, for
+    /// [`super::reopen`]: splitting them turns their feasible part into cells).
+    #[serde(skip)]
+    pub feasible_excluded_leaves: Vec<usize>,
     /// The per-cell (stratified) check and its verdict.
     pub per_cell: super::CellCheck,
     /// Wall time, seconds.
@@ -111,7 +115,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let mlp = &r.model.mlp;
     let band = cfg.ocp.u_bounds(0);
     let bound_of: HashMap<usize, &CellBound> = st.bounds.iter().map(|(n, b)| (*n, b)).collect();
-    let certified = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+    let certified = super::rounds::max_eps(&st.bounds);
     let ls = super::rounds::local_settings(rs);
     let centre_check =
         rs.centre_check && crate::certify::critical::QpCertifier::detect(cfg).is_err();
@@ -130,6 +134,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         offenders: Vec<(Vec<f64>, f64, f64, usize)>,
         excluded: usize,
         feasible_excluded: usize,
+        feasible_leaves: Vec<usize>,
     }
     let acc = (0..n)
         .into_par_iter()
@@ -150,7 +155,10 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                 let leaf = leaf_of(st, &lat, &counts, &x);
                 if rs.exclude_infeasible && st.excluded(leaf) {
                     a.excluded += 1;
-                    a.feasible_excluded += (l.status == SqpStatus::Converged) as usize;
+                    if l.status == SqpStatus::Converged {
+                        a.feasible_excluded += 1;
+                        a.feasible_leaves.push(leaf);
+                    }
                 } else if l.u.iter().all(|v| v.is_finite()) {
                     a.labelled += 1;
                     let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
@@ -229,6 +237,11 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             excess: x.excess.max(y.excess),
             excluded: x.excluded + y.excluded,
             feasible_excluded: x.feasible_excluded + y.feasible_excluded,
+            feasible_leaves: {
+                let mut v = x.feasible_leaves;
+                v.extend(y.feasible_leaves);
+                v
+            },
         });
     let per_cell = super::cellcheck::per_cell(
         &super::cellcheck::Setup {
@@ -262,6 +275,12 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
         max_slope_excess: acc.excess,
         excluded_states: acc.excluded,
         feasible_in_excluded: acc.feasible_excluded,
+        feasible_excluded_leaves: {
+            let mut v = acc.feasible_leaves;
+            v.sort_unstable();
+            v.dedup();
+            v
+        },
         offenders: acc
             .offenders
             .iter()

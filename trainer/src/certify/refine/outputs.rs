@@ -101,7 +101,8 @@ pub struct LocalSummary {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cells_exact: Option<usize>,
     /// With `refine.exclude_infeasible`: the part of X excluded from the certified domain
-    /// (outside the MPC's feasible set as far as the cells' corners show); absent without.
+    /// (outside the MPC's feasible set as far as the cells' corners show); absent without
+    /// the setting or when no cell is excluded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub excluded: Option<Excluded>,
 }
@@ -196,6 +197,9 @@ fn excluded_summary(
     let nx = cfg.system.nx();
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(nx));
     let leaves = st.excluded_leaves(true);
+    if leaves.is_empty() {
+        return None;
+    }
     let volume = |size: &[u64]| -> f64 {
         size.iter()
             .zip(&lat.max)
@@ -248,7 +252,7 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     let mlp = &r.model.mlp;
     let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
     let nx = lo.len();
-    let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+    let eps = super::rounds::max_eps(&st.bounds);
     let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
     let naive = lipschitz::naive_bound(mlp);
     let sdp = lipschitz::lipsdp_bound(mlp);

@@ -115,6 +115,20 @@ pub(super) fn train_set(
     s
 }
 
+/// The certified ε of a set of leaf bounds: max_C ε_C, and ∞ when no leaf is bounded (every
+/// cell excluded: nothing is certified, not ε = 0).
+pub(super) fn max_eps(bounds: &[(usize, CellBound)]) -> f64 {
+    if bounds.is_empty() {
+        return f64::INFINITY;
+    }
+    bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max)
+}
+
+/// Whether every bounded leaf meets `target` — false when none is bounded.
+pub(super) fn certified_all(bounds: &[(usize, CellBound)], target: f64) -> bool {
+    !bounds.is_empty() && bounds.iter().all(|(_, b)| b.eps <= target)
+}
+
 /// The bounding box of the leaves not excluded, when `exclude` is on and some leaf is.
 fn certified_box(st: &RefineState, lat: &Lattice, exclude: bool) -> Option<(Vec<f64>, Vec<f64>)> {
     if !exclude {
@@ -329,7 +343,7 @@ pub fn refine(
     if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
         // A finished run: return its result unless the settings now allow more (a lower
         // target, a larger budget or more rounds).
-        let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
+        let met = certified_all(&st.bounds, rs.target_eps);
         let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
         if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
             let mut state = st.clone();
@@ -477,7 +491,7 @@ pub fn refine(
             qp.as_ref().map(|q| (q, rs.target_eps)),
             rs.exclude_infeasible,
         );
-        let eps = st.bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+        let eps = max_eps(&st.bounds);
         let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
         let ok = st
             .bounds
@@ -509,7 +523,9 @@ pub fn refine(
         }
         // A QP problem's cells are also split until their MPC part is proven exact.
         let unproven = |b: &CellBound| qp.is_some() && !b.exact;
-        let met = ok == st.bounds.len() && !st.bounds.iter().any(|(_, b)| unproven(b));
+        let met = !st.bounds.is_empty()
+            && ok == st.bounds.len()
+            && !st.bounds.iter().any(|(_, b)| unproven(b));
         // Split the failing cells, worst first, within the budget: those above the target
         // first; unproven cells of a QP only once every cell meets the target (so proving
         // never costs the budget the target needs).
@@ -586,7 +602,7 @@ pub fn refine(
                     qp.as_ref().map(|q| (q, rs.target_eps)),
                     rs.exclude_infeasible,
                 );
-                let e = b.iter().map(|(_, b)| b.eps).fold(0.0, f64::max);
+                let e = max_eps(&b);
                 if e < eps {
                     st.bounds = b;
                     model = best;
@@ -602,7 +618,7 @@ pub fn refine(
             write_atomic(p, &bytes)?;
         }
         if done {
-            let met = st.bounds.iter().all(|(_, b)| b.eps <= rs.target_eps);
+            let met = certified_all(&st.bounds, rs.target_eps);
             return Ok(Refined {
                 met,
                 state: st,

@@ -358,3 +358,12 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
         .excluded
         .is_none());
 }
+
+/// With every leaf excluded nothing is certified: ε = ∞ and the target is not met (not the
+/// ε = 0 of an empty maximum).
+#[test]
+fn no_bounded_leaf_certifies_nothing() {
+    use super::rounds::{certified_all, max_eps};
+    assert_eq!(max_eps(&[]), f64::INFINITY);
+    assert!(!certified_all(&[], 1.0));
+}
