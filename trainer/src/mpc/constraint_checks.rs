@@ -370,19 +370,7 @@ fn infeasible_constraint_gets_a_soft_label() {
 /// stage 1 has b − margin (`robust` computes the margins, `mpc` builds the rows from them).
 #[test]
 fn robust_margins_reach_the_ocp_rows() {
-    let path = std::path::PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../configs/double_integrator.toml"
-    ));
-    let mut cfg = ProblemConfig::load(&path).unwrap();
-    cfg.robust.eps = 0.05;
-    cfg.ocp.x_hi = vec![f64::INFINITY, 1.5];
-    cfg.ocp.constraints = vec![
-        "velocity <= 1.5".into(),
-        "0.7*position - 0.4*velocity + 0.3*force <= 2".into(),
-        "force >= -0.8".into(),
-    ];
-    cfg.validate().unwrap();
+    let cfg = crate::robust::tests::di_mixed_constraints();
     let d = crate::robust::design(&cfg).unwrap();
     let rc = crate::robust::robust_config(&cfg, &d);
     let ocp = crate::mpc::ocp::Ocp::new(&rc, false);

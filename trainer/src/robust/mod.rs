@@ -103,4 +103,4 @@ pub enum RobustError {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

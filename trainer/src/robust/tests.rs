@@ -26,6 +26,21 @@ fn di(eps: f64) -> ProblemConfig {
     c
 }
 
+/// The double integrator at ε = 0.05 with x₂ ≤ 1.5, the same bound as a constraint, a mixed
+/// state–input constraint 0.7x₁ − 0.4x₂ + 0.3u ≤ 2 and an input bound u ≥ −0.8 as one (also
+/// used by `mpc`'s check that the margins reach the OCP's rows).
+pub(crate) fn di_mixed_constraints() -> ProblemConfig {
+    let mut cfg = di(0.05);
+    cfg.ocp.x_hi = vec![f64::INFINITY, 1.5];
+    cfg.ocp.constraints = vec![
+        "velocity <= 1.5".into(),
+        "0.7*position - 0.4*velocity + 0.3*force <= 2".into(),
+        "force >= -0.8".into(),
+    ];
+    cfg.validate().unwrap();
+    cfg
+}
+
 /// σ_max of a 2×2 matrix in closed form.
 fn sigma_max_2x2(m: &DMatrix<f64>) -> f64 {
     let f2 = m.iter().map(|v| v * v).sum::<f64>();
@@ -344,14 +359,7 @@ fn nonlinear_constraints_are_refused_affine_ones_tightened() {
 /// (KΔ + e), and is approached by them (the support function is attained).
 #[test]
 fn affine_constraint_margins_are_the_support_function_of_the_tube() {
-    let mut cfg = di(0.05);
-    cfg.ocp.x_hi = vec![f64::INFINITY, 1.5];
-    cfg.ocp.constraints = vec![
-        "velocity <= 1.5".into(),
-        "0.7*position - 0.4*velocity + 0.3*force <= 2".into(),
-        "force >= -0.8".into(),
-    ];
-    cfg.validate().unwrap();
+    let cfg = di_mixed_constraints();
     let d = design::design(&cfg).unwrap();
     let t = &d.tube;
     let n = cfg.ocp.horizon;
