@@ -169,6 +169,16 @@ pub fn from_errors(
     }
 }
 
+/// Whether `x` lies in one of the closed `boxes` (lower corner, upper corner): the test of
+/// the excluded boxes of a certificate (`refine.exclude_infeasible`) on the trainer's side.
+pub fn in_any_box(x: &[f64], boxes: &[(Vec<f64>, Vec<f64>)]) -> bool {
+    boxes.iter().any(|(lo, hi)| {
+        x.iter()
+            .zip(lo.iter().zip(hi))
+            .all(|(v, (l, h))| l <= v && v <= h)
+    })
+}
+
 /// Default seed of the statistical states: a stream of its own, apart from the data's
 /// (`sampling.seed`, default 0) and the refinement check's.
 pub const DEFAULT_SEED: u64 = 0x5354_4154;
@@ -274,13 +284,7 @@ pub fn certify_statistically(
     let nx = cfg.system.nx();
     let mut ws = Workspace::default();
     let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
-    let inside = |x: &[f64]| {
-        opts.excluded.iter().any(|(lo, hi)| {
-            x.iter()
-                .zip(lo.iter().zip(hi))
-                .all(|(v, (l, h))| *l <= *v && *v <= *h)
-        })
-    };
+    let inside = |x: &[f64]| in_any_box(x, &opts.excluded);
     let dropped = data.records.iter().filter(|r| inside(&r.x)).count() as u64;
     let errors: Vec<f64> = data
         .records

@@ -196,13 +196,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     // needs ε on the whole feasible set, so the verdict cannot be `certified` then.
     let feasible_in_excluded = excluded.as_ref().map_or(0, |e| {
         mc.iter()
-            .filter(|x| {
-                e.boxes.iter().any(|(lo, hi)| {
-                    x.iter()
-                        .zip(lo.iter().zip(hi))
-                        .all(|(v, (l, h))| l <= v && v <= h)
-                })
-            })
+            .filter(|x| crate::certify::statistical::in_any_box(x, &e.boxes))
             .count()
     });
     if feasible_in_excluded > 0 && v.certified {

@@ -211,13 +211,9 @@ fn a_box_across_a_region_boundary_is_refused_by_one_law_and_covered_by_both() {
     assert!(q.prove_from_corners(&lo, &hi, &[None; 4]).is_none());
 }
 
-/// The exact cell bound is never exceeded by |κ − sat(κ_NN)| at sampled interior points
-/// (κ by fresh SQP solves), on boxes inside one region and across a boundary.
-#[test]
-fn the_exact_cell_bound_holds_at_sampled_points() {
+/// The double integrator's QP certifier, its MPC law and a seeded 2-8-8-1 tanh net.
+fn di_certifier_law_net() -> (QpCertifier, MpcLaw, Mlp) {
     let cfg = load("double_integrator.toml");
-    let q = QpCertifier::detect(&cfg).unwrap();
-    let mut law = MpcLaw::new(&cfg);
     let m = Mlp::new(
         &[2, 8, 8, 1],
         Activation::Tanh,
@@ -227,6 +223,14 @@ fn the_exact_cell_bound_holds_at_sampled_points() {
         &[-1.0],
         &[1.0],
     );
+    (QpCertifier::detect(&cfg).unwrap(), MpcLaw::new(&cfg), m)
+}
+
+/// The exact cell bound is never exceeded by |κ − sat(κ_NN)| at sampled interior points
+/// (κ by fresh SQP solves), on boxes inside one region and across a boundary.
+#[test]
+fn the_exact_cell_bound_holds_at_sampled_points() {
+    let (q, mut law, m) = di_certifier_law_net();
     let nb = NetBounder::new(&m);
     let band = ([-1.0], [1.0]);
     let (p, _, _) = boundary(&mut law);
@@ -335,18 +339,7 @@ fn a_law_is_bounded_only_where_it_can_hold_and_dropped_where_it_cannot() {
 /// region boundary it is below the bound of every law over the whole box.
 #[test]
 fn the_restricted_bound_holds_against_dense_sampling() {
-    let cfg = load("double_integrator.toml");
-    let q = QpCertifier::detect(&cfg).unwrap();
-    let mut law = MpcLaw::new(&cfg);
-    let m = Mlp::new(
-        &[2, 8, 8, 1],
-        Activation::Tanh,
-        11,
-        &cfg.domain.lo,
-        &cfg.domain.hi,
-        &[-1.0],
-        &[1.0],
-    );
+    let (q, mut law, m) = di_certifier_law_net();
     let nb = NetBounder::new(&m);
     let band: (&[f64], &[f64]) = (&[-1.0], &[1.0]);
     let (p, _, _) = boundary(&mut law);
