@@ -2,7 +2,7 @@
 //! the two switches packed into the one byte that held `saturation_aware`,
 //!
 //! ```text
-//! flags = saturation_aware · 1 + hold_setpoint · 2
+//! flags = saturation_aware · 1 + hold_setpoint · 2 + (precision = f32) · 4
 //! ```
 //!
 //! A net trained without the setpoint hold is encoded byte for byte as before the hold
@@ -11,7 +11,7 @@
 //! through `#[serde(with)]`; every other encoding of the settings (TOML, JSON) is the
 //! derived one.
 
-use crate::problem::{Activation, Schedule, TrainSettings};
+use crate::problem::{Activation, Precision, Schedule, TrainSettings};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Format 3's layout of the settings; `flags` in place of `saturation_aware`.
@@ -34,6 +34,7 @@ struct Stored {
 
 const SATURATION_AWARE: u8 = 1;
 const HOLD_SETPOINT: u8 = 2;
+const PRECISION_F32: u8 = 4;
 
 /// Encodes `s` in the stored layout.
 pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::Ok, S::Error> {
@@ -51,7 +52,8 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
         validation_seed: s.validation_seed,
         log_every: s.log_every,
         flags: u8::from(s.saturation_aware) * SATURATION_AWARE
-            + u8::from(s.hold_setpoint) * HOLD_SETPOINT,
+            + u8::from(s.hold_setpoint) * HOLD_SETPOINT
+            + u8::from(s.precision == Precision::F32) * PRECISION_F32,
     }
     .serialize(ser)
 }
@@ -59,7 +61,7 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
 /// Decodes the stored layout; unknown flag bits are an error.
 pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSettings, D::Error> {
     let s = Stored::deserialize(de)?;
-    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT) != 0 {
+    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT | PRECISION_F32) != 0 {
         return Err(serde::de::Error::custom(format!(
             "unknown training flags {:#04x}",
             s.flags
@@ -80,6 +82,11 @@ pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSetti
         log_every: s.log_every,
         saturation_aware: s.flags & SATURATION_AWARE != 0,
         hold_setpoint: s.flags & HOLD_SETPOINT != 0,
+        precision: if s.flags & PRECISION_F32 != 0 {
+            Precision::F32
+        } else {
+            Precision::F64
+        },
     })
 }
 
@@ -114,6 +121,7 @@ mod tests {
             let s = TrainSettings {
                 saturation_aware: sat,
                 hold_setpoint: hold,
+                precision: Precision::F64,
                 target_eps_d: Some(0.5),
                 ..TrainSettings::default()
             };
@@ -138,8 +146,13 @@ mod tests {
             .unwrap();
             assert_eq!(bytes == old, !hold, "sat {sat} hold {hold}");
         }
+        // The f32 engine round trips (flag 4); an unknown bit is an error.
+        let f32s = TrainSettings::default();
+        assert_eq!(f32s.precision, Precision::F32);
+        let bytes = postcard::to_allocvec(&Wrap(f32s.clone())).unwrap();
+        assert_eq!(postcard::from_bytes::<Wrap>(&bytes).unwrap().0, f32s);
         let mut bad = postcard::to_allocvec(&Wrap(TrainSettings::default())).unwrap();
-        *bad.last_mut().unwrap() = 4;
+        *bad.last_mut().unwrap() = 8;
         assert!(postcard::from_bytes::<Wrap>(&bad).is_err());
     }
 }

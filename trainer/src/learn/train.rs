@@ -6,15 +6,18 @@
 //! Adam:  m ← β₁m + (1−β₁)g,  v ← β₂v + (1−β₂)g²,  Θ ← Θ − η_t·m̂/(√v̂ + 1e-8)
 //! ```
 //! The nominal net is the same procedure with (λ₁, 0, 0). Training is single-threaded and
-//! fully determined by (dataset, settings, seed): same inputs → bit-identical weights.
+//! fully determined by (dataset, settings, seed): same inputs → bit-identical weights. The
+//! passes run in f32 over 8-sample lanes (`training.precision = "f32"`, the default,
+//! [`Lanes`]) or in f64 ([`Mlp::loss_grad`]); Adam and the master weights are f64 in both,
+//! and the final statistics are f64 evaluations of the f64 net.
 //! Points without a label are excluded; degenerate points keep their value term and drop
 //! the Jacobian term. Metrics: ε_D = max_i ‖κ(x_i) − κ_NN(x_i)‖ over the training set
 //! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
 
 use crate::data::dataset::Dataset;
-use crate::learn::mlp::{Batch, LossParts, LossWeights, Mlp, Workspace};
+use crate::learn::mlp::{Batch, Lanes, LossParts, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
-use crate::problem::{Schedule, TrainSettings};
+use crate::problem::{Precision, Schedule, TrainSettings};
 use crate::rng::splitmix64;
 use serde::{Deserialize, Serialize};
 
@@ -106,6 +109,31 @@ fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorSta
         with_jac.then_some(&mut j_all[..]),
         &mut ws,
     );
+    error_stats(set, &u_all, &j_all, with_jac)
+}
+
+/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures under
+/// `precision = "f32"` (the final statistics are always [`errors`], in f64).
+fn errors_lanes(
+    lanes: &mut Lanes,
+    mlp: &Mlp,
+    set: &TrainSet,
+    with_jac: bool,
+) -> (Vec<f64>, ErrorStats) {
+    let (nx, nu) = (set.nx, set.nu);
+    let (mut u_all, mut j_all) = (vec![0.0; set.len() * nu], vec![0.0; set.len() * nu * nx]);
+    lanes.eval_batch(mlp, &set.x, &mut u_all, with_jac.then_some(&mut j_all[..]));
+    error_stats(set, &u_all, &j_all, with_jac)
+}
+
+/// Error statistics of the outputs `u_all` (n × nu) and Jacobians `j_all` against `set`.
+fn error_stats(
+    set: &TrainSet,
+    u_all: &[f64],
+    j_all: &[f64],
+    with_jac: bool,
+) -> (Vec<f64>, ErrorStats) {
+    let (nx, nu) = (set.nx, set.nu);
     let mut errs = Vec::with_capacity(set.len());
     let (mut ss_res, mut max_jac) = (0.0, 0.0f64);
     let mut mean_u = vec![0.0; nu];
@@ -338,6 +366,8 @@ pub fn train_from<C>(
     };
     let mut grad = mlp.zero_grad();
     let mut ws = Workspace::default();
+    let mut lanes = Lanes::default();
+    let f32_passes = settings.precision == Precision::F32;
     let (mut bx, mut bu, mut bdu, mut bj) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut order: Vec<usize> = (0..n).collect();
     let mut history = Vec::new();
@@ -376,7 +406,11 @@ pub fn train_from<C>(
                 use_jac: &bj,
                 band,
             };
-            mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
+            if f32_passes {
+                lanes.loss_grad(&mlp, &batch, lam, Some(&mut grad));
+            } else {
+                mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
+            }
             adam.t += 1;
             let (c1, c2) = (1.0 - b1.powi(adam.t as i32), 1.0 - b2.powi(adam.t as i32));
             // Update the layers in place; m, v are flat in the order of `flatten`.
@@ -404,13 +438,20 @@ pub fn train_from<C>(
                 use_jac: &train.use_jac,
                 band,
             };
-            let loss = mlp.loss(&full, lam, &mut ws);
-            let (_, st) = errors(&mlp, train);
-            let r2v = if validation.is_empty() {
-                f64::NAN
+            let (loss, st, r2v) = if f32_passes {
+                (
+                    lanes.loss_grad(&mlp, &full, lam, None),
+                    errors_lanes(&mut lanes, &mlp, train, true).1,
+                    errors_lanes(&mut lanes, &mlp, validation, false).1.r2,
+                )
             } else {
-                errors_impl(&mlp, validation, false).1.r2
+                (
+                    mlp.loss(&full, lam, &mut ws),
+                    errors(&mlp, train).1,
+                    errors_impl(&mlp, validation, false).1.r2,
+                )
             };
+            let r2v = if validation.is_empty() { f64::NAN } else { r2v };
             history.push(EpochLog {
                 epoch: epoch + 1,
                 loss,

@@ -32,7 +32,7 @@ pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{QpSolverKind, SolverSettings};
 pub use study::{ClosedLoopSettings, PlotSettings};
-pub use training::{Activation, Schedule, TrainSettings};
+pub use training::{Activation, Precision, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
@@ -184,7 +184,7 @@ impl ProblemConfig {
     /// `training.hold_setpoint` means off: it is written only when on, and copies stored
     /// before it existed come from runs without the hold. (In a file a user writes, a
     /// missing key means the default, on.) The same for `refine.training` when `[refine]`
-    /// was stored.
+    /// was stored. Likewise a missing `training.precision` means f64 (written only when f32).
     pub fn from_stored_toml(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let mut cfg = Self::from_toml_str(text, origin)?;
         let table: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -196,9 +196,18 @@ impl ProblemConfig {
                 .and_then(toml::Value::as_bool)
                 .unwrap_or(false)
         };
+        let precision = |t: Option<&toml::Value>| match t
+            .and_then(|t| t.get("precision"))
+            .and_then(toml::Value::as_str)
+        {
+            Some("f32") => Precision::F32,
+            _ => Precision::F64,
+        };
         cfg.training.hold_setpoint = hold(table.get("training"));
+        cfg.training.precision = precision(table.get("training"));
         if let Some(r) = table.get("refine") {
             cfg.refine.training.hold_setpoint = hold(r.get("training"));
+            cfg.refine.training.precision = precision(r.get("training"));
         }
         Ok(cfg)
     }

@@ -292,3 +292,33 @@ fn hold_setpoint_is_stored_only_when_on() {
             .hold_setpoint
     );
 }
+
+/// `training.precision`: f32 by default and written only when f32; a stored copy without it
+/// (every copy stored before the f32 engine existed) reads as f64; a bad value names the key.
+#[test]
+fn precision_is_stored_only_when_f32() {
+    use crate::problem::Precision;
+    let f32s = ProblemConfig::default();
+    assert_eq!(f32s.training.precision, Precision::F32);
+    assert_eq!(f32s.refine.training.precision, Precision::F32);
+    let text = toml::to_string(&f32s).unwrap();
+    assert!(text.contains("precision = \"f32\""), "{text}");
+    assert_eq!(ProblemConfig::from_stored_toml(&text, "s").unwrap(), f32s);
+    let f64_text = format!("{PENDULUM_TOML}\n[training]\nprecision = \"f64\"\n");
+    let f64s = ProblemConfig::from_toml_str(&f64_text, "f").unwrap();
+    assert_eq!(f64s.training.precision, Precision::F64);
+    let stored = toml::to_string(&f64s).unwrap();
+    assert!(!stored.contains("precision = "), "{stored}");
+    assert_eq!(ProblemConfig::from_stored_toml(&stored, "s").unwrap(), f64s);
+    // A user's file without the key: f32.
+    assert_eq!(
+        ProblemConfig::from_toml_str(&stored, "f")
+            .unwrap()
+            .training
+            .precision,
+        Precision::F32
+    );
+    let bad = format!("{PENDULUM_TOML}\n[training]\nprecision = \"f16\"\n");
+    let e = ProblemConfig::from_toml_str(&bad, "bad.toml").unwrap_err().to_string();
+    assert!(e.contains("bad.toml") && e.contains("precision"), "{e}");
+}

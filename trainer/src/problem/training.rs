@@ -56,6 +56,33 @@ pub struct TrainSettings {
     /// means off, so that runs with it off store, train and hash exactly as before it existed.
     #[serde(skip_serializing_if = "is_false")]
     pub hold_setpoint: bool,
+    /// Arithmetic of the training passes (default f32, `learn::mlp::Lanes`). Written into
+    /// stored copies of the problem file only when f32: a stored copy without it
+    /// ([`ProblemConfig::from_stored_toml`](crate::problem::ProblemConfig::from_stored_toml))
+    /// means f64, the only engine before f32 existed.
+    #[serde(skip_serializing_if = "Precision::is_f64")]
+    pub precision: Precision,
+}
+
+/// Arithmetic of the training passes (forward, tangent, reverse); Adam and the master
+/// weights are f64 in both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// f32 passes over groups of 8 samples in vector lanes, with the deployed controller's
+    /// f32 tanh (`learn::mlp::Lanes`).
+    #[default]
+    F32,
+    /// f64 passes (`learn::mlp::Mlp::loss_grad`, libm's tanh): bit-identical to training
+    /// before the f32 engine existed.
+    F64,
+}
+
+impl Precision {
+    /// Whether this is [`Precision::F64`].
+    pub fn is_f64(&self) -> bool {
+        *self == Precision::F64
+    }
 }
 
 fn is_false(v: &bool) -> bool {
@@ -79,6 +106,7 @@ impl Default for TrainSettings {
             log_every: 20,
             saturation_aware: false,
             hold_setpoint: true,
+            precision: Precision::F32,
         }
     }
 }

@@ -31,49 +31,7 @@ pub const TANH_FAST_ERR_BINS: [(f64, f64); 10] = [
     (4.5, 2.6e-6),
     (f64::INFINITY, 3.3e-6),
 ];
-/// `controller_core::activation`'s constants of `tanh_accurate` (same names).
-const ACC_CUT: f32 = 0.875;
-const ACC_P: [f32; 6] = [
-    -0.333_331_76,
-    0.133_299_98,
-    -0.053_710_45,
-    0.020_895_608,
-    -0.006_869_007_4,
-    0.001_314_905,
-];
-const ACC_Q: [f32; 5] = [
-    0.499_999_94,
-    0.166_665_21,
-    0.041_668_39,
-    0.008_368_71,
-    0.001_381_461_3,
-];
-const ACC_CLIP: f32 = 10.0;
-const LOG2E: f32 = core::f32::consts::LOG2_E;
-const LN2_HI: f32 = 0.693_145_75;
-const LN2_LO: f32 = 1.428_606_8e-6;
-
-/// `controller_core::activation::tanh_accurate`, the same f32 operations in the same order.
-fn tanh_accurate(x: f32) -> f32 {
-    let a = f32::from_bits(x.to_bits() & 0x7fff_ffff);
-    if a < ACC_CUT {
-        let z = x * x;
-        let [p0, p1, p2, p3, p4, p5] = ACC_P;
-        let p = p0 + z * (p1 + z * (p2 + z * (p3 + z * (p4 + z * p5))));
-        return x + x * (z * p);
-    }
-    let a = if a < ACC_CLIP { a } else { ACC_CLIP };
-    let y = a + a;
-    let k = (y * LOG2E + 0.5) as i32;
-    let kf = k as f32;
-    let r = (y - kf * LN2_HI) - kf * LN2_LO;
-    let [q0, q1, q2, q3, q4] = ACC_Q;
-    let q = q0 + r * (q1 + r * (q2 + r * (q3 + r * q4)));
-    let p = 1.0 + (r + r * (r * q));
-    let e = f32::from_bits(p.to_bits().wrapping_add((k as u32) << 23));
-    let t = 1.0 - 2.0 / (e + 1.0);
-    f32::from_bits(t.to_bits() | (x.to_bits() & 0x8000_0000))
-}
+use crate::learn::mlp::tanh32::tanh_accurate;
 
 /// The device tanh implementations of `controller-core`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -24,17 +24,23 @@
 //! - `tangent`: the tangent pass `T_j` (the input Jacobian);
 //! - `loss`: the training loss, its reverse pass and the gradient ([`Batch`], [`Grad`]);
 //! - `kernels`: the register-blocked dot products the batched passes share;
+//! - `lanes`: the f32 engine of training ([`Lanes`]): the same loss and gradient over groups
+//!   of 8 samples in f32 vector lanes;
+//! - `tanh32`: the deployed controller's f32 tanh, branch-free;
 //! - `tests`: gradients and Jacobians against central differences, the batched kernels
 //!   against the per-sample reference bit for bit.
 
 mod kernels;
+mod lanes;
 mod loss;
 mod tangent;
+pub mod tanh32;
 #[cfg(test)]
 mod tests;
 
 pub use crate::problem::Activation;
 use kernels::dot_block;
+pub use lanes::Lanes;
 pub use loss::{clamped_exact, Batch, Grad, LossParts, LossWeights, SAT_TOL};
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,158 @@
+//! The f32 lane engine against the f64 passes (whose gradient is checked against central
+//! differences in `mlp::tests`): loss terms, gradient and outputs/Jacobians agree to f32
+//! accuracy on every activation, jet size (specialised and not), batch size (partial groups,
+//! several flushes) and with the clamp band; results are reproducible bit for bit.
+
+use super::super::tests::{data, net};
+use super::*;
+use crate::learn::mlp::Workspace;
+
+fn close(a: f64, b: f64, scale: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * (b.abs() + scale)
+}
+
+fn max_abs(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0, |m, x| m.max(x.abs()))
+}
+
+#[test]
+fn lane_loss_and_gradient_match_the_f64_passes() {
+    let lams = [
+        LossWeights {
+            value: 1.0,
+            jacobian: 3.0,
+            weights: 0.05,
+        },
+        LossWeights {
+            value: 1.0,
+            jacobian: 0.0,
+            weights: 0.0,
+        },
+    ];
+    let mut lanes = Lanes::default();
+    let mut ws = Workspace::default();
+    for (case, (act, widths)) in [
+        (Activation::Tanh, vec![2, 10, 10, 1]),
+        (Activation::Tanh, vec![3, 7, 2]),
+        (Activation::Softplus, vec![2, 6, 5, 1]),
+        (Activation::Relu, vec![4, 9, 3]),
+        (Activation::Tanh, vec![6, 16, 16, 2]),
+        (Activation::Tanh, vec![12, 8, 8, 4]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let m = net(case as u64 + 3, act, &widths);
+        let (nx, nu) = (m.nx(), m.nu());
+        for bsz in [1usize, 7, 8, 9, 35, 600] {
+            let (x, mut u, du, uj) = data(case as u64 * 31 + bsz as u64, nx, nu, bsz);
+            for banded in [false, true] {
+                let (blo, bhi) = (vec![-0.3; nu], vec![0.3; nu]);
+                if banded {
+                    u.iter_mut().for_each(|v| *v = v.clamp(-0.3, 0.3));
+                }
+                let batch = Batch {
+                    x: &x,
+                    u: &u,
+                    du: &du,
+                    use_jac: &uj,
+                    band: banded.then_some((&blo[..], &bhi[..])),
+                };
+                for lam in lams {
+                    let (mut g64, mut g32) = (m.zero_grad(), m.zero_grad());
+                    let l64 = m.loss_grad(&batch, lam, &mut g64, &mut ws);
+                    let l32 = lanes.loss_grad(&m, &batch, lam, Some(&mut g32));
+                    let what = format!("{act:?} {widths:?} B={bsz} band={banded} {lam:?}");
+                    let scale = l64.total().abs() + 1e-3;
+                    for (a, b) in [
+                        (l32.value, l64.value),
+                        (l32.jacobian, l64.jacobian),
+                        (l32.weights, l64.weights),
+                    ] {
+                        assert!(close(a, b, scale, 1e-4), "{what}: loss {a} vs {b}");
+                    }
+                    let flat = |g: &Grad| -> Vec<f64> {
+                        g.w.iter().chain(&g.b).flatten().copied().collect()
+                    };
+                    let (f64s, f32s) = (flat(&g64), flat(&g32));
+                    let gmax = max_abs(f64s.iter().copied());
+                    let dmax = max_abs(f64s.iter().zip(&f32s).map(|(a, b)| a - b));
+                    assert!(gmax > 0.0, "{what}: zero gradient");
+                    assert!(dmax <= 2e-4 * gmax, "{what}: gradient off by {dmax} (max {gmax})");
+                    // The loss alone (no gradient) is the same computation.
+                    assert_eq!(lanes.loss_grad(&m, &batch, lam, None), l32, "{what}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn lane_outputs_and_jacobians_match_the_f64_passes() {
+    let mut lanes = Lanes::default();
+    for (act, widths) in [
+        (Activation::Tanh, vec![2, 10, 10, 1]),
+        (Activation::Relu, vec![3, 5, 2]),
+        (Activation::Tanh, vec![12, 8, 8, 4]),
+    ] {
+        let m = net(7, act, &widths);
+        let (nx, nu) = (m.nx(), m.nu());
+        let n = 37;
+        let (x, ..) = data(11, nx, nu, n);
+        let mut ws = Workspace::default();
+        let (mut u64s, mut j64) = (vec![0.0; n * nu], vec![0.0; n * nu * nx]);
+        m.eval_batch(&x, &mut u64s, Some(&mut j64), &mut ws);
+        let (mut u32s, mut j32) = (vec![0.0; n * nu], vec![0.0; n * nu * nx]);
+        lanes.eval_batch(&m, &x, &mut u32s, Some(&mut j32));
+        let umax = max_abs(u64s.iter().copied());
+        let jmax = max_abs(j64.iter().copied());
+        for (a, b) in u32s.iter().zip(&u64s) {
+            assert!((a - b).abs() <= 1e-5 * (umax + 1.0), "{widths:?}: u {a} vs {b}");
+        }
+        for (a, b) in j32.iter().zip(&j64) {
+            assert!((a - b).abs() <= 1e-5 * (jmax + 1.0), "{widths:?}: J {a} vs {b}");
+        }
+        // Without Jacobians: the same outputs.
+        let mut u_only = vec![0.0; n * nu];
+        lanes.eval_batch(&m, &x, &mut u_only, None);
+        assert_eq!(u_only, u32s);
+    }
+}
+
+#[test]
+fn lane_results_are_reproducible_bit_for_bit() {
+    let m = net(5, Activation::Tanh, &[2, 10, 10, 1]);
+    let other = net(6, Activation::Tanh, &[3, 4, 1]);
+    let (x, u, du, uj) = data(9, 2, 1, 53);
+    let batch = Batch {
+        x: &x,
+        u: &u,
+        du: &du,
+        use_jac: &uj,
+        band: None,
+    };
+    let lam = LossWeights {
+        value: 1.0,
+        jacobian: 3.0,
+        weights: 0.05,
+    };
+    let run = |lanes: &mut Lanes| {
+        let mut g = m.zero_grad();
+        let l = lanes.loss_grad(&m, &batch, lam, Some(&mut g));
+        (l, g)
+    };
+    let mut a = Lanes::default();
+    let first = run(&mut a);
+    // Reused buffers, after a net of another shape: the same bits.
+    let (ox, ou, odu, ouj) = data(1, 3, 1, 20);
+    let ob = Batch {
+        x: &ox,
+        u: &ou,
+        du: &odu,
+        use_jac: &ouj,
+        band: None,
+    };
+    a.loss_grad(&other, &ob, lam, Some(&mut other.zero_grad()));
+    assert_eq!(run(&mut a), first);
+    assert_eq!(run(&mut Lanes::default()), first);
+}
