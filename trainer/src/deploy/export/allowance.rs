@@ -179,58 +179,57 @@ fn splits(nx: usize) -> usize {
 }
 
 /// The sound f32 allowance over X for one tanh (module doc) and the number of sub-boxes.
+/// The sub-boxes are bounded in parallel; the maximum does not depend on the order, so the
+/// result is the same for every thread count.
 pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
+    use rayon::prelude::*;
     let folded = model.folded();
+    let exact = model_unfolded_as_exact(&folded);
     let nx = model.nx();
     let k = splits(nx);
     let boxes = k.pow(nx as u32);
-    let mut worst = 0.0f64;
-    let mut idx = vec![0usize; nx];
-    let mut a = vec![0.0; nx];
-    let mut b = vec![0.0; nx];
-    for _ in 0..boxes {
-        for i in 0..nx {
-            let (l, h) = (model.domain_lo[i], model.domain_hi[i]);
-            let step = (h - l) / k as f64;
-            a[i] = if idx[i] == 0 {
-                l
-            } else {
-                l + step * idx[i] as f64
-            };
-            b[i] = if idx[i] + 1 == k {
-                h
-            } else {
-                l + step * (idx[i] + 1) as f64
-            };
-            // Adjacent boxes share the computed end point, so the union covers X.
-        }
-        let e32 = box_error(
-            &folded.layers,
-            Some(&folded.f32_layers),
-            &a,
-            &b,
-            2f64.powi(-24),
-            2f64.powi(-23),
-            &|lo, hi| tanh.max_abs_err_on(lo, hi),
-        );
-        let e64 = box_error(
-            &model_unfolded_as_exact(&folded),
-            None,
-            &a,
-            &b,
-            8.0 * 2f64.powi(-53),
-            8.0 * 2f64.powi(-53),
-            &|_, _| 1e-15,
-        );
-        worst = worst.max(e32 + e64);
-        for d in idx.iter_mut() {
-            *d += 1;
-            if *d < k {
-                break;
-            }
-            *d = 0;
-        }
-    }
+    let worst = (0..boxes)
+        .into_par_iter()
+        .map_init(
+            || (vec![0.0; nx], vec![0.0; nx]),
+            |(a, b), n| {
+                // Box n: index (n / kⁱ) mod k along axis i.
+                let mut rest = n;
+                for i in 0..nx {
+                    let idx = rest % k;
+                    rest /= k;
+                    let (l, h) = (model.domain_lo[i], model.domain_hi[i]);
+                    let step = (h - l) / k as f64;
+                    a[i] = if idx == 0 { l } else { l + step * idx as f64 };
+                    b[i] = if idx + 1 == k {
+                        h
+                    } else {
+                        l + step * (idx + 1) as f64
+                    };
+                    // Adjacent boxes share the computed end point, so the union covers X.
+                }
+                let e32 = box_error(
+                    &folded.layers,
+                    Some(&folded.f32_layers),
+                    a,
+                    b,
+                    2f64.powi(-24),
+                    2f64.powi(-23),
+                    &|lo, hi| tanh.max_abs_err_on(lo, hi),
+                );
+                let e64 = box_error(
+                    &exact,
+                    None,
+                    a,
+                    b,
+                    8.0 * 2f64.powi(-53),
+                    8.0 * 2f64.powi(-53),
+                    &|_, _| 1e-15,
+                );
+                e32 + e64
+            },
+        )
+        .reduce(|| 0.0, f64::max);
     (worst * (1.0 + 1e-9), boxes)
 }
 
@@ -239,8 +238,12 @@ fn model_unfolded_as_exact(folded: &Folded) -> Vec<DenseF64> {
 }
 
 /// Largest |κ_NN,f32(x) − κ_NN,f64(x)| (over outputs) on `n` uniform random states in X
-/// (deterministic xorshift stream from `seed`).
+/// (deterministic xorshift stream from `seed`). The states are drawn in order, chunk by
+/// chunk, and each chunk is evaluated in parallel: the maximum is the same for every
+/// thread count.
 pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) -> f64 {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
     let folded = model.folded();
     let (lo, hi) = model.domain_f32();
     let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
@@ -252,17 +255,28 @@ pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) ->
     };
     let nx = model.nx();
     let mut worst = 0.0f64;
-    let mut x = vec![0.0; nx];
-    for _ in 0..n {
-        for i in 0..nx {
-            x[i] = model.domain_lo[i] + next() * (model.domain_hi[i] - model.domain_lo[i]);
+    let mut xs = vec![0.0; CHUNK * nx.max(1)];
+    let mut done = 0;
+    while done < n {
+        let m = CHUNK.min(n - done);
+        for x in xs[..m * nx].chunks_exact_mut(nx.max(1)) {
+            for (i, v) in x.iter_mut().enumerate() {
+                *v = model.domain_lo[i] + next() * (model.domain_hi[i] - model.domain_lo[i]);
+            }
         }
-        let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
-        let y32 = eval_f32(&folded, &lo, &hi, &x32, tanh);
-        let y64 = model.eval_f64(&x);
-        for (a, b) in y32.iter().zip(&y64) {
-            worst = worst.max((f64::from(*a) - b).abs());
-        }
+        let w = xs[..m * nx]
+            .par_chunks(nx.max(1))
+            .map(|x| {
+                let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+                let y32 = eval_f32(&folded, &lo, &hi, &x32, tanh);
+                let y64 = model.eval_f64(x);
+                y32.iter()
+                    .zip(&y64)
+                    .fold(0.0f64, |w, (a, b)| w.max((f64::from(*a) - b).abs()))
+            })
+            .reduce(|| 0.0, f64::max);
+        worst = worst.max(w);
+        done += m;
     }
     worst
 }
