@@ -319,6 +319,8 @@ fn precision_is_stored_only_when_f32() {
         Precision::F32
     );
     let bad = format!("{PENDULUM_TOML}\n[training]\nprecision = \"f16\"\n");
-    let e = ProblemConfig::from_toml_str(&bad, "bad.toml").unwrap_err().to_string();
+    let e = ProblemConfig::from_toml_str(&bad, "bad.toml")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("bad.toml") && e.contains("precision"), "{e}");
 }

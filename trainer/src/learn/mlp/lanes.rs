@@ -39,8 +39,9 @@ type V = [f32; L];
 pub struct Lanes {
     /// Widths `[nx, h₁, …, nu]` the buffers are sized for.
     widths: Vec<usize>,
-    /// f32 weights (row-major out × inp) and biases.
+    /// f32 weights (row-major out × inp), their transposes (inp × out) and biases.
     w: Vec<Vec<f32>>,
+    wt: Vec<Vec<f32>>,
     b: Vec<Vec<f32>>,
     /// Jets of every layer (layer 0 the scaled input, layer m the raw output y, Y).
     h: Vec<Vec<V>>,
@@ -54,8 +55,7 @@ pub struct Lanes {
     g2: Vec<V>,
     /// Accumulator jet of one unit.
     acc: Vec<V>,
-    /// A column of a weight matrix.
-    wcol: Vec<f32>,
+
     /// Per-lane gradient accumulators.
     gw: Vec<Vec<V>>,
     gb: Vec<Vec<V>>,
@@ -107,6 +107,27 @@ fn dot_jets_q<const Q: usize>(w: &[f32], h: &[V], acc: &mut [V]) {
     acc.copy_from_slice(&a);
 }
 
+/// `gw[c] += Σ_q g[q]·h_c[q]` lane-wise for every unit c (jets of `g.len()` vectors
+/// consecutive in `h`): one row of a weight gradient.
+#[inline(always)]
+fn outer_jets(g: &[V], h: &[V], gw: &mut [V]) {
+    let q = g.len();
+    for (acc, hc) in gw.iter_mut().zip(h.chunks_exact(q)) {
+        let mut s = [0.0f32; L];
+        for (a, b) in g.iter().zip(hc) {
+            let (a, b) = (*a, *b);
+            for i in 0..L {
+                s[i] += a[i] * b[i];
+            }
+        }
+        let mut t = *acc;
+        for i in 0..L {
+            t[i] += s[i];
+        }
+        *acc = t;
+    }
+}
+
 /// α, α′, α″ over the lanes of `z` (in place: `z` becomes α(z)).
 #[inline(always)]
 fn activate(act: Activation, z: &mut V, d: &mut V, dd: &mut V) {
@@ -142,8 +163,15 @@ fn activate(act: Activation, z: &mut V, d: &mut V, dd: &mut V) {
 impl Lanes {
     /// Sizes the buffers for `mlp` (once per shape) and rounds its weights to f32.
     fn load(&mut self, mlp: &Mlp) {
-        let widths = mlp.widths();
-        if widths != self.widths {
+        let same = self.widths.len() == mlp.layers.len() + 1
+            && self.widths[0] == mlp.nx()
+            && mlp
+                .layers
+                .iter()
+                .zip(&self.widths[1..])
+                .all(|(l, &n)| l.out == n);
+        if !same {
+            let widths = mlp.widths();
             let q = 1 + mlp.nx();
             let per = |f: usize| -> Vec<Vec<V>> {
                 widths.iter().map(|&n| vec![[0.0; L]; n * f]).collect()
@@ -156,16 +184,34 @@ impl Lanes {
             self.g = vec![[0.0; L]; maxw * q];
             self.g2 = vec![[0.0; L]; maxw * q];
             self.acc = vec![[0.0; L]; q];
-            self.wcol = vec![0.0; maxw];
-            self.gw = mlp.layers.iter().map(|l| vec![[0.0; L]; l.w.len()]).collect();
-            self.gb = mlp.layers.iter().map(|l| vec![[0.0; L]; l.b.len()]).collect();
+            self.gw = mlp
+                .layers
+                .iter()
+                .map(|l| vec![[0.0; L]; l.w.len()])
+                .collect();
+            self.gb = mlp
+                .layers
+                .iter()
+                .map(|l| vec![[0.0; L]; l.b.len()])
+                .collect();
             self.w = mlp.layers.iter().map(|l| vec![0.0; l.w.len()]).collect();
+            self.wt = self.w.clone();
             self.b = mlp.layers.iter().map(|l| vec![0.0; l.b.len()]).collect();
             self.widths = widths;
         }
-        for (l, (w, b)) in mlp.layers.iter().zip(self.w.iter_mut().zip(self.b.iter_mut())) {
+        for (l, ((w, wt), b)) in mlp.layers.iter().zip(
+            self.w
+                .iter_mut()
+                .zip(self.wt.iter_mut())
+                .zip(self.b.iter_mut()),
+        ) {
             for (d, &s) in w.iter_mut().zip(&l.w) {
                 *d = s as f32;
+            }
+            for (r, row) in w.chunks_exact(l.inp).enumerate() {
+                for (c, &v) in row.iter().enumerate() {
+                    wt[c * l.out + r] = v;
+                }
             }
             for (d, &s) in b.iter_mut().zip(&l.b) {
                 *d = s as f32;
@@ -398,31 +444,14 @@ impl Lanes {
                 for i in 0..L {
                     gb[i] += gr[0][i];
                 }
-                for (gw, hc) in gwr.iter_mut().zip(hp.chunks_exact(q)) {
-                    let mut s = [0.0f32; L];
-                    for (a, b) in gr.iter().zip(hc) {
-                        let (a, b) = (*a, *b);
-                        for i in 0..L {
-                            s[i] += a[i] * b[i];
-                        }
-                    }
-                    let mut acc = *gw;
-                    for i in 0..L {
-                        acc[i] += s[i];
-                    }
-                    *gw = acc;
-                }
+                outer_jets(gr, hp, gwr);
             }
             if j > 0 {
                 // ∂/∂(a, T)_{j−1} = Wᵀ ∂/∂(z, Z)_j.
                 let g2 = &mut self.g2[..inp * q];
-                let wcol = &mut self.wcol[..out];
-                for (c, g2c) in g2.chunks_exact_mut(q).enumerate() {
-                    for (v, wr) in wcol.iter_mut().zip(self.w[j].chunks_exact(inp)) {
-                        *v = wr[c];
-                    }
+                for (g2c, wc) in g2.chunks_exact_mut(q).zip(self.wt[j].chunks_exact(out)) {
                     g2c.fill([0.0; L]);
-                    dot_jets(wcol, g, g2c);
+                    dot_jets(wc, g, g2c);
                 }
                 std::mem::swap(&mut self.g, &mut self.g2);
             }

@@ -19,7 +19,12 @@ pub(super) fn net(seed: u64, act: Activation, widths: &[usize]) -> Mlp {
     m
 }
 
-pub(super) fn data(seed: u64, nx: usize, nu: usize, b: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<bool>) {
+pub(super) fn data(
+    seed: u64,
+    nx: usize,
+    nu: usize,
+    b: usize,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<bool>) {
     let r = |a: u64, k: usize| 4.0 * crate::rng::uniform(seed, a, k as u64) - 2.0;
     let x = (0..b * nx).map(|k| r(1, k)).collect();
     let u = (0..b * nu).map(|k| r(2, k)).collect();

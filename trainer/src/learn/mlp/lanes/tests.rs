@@ -78,7 +78,10 @@ fn lane_loss_and_gradient_match_the_f64_passes() {
                     let gmax = max_abs(f64s.iter().copied());
                     let dmax = max_abs(f64s.iter().zip(&f32s).map(|(a, b)| a - b));
                     assert!(gmax > 0.0, "{what}: zero gradient");
-                    assert!(dmax <= 2e-4 * gmax, "{what}: gradient off by {dmax} (max {gmax})");
+                    assert!(
+                        dmax <= 2e-4 * gmax,
+                        "{what}: gradient off by {dmax} (max {gmax})"
+                    );
                     // The loss alone (no gradient) is the same computation.
                     assert_eq!(lanes.loss_grad(&m, &batch, lam, None), l32, "{what}");
                 }
@@ -107,10 +110,16 @@ fn lane_outputs_and_jacobians_match_the_f64_passes() {
         let umax = max_abs(u64s.iter().copied());
         let jmax = max_abs(j64.iter().copied());
         for (a, b) in u32s.iter().zip(&u64s) {
-            assert!((a - b).abs() <= 1e-5 * (umax + 1.0), "{widths:?}: u {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-5 * (umax + 1.0),
+                "{widths:?}: u {a} vs {b}"
+            );
         }
         for (a, b) in j32.iter().zip(&j64) {
-            assert!((a - b).abs() <= 1e-5 * (jmax + 1.0), "{widths:?}: J {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-5 * (jmax + 1.0),
+                "{widths:?}: J {a} vs {b}"
+            );
         }
         // Without Jacobians: the same outputs.
         let mut u_only = vec![0.0; n * nu];
