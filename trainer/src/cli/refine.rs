@@ -2,7 +2,7 @@
 //! `[refine]` table (`--config`; a robust design refines the tightened MPC). Resumes from
 //! `<out>/refine_state.bin` and writes the model, dataset, certificate, cells and log into
 //! the output directory (default `runs/<name>/refine`), plus `eps_map.svg`/`.png` for two or
-//! more states and, with `--check`, `check.json`; with `--statistical N` the certificate
+//! more states, `refine_rounds.svg`/`.png` (ε per round) and, with `--check`, `check.json`; with `--statistical N` the certificate
 //! gets its statistical tier (states kept in `statistical.bin`). Fails if the target ε is
 //! not met. `--certify-only --model M` keeps the network of M (a model file or an ONNX file)
 //! fixed and refines only the cells; the certificate is about M (its hash); for an ONNX M no
@@ -158,6 +158,7 @@ pub(super) fn execute(
     if cfg.system.nx() >= 2 {
         write_eps_map(&cfg, &rs, &r, &dir)?;
     }
+    write_rounds(&cfg, &rs, &r, &dir)?;
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
@@ -284,6 +285,15 @@ fn write_eps_map(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, dir: &Pa
     let png = trainer::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
     trainer::io::write_atomic(&dir.join("eps_map.svg"), fig.svg.as_bytes())?;
     trainer::io::write_atomic(&dir.join("eps_map.png"), &png)?;
+    Ok(())
+}
+
+/// The ε-per-round curve: `refine_rounds.svg` and `refine_rounds.png` in `dir`.
+fn write_rounds(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, dir: &Path) -> Result<()> {
+    let fig = trainer::study::plots::refine_rounds(&r.state.log, rs.target_eps)?;
+    let png = trainer::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)?;
+    trainer::io::write_atomic(&dir.join("refine_rounds.svg"), fig.svg.as_bytes())?;
+    trainer::io::write_atomic(&dir.join("refine_rounds.png"), &png)?;
     Ok(())
 }
 

@@ -29,12 +29,14 @@
 mod eps_map;
 mod error_boxes;
 mod error_map;
+mod refine_rounds;
 mod training_curves;
 mod trajectories;
 
 pub use eps_map::eps_map;
 pub use error_boxes::error_boxes;
 pub use error_map::{error_map, sensitivity_spread, slice_axes, slice_base, ErrorGrid};
+pub use refine_rounds::{best_so_far, refine_rounds};
 pub use training_curves::training_curves;
 pub use trajectories::trajectories;
 

@@ -196,3 +196,38 @@ fn eps_map_of_nx_above_two_draws_the_cells_its_slice_cuts() {
     let fig = eps_map(&cfg2, &two, 0.5, &[]).unwrap();
     assert!(fig.caption.contains("each of the 8 cells") && !fig.caption.contains("slice"));
 }
+
+#[test]
+fn refine_rounds_curve_keeps_the_smallest_eps_so_far() {
+    use crate::certify::refine::RoundLog;
+    let eps = [39.6, 20.1, 11.4, 8.6, 5.6, 6.2, 8.5, 5.6, 3.2, 8.3, 0.7497];
+    let log: Vec<RoundLog> = eps
+        .iter()
+        .enumerate()
+        .map(|(k, &e)| RoundLog {
+            round: k,
+            solves: 100 * (k + 1),
+            cells: 10 * (k + 1),
+            cells_ok: k,
+            eps: e,
+            eps_d: 0.5 * e.min(5.0),
+            second_order: 0,
+            seconds: 0.1,
+        })
+        .collect();
+    let best = best_so_far(&log);
+    assert_eq!(
+        best,
+        [39.6, 20.1, 11.4, 8.6, 5.6, 5.6, 5.6, 5.6, 3.2, 3.2, 0.7497]
+    );
+    assert!(best.windows(2).all(|w| w[1] <= w[0]));
+    let fig = refine_rounds(&log, 0.75).unwrap();
+    assert!(fig.svg.contains("smallest certified ε so far"), "legend");
+    assert!(fig.caption.contains("11 rounds") && fig.caption.contains("0.7497"));
+    assert!(to_png(fig.name, &fig.svg, 1.0).is_ok());
+    // An infinite ε (a failed corner) is not drawn; no finite round at all is an error.
+    let mut inf = log.clone();
+    inf[3].eps = f64::INFINITY;
+    assert!(refine_rounds(&inf, 0.75).is_ok());
+    assert!(refine_rounds(&[], 0.75).is_err());
+}
