@@ -148,6 +148,18 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         .map_err(|e| io(&rdir, e))?;
         let lc = crate::certify::refine::write_outputs(&fcfg, &fcfg.refine, &r, &rdir)
             .map_err(|e| io(&rdir, e))?;
+        // The ε-per-round curve of the refinement, beside its outputs.
+        let fig = crate::study::plots::refine_rounds(&r.state.log, fcfg.refine.target_eps)
+            .map_err(|e| io(&rdir, e))?;
+        let png = crate::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)
+            .map_err(|e| io(&rdir, e))?;
+        for (name, bytes) in [
+            ("refine_rounds.svg", fig.svg.as_bytes()),
+            ("refine_rounds.png", &png[..]),
+        ] {
+            let p = rdir.join(name);
+            crate::io::write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
+        }
         if lc.base.eps < cert.eps {
             net = r.model;
             net.certificate = Some(lc.base.clone());
