@@ -367,22 +367,7 @@ impl Lanes {
             self.flush(g);
         }
         // Weight term on the physical weights, in f64 (as the f64 path).
-        if lam.weights != 0.0 {
-            for (j, l) in mlp.layers.iter().enumerate() {
-                for r in 0..l.out {
-                    let rs = if j + 1 == m { mlp.out_half[r] } else { 1.0 };
-                    for c in 0..l.inp {
-                        let cs = if j == 0 { 1.0 / mlp.in_half[c] } else { 1.0 };
-                        let f = rs * rs * cs * cs;
-                        let w = l.w[r * l.inp + c];
-                        parts.weights += lam.weights * f * w * w;
-                        if let Some(g) = grad.as_deref_mut() {
-                            g.w[j][r * l.inp + c] += 2.0 * lam.weights * f * w;
-                        }
-                    }
-                }
-            }
-        }
+        mlp.add_weight_term(lam, &mut parts, grad);
         parts
     }
 

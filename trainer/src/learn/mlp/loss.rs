@@ -143,25 +143,36 @@ impl Mlp {
             }
             i0 += nb;
         }
-        // Weight term on the physical weights: ‖W̃‖² with W̃_1 = W_1 D, W̃_m = S W_m.
-        if lam.weights != 0.0 {
-            let m = self.layers.len();
-            for (j, l) in self.layers.iter().enumerate() {
-                for r in 0..l.out {
-                    let rs = if j + 1 == m { self.out_half[r] } else { 1.0 };
-                    for c in 0..l.inp {
-                        let cs = if j == 0 { 1.0 / self.in_half[c] } else { 1.0 };
-                        let f = rs * rs * cs * cs;
-                        let w = l.w[r * l.inp + c];
-                        parts.weights += lam.weights * f * w * w;
-                        if let Some(grad) = grad.as_deref_mut() {
-                            grad.w[j][r * l.inp + c] += 2.0 * lam.weights * f * w;
-                        }
+        self.add_weight_term(lam, &mut parts, grad);
+        parts
+    }
+
+    /// Adds the weight term λ₃ Σ_j ‖W̃_j‖²_F on the physical weights (W̃_1 = W_1 D,
+    /// W̃_m = S W_m) to `parts.weights` and, with `grad`, its gradient to `grad.w`.
+    pub(super) fn add_weight_term(
+        &self,
+        lam: LossWeights,
+        parts: &mut LossParts,
+        mut grad: Option<&mut Grad>,
+    ) {
+        if lam.weights == 0.0 {
+            return;
+        }
+        let m = self.layers.len();
+        for (j, l) in self.layers.iter().enumerate() {
+            for r in 0..l.out {
+                let rs = if j + 1 == m { self.out_half[r] } else { 1.0 };
+                for c in 0..l.inp {
+                    let cs = if j == 0 { 1.0 / self.in_half[c] } else { 1.0 };
+                    let f = rs * rs * cs * cs;
+                    let w = l.w[r * l.inp + c];
+                    parts.weights += lam.weights * f * w * w;
+                    if let Some(grad) = grad.as_deref_mut() {
+                        grad.w[j][r * l.inp + c] += 2.0 * lam.weights * f * w;
                     }
                 }
             }
         }
-        parts
     }
 
     /// Loss terms of a block (accumulated into `parts` sample by sample) and the output
