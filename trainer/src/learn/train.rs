@@ -112,8 +112,10 @@ fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorSta
     error_stats(set, &u_all, &j_all, with_jac)
 }
 
-/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures under
-/// `precision = "f32"` (the final statistics are always [`errors`], in f64).
+/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures and the
+/// early stop's ε_D (`target_eps_d`) under `precision = "f32"`; the final statistics are
+/// always [`errors`], in f64, so a run stopped early may report an ε_D a few f32 roundings
+/// above the target.
 fn errors_lanes(
     lanes: &mut Lanes,
     mlp: &Mlp,

@@ -16,8 +16,10 @@
 //! true tanh), the one the deployed controller runs.
 //!
 //! Deterministic: one thread, a fixed order of every sum; the result depends only on the
-//! inputs (not on the thread count, the group position of a sample, or the CPU: plain
-//! IEEE f32 operations, no fused multiply-add).
+//! inputs, not on the thread count or on whether the AVX or the portable (SSE2 on x86_64)
+//! code runs: plain IEEE f32 operations, no fused multiply-add (tanh and ReLU entirely;
+//! softplus calls the platform's `expf`/`log1pf`). Note that a sample's group depends on
+//! its position in the batch.
 
 use super::loss::{clamped_exact, Batch, Grad, LossParts, LossWeights};
 use super::{Activation, Mlp};
@@ -73,7 +75,8 @@ fn fma_lanes(acc: &mut V, w: f32, v: &V) {
 }
 
 /// `acc += Σ_c w[c]·h_c` over units c whose jets (q vectors each) are consecutive in `h`.
-/// Specialised for the jet sizes of nx ≤ 6 so that the accumulators stay in registers.
+/// Specialised for the jet sizes 1–5 and 7 (nx ≤ 4 and nx = 6, and every net without the
+/// tangent pass) so that the accumulators stay in registers.
 #[inline(always)]
 fn dot_jets(w: &[f32], h: &[V], acc: &mut [V]) {
     match acc.len() {
