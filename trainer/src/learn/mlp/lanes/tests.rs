@@ -165,3 +165,38 @@ fn lane_results_are_reproducible_bit_for_bit() {
     assert_eq!(run(&mut a), first);
     assert_eq!(run(&mut Lanes::default()), first);
 }
+
+/// The AVX build (taken by `loss_grad` and `eval_batch` where the CPU has AVX) and the
+/// portable build of the same code give the same bits.
+#[test]
+fn avx_and_portable_code_give_the_same_bits() {
+    let lam = LossWeights {
+        value: 1.0,
+        jacobian: 3.0,
+        weights: 0.05,
+    };
+    for widths in [vec![2, 10, 10, 1], vec![5, 9, 3], vec![12, 8, 8, 4]] {
+        let m = net(2, Activation::Tanh, &widths);
+        let (nx, nu) = (m.nx(), m.nu());
+        let (x, u, du, uj) = data(4, nx, nu, 45);
+        let batch = Batch {
+            x: &x,
+            u: &u,
+            du: &du,
+            use_jac: &uj,
+            band: None,
+        };
+        let mut lanes = Lanes::default();
+        let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
+        let la = lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
+        lanes.load(&m);
+        let lb = lanes.loss_grad_impl(&m, &batch, lam, Some(&mut gb));
+        assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
+        let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
+        let (mut ub, mut jb) = (ua.clone(), ja.clone());
+        lanes.eval_batch(&m, &x, &mut ua, Some(&mut ja));
+        lanes.load(&m);
+        lanes.eval_batch_impl(&m, &x, &mut ub, Some(&mut jb));
+        assert_eq!((ua, ja), (ub, jb), "{widths:?}");
+    }
+}
