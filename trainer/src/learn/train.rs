@@ -112,10 +112,9 @@ fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorSta
     error_stats(set, &u_all, &j_all, with_jac)
 }
 
-/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures and the
-/// early stop's ε_D (`target_eps_d`) under `precision = "f32"`; the final statistics are
-/// always [`errors`], in f64, so a run stopped early may report an ε_D a few f32 roundings
-/// above the target.
+/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures under
+/// `precision = "f32"` (an early stop on `target_eps_d` is confirmed in f64; the final
+/// statistics are always [`errors`], in f64).
 fn errors_lanes(
     lanes: &mut Lanes,
     mlp: &Mlp,
@@ -463,7 +462,11 @@ pub fn train_from<C>(
             if let Some(p) = opts.progress {
                 p(epoch + 1, settings.epochs);
             }
-            if settings.target_eps_d.is_some_and(|t| st.max <= t) {
+            // Under f32 the stop is confirmed by the f64 ε_D the model reports.
+            if settings
+                .target_eps_d
+                .is_some_and(|t| st.max <= t && (!f32_passes || errors(&mlp, train).1.max <= t))
+            {
                 break;
             }
         }
