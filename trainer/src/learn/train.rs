@@ -442,7 +442,8 @@ pub fn train_from<C>(
             let (loss, st, r2v) = if f32_passes {
                 (
                     lanes.loss_grad(&mlp, &full, lam, None),
-                    errors_lanes(&mut lanes, &mlp, train, true).1,
+                    // The curve records ε_D only: no Jacobians.
+                    errors_lanes(&mut lanes, &mlp, train, false).1,
                     errors_lanes(&mut lanes, &mlp, validation, false).1.r2,
                 )
             } else {

@@ -21,7 +21,7 @@
 //! softplus calls the platform's `expf`/`log1pf`). Note that a sample's group depends on
 //! its position in the batch.
 
-use super::loss::{clamped_exact, Batch, Grad, LossParts, LossWeights};
+use super::loss::{value_error, Batch, Grad, LossParts, LossWeights};
 use super::{Activation, Mlp};
 
 /// Samples per group (lanes of one vector).
@@ -339,12 +339,7 @@ impl Lanes {
                 for r in 0..nu {
                     let s = mlp.out_half[r];
                     let pred = mlp.out_center[r] + s * f64::from(y[r * q][i]);
-                    let exact = clamped_exact(batch.band, r, pred, batch.u[gi * nu + r]);
-                    let e = if exact {
-                        0.0
-                    } else {
-                        pred - batch.u[gi * nu + r]
-                    };
+                    let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
                     parts.value += lam.value * inv_b * e * e;
                     self.g[r * q][i] = (2.0 * lam.value * inv_b * e * s) as f32;
                     if !use_jac || exact {

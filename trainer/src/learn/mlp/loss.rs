@@ -83,6 +83,19 @@ pub fn clamped_exact(band: Option<(&[f64], &[f64])>, r: usize, pred: f64, target
     }
 }
 
+/// The value error of output r, `pred − target`, and whether the clamp to `band` matches
+/// the label exactly ([`clamped_exact`]; the error is then 0).
+#[inline]
+pub(super) fn value_error(
+    band: Option<(&[f64], &[f64])>,
+    r: usize,
+    pred: f64,
+    target: f64,
+) -> (f64, bool) {
+    let exact = clamped_exact(band, r, pred, target);
+    (if exact { 0.0 } else { pred - target }, exact)
+}
+
 impl Mlp {
     /// The weight term Σ_j ‖W̃_j‖²_F (physical units).
     pub fn weight_norm2(&self) -> f64 {
@@ -197,12 +210,7 @@ impl Mlp {
             for r in 0..nu {
                 let s = self.out_half[r];
                 let pred = self.out_center[r] + s * y[r * nb + i];
-                let exact = clamped_exact(batch.band, r, pred, batch.u[gi * nu + r]);
-                let e = if exact {
-                    0.0
-                } else {
-                    pred - batch.u[gi * nu + r]
-                };
+                let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
                 parts.value += lam.value * inv_b * e * e;
                 ws.ga[r * nb + i] = 2.0 * lam.value * inv_b * e * s;
                 if !tangent {
