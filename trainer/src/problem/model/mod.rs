@@ -17,7 +17,11 @@
 //! Besides the built-in plants, a plant may be written in the problem file as expressions
 //! (`kind = "ode"`: ẋ = f(x, u) with the same RK4; `kind = "discrete"`: x⁺ = F(x, u) with no
 //! RK4) — [`expr`] compiles them, [`ExprPlant`] differentiates them the same way, for
-//! `nx + nu ≤` [`MAX_NZ`].
+//! `nx + nu ≤` [`MAX_NZ`]. [`Discrete`] differentiates an expression plant faster: its
+//! [`expr::Sweep`] (F as one straight-line program, forward tangents for `∂F`,
+//! forward-over-reverse for `∇²λᵀF`, `O(nz)` per instruction instead of the second-order
+//! duals' `O(nz²)`); the dual numbers remain the reference it is tested against, and give the
+//! Hessian below [`SWEEP_HESSIAN_MIN_NZ`].
 //!
 //! A plant may also be implemented in Rust by a user of the library, in their own crate:
 //! [`CustomPlant`] (`kind = "custom"`) wraps any `serde` struct implementing [`Dynamics`]
@@ -41,6 +45,7 @@ pub use plant::{DiscretePlant, ExprPlant, OdePlant, MAX_NZ};
 
 use num_dual::{Dual2SVec64, DualSVec64};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// The number-type bound of [`Dynamics::rhs`] (re-exported so that a plant's crate needs no
 /// direct `num-dual` dependency).
@@ -267,8 +272,14 @@ fn without_equations(spec: &expr::SystemSpec) -> expr::SystemSpec {
     }
 }
 
+/// From this `nx + nu` on, an expression plant's `∇²(λᵀF)` comes from its [`expr::Sweep`]
+/// (forward-over-reverse, `O(nz)` per instruction); below it from second-order dual numbers
+/// (`O(nz²)`, as cheap at these sizes), which keep an expression plant's Hessian bit-identical
+/// to a built-in plant's written with the same formula (`configs/pendulum_ode.toml`).
+pub const SWEEP_HESSIAN_MIN_NZ: usize = 5;
+
 /// The discrete dynamics `F(x, u)`: `substeps` RK4 steps of the system over `ts`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Discrete {
     /// The continuous system.
     pub system: System,
@@ -276,6 +287,16 @@ pub struct Discrete {
     pub ts: f64,
     /// Number of RK4 sub-steps per sample (≥ 1).
     pub substeps: usize,
+    /// For an expression plant, `F` compiled with its derivative sweeps (built by
+    /// [`Discrete::new`]; used while `ts` and `substeps` are those it was built for).
+    sweep: Option<Arc<expr::Sweep>>,
+}
+
+impl PartialEq for Discrete {
+    /// By the system, `ts` and `substeps` (the sweep is derived from them).
+    fn eq(&self, other: &Self) -> bool {
+        self.system == other.system && self.ts == other.ts && self.substeps == other.substeps
+    }
 }
 
 /// Generic explicit RK4 over `ts` with `substeps` sub-steps; `x` is overwritten by `F(x, u)`.
@@ -406,11 +427,24 @@ fn ad_hessian<S: Dynamics, const NZ: usize, const B: usize>(
 impl Discrete {
     /// Builds the discrete dynamics; `substeps` must be ≥ 1 and `ts` > 0 (validated by the config).
     pub fn new(system: System, ts: f64, substeps: usize) -> Self {
+        let substeps = substeps.max(1);
+        let sweep = match &system {
+            System::Ode(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
+            System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
+            _ => None,
+        };
         Discrete {
             system,
             ts,
-            substeps: substeps.max(1),
+            substeps,
+            sweep,
         }
+    }
+    /// The sweep of an expression plant, if it matches the current `ts` and `substeps`.
+    fn sweep(&self) -> Option<&expr::Sweep> {
+        self.sweep
+            .as_deref()
+            .filter(|s| s.is_for(self.ts, self.substeps))
     }
     /// State dimension.
     pub fn nx(&self) -> usize {
@@ -441,6 +475,9 @@ impl Discrete {
     }
     /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
     pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
+        if let Some(sw) = self.sweep() {
+            return sw.linearize(x, u, f, jx, ju);
+        }
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
             System::Pendulum(s) => ad_linearize::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, f, jx, ju),
@@ -455,6 +492,12 @@ impl Discrete {
     }
     /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu).
     pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
+        if let Some(sw) = self
+            .sweep()
+            .filter(|_| self.nx() + self.nu() >= SWEEP_HESSIAN_MIN_NZ)
+        {
+            return sw.lagrangian_hessian(x, u, lam, hess);
+        }
         let (ts, m) = (self.ts, self.substeps);
         match &self.system {
             System::Pendulum(s) => ad_hessian::<_, 3, BUILTIN_MAX_NX>(s, ts, m, x, u, lam, hess),

@@ -16,6 +16,7 @@
 //! | names, checks, parameters and definitions substituted | `compile.rs` | [`compile`] |
 //! | hash-consed graph: CSE, constant folding | `dag.rs` | `Dag` |
 //! | flat instruction tape on registers | `tape.rs` | `Tape` |
+//! | F = RK4 of the tape on single-assignment slots, exact derivative sweeps | `sweep.rs` | [`Sweep`] |
 //! | the compiled model | `model.rs` | [`ExprModel`] |
 //! | `[ocp]` constraints g(x, u) ≤ 0 | `constraint.rs` | [`ConstraintSet`] |
 //! | errors | `error.rs` | [`ExprError`], [`ErrorKind`] |
@@ -31,6 +32,7 @@ mod error;
 mod model;
 mod parse;
 mod spec;
+mod sweep;
 mod tape;
 
 #[cfg(test)]
@@ -42,3 +44,4 @@ pub use error::{ErrorKind, ExprError};
 pub use model::ExprModel;
 pub use parse::{Func, MAX_DEPTH, MAX_NESTING};
 pub use spec::SystemSpec;
+pub use sweep::Sweep;

@@ -2,6 +2,7 @@
 //! tape that evaluates all `nx` outputs (ẋ for an ODE, x⁺ for a discrete system) at once.
 
 use super::tape::Tape;
+use super::Sweep;
 use num_dual::DualNum;
 use std::collections::BTreeMap;
 use std::fmt;
@@ -69,6 +70,18 @@ impl ExprModel {
     /// over the step, is affine too.
     pub fn is_affine(&self) -> bool {
         self.tape.is_affine()
+    }
+    /// The discrete map `F` of this model as a [`Sweep`] (RK4 over `ts` with `substeps`
+    /// sub-steps for an ODE; the tape itself for a discrete model), for fast exact derivatives.
+    pub fn sweep(&self, ts: f64, substeps: usize) -> Sweep {
+        Sweep::build(
+            &self.tape,
+            self.nx(),
+            self.nu(),
+            self.discrete,
+            ts,
+            substeps,
+        )
     }
     /// Number of registers: the length `scratch` grows to in [`ExprModel::eval`].
     pub fn n_registers(&self) -> usize {

@@ -342,6 +342,10 @@ impl Tape {
     pub fn instrs(&self) -> &[Instr] {
         &self.instrs
     }
+    /// The register of each output.
+    pub(super) fn outs(&self) -> &[R] {
+        &self.outs
+    }
     /// Number of registers (the length the scratch vector grows to).
     pub fn n_registers(&self) -> usize {
         self.n_regs
@@ -469,7 +473,7 @@ fn bin_op(op: Bin, a: Arg, b: Arg) -> Option<Op> {
 }
 
 /// The register operands of an instruction.
-fn operands(op: &Op) -> Vec<R> {
+pub(super) fn operands(op: &Op) -> Vec<R> {
     match *op {
         Op::Const(_) => vec![],
         Op::Add(a, b)
@@ -507,7 +511,7 @@ fn operands(op: &Op) -> Vec<R> {
 }
 
 /// `op` with its value numbers replaced by registers.
-fn rename(op: Op, reg: &[R]) -> Op {
+pub(super) fn rename(op: Op, reg: &[R]) -> Op {
     let m = |v: R| reg[v as usize];
     match op {
         Op::Const(c) => Op::Const(c),

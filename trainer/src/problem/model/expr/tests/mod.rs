@@ -1,11 +1,12 @@
 //! Tests of the expression language: the parser (`parser`), the error messages (`errors`),
 //! the tape against a direct evaluation of random trees and its derivatives against finite
-//! differences (`props`), and the paper's pendulum, CSE, serde and timing (`pendulum`).
+//! differences (`props`), the derivative sweeps against the dual numbers (`sweep`), and the paper's pendulum, CSE, serde and timing (`pendulum`).
 
 mod errors;
 mod parser;
 mod pendulum;
 mod props;
+mod sweep;
 
 use super::{compile, ExprError, ExprModel, SystemSpec};
 use std::collections::BTreeMap;

@@ -10,7 +10,7 @@ use proptest::prelude::*;
 
 /// A random expression over x, y (states) and z (input).
 #[derive(Debug, Clone)]
-enum T {
+pub(super) enum T {
     Num(f64),
     Var(usize),
     Neg(Box<T>),
@@ -20,7 +20,7 @@ enum T {
 
 const VARS: [&str; 3] = ["x", "y", "z"];
 
-fn tree() -> impl Strategy<Value = T> {
+pub(super) fn tree() -> impl Strategy<Value = T> {
     let leaf = prop_oneof![
         (-3.0f64..3.0).prop_map(T::Num),
         prop::sample::select(vec![0.0, 1.0, 2.0, 3.0, 0.5, -1.0, -2.0, 1e-3]).prop_map(T::Num),
@@ -67,7 +67,7 @@ fn prec(t: &T) -> u8 {
 }
 
 /// Text with as few parentheses as the grammar allows (so the parser's rules are exercised).
-fn render(t: &T) -> String {
+pub(super) fn render(t: &T) -> String {
     let wrap = |t: &T, paren: bool| {
         if paren {
             format!("({})", render(t))
@@ -223,7 +223,7 @@ proptest! {
 
 /// Smooth expressions covering every operation (kinks and singularities away from the box
 /// x, y ∈ [0.5, 1.5], z ∈ [0.2, 0.8]).
-const SMOOTH: [[&str; 2]; 6] = [
+pub(super) const SMOOTH: [[&str; 2]; 6] = [
     ["sin(x)*cos(y) + tan(z)", "asin(z) + acos(z/2) - atan(x*y)"],
     [
         "atan2(y, x) + exp(-x^2)*log(y)",

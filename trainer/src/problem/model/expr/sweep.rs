@@ -1,0 +1,534 @@
+//! [`Sweep`]: the discrete map `F(x, u)` of an expression plant as one straight-line program
+//! on single-assignment slots, and its exact first and second derivatives by hand-written
+//! sweeps — the fast path of `Discrete::linearize` and `Discrete::lagrangian_hessian` for
+//! expression plants (the dual-number path, `ExprPlant::linearize`/`lagrangian_hessian`,
+//! stays as the reference it is tested against).
+//!
+//! **Building** ([`Sweep::build`]): for `kind = "ode"` the model's tape is inlined into every
+//! stage of `M` classical RK4 steps of size `h = Ts/M`, the RK4 combinations emitted as
+//! instructions in the order of the generic RK4 (`x + k₁·(h/2)`, …,
+//! `x + (((k₁ + k₂·2) + k₃·2) + k₄)·(h/6)`), so that the values are the f64 step's bits; for
+//! `kind = "discrete"` the tape as it is. Slots `0..nz` hold `z = (x, u)`, slot `nz + k` the
+//! value of instruction `k` (no reuse: the reverse sweep reads every value).
+//!
+//! **Sweeps**, for an instruction `c = φ(a, b)` with local partials `φ_a, φ_b, φ_aa, φ_ab,
+//! φ_bb` (computed once per instruction, in the forward sweep, from the operands' values):
+//! - forward, values and tangents in `NZ = nz` directions seeded by the identity:
+//!   `ċ = φ_a ȧ + φ_b ḃ` — the outputs' tangents are the rows of `∂F/∂z`;
+//! - reverse with tangents (forward-over-reverse), seeded `c̄ = λᵢ` at output `i`:
+//!   `ā += c̄ φ_a`, `(ā)˙ += (c̄)˙ φ_a + c̄ (φ_aa ȧ + φ_ab ḃ)`, and `b̄`, `(b̄)˙` alike with
+//!   `φ_b`, `φ_ab ȧ + φ_bb ḃ` — the inputs' adjoint tangents are the rows of `∇²_z (λᵀF)`
+//!   (symmetrised: `H = (H + Hᵀ)/2`).
+//!
+//! Both cost `O(NZ)` per instruction, against `O(NZ²)` for second-order dual numbers, and work
+//! in flat per-thread buffers (grown on the first call, then reused: no allocation). Values are
+//! those of the f64 tape (the same `f64` functions); derivatives agree with the dual numbers'
+//! to rounding (tested to 1e-12 relative).
+
+use super::super::plant::by_nz;
+use super::super::MAX_NZ;
+use super::tape::{operands, rename, Op, Tape};
+use num_dual::DualNum;
+use std::cell::RefCell;
+
+/// The discrete map as a program on slots, for one sampling time and sub-step count.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sweep {
+    nx: usize,
+    nu: usize,
+    /// Instruction `k` writes slot `nz + k`; its operands are slots `< nz + k`.
+    code: Vec<Op>,
+    /// The slot of each output `F_i`.
+    outs: Vec<u32>,
+    ts: f64,
+    substeps: usize,
+}
+
+/// Emits instructions; slot numbers follow the instruction count.
+struct Builder {
+    nz: usize,
+    code: Vec<Op>,
+}
+
+impl Builder {
+    fn push(&mut self, op: Op) -> u32 {
+        self.code.push(op);
+        (self.nz + self.code.len() - 1) as u32
+    }
+    /// Inlines `tape` with its states in slots `x` and inputs in slots `u`; the outputs' slots.
+    fn inline(&mut self, tape: &Tape, x: &[u32], u: &[u32]) -> Vec<u32> {
+        let mut reg = vec![u32::MAX; tape.n_registers().max(x.len() + u.len())];
+        for (i, &s) in x.iter().chain(u).enumerate() {
+            reg[i] = s;
+        }
+        for ins in tape.instrs() {
+            let s = self.push(rename(ins.op, &reg));
+            reg[ins.dst as usize] = s;
+        }
+        tape.outs().iter().map(|&r| reg[r as usize]).collect()
+    }
+    /// `a + b·c` as the generic RK4 computes it (`b·c` first).
+    fn axpy(&mut self, a: u32, b: u32, c: f64) -> u32 {
+        let m = self.push(Op::MulC(b, c));
+        self.push(Op::Add(a, m))
+    }
+}
+
+impl Sweep {
+    /// The program of `F` for a tape of `nx` outputs on `(x, u)`: the tape itself when
+    /// `discrete`, else `substeps` RK4 steps over `ts`.
+    pub fn build(
+        tape: &Tape,
+        nx: usize,
+        nu: usize,
+        discrete: bool,
+        ts: f64,
+        substeps: usize,
+    ) -> Self {
+        let nz = nx + nu;
+        let mut b = Builder {
+            nz,
+            code: Vec::new(),
+        };
+        let mut x: Vec<u32> = (0..nx as u32).collect();
+        let u: Vec<u32> = (nx as u32..nz as u32).collect();
+        let substeps = substeps.max(1);
+        if discrete {
+            x = b.inline(tape, &x, &u);
+        } else {
+            let h = ts / substeps as f64;
+            for _ in 0..substeps {
+                let k1 = b.inline(tape, &x, &u);
+                let t: Vec<u32> = (0..nx).map(|i| b.axpy(x[i], k1[i], 0.5 * h)).collect();
+                let k2 = b.inline(tape, &t, &u);
+                let t: Vec<u32> = (0..nx).map(|i| b.axpy(x[i], k2[i], 0.5 * h)).collect();
+                let k3 = b.inline(tape, &t, &u);
+                let t: Vec<u32> = (0..nx).map(|i| b.axpy(x[i], k3[i], h)).collect();
+                let k4 = b.inline(tape, &t, &u);
+                x = (0..nx)
+                    .map(|i| {
+                        let s = b.push(Op::MulC(k2[i], 2.0));
+                        let s = b.push(Op::Add(k1[i], s));
+                        let c = b.push(Op::MulC(k3[i], 2.0));
+                        let s = b.push(Op::Add(s, c));
+                        let s = b.push(Op::Add(s, k4[i]));
+                        let s = b.push(Op::MulC(s, h / 6.0));
+                        b.push(Op::Add(x[i], s))
+                    })
+                    .collect();
+            }
+        }
+        let sweep = Sweep {
+            nx,
+            nu,
+            code: b.code,
+            outs: x,
+            ts,
+            substeps,
+        };
+        debug_assert!(sweep
+            .code
+            .iter()
+            .enumerate()
+            .all(|(k, op)| operands(op).iter().all(|&a| (a as usize) < nz + k)));
+        sweep
+    }
+
+    /// Whether this program was built for sampling time `ts` and `substeps` RK4 sub-steps.
+    pub fn is_for(&self, ts: f64, substeps: usize) -> bool {
+        self.ts.to_bits() == ts.to_bits() && self.substeps == substeps.max(1)
+    }
+    /// Number of instructions.
+    pub fn len(&self) -> usize {
+        self.code.len()
+    }
+    /// Whether the program has no instruction (`F` copies or permutes its inputs).
+    pub fn is_empty(&self) -> bool {
+        self.code.is_empty()
+    }
+    fn nz(&self) -> usize {
+        self.nx + self.nu
+    }
+
+    /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
+    pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
+        let (nx, nu) = (self.nx, self.nu);
+        with_work(|w| {
+            by_nz!(self.nz(), self.forward(x, u, w));
+            let nz = self.nz();
+            for (i, &o) in self.outs.iter().enumerate() {
+                let o = o as usize;
+                f[i] = w.val[o];
+                let t = &w.tan[o * nz..o * nz + nz];
+                jx[i * nx..i * nx + nx].copy_from_slice(&t[..nx]);
+                ju[i * nu..i * nu + nu].copy_from_slice(&t[nx..]);
+            }
+        })
+    }
+
+    /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu), symmetric.
+    pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
+        with_work(|w| {
+            by_nz!(self.nz(), self.forward(x, u, w));
+            by_nz!(self.nz(), self.reverse(lam, w));
+            let nz = self.nz();
+            for r in 0..nz {
+                for c in 0..=r {
+                    let v = 0.5 * (w.adt[r * nz + c] + w.adt[c * nz + r]);
+                    hess[r * nz + c] = v;
+                    hess[c * nz + r] = v;
+                }
+            }
+        })
+    }
+
+    /// Values, local partials and tangents of every slot.
+    fn forward<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+        let n = NZ + self.code.len();
+        w.val.resize(n, 0.0);
+        w.tan.resize(n * NZ, 0.0);
+        w.part.resize(self.code.len(), [0.0; 5]);
+        w.val[..self.nx].copy_from_slice(&x[..self.nx]);
+        w.val[self.nx..NZ].copy_from_slice(&u[..self.nu]);
+        w.tan[..NZ * NZ].fill(0.0);
+        for i in 0..NZ {
+            w.tan[i * NZ + i] = 1.0;
+        }
+        for (k, op) in self.code.iter().enumerate() {
+            let s = NZ + k;
+            let (v, p) = local(*op, &w.val);
+            w.val[s] = v;
+            w.part[k] = p;
+            let (lo, hi) = w.tan.split_at_mut(s * NZ);
+            let t: &mut [f64; NZ] = (&mut hi[..NZ]).try_into().expect("NZ");
+            match arity(op) {
+                (0, _, _) => *t = [0.0; NZ],
+                (1, a, _) => {
+                    let ta: &[f64; NZ] = lo[a * NZ..a * NZ + NZ].try_into().expect("NZ");
+                    match *op {
+                        // The dual numbers' rounding (`ε / c`, `0 − ε`), so that these
+                        // common operations give their tangents' bits.
+                        Op::DivC(_, c) => {
+                            for j in 0..NZ {
+                                t[j] = ta[j] / c;
+                            }
+                        }
+                        Op::CSub(..) => {
+                            for j in 0..NZ {
+                                t[j] = 0.0 - ta[j];
+                            }
+                        }
+                        _ => {
+                            for j in 0..NZ {
+                                t[j] = ta[j] * p[0];
+                            }
+                        }
+                    }
+                }
+                (_, a, b) => {
+                    let ta: &[f64; NZ] = lo[a * NZ..a * NZ + NZ].try_into().expect("NZ");
+                    let tb: &[f64; NZ] = lo[b * NZ..b * NZ + NZ].try_into().expect("NZ");
+                    if let Op::Div(..) = *op {
+                        // `(ε_a b − ε_b a) / b / b` as the dual numbers round it.
+                        let (va, vb) = (w.val[a], w.val[b]);
+                        let inv = 1.0 / vb;
+                        for j in 0..NZ {
+                            t[j] = (ta[j] * vb - tb[j] * va) * inv * inv;
+                        }
+                    } else {
+                        for j in 0..NZ {
+                            t[j] = ta[j] * p[0] + tb[j] * p[1];
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Adjoints and their tangents, seeded by `λ` at the outputs (after [`Sweep::forward`]).
+    fn reverse<const NZ: usize>(&self, lam: &[f64], w: &mut Work) {
+        let n = NZ + self.code.len();
+        w.adj.clear();
+        w.adj.resize(n, 0.0);
+        w.adt.clear();
+        w.adt.resize(n * NZ, 0.0);
+        for (i, &o) in self.outs.iter().enumerate() {
+            w.adj[o as usize] += lam[i];
+        }
+        for (k, op) in self.code.iter().enumerate().rev() {
+            let s = NZ + k;
+            let c = w.adj[s];
+            let (lo, hi) = w.adt.split_at_mut(s * NZ);
+            let ct: &[f64; NZ] = (&hi[..NZ]).try_into().expect("NZ");
+            if c == 0.0 && ct.iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let p = w.part[k];
+            let tan = &w.tan;
+            match arity(op) {
+                (0, _, _) => {}
+                (1, a, _) => {
+                    w.adj[a] += c * p[0];
+                    let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
+                    let at: &mut [f64; NZ] = (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
+                    let caa = c * p[2];
+                    for j in 0..NZ {
+                        at[j] += ct[j] * p[0] + caa * ta[j];
+                    }
+                }
+                (_, a, b) => {
+                    w.adj[a] += c * p[0];
+                    w.adj[b] += c * p[1];
+                    let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
+                    let tb: &[f64; NZ] = tan[b * NZ..b * NZ + NZ].try_into().expect("NZ");
+                    let (caa, cab, cbb) = (c * p[2], c * p[3], c * p[4]);
+                    {
+                        let at: &mut [f64; NZ] =
+                            (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
+                        for j in 0..NZ {
+                            at[j] += ct[j] * p[0] + caa * ta[j] + cab * tb[j];
+                        }
+                    }
+                    let bt: &mut [f64; NZ] = (&mut lo[b * NZ..b * NZ + NZ]).try_into().expect("NZ");
+                    for j in 0..NZ {
+                        bt[j] += ct[j] * p[1] + cab * ta[j] + cbb * tb[j];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `(number of operands, a, b)` of an instruction (slots as indices).
+#[inline(always)]
+fn arity(op: &Op) -> (usize, usize, usize) {
+    match *op {
+        Op::Const(_) => (0, 0, 0),
+        Op::Add(a, b)
+        | Op::Sub(a, b)
+        | Op::Mul(a, b)
+        | Op::Div(a, b)
+        | Op::Pow(a, b)
+        | Op::Atan2(a, b)
+        | Op::Min(a, b)
+        | Op::Max(a, b) => (2, a as usize, b as usize),
+        Op::AddC(a, _)
+        | Op::CSub(_, a)
+        | Op::MulC(a, _)
+        | Op::DivC(a, _)
+        | Op::CDiv(_, a)
+        | Op::Neg(a)
+        | Op::Sq(a)
+        | Op::Recip(a)
+        | Op::Powi(a, _)
+        | Op::Powf(a, _)
+        | Op::Sin(a)
+        | Op::Cos(a)
+        | Op::Tan(a)
+        | Op::Asin(a)
+        | Op::Acos(a)
+        | Op::Atan(a)
+        | Op::Exp(a)
+        | Op::Log(a)
+        | Op::Sqrt(a)
+        | Op::Sinh(a)
+        | Op::Cosh(a)
+        | Op::Tanh(a)
+        | Op::Abs(a) => (1, a as usize, 0),
+    }
+}
+
+/// The value of an instruction and its local partials `[φ_a, φ_b, φ_aa, φ_ab, φ_bb]`; the
+/// value is computed by the same `f64` function as the tape's f64 evaluation (bit for bit).
+#[inline(always)]
+fn local(op: Op, v: &[f64]) -> (f64, [f64; 5]) {
+    let g = |r: u32| v[r as usize];
+    let un = |value: f64, d: f64, dd: f64| (value, [d, 0.0, dd, 0.0, 0.0]);
+    match op {
+        Op::Const(c) => (c, [0.0; 5]),
+        Op::Add(a, b) => (g(a) + g(b), [1.0, 1.0, 0.0, 0.0, 0.0]),
+        Op::Sub(a, b) => (g(a) - g(b), [1.0, -1.0, 0.0, 0.0, 0.0]),
+        Op::Mul(a, b) => (g(a) * g(b), [g(b), g(a), 0.0, 1.0, 0.0]),
+        Op::Div(a, b) => {
+            let (x, y) = (g(a), g(b));
+            let c = x / y;
+            let r = 1.0 / y;
+            (c, [r, -c * r, 0.0, -r * r, 2.0 * c * r * r])
+        }
+        Op::AddC(a, c) => un(g(a) + c, 1.0, 0.0),
+        Op::CSub(c, a) => un(c - g(a), -1.0, 0.0),
+        Op::MulC(a, c) => un(g(a) * c, c, 0.0),
+        Op::DivC(a, c) => un(g(a) / c, 1.0 / c, 0.0),
+        Op::CDiv(c, a) => {
+            let x = g(a);
+            let value = c / x;
+            let r = 1.0 / x;
+            un(value, -c * r * r, 2.0 * value * r * r)
+        }
+        Op::Neg(a) => un(-g(a), -1.0, 0.0),
+        Op::Sq(a) => un(g(a) * g(a), 2.0 * g(a), 2.0),
+        Op::Recip(a) => {
+            let value = DualNum::recip(&g(a));
+            un(value, -value * value, 2.0 * value * value * value)
+        }
+        Op::Powi(a, n) => {
+            let x = g(a);
+            let value = super::dag::powi(x, n);
+            match n {
+                0 => un(value, 0.0, 0.0),
+                1 => un(value, 1.0, 0.0),
+                2 => un(value, 2.0 * x, 2.0),
+                _ => {
+                    // As the dual numbers: x^(n−3)·x·x·n.
+                    let p3 = x.powi(n - 3);
+                    let p2 = p3 * x;
+                    un(value, p2 * x * f64::from(n), f64::from(n * (n - 1)) * p2)
+                }
+            }
+        }
+        Op::Powf(a, c) => {
+            let x = g(a);
+            let value = DualNum::powf(&x, c);
+            if c == 0.0 {
+                un(value, 0.0, 0.0)
+            } else if c == 1.0 {
+                un(value, 1.0, 0.0)
+            } else {
+                // As the dual numbers: x^(c−3)·x·x·c.
+                let p3 = x.powf(c - 1.0 - 1.0 - 1.0);
+                let p2 = p3 * x;
+                un(value, p2 * x * c, c * (c - 1.0) * p2)
+            }
+        }
+        Op::Pow(a, b) => {
+            let (x, y) = (g(a), g(b));
+            let value = DualNum::powd(&x, y);
+            let l = x.ln();
+            let p1 = x.powf(y - 1.0);
+            (
+                value,
+                [
+                    y * p1,
+                    value * l,
+                    y * (y - 1.0) * x.powf(y - 2.0),
+                    p1 * (1.0 + y * l),
+                    value * l * l,
+                ],
+            )
+        }
+        Op::Sin(a) => {
+            let x = g(a);
+            let s = DualNum::sin(&x);
+            un(s, x.cos(), -s)
+        }
+        Op::Cos(a) => {
+            let x = g(a);
+            let c = DualNum::cos(&x);
+            un(c, -x.sin(), -c)
+        }
+        Op::Tan(a) => {
+            let t = DualNum::tan(&g(a));
+            let d = 1.0 + t * t;
+            un(t, d, 2.0 * t * d)
+        }
+        Op::Asin(a) | Op::Acos(a) => {
+            let x = g(a);
+            let r = 1.0 / (1.0 - x * x);
+            let d = r.sqrt();
+            let sign = if matches!(op, Op::Asin(_)) { 1.0 } else { -1.0 };
+            let value = if sign > 0.0 {
+                DualNum::asin(&x)
+            } else {
+                DualNum::acos(&x)
+            };
+            un(value, sign * d, sign * x * d * r)
+        }
+        Op::Atan(a) => {
+            let x = g(a);
+            let r = 1.0 / (1.0 + x * x);
+            un(DualNum::atan(&x), r, -2.0 * x * r * r)
+        }
+        Op::Exp(a) => {
+            let e = DualNum::exp(&g(a));
+            un(e, e, e)
+        }
+        Op::Log(a) => {
+            let x = g(a);
+            let r = 1.0 / x;
+            un(DualNum::ln(&x), r, -r * r)
+        }
+        Op::Sqrt(a) => {
+            let x = g(a);
+            let s = DualNum::sqrt(&x);
+            let d = s * x.recip() * 0.5;
+            un(s, d, -0.5 * d / x)
+        }
+        Op::Sinh(a) => {
+            let x = g(a);
+            let s = DualNum::sinh(&x);
+            un(s, x.cosh(), s)
+        }
+        Op::Cosh(a) => {
+            let x = g(a);
+            let c = DualNum::cosh(&x);
+            un(c, x.sinh(), c)
+        }
+        Op::Tanh(a) => {
+            let t = DualNum::tanh(&g(a));
+            let d = 1.0 - t * t;
+            un(t, d, -2.0 * t * d)
+        }
+        Op::Abs(a) => {
+            // num-dual's convention: the derivative is −1 at 0 (`is_positive` is `> 0`).
+            let x = g(a);
+            un(x.abs(), if x > 0.0 { 1.0 } else { -1.0 }, 0.0)
+        }
+        Op::Atan2(a, b) => {
+            let (x, y) = (g(a), g(b));
+            let r = 1.0 / (x * x + y * y);
+            let r2 = r * r;
+            (
+                DualNum::atan2(&x, y),
+                [
+                    y * r,
+                    -x * r,
+                    -2.0 * x * y * r2,
+                    (x * x - y * y) * r2,
+                    2.0 * x * y * r2,
+                ],
+            )
+        }
+        // By the values, at a tie `a` (as `dag::min`/`dag::max`).
+        Op::Min(a, b) => {
+            if g(b) < g(a) {
+                (g(b), [0.0, 1.0, 0.0, 0.0, 0.0])
+            } else {
+                (g(a), [1.0, 0.0, 0.0, 0.0, 0.0])
+            }
+        }
+        Op::Max(a, b) => {
+            if g(b) > g(a) {
+                (g(b), [0.0, 1.0, 0.0, 0.0, 0.0])
+            } else {
+                (g(a), [1.0, 0.0, 0.0, 0.0, 0.0])
+            }
+        }
+    }
+}
+
+/// Per-thread buffers of the sweeps.
+#[derive(Default)]
+struct Work {
+    val: Vec<f64>,
+    part: Vec<[f64; 5]>,
+    tan: Vec<f64>,
+    adj: Vec<f64>,
+    adt: Vec<f64>,
+}
+
+fn with_work<R>(f: impl FnOnce(&mut Work) -> R) -> R {
+    thread_local! {
+        static W: RefCell<Work> = RefCell::new(Work::default());
+    }
+    W.with(|w| f(&mut w.borrow_mut()))
+}
