@@ -134,43 +134,53 @@ impl RiccatiKkt {
             let pn = &tail[..nx * nx];
             let pk = &mut head[k * nx * nx..];
             let (pa, pb, h) = (&mut self.pa, &mut self.pb, &self.h);
-            // pa = P A, pb = P B.
-            for i in 0..nx {
-                for j in 0..nx {
-                    let mut acc = 0.0;
-                    for l in 0..nx {
-                        acc += pn[i * nx + l] * a[l * nx + j];
+            // pa = P A, pb = P B. Row by row as axpys (contiguous, vectorisable); every
+            // entry is still summed over l in ascending order from 0, so the bits are those
+            // of the dot-product form.
+            pa.fill(0.0);
+            pb.fill(0.0);
+            for ((prow, parow), pbrow) in pn
+                .chunks_exact(nx)
+                .zip(pa.chunks_exact_mut(nx))
+                .zip(pb.chunks_exact_mut(nu))
+            {
+                for ((&p, arow), brow) in
+                    prow.iter().zip(a.chunks_exact(nx)).zip(b.chunks_exact(nu))
+                {
+                    for (d, &v) in parow.iter_mut().zip(arow) {
+                        *d += p * v;
                     }
-                    pa[i * nx + j] = acc;
-                }
-                for j in 0..nu {
-                    let mut acc = 0.0;
-                    for l in 0..nx {
-                        acc += pn[i * nx + l] * b[l * nu + j];
+                    for (d, &v) in pbrow.iter_mut().zip(brow) {
+                        *d += p * v;
                     }
-                    pb[i * nu + j] = acc;
                 }
             }
             let lk = &mut self.l[k * nu * nu..(k + 1) * nu * nu];
             let st = &mut self.st[k * nu * nx..(k + 1) * nu * nx];
-            // R̃ = R + Bᵀ P B (lower triangle), S̃ = S + Bᵀ P A.
+            // R̃ = R + Bᵀ P B (lower triangle), S̃ = S + Bᵀ P A; each entry summed over l in
+            // ascending order from the Hessian's entry.
+            for i in 0..nu {
+                let hrow = &h[(nx + i) * nz..(nx + i + 1) * nz];
+                lk[i * nu..i * nu + i + 1].copy_from_slice(&hrow[nx..nx + i + 1]);
+                st[i * nx..(i + 1) * nx].copy_from_slice(&hrow[..nx]);
+            }
+            for ((brow, pbrow), parow) in b
+                .chunks_exact(nu)
+                .zip(pb.chunks_exact(nu))
+                .zip(pa.chunks_exact(nx))
+            {
+                for ((i, &bi), strow) in brow.iter().enumerate().zip(st.chunks_exact_mut(nx)) {
+                    for (d, &v) in lk[i * nu..i * nu + i + 1].iter_mut().zip(pbrow) {
+                        *d += bi * v;
+                    }
+                    for (d, &v) in strow.iter_mut().zip(parow) {
+                        *d += bi * v;
+                    }
+                }
+            }
             let mut scale = 1.0f64;
             for i in 0..nu {
-                for j in 0..=i {
-                    let mut acc = h[(nx + i) * nz + nx + j];
-                    for l in 0..nx {
-                        acc += b[l * nu + i] * pb[l * nu + j];
-                    }
-                    lk[i * nu + j] = acc;
-                }
                 scale = scale.max(lk[i * nu + i].abs());
-                for j in 0..nx {
-                    let mut acc = h[(nx + i) * nz + j];
-                    for l in 0..nx {
-                        acc += b[l * nu + i] * pa[l * nx + j];
-                    }
-                    st[i * nx + j] = acc;
-                }
             }
             // Cholesky R̃ = L Lᵀ in place.
             for j in 0..nu {
@@ -201,18 +211,27 @@ impl RiccatiKkt {
                     st[i * nx + c] = v / lk[i * nu + i];
                 }
             }
-            // P_k = Q + Aᵀ P A − S̃ᵀ R̃⁻¹ S̃ (upper triangle computed, mirrored).
+            // P_k = Q + Aᵀ P A − S̃ᵀ R̃⁻¹ S̃ (upper triangle computed row by row as axpys,
+            // each entry in the order Q, then l ascending; mirrored).
             for i in 0..nx {
-                for j in i..nx {
-                    let mut acc = h[i * nz + j];
-                    for l in 0..nx {
-                        acc += a[l * nx + i] * pa[l * nx + j];
+                let row = &mut pk[i * nx + i..(i + 1) * nx];
+                row.copy_from_slice(&h[i * nz + i..i * nz + nx]);
+                for (arow, parow) in a.chunks_exact(nx).zip(pa.chunks_exact(nx)) {
+                    let ali = arow[i];
+                    for (d, &v) in row.iter_mut().zip(&parow[i..]) {
+                        *d += ali * v;
                     }
-                    for l in 0..nu {
-                        acc -= st[l * nx + i] * st[l * nx + j];
+                }
+                for srow in st.chunks_exact(nx) {
+                    let sli = srow[i];
+                    for (d, &v) in row.iter_mut().zip(&srow[i..]) {
+                        *d -= sli * v;
                     }
-                    pk[i * nx + j] = acc;
-                    pk[j * nx + i] = acc;
+                }
+            }
+            for i in 0..nx {
+                for j in i + 1..nx {
+                    pk[j * nx + i] = pk[i * nx + j];
                 }
             }
         }
