@@ -12,6 +12,7 @@
 //! Default parameters (m_c = 1 kg, m_p = 0.1 kg, l = 0.5 m) are the classic benchmark's;
 //! with |F| ≤ 20 N (configs/cartpole.toml) the pole can be swung up within a 2 m track.
 
+use super::expr::SystemSpec;
 use super::Dynamics;
 use num_dual::DualNum;
 use serde::{Deserialize, Serialize};
@@ -56,5 +57,44 @@ impl Dynamics for CartPole {
         dx[1] = x[3];
         dx[2] = p_dd;
         dx[3] = th_dd;
+    }
+}
+
+impl CartPole {
+    /// [`Dynamics::rhs`] written as expressions, operation for operation and with its
+    /// constant factors precomputed the same way, so that the compiled tape computes `rhs`'s
+    /// bits: the form in which [`Discrete`](super::Discrete) differentiates the cart-pole
+    /// by sweeps (`expr::Sweep`).
+    pub(super) fn expressions(&self) -> SystemSpec {
+        let mt = self.m_cart + self.m_pole;
+        let s = |v: &[&str]| v.iter().map(|t| t.to_string()).collect::<Vec<_>>();
+        SystemSpec {
+            states: s(&["p", "th", "v", "om"]),
+            inputs: s(&["f"]),
+            parameters: [
+                ("mpl", self.m_pole * self.l),
+                ("inv_mt", 1.0 / mt),
+                ("neg_mp_mt", -self.m_pole / mt),
+                ("four_thirds", 4.0 / 3.0),
+                ("l", self.l),
+                ("g", self.g),
+                ("mpl_mt", self.m_pole * self.l / mt),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+            definitions: s(&[
+                "sn = sin(th)",
+                "cs = cos(th)",
+                "w2 = om*om",
+                "temp = (f + w2*sn*mpl)*inv_mt",
+                "den = (cs*cs*neg_mp_mt + four_thirds)*l",
+                "th_dd = (sn*g - cs*temp)/den",
+                "p_dd = temp - th_dd*cs*mpl_mt",
+            ]),
+            rhs: Some(s(&["v", "om", "p_dd", "th_dd"])),
+            next: None,
+            units: Default::default(),
+        }
     }
 }

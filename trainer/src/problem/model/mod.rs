@@ -431,6 +431,11 @@ impl Discrete {
         let sweep = match &system {
             System::Ode(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
+            // The built-in cart-pole through its expression form (the same bits for F and
+            // ∂F; tested in `plant::tests`): its Hessian is then a sweep's too.
+            System::CartPole(c) => expr::compile(&c.expressions(), false)
+                .ok()
+                .map(|m| Arc::new(m.sweep(ts, substeps))),
             _ => None,
         };
         Discrete {

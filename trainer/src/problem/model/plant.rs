@@ -377,6 +377,54 @@ mod tests {
         }
     }
 
+    /// The built-in cart-pole is differentiated through its expression form
+    /// (`CartPole::expressions`): its F is the f64 step's, bit for bit (the dual numbers'
+    /// F is not: they divide as `a·(1/b)`), and ∂F and the Hessian (a sweep's) equal the
+    /// dual numbers' of its Rust `rhs` to 1e-12.
+    #[test]
+    fn cart_pole_expression_form_gives_the_built_in_derivatives() {
+        use super::super::{ad_hessian, ad_linearize, CartPole, BUILTIN_MAX_NX};
+        let cp = CartPole::default();
+        let close = |a: &[f64], b: &[f64], what: &str| {
+            let scale = 1.0 + b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (p, q) in a.iter().zip(b) {
+                assert!((p - q).abs() <= 1e-12 * scale, "{what}: {p} vs {q}");
+            }
+        };
+        for substeps in [1, 2] {
+            let d = Discrete::new(System::CartPole(cp.clone()), 0.05, substeps);
+            assert!(d.sweep().is_some());
+            for k in 0..300 {
+                let t = k as f64 * 0.61;
+                let x = [
+                    t.sin(),
+                    3.0 * (0.7 * t).cos(),
+                    (1.1 * t).sin() * 2.0,
+                    t.cos() * 5.0,
+                ];
+                let u = [20.0 * (1.3 * t).sin()];
+                let lam = [0.3, -t.sin(), 1.5, t.cos() * 2.0];
+                let (mut f, mut jx, mut ju, mut s) = ([0.0; 4], [0.0; 16], [0.0; 4], [0.0; 4]);
+                let (mut g, mut gx, mut gu) = ([0.0; 4], [0.0; 16], [0.0; 4]);
+                d.linearize(&x, &u, &mut f, &mut jx, &mut ju);
+                d.step(&x, &u, &mut s);
+                assert_eq!(f.map(f64::to_bits), s.map(f64::to_bits), "x {x:?}");
+                ad_linearize::<_, 5, BUILTIN_MAX_NX>(
+                    &cp, 0.05, substeps, &x, &u, &mut g, &mut gx, &mut gu,
+                );
+                close(
+                    &[&f[..], &jx, &ju].concat(),
+                    &[&g[..], &gx, &gu].concat(),
+                    "F, ∂F",
+                );
+                let (mut h, mut r) = ([0.0; 25], [0.0; 25]);
+                d.lagrangian_hessian(&x, &u, &lam, &mut h);
+                ad_hessian::<_, 5, BUILTIN_MAX_NX>(&cp, 0.05, substeps, &x, &u, &lam, &mut r);
+                close(&h, &r, "Hessian");
+            }
+        }
+    }
+
     /// Timing of `Discrete::linearize`: built-in pendulum vs the same plant as expressions
     /// (`cargo test --release -p trainer --lib linearize_timing -- --ignored --nocapture`).
     #[test]
