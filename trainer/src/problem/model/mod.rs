@@ -20,8 +20,8 @@
 //! `nx + nu ≤` [`MAX_NZ`]. [`Discrete`] differentiates an expression plant faster: its
 //! [`expr::Sweep`] (F as one straight-line program, forward tangents for `∂F`,
 //! forward-over-reverse for `∇²λᵀF`, `O(nz)` per instruction instead of the second-order
-//! duals' `O(nz²)`); the dual numbers remain the reference it is tested against, and give the
-//! Hessian below [`SWEEP_HESSIAN_MIN_NZ`].
+//! duals' `O(nz²)`) from `nx + nu ≥` [`SWEEP_MIN_NZ`]; the dual numbers remain the reference
+//! it is tested against, and differentiate the smaller plants.
 //!
 //! A plant may also be implemented in Rust by a user of the library, in their own crate:
 //! [`CustomPlant`] (`kind = "custom"`) wraps any `serde` struct implementing [`Dynamics`]
@@ -272,11 +272,13 @@ fn without_equations(spec: &expr::SystemSpec) -> expr::SystemSpec {
     }
 }
 
-/// From this `nx + nu` on, an expression plant's `∇²(λᵀF)` comes from its [`expr::Sweep`]
-/// (forward-over-reverse, `O(nz)` per instruction); below it from second-order dual numbers
-/// (`O(nz²)`, as cheap at these sizes), which keep an expression plant's Hessian bit-identical
-/// to a built-in plant's written with the same formula (`configs/pendulum_ode.toml`).
-pub const SWEEP_HESSIAN_MIN_NZ: usize = 5;
+/// From this `nx + nu` on, [`Discrete`] differentiates an expression plant (and the built-in
+/// cart-pole, through its expression form) by its [`expr::Sweep`]: `∂F` by forward tangents,
+/// `∇²(λᵀF)` forward-over-reverse in `O(nz)` per instruction instead of the second-order dual
+/// numbers' `O(nz²)`. Below it (the pendulum, the double integrator) the dual numbers are as
+/// fast or faster (measured: BENCHMARKS.md, "Derivative sweeps") and keep an expression plant
+/// bit-identical to a built-in plant written with the same formula (`configs/pendulum_ode.toml`).
+pub const SWEEP_MIN_NZ: usize = 5;
 
 /// The discrete dynamics `F(x, u)`: `substeps` RK4 steps of the system over `ts`.
 #[derive(Debug, Clone)]
@@ -287,8 +289,9 @@ pub struct Discrete {
     pub ts: f64,
     /// Number of RK4 sub-steps per sample (≥ 1).
     pub substeps: usize,
-    /// For an expression plant, `F` compiled with its derivative sweeps (built by
-    /// [`Discrete::new`]; used while `ts` and `substeps` are those it was built for).
+    /// For an expression plant or the cart-pole with `nx + nu ≥` [`SWEEP_MIN_NZ`], `F`
+    /// compiled with its derivative sweeps (built by [`Discrete::new`]; used while `ts` and
+    /// `substeps` are those it was built for).
     sweep: Option<Arc<expr::Sweep>>,
 }
 
@@ -429,6 +432,7 @@ impl Discrete {
     pub fn new(system: System, ts: f64, substeps: usize) -> Self {
         let substeps = substeps.max(1);
         let sweep = match &system {
+            s if s.nx() + s.nu() < SWEEP_MIN_NZ => None,
             System::Ode(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             // The built-in cart-pole through its expression form (the same bits for F and
@@ -497,10 +501,7 @@ impl Discrete {
     }
     /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu).
     pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
-        if let Some(sw) = self
-            .sweep()
-            .filter(|_| self.nx() + self.nu() >= SWEEP_HESSIAN_MIN_NZ)
-        {
+        if let Some(sw) = self.sweep() {
             return sw.lagrangian_hessian(x, u, lam, hess);
         }
         let (ts, m) = (self.ts, self.substeps);

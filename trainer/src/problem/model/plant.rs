@@ -459,5 +459,54 @@ mod tests {
         }
         let hess = t0.elapsed().as_nanos() as f64 / (n / 10) as f64 / 1e3;
         eprintln!("12-state chain: linearize {lin:.1} µs, lagrangian_hessian {hess:.1} µs");
+        // Dual numbers against the sweep, per call, for a small and a large plant.
+        let time = |reps: usize, f: &mut dyn FnMut()| {
+            let t0 = std::time::Instant::now();
+            for _ in 0..reps {
+                f();
+            }
+            t0.elapsed().as_nanos() as f64 / reps as f64
+        };
+        let quad = {
+            let path = concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../configs/planar_quadrotor.toml"
+            );
+            let cfg = crate::problem::ProblemConfig::load(std::path::Path::new(path)).unwrap();
+            Discrete::new(cfg.system, cfg.ocp.ts, cfg.ocp.rk4_substeps)
+        };
+        let cart_pole = super::super::CartPole::default();
+        let cart = Discrete::new(
+            System::Ode(OdePlant::try_from(cart_pole.expressions()).unwrap()),
+            0.05,
+            1,
+        );
+        for (name, d, reps) in [
+            ("pendulum_ode", &b, 200_000),
+            ("cart-pole as expressions", &cart, 100_000),
+            ("planar quadrotor", &quad, 20_000),
+            ("12-state chain", &chain, 2_000),
+        ] {
+            let System::Ode(p) = &d.system else {
+                panic!("an ODE plant")
+            };
+            let sw = p.model().sweep(d.ts, d.substeps);
+            let (nx, nu) = (p.nx(), p.nu());
+            let (x, u, lam) = (vec![0.1; nx], vec![0.2; nu], vec![1.0; nx]);
+            let (mut f, mut jx, mut ju) = (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
+            let mut h = vec![0.0; (nx + nu) * (nx + nu)];
+            let (ts, m) = (d.ts, d.substeps);
+            let ld = time(reps, &mut || {
+                p.linearize(ts, m, &x, &u, &mut f, &mut jx, &mut ju)
+            });
+            let ls = time(reps, &mut || sw.linearize(&x, &u, &mut f, &mut jx, &mut ju));
+            let hd = time(reps, &mut || {
+                p.lagrangian_hessian(ts, m, &x, &u, &lam, &mut h)
+            });
+            let hs = time(reps, &mut || sw.lagrangian_hessian(&x, &u, &lam, &mut h));
+            eprintln!(
+                "{name}: linearize dual {ld:.0} ns, sweep {ls:.0} ns; hessian dual {hd:.0} ns, sweep {hs:.0} ns"
+            );
+        }
     }
 }

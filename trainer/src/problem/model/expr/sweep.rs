@@ -154,7 +154,7 @@ impl Sweep {
     pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
         let (nx, nu) = (self.nx, self.nu);
         with_work(|w| {
-            by_nz!(self.nz(), self.forward(x, u, w));
+            by_nz!(self.nz(), self.forward_first(x, u, w));
             let nz = self.nz();
             for (i, &o) in self.outs.iter().enumerate() {
                 let o = o as usize;
@@ -182,12 +182,26 @@ impl Sweep {
         })
     }
 
-    /// Values, local partials and tangents of every slot.
+    /// Values and tangents of every slot (for `∂F`).
+    fn forward_first<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+        self.sweep_forward::<NZ, false>(x, u, w)
+    }
+
+    /// Values, local partials and tangents of every slot (for the reverse sweep).
     fn forward<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+        self.sweep_forward::<NZ, true>(x, u, w)
+    }
+
+    /// The forward sweep; the local partials are kept (for [`Sweep::reverse`]) when `KEEP`,
+    /// else their second-order entries are not computed.
+    #[inline(always)]
+    fn sweep_forward<const NZ: usize, const KEEP: bool>(&self, x: &[f64], u: &[f64], w: &mut Work) {
         let n = NZ + self.code.len();
         w.val.resize(n, 0.0);
         w.tan.resize(n * NZ, 0.0);
-        w.part.resize(self.code.len(), [0.0; 5]);
+        if KEEP {
+            w.part.resize(self.code.len(), [0.0; 5]);
+        }
         w.val[..self.nx].copy_from_slice(&x[..self.nx]);
         w.val[self.nx..NZ].copy_from_slice(&u[..self.nu]);
         w.tan[..NZ * NZ].fill(0.0);
@@ -198,7 +212,9 @@ impl Sweep {
             let s = NZ + k;
             let (v, p) = local(*op, &w.val);
             w.val[s] = v;
-            w.part[k] = p;
+            if KEEP {
+                w.part[k] = p;
+            }
             let (lo, hi) = w.tan.split_at_mut(s * NZ);
             let t: &mut [f64; NZ] = (&mut hi[..NZ]).try_into().expect("NZ");
             match arity(op) {
