@@ -281,6 +281,10 @@ fn without_equations(spec: &expr::SystemSpec) -> expr::SystemSpec {
 pub const SWEEP_MIN_NZ: usize = 5;
 
 /// The discrete dynamics `F(x, u)`: `substeps` RK4 steps of the system over `ts`.
+///
+/// Build it with [`Discrete::new`] and treat the fields as read-only: the derivative sweep
+/// is compiled there from `system` (a changed `ts` or `substeps` is noticed and the dual
+/// numbers are used instead; a replaced `system` is not — build a new `Discrete`).
 #[derive(Debug, Clone)]
 pub struct Discrete {
     /// The continuous system.
@@ -435,8 +439,9 @@ impl Discrete {
             s if s.nx() + s.nu() < SWEEP_MIN_NZ => None,
             System::Ode(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
-            // The built-in cart-pole through its expression form (the same bits for F and
-            // ∂F; tested in `plant::tests`): its Hessian is then a sweep's too.
+            // The built-in cart-pole through its expression form (F = the f64 step's bits,
+            // ∂F and ∇²λᵀF = its dual numbers' to rounding; `plant::tests`). Should it not
+            // compile (a non-finite parameter), the dual numbers serve as before.
             System::CartPole(c) => expr::compile(&c.expressions(), false)
                 .ok()
                 .map(|m| Arc::new(m.sweep(ts, substeps))),

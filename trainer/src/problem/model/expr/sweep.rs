@@ -192,8 +192,8 @@ impl Sweep {
         self.sweep_forward::<NZ, true>(x, u, w)
     }
 
-    /// The forward sweep; the local partials are kept (for [`Sweep::reverse`]) when `KEEP`,
-    /// else their second-order entries are not computed.
+    /// The forward sweep; the local partials are kept (for [`Sweep::reverse`]) when `KEEP`
+    /// (else their second-order entries are unused, and left to the optimiser to drop).
     #[inline(always)]
     fn sweep_forward<const NZ: usize, const KEEP: bool>(&self, x: &[f64], u: &[f64], w: &mut Work) {
         let n = NZ + self.code.len();
@@ -495,9 +495,10 @@ fn local(op: Op, v: &[f64]) -> (f64, [f64; 5]) {
             un(t, d, -2.0 * t * d)
         }
         Op::Abs(a) => {
-            // num-dual's convention: the derivative is −1 at 0 (`is_positive` is `> 0`).
+            // num-dual's convention (`is_positive` of num-traits is `is_sign_positive`): the
+            // derivative is +1 at +0.0 and −1 at −0.0.
             let x = g(a);
-            un(x.abs(), if x > 0.0 { 1.0 } else { -1.0 }, 0.0)
+            un(x.abs(), if x.is_sign_positive() { 1.0 } else { -1.0 }, 0.0)
         }
         Op::Atan2(a, b) => {
             let (x, y) = (g(a), g(b));

@@ -85,8 +85,7 @@ proptest! {
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x616d_7063),
         ..ProptestConfig::with_cases(64)
     })]
-    /// Every operation, smooth region: the sweep's F is the dual path's value to the bit for
-    /// the first-order outputs' operations, and all derivatives agree to 1e-12.
+    /// Every operation, smooth region: F, ∂F and ∇²λᵀF agree with the dual path's to 1e-12.
     #[test]
     fn sweeps_equal_the_dual_numbers_on_every_operation(
         x in 0.5f64..1.5,
@@ -100,20 +99,16 @@ proptest! {
                 let b = both(&smooth_spec(pair, discrete), discrete, substeps, &[x, y, z], &[l0, l1]);
                 let w = worst(&b);
                 prop_assert!(w <= 1e-12, "{pair:?} discrete {discrete} substeps {substeps}: {w:e}\nsweep {:?}\ndual {:?}", b.sweep, b.dual);
-                // Hessians are symmetric.
-                let h = &b.sweep[3];
-                for i in 0..3 {
-                    for j in 0..3 {
-                        prop_assert_eq!(h[i * 3 + j].to_bits(), h[j * 3 + i].to_bits());
-                    }
-                }
             }
         }
     }
 
-    /// Random expression trees (every operation, kinks, poles): where both are finite, the
-    /// sweep and the dual numbers agree to 1e-9 relative (rounding of different but exact
-    /// formulas, amplified by cancellation in deep trees).
+    /// Random expression trees (every operation, kinks, poles), as a discrete map: where both
+    /// are finite, the sweep and the dual numbers agree to 1e-9 relative (rounding of
+    /// different but exact formulas, amplified by cancellation in deep trees). Entries where
+    /// only one side is finite are not compared: the two differ on purpose there (the dual
+    /// numbers' tanh is sinh/cosh, NaN beyond |x| ≈ 710; their powers and quotients round
+    /// through other intermediates).
     #[test]
     fn sweeps_equal_the_dual_numbers_on_random_trees(
         a in tree(),
@@ -147,5 +142,25 @@ proptest! {
             let p = r.sweep[0][k];
             prop_assert!(p.to_bits() == f[k].to_bits() || (p.is_nan() && f[k].is_nan()), "F[{k}] {p} vs {}", f[k]);
         }
+    }
+}
+
+/// `abs` at ±0: the derivative's sign follows the sign bit of the argument, as in the dual
+/// numbers (+1 at +0.0, −1 at −0.0), through both sweeps.
+#[test]
+fn abs_at_signed_zero_follows_the_dual_numbers() {
+    for (z, sign) in [(0.0, 1.0), (-0.0, -1.0)] {
+        let mut d = spec(
+            &["x", "y"],
+            &["z"],
+            &[],
+            &[],
+            &["abs(z)*x + y", "abs(z)^2 + abs(x)"],
+        );
+        d.next = d.rhs.take();
+        let b = both(&d, true, 1, &[0.5, 1.0, z], &[1.0, 1.0]);
+        assert_eq!(worst(&b), 0.0, "z {z}: {:?} vs {:?}", b.sweep, b.dual);
+        // ∂F₀/∂z = sign · x.
+        assert_eq!(b.sweep[2][0], sign * 0.5, "z {z}");
     }
 }
