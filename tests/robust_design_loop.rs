@@ -80,6 +80,14 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     .unwrap();
     assert_eq!(cert["eps"].as_f64().unwrap(), eps);
     assert_eq!(cert["local"]["met"], true);
+    // The report names the refinement and links its ε-per-round figure, which exists.
+    let refinement = &rep["refinement"];
+    assert_eq!(refinement["certified_eps"].as_f64().unwrap(), eps);
+    assert!(refinement["rounds"].as_u64().unwrap() >= 1, "{refinement}");
+    let figure = refinement["figure"].as_str().unwrap();
+    assert!(rdir.join(figure).is_file(), "{figure}");
+    let md = std::fs::read_to_string(rdir.join("robust.md")).unwrap();
+    assert!(md.contains(&format!("]({figure})")), "{md}");
     let cl: serde_json::Value =
         serde_json::from_slice(&std::fs::read(rdir.join("closed_loop.json")).unwrap()).unwrap();
     let robust = cl["robust"].as_array().unwrap();

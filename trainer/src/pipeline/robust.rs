@@ -85,6 +85,21 @@ pub struct RobustReport {
     /// any makes the verdict `not_certified`.
     #[serde(default)]
     pub feasible_in_excluded: usize,
+    /// When the design loop refined (`robust.refine` and the first certificate missed the
+    /// design ε): its rounds, its certified ε and the ε-per-round figure (relative path).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refinement: Option<Refinement>,
+}
+
+/// The refinement step of the design loop, as the report states it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Refinement {
+    /// Refinement rounds run.
+    pub rounds: usize,
+    /// The refined net's certified ε (before the f32 allowance).
+    pub certified_eps: f64,
+    /// The ε-per-round figure, relative to the run directory.
+    pub figure: String,
 }
 
 /// The sound f32 allowance (libm tanh) of the export of `net` with `cert`; NaN when the
@@ -131,6 +146,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         f32_allowance(&cfg.name, &net, &cert),
         rf,
     );
+    let mut refinement = None;
     if !v.certified && cfg.robust.refine {
         // The design loop's second step: refine data and network with local certificates
         // until the certified ε meets the design ε (or the refinement budget is spent).
@@ -160,6 +176,11 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             let p = rdir.join(name);
             crate::io::write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
         }
+        refinement = Some(Refinement {
+            rounds: r.state.log.len(),
+            certified_eps: lc.base.eps,
+            figure: "refine/refine_rounds.svg".into(),
+        });
         if lc.base.eps < cert.eps {
             net = r.model;
             net.certificate = Some(lc.base.clone());
@@ -282,6 +303,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         study_seconds,
         excluded,
         feasible_in_excluded,
+        refinement,
     };
     for (k, runs) in st {
         cl.insert(k, runs);
@@ -326,6 +348,13 @@ pub fn markdown(r: &RobustReport) -> String {
         r.guarantee.name(),
         r.recursive_feasibility.name()
     );
+    if let Some(f) = &r.refinement {
+        s += &format!(
+            "Refinement (the design loop's second step): {} rounds, certified ε {:.4}; ε per \
+             round: [{}]({})\n\n",
+            f.rounds, f.certified_eps, f.figure, f.figure
+        );
+    }
     if let Some(e) = &r.excluded {
         s += &format!(
             "Certified domain: X minus {} excluded cells ({:.1} % of X, {} boxes in \
