@@ -27,7 +27,7 @@
 
 use super::super::plant::by_nz;
 use super::super::MAX_NZ;
-use super::tape::{operands, rename, Op, Tape};
+use super::tape::{args, operands, rename, Op, Tape};
 use num_dual::DualNum;
 use std::cell::RefCell;
 
@@ -315,43 +315,11 @@ impl Sweep {
     }
 }
 
-/// `(number of operands, a, b)` of an instruction (slots as indices).
+/// `(number of operands, a, b)` of an instruction, slots as indices.
 #[inline(always)]
 fn arity(op: &Op) -> (usize, usize, usize) {
-    match *op {
-        Op::Const(_) => (0, 0, 0),
-        Op::Add(a, b)
-        | Op::Sub(a, b)
-        | Op::Mul(a, b)
-        | Op::Div(a, b)
-        | Op::Pow(a, b)
-        | Op::Atan2(a, b)
-        | Op::Min(a, b)
-        | Op::Max(a, b) => (2, a as usize, b as usize),
-        Op::AddC(a, _)
-        | Op::CSub(_, a)
-        | Op::MulC(a, _)
-        | Op::DivC(a, _)
-        | Op::CDiv(_, a)
-        | Op::Neg(a)
-        | Op::Sq(a)
-        | Op::Recip(a)
-        | Op::Powi(a, _)
-        | Op::Powf(a, _)
-        | Op::Sin(a)
-        | Op::Cos(a)
-        | Op::Tan(a)
-        | Op::Asin(a)
-        | Op::Acos(a)
-        | Op::Atan(a)
-        | Op::Exp(a)
-        | Op::Log(a)
-        | Op::Sqrt(a)
-        | Op::Sinh(a)
-        | Op::Cosh(a)
-        | Op::Tanh(a)
-        | Op::Abs(a) => (1, a as usize, 0),
-    }
+    let (n, a, b) = args(op);
+    (n, a as usize, b as usize)
 }
 
 /// The value of an instruction and its local partials `[φ_a, φ_b, φ_aa, φ_ab, φ_bb]`; the

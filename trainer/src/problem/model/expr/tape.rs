@@ -472,10 +472,12 @@ fn bin_op(op: Bin, a: Arg, b: Arg) -> Option<Op> {
     })
 }
 
-/// The register operands of an instruction.
-pub(super) fn operands(op: &Op) -> Vec<R> {
+/// The register operands of an instruction: `(number of operands, a, b)` of an instruction (`b` = `a` for one operand, 0 for none);
+/// allocation-free, for the evaluation loops.
+#[inline(always)]
+pub(super) fn args(op: &Op) -> (usize, R, R) {
     match *op {
-        Op::Const(_) => vec![],
+        Op::Const(_) => (0, 0, 0),
         Op::Add(a, b)
         | Op::Sub(a, b)
         | Op::Mul(a, b)
@@ -483,7 +485,7 @@ pub(super) fn operands(op: &Op) -> Vec<R> {
         | Op::Pow(a, b)
         | Op::Atan2(a, b)
         | Op::Min(a, b)
-        | Op::Max(a, b) => vec![a, b],
+        | Op::Max(a, b) => (2, a, b),
         Op::AddC(a, _)
         | Op::CSub(_, a)
         | Op::MulC(a, _)
@@ -506,8 +508,14 @@ pub(super) fn operands(op: &Op) -> Vec<R> {
         | Op::Sinh(a)
         | Op::Cosh(a)
         | Op::Tanh(a)
-        | Op::Abs(a) => vec![a],
+        | Op::Abs(a) => (1, a, a),
     }
+}
+
+/// The register operands of an instruction, as a list.
+pub(super) fn operands(op: &Op) -> Vec<R> {
+    let (n, a, b) = args(op);
+    [a, b][..n].to_vec()
 }
 
 /// `op` with its value numbers replaced by registers.
