@@ -392,9 +392,16 @@ pub fn certify(
     let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
     let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
     let naive = lipschitz::naive_bound(&model.mlp);
-    let sdp = lipschitz::lipsdp_bound(&model.mlp);
-    let vertex = lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22));
-    let lower = lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7);
+    // The three are independent and deterministic: LipSDP beside the other two.
+    let (sdp, (vertex, lower)) = rayon::join(
+        || lipschitz::lipsdp_bound(&model.mlp),
+        || {
+            (
+                lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
+                lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
+            )
+        },
+    );
     let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
     if sdp < l_nn {
         (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);

@@ -367,3 +367,75 @@ fn mpc_estimates_of_a_linear_law() {
     assert!((s - 5.0).abs() < 1e-12);
     assert!(q <= 5.0 + 1e-9 && q > 3.0);
 }
+
+/// The blocked, parallel sampled lower bound is the serial point-by-point search bit for
+/// bit (the algorithm before the blocks, written out here), for 1 and 2 threads, on
+/// several shapes (n not a multiple of the block size).
+#[test]
+fn sampled_lower_bound_is_the_serial_search_for_any_thread_count() {
+    fn serial(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u64) -> f64 {
+        let (nx, nu) = (mlp.nx(), mlp.nu());
+        let mut ws = Workspace::default();
+        let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+        let mut norm_at = |x: &[f64], ws: &mut Workspace| {
+            mlp.eval(x, &mut u, &mut j, ws);
+            spectral_norm(&DMatrix::from_row_slice(nu, nx, &j))
+        };
+        let mut pts: Vec<(f64, Vec<f64>)> = (0..n)
+            .map(|i| {
+                let x: Vec<f64> = (0..nx)
+                    .map(|k| {
+                        lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(seed, i as u64, k as u64)
+                    })
+                    .collect();
+                (norm_at(&x, &mut ws), x)
+            })
+            .collect();
+        pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut best = pts.first().map_or(0.0, |p| p.0);
+        for (k, (v0, x0)) in pts.into_iter().take(10).enumerate() {
+            let (mut v, mut x) = (v0, x0);
+            let mut radius: Vec<f64> = (0..nx).map(|i| 0.05 * (hi[i] - lo[i])).collect();
+            for it in 0..400 {
+                let cand: Vec<f64> = (0..nx)
+                    .map(|i| {
+                        let r = 2.0
+                            * crate::rng::uniform(seed ^ 0x5151, (k * 1000 + it) as u64, i as u64)
+                            - 1.0;
+                        (x[i] + r * radius[i]).clamp(lo[i], hi[i])
+                    })
+                    .collect();
+                let c = norm_at(&cand, &mut ws);
+                if c > v {
+                    v = c;
+                    x = cand;
+                } else if it % 20 == 19 {
+                    radius.iter_mut().for_each(|r| *r *= 0.5);
+                }
+            }
+            best = best.max(v);
+        }
+        best
+    }
+    for (seed, widths, n) in [
+        (0u64, [2usize, 10, 10, 1].as_slice(), 3000usize),
+        (5, &[3, 5, 4, 2], 2500),
+        (9, &[4, 6, 3], 7),
+    ] {
+        let m = net(seed, widths);
+        let (lo, hi) = (vec![-2.0; widths[0]], vec![3.0; widths[0]]);
+        let want = serial(&m, &lo, &hi, n, seed);
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let got = pool.install(|| sampled_lower_bound(&m, &lo, &hi, n, seed));
+            assert_eq!(
+                got.to_bits(),
+                want.to_bits(),
+                "{widths:?} {threads} threads"
+            );
+        }
+    }
+}

@@ -255,13 +255,15 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     let eps = super::rounds::max_eps(&st.bounds);
     let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
     let naive = lipschitz::naive_bound(mlp);
-    let sdp = lipschitz::lipsdp_bound(mlp);
+    let (sdp, lower) = rayon::join(
+        || lipschitz::lipsdp_bound(mlp),
+        || lipschitz::sampled_lower_bound(mlp, lo, hi, 20_000, 7),
+    );
     let (l_nn, method) = if sdp < naive {
         (sdp, LnnMethod::LipSdpNeuron)
     } else {
         (naive, LnnMethod::Naive)
     };
-    let lower = lipschitz::sampled_lower_bound(mlp, lo, hi, 20_000, 7);
     let set = train_set(st, nx, cfg.system.nu(), &[], 1, rs.exclude_infeasible);
     let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
     let l_mpc = sl.max(q);
