@@ -263,6 +263,8 @@ mod tests {
         assert!(run(|r| rows.push(*r)));
         assert_eq!(rows.len(), STEPS + 1);
         assert_eq!(rows[0].x, [-core::f32::consts::PI, 0.0]);
-        assert!(rows.iter().all(|r| r.u[0].is_finite() && r.u[0].abs() <= 15.0));
+        assert!(rows
+            .iter()
+            .all(|r| r.u[0].is_finite() && r.u[0].abs() <= 15.0));
     }
 }

@@ -17,11 +17,11 @@
 #[cfg(target_os = "none")]
 mod device {
     use controller_core::{Controller, Output};
-    use firmware_example::controller::{weights::Net, NU, NX};
-    use firmware_example::bench_state;
     use core::hint::black_box;
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hio, syscall};
+    use firmware_example::bench_state;
+    use firmware_example::controller::{weights::Net, NU, NX};
     use firmware_example::decimal::write_u32;
 
     /// The controller as a named static (weights in flash), so its size shows in `nm`.
