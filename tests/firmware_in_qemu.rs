@@ -92,7 +92,7 @@ fn parse(csv: &str) -> Vec<Row> {
             Row {
                 k: f[0].parse().unwrap(),
                 x: [f[1].parse().unwrap(), f[2].parse().unwrap()],
-                u: f[3].parse().unwrap(),
+                u: [f[3].parse().unwrap()],
                 flags: Flags(f[4].parse().unwrap()),
             }
         })
@@ -109,11 +109,11 @@ fn trajectory_matches_host_and_f64_network(board: &Board) {
 
     // (1) The host runs the same f32 code: identical bits.
     let mut host = Vec::new();
-    run(|r| host.push(*r));
+    assert!(run(|r| host.push(*r)));
     for (d, h) in device.iter().zip(&host) {
         assert_eq!(
-            (d.x.map(f32::to_bits), d.u.to_bits(), d.flags),
-            (h.x.map(f32::to_bits), h.u.to_bits(), h.flags),
+            (d.x.map(f32::to_bits), d.u.map(f32::to_bits), d.flags),
+            (h.x.map(f32::to_bits), h.u.map(f32::to_bits), h.flags),
             "{}, step {}: device {d:?} host {h:?}",
             board.machine,
             d.k
@@ -137,7 +137,7 @@ fn trajectory_matches_host_and_f64_network(board: &Board) {
             f64::from(CERTIFICATE.clamp_lo[0]),
             f64::from(CERTIFICATE.clamp_hi[0]),
         );
-        worst = worst.max((f64::from(r.u) - u64).abs());
+        worst = worst.max((f64::from(r.u[0]) - u64).abs());
     }
     println!(
         "{}: max |u_device − u_f64| = {worst:e} (allowance {:e})",
@@ -319,4 +319,81 @@ fn no_panic_reachable_from_evaluate(board: &Board) {
         code + data
     );
     assert!(code > 0);
+}
+
+/// A controller of other dimensions on the device: `firmware-example` built with
+/// `AMPC_WEIGHTS` = the 3-6-2 net of `tests/fixtures/own-weights` (nx = 3, nu = 2, an
+/// excluded box). `evaluate-check` on the M4 and the M0 prints the host build's lines bit
+/// for bit (both built with the same file), the closed loop says why it is skipped, and
+/// `evaluate-bench` runs.
+#[test]
+fn another_controller_size_runs_on_both_boards() {
+    let weights = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/fixtures/own-weights/src/weights.rs"
+    );
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let dir = target_dir().join("firmware-qemu-362");
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let host = Command::new(&cargo)
+        .args([
+            "run",
+            "-q",
+            "-p",
+            "firmware-example",
+            "--release",
+            "--bin",
+            "evaluate-check",
+        ])
+        .env("CARGO_TARGET_DIR", &dir)
+        .env("AMPC_WEIGHTS", weights)
+        .current_dir(root)
+        .output()
+        .expect("run cargo");
+    assert!(
+        host.status.success(),
+        "{}",
+        String::from_utf8_lossy(&host.stderr)
+    );
+    let host = String::from_utf8(host.stdout).unwrap();
+    let rows: Vec<&str> = host.lines().collect();
+    assert_eq!(rows.len(), PROBES as usize);
+    // i, two u bit patterns, flags.
+    assert!(
+        rows.iter().all(|l| l.split(',').count() == 4),
+        "{}",
+        rows[0]
+    );
+    for board in [&M4, &M0] {
+        let st = Command::new(&cargo)
+            .args([
+                "build",
+                "-q",
+                "-p",
+                "firmware-example",
+                "--release",
+                "--bins",
+            ])
+            .args(["--target", board.target])
+            .env("CARGO_TARGET_DIR", &dir)
+            .env("AMPC_WEIGHTS", weights)
+            .current_dir(root)
+            .status()
+            .expect("run cargo");
+        assert!(
+            st.success(),
+            "building the 3-6-2 firmware for {}",
+            board.target
+        );
+        let bins = dir.join(board.target).join("release");
+        assert_eq!(
+            qemu(board, &bins.join("evaluate-check")),
+            host,
+            "{}: device and host differ",
+            board.machine
+        );
+        let cl = qemu(board, &bins.join("firmware-example"));
+        assert!(cl.contains("# closed loop skipped"), "{cl}");
+        assert!(qemu(board, &bins.join("evaluate-bench")).starts_with("calls=1 "));
+    }
 }

@@ -3,7 +3,8 @@
 //!
 //! Reads the number of calls N from the semihosting command line
 //! (`-semihosting-config enable=on,target=native,arg=evaluate-bench,arg=N`, default 1),
-//! evaluates N states (cycling through 8 fixed states in X), and prints
+//! evaluates N states (cycling through the 8 states of `firmware_example::bench_state`, in
+//! X), and prints
 //! `calls=N stack_bytes=S u_sum_bits=…`. S is the stack used by one call, by stack painting:
 //! 4 KiB below the current stack pointer are filled with a pattern, `ampc_evaluate` is
 //! called, and the deepest overwritten word gives the depth. Executed instructions per
@@ -15,15 +16,17 @@
 
 #[cfg(target_os = "none")]
 mod device {
-    use controller_core::{generated::weights::Net, Controller, Output, NU, NX};
+    use controller_core::{Controller, Output};
     use core::hint::black_box;
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hio, syscall};
+    use firmware_example::bench_state;
+    use firmware_example::controller::{weights::Net, NU, NX};
     use firmware_example::decimal::write_u32;
 
     /// The controller as a named static (weights in flash), so its size shows in `nm`.
     #[no_mangle]
-    pub static AMPC_CONTROLLER: Controller<NX, NU, Net> = controller_core::CONTROLLER;
+    pub static AMPC_CONTROLLER: Controller<NX, NU, Net> = firmware_example::CONTROLLER;
 
     /// The measured entry point.
     #[no_mangle]
@@ -32,16 +35,6 @@ mod device {
         AMPC_CONTROLLER.evaluate(x)
     }
 
-    const STATES: [[f32; 2]; 8] = [
-        [-3.1, 0.0],
-        [-2.0, 0.5],
-        [-1.0, -0.8],
-        [-0.2, 0.3],
-        [0.1, -0.1],
-        [1.5, 0.9],
-        [2.5, -0.4],
-        [5.0, 0.7],
-    ];
     const PAINT: u32 = 0xDEAD_BEEF;
     const DEPTH: usize = 1024; // words
 
@@ -76,7 +69,7 @@ mod device {
                 core::ptr::write_volatile(a as *mut u32, PAINT);
             }
         }
-        black_box(ampc_evaluate(black_box(&STATES[0])));
+        black_box(ampc_evaluate(black_box(&bench_state(0))));
         let mut lowest = top;
         for a in (bottom..top).step_by(4) {
             // SAFETY: same region as above.
@@ -92,11 +85,12 @@ mod device {
     fn main() -> ! {
         let n = calls();
         let stack = stack_use();
+        let states: [[f32; NX]; 8] = core::array::from_fn(bench_state);
         let mut acc = 0u32;
         for i in 0..n {
-            let x = STATES[(i % 8) as usize];
+            let x = states[(i % 8) as usize];
             let o = black_box(ampc_evaluate(black_box(&x)));
-            acc = acc.wrapping_add(o.u[0].to_bits());
+            acc = o.u.iter().fold(acc, |a, u| a.wrapping_add(u.to_bits()));
         }
         let mut ok = false;
         if let Ok(mut out) = hio::hstdout() {
