@@ -62,6 +62,10 @@ fn main() {
     println!(
         "{:.3} µs per loss_grad of {bs} ({}); bits hash {hash:016x}",
         best * 1e6,
-        if loss_only { "loss only" } else { "loss and gradient" }
+        if loss_only {
+            "loss only"
+        } else {
+            "loss and gradient"
+        }
     );
 }
