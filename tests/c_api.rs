@@ -273,6 +273,8 @@ fn rust_firmware() -> PathBuf {
     cmd.args(["build", "-p", "firmware-example", "--release", "--bins"])
         .args(["--target", "thumbv7em-none-eabihf"])
         .env("CARGO_TARGET_DIR", &dir)
+        // The built-in pendulum, whatever the caller's environment names.
+        .env_remove("AMPC_WEIGHTS")
         .current_dir(root());
     if FAST_TANH {
         cmd.args(["--features", "fast-tanh"]);

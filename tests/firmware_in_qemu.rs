@@ -53,6 +53,8 @@ fn build_firmware(board: &Board) -> PathBuf {
     cmd.args(["build", "-p", "firmware-example", "--release", "--bins"])
         .args(["--target", board.target])
         .env("CARGO_TARGET_DIR", &dir)
+        // The built-in pendulum, whatever the caller's environment names.
+        .env_remove("AMPC_WEIGHTS")
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     if controller_core::activation::TANH_KIND == "fast" {
         cmd.args(["--features", "fast-tanh"]);
@@ -172,10 +174,16 @@ fn probe_states_match_host(board: &Board) {
         let h = controller_core::evaluate(&x);
         assert_eq!(
             row.as_slice(),
-            [i as u32, h.u[0].to_bits(), u32::from(h.flags.0)],
+            [
+                i as u32,
+                x[0].to_bits(),
+                x[1].to_bits(),
+                h.u[0].to_bits(),
+                u32::from(h.flags.0)
+            ],
             "{}: state {i} {x:?}: device u = {:e}, host u = {:e}",
             board.machine,
-            f32::from_bits(row[1]),
+            f32::from_bits(row[3]),
             h.u[0]
         );
         flagged += usize::from(h.flags != Flags::EMPTY);
@@ -204,7 +212,7 @@ fn probe_states_match_host(board: &Board) {
             f64::from(CERTIFICATE.clamp_lo[0]),
             f64::from(CERTIFICATE.clamp_hi[0]),
         );
-        worst = worst.max((f64::from(f32::from_bits(row[1])) - u64).abs());
+        worst = worst.max((f64::from(f32::from_bits(row[3])) - u64).abs());
     }
     println!(
         "{}: probes: max |u_device − u_f64| = {worst:e} (allowance {:e})",
@@ -321,11 +329,16 @@ fn no_panic_reachable_from_evaluate(board: &Board) {
     assert!(code > 0);
 }
 
+/// The 3-6-2 controller of `tests/fixtures/own-weights`, compiled into this test.
+mod own {
+    controller_core::include_controller!("fixtures/own-weights/src/weights.rs");
+}
+
 /// A controller of other dimensions on the device: `firmware-example` built with
 /// `AMPC_WEIGHTS` = the 3-6-2 net of `tests/fixtures/own-weights` (nx = 3, nu = 2, an
-/// excluded box). `evaluate-check` on the M4 and the M0 prints the host build's lines bit
-/// for bit (both built with the same file), the closed loop says why it is skipped, and
-/// `evaluate-bench` runs.
+/// excluded box). The host build's `evaluate-check` lines equal this test's own evaluation of
+/// the fixture at the printed states; on the M4 and the M0 they are the same bit for bit, the
+/// closed loop says why it is skipped, and `evaluate-bench` runs.
 #[test]
 fn another_controller_size_runs_on_both_boards() {
     let weights = concat!(
@@ -356,14 +369,36 @@ fn another_controller_size_runs_on_both_boards() {
         String::from_utf8_lossy(&host.stderr)
     );
     let host = String::from_utf8(host.stdout).unwrap();
-    let rows: Vec<&str> = host.lines().collect();
+    // Every line against the fixture's controller compiled into this test (not the
+    // firmware crate's code): i, the state's 3 bit patterns, two u bit patterns, flags.
+    let rows: Vec<Vec<u32>> = host
+        .lines()
+        .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+        .collect();
     assert_eq!(rows.len(), PROBES as usize);
-    // i, two u bit patterns, flags.
+    let mut plain = 0;
+    let mut us = std::collections::BTreeSet::new();
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), 1 + 3 + 2 + 1, "line {i}: {row:?}");
+        assert_eq!(row[0], i as u32);
+        let x = [row[1], row[2], row[3]].map(f32::from_bits);
+        let o = own::evaluate(&x);
+        assert_eq!(
+            &row[4..],
+            [o.u[0].to_bits(), o.u[1].to_bits(), u32::from(o.flags.0)],
+            "line {i}, x = {x:?}"
+        );
+        plain += usize::from(o.flags == Flags::EMPTY);
+        us.insert((o.u[0].to_bits(), o.u[1].to_bits()));
+    }
+    // Plain states, varied outputs, and some states off X (out of domain) among the probes.
+    assert!(plain > PROBES as usize / 4, "{plain} unflagged");
     assert!(
-        rows.iter().all(|l| l.split(',').count() == 4),
-        "{}",
-        rows[0]
+        us.len() > PROBES as usize / 4,
+        "{} distinct outputs",
+        us.len()
     );
+    assert!(rows.iter().any(|r| r[6] != 0));
     for board in [&M4, &M0] {
         let st = Command::new(&cargo)
             .args([

@@ -11,9 +11,9 @@
 //! ẋ2 = u/(m l²) − (g/l) sin(x1 + π), m = l = 1, g = 9.81, integrated in f32 by one RK4
 //! step per Ts = 0.05 s (`libm::sinf`, the same code on host and device). [`run`] drives
 //! [`STEPS`] steps from (−π, 0) with [`evaluate`] and hands each row to a sink; the
-//! firmware prints them over semihosting, the host test collects them. It runs only for a
-//! controller with the pendulum's dimensions (nx = 2, nu = 1): another plant needs its own
-//! f32 model in place of `plant.rs`. No `core::fmt` anywhere: [`decimal::write_f32`]
+//! firmware prints them over semihosting, the host test collects them. It runs only with the
+//! built-in pendulum controller ([`CLOSED_LOOP`]: no `AMPC_WEIGHTS`); another plant, or
+//! another controller of the same sizes, needs its own f32 model in place of `plant.rs`. No `core::fmt` anywhere: [`decimal::write_f32`]
 //! prints floats with 9 significant digits, which round-trip exactly to the same f32.
 #![cfg_attr(not(test), no_std)]
 
@@ -28,6 +28,10 @@ pub mod controller {
 pub use controller::{evaluate, CERTIFICATE, CONTROLLER, NU, NX};
 
 use controller_core::Flags;
+
+/// Whether [`run`] simulates the closed loop: only with the built-in pendulum controller
+/// (built without `AMPC_WEIGHTS`, whose plant `plant.rs` models), nx = 2, nu = 1.
+pub const CLOSED_LOOP: bool = cfg!(ampc_pendulum) && NX == 2 && NU == 1;
 
 /// Number of control steps of the upswing.
 pub const STEPS: usize = 90;
@@ -46,10 +50,10 @@ pub struct Row {
 }
 
 /// Runs the closed loop from (−π, 0) for [`STEPS`] steps, rows k = 0..=STEPS; returns
-/// `false` without a row when the controller does not have the pendulum's dimensions
-/// (nx = 2, nu = 1).
+/// `false` without a row unless [`CLOSED_LOOP`] (the controller is not the built-in
+/// pendulum's, whose plant this loop simulates).
 pub fn run(mut sink: impl FnMut(&Row)) -> bool {
-    if NX != 2 || NU != 1 {
+    if !CLOSED_LOOP {
         return false;
     }
     let mut x = [0.0f32; NX];
@@ -148,9 +152,10 @@ pub fn probe_state(i: u32) -> [f32; NX] {
     x
 }
 
-/// The `s`-th of the 8 states `evaluate-bench` cycles through: for the pendulum (nx = 2) the
-/// 8 states of the recorded measurements, else a Latin hypercube in X (component k of
-/// state s at the centre of stratum (s·(2k + 3)) mod 8 of [lo_k, hi_k]).
+/// The `s`-th of the 8 states `evaluate-bench` cycles through: for the built-in pendulum
+/// ([`CLOSED_LOOP`]) the 8 states of the recorded measurements, else a Latin hypercube in X
+/// (component k of state s at the centre of stratum (s·(2k + 3)) mod 8 of [lo_k, hi_k];
+/// components k and k + 4 share their strata).
 pub fn bench_state(s: usize) -> [f32; NX] {
     const PENDULUM: [[f32; 2]; 8] = [
         [-3.1, 0.0],
@@ -163,7 +168,7 @@ pub fn bench_state(s: usize) -> [f32; NX] {
         [5.0, 0.7],
     ];
     let mut x = [0.0f32; NX];
-    if NX == 2 {
+    if CLOSED_LOOP {
         if let Some(p) = PENDULUM.get(s % 8) {
             for (xi, v) in x.iter_mut().zip(p) {
                 *xi = *v;
@@ -182,8 +187,9 @@ pub fn bench_state(s: usize) -> [f32; NX] {
 /// CSV header of the closed loop's output (the pendulum's: nx = 2, nu = 1).
 pub const HEADER: &str = "k,x1,x2,u,flags";
 
-/// Bytes of a formatted row: the index, NX + NU floats of at most 15 bytes, the flags.
-pub const ROW_BYTES: usize = 32 + 16 * (NX + NU);
+/// Bytes of a formatted row: the index (≤ 10 digits), NX + NU floats of at most 16 bytes
+/// each after a comma, the flags (≤ 3 digits) after a comma, the newline.
+pub const ROW_BYTES: usize = 16 + 17 * (NX + NU);
 
 /// Formats a row as `k,x1,…,u1,…,flags\n` into `buf` (for the pendulum `k,x1,x2,u,flags`);
 /// returns the number of bytes.
@@ -217,6 +223,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[cfg(ampc_pendulum)]
     fn rows_are_formatted_as_csv() {
         let mut buf = [0u8; ROW_BYTES];
         let r = Row {
@@ -258,6 +265,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(ampc_pendulum)]
     fn run_produces_91_rows_from_the_hanging_position() {
         let mut rows = Vec::new();
         assert!(run(|r| rows.push(*r)));

@@ -1,6 +1,6 @@
 //! Check firmware: the controller's `evaluate` on the [`firmware_example::PROBES`] states
-//! of [`firmware_example::probe_state`], one line `i,u1_bits,…,flags` each (each u as the
-//! decimal of its f32 bit pattern), then exit 0. `tests/firmware_in_qemu.rs` runs it on the
+//! of [`firmware_example::probe_state`], one line `i,x1_bits,…,u1_bits,…,flags` each (each
+//! x and u as the decimal of its f32 bit pattern), then exit 0. `tests/firmware_in_qemu.rs` runs it on the
 //! Cortex-M4 (mps2-an386) and the Cortex-M0 (microbit) and compares every line with the
 //! host. On the host it prints the same lines (the host's reference), see [`lines`].
 #![cfg_attr(target_os = "none", no_std)]
@@ -34,19 +34,23 @@ mod device {
 }
 
 /// Hands the check's output to `write`, piece by piece: per probe state i the line
-/// `i,u1_bits,…,u_NU_bits,flags`.
+/// `i,x1_bits,…,x_NX_bits,u1_bits,…,u_NU_bits,flags`.
 fn lines(mut write: impl FnMut(&[u8])) {
     use firmware_example::decimal::write_u32;
     use firmware_example::{evaluate, probe_state, PROBES};
     let mut t = [0u8; 24];
     for i in 0..PROBES {
-        let o = evaluate(&probe_state(i));
+        let x = probe_state(i);
+        let o = evaluate(&x);
         let mut num = |v: u32, sep: &[u8]| {
             let l = write_u32(v, &mut t);
             write(t.get(..l).unwrap_or(&[]));
             write(sep);
         };
         num(i, b",");
+        for v in x {
+            num(v.to_bits(), b",");
+        }
         for u in o.u {
             num(u.to_bits(), b",");
         }
