@@ -69,15 +69,19 @@ fn build_firmware(board: &Board) -> PathBuf {
 }
 
 fn qemu(board: &Board, elf: &std::path::Path) -> String {
-    let out = Command::new("qemu-system-arm")
+    // Under coreutils' `timeout`: a firmware that hangs fails the test (status 124)
+    // instead of hanging it.
+    let out = Command::new("timeout")
+        .args(["-k", "5", "300", "qemu-system-arm"])
         .args(["-cpu", board.cpu, "-machine", board.machine, "-nographic"])
         .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
         .arg(elf)
         .output()
-        .expect("qemu-system-arm not found: apt-get install -y qemu-system-arm");
+        .expect("coreutils' timeout not found");
     assert!(
         out.status.success(),
-        "firmware {elf:?} on {} exited with {:?}",
+        "firmware {elf:?} on {} exited with {:?} (124: timed out after 300 s; 127: \
+         qemu-system-arm not found, apt-get install -y qemu-system-arm)",
         board.machine,
         out.status
     );
