@@ -85,7 +85,8 @@ pub const PROBES: u32 = 600;
 /// cases (zeros of both signs, NaN, ±inf, subnormals, huge values, the corners of X and
 /// points just outside, each spread over the components), then pseudo-random states
 /// (xorshift32, fixed seed) uniform on X widened by 10 % of its width on each side,
-/// computed in f32. For nx = 2 the edge cases are the pairs listed in the code.
+/// computed in f32. For nx = 2 the edge cases are the pairs listed in the code; for nx = 1,
+/// states 16–21 are edge cases too (the pairs' second values).
 pub fn probe_state(i: u32) -> [f32; NX] {
     let lo = CERTIFICATE.domain_lo.map(|v| v as f32);
     let hi = CERTIFICATE.domain_hi.map(|v| v as f32);
@@ -133,6 +134,17 @@ pub fn probe_state(i: u32) -> [f32; NX] {
         13 => Some(out_hi),
         14 => Some(pick(f32::MIN_POSITIVE, -f32::MIN_POSITIVE)),
         15 => Some(pick(-1.0e-3, 2.0e-3)),
+        // With one component `pick` keeps only its first value: the second ones here.
+        16..=21 if NX == 1 => [
+            f32::INFINITY,
+            0.5,
+            -1.0e-40,
+            -1.0e30,
+            f32::MAX,
+            -f32::MIN_POSITIVE,
+        ]
+        .get(i as usize - 16)
+        .map(|&v| [v; NX]),
         _ => None,
     };
     if let Some(x) = fixed {
