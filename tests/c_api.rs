@@ -222,24 +222,7 @@ fn host_c_program_is_bit_identical_to_the_core_on_ten_thousand_states() {
 type Row = (usize, u32, u32, u32, u8);
 
 fn qemu(elf: &Path) -> String {
-    // Under coreutils' `timeout`: a firmware that hangs fails the test (status 124)
-    // instead of hanging it.
-    let out = Command::new("timeout")
-        .args(["-k", "5", "300", "qemu-system-arm"])
-        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(elf)
-        .output()
-        .expect("coreutils' timeout not found");
-    assert!(
-        out.status.success(),
-        "{} exited with {:?} (124: timed out after 300 s; 127: qemu-system-arm not found, \
-         apt-get install -y qemu-system-arm): {}",
-        elf.display(),
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
+    ampc_tests::qemu("cortex-m4", "mps2-an386", elf)
 }
 
 /// Rows of the C firmware (floats as hex bits) or the Rust firmware (decimal, 9 digits).

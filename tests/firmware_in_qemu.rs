@@ -44,48 +44,55 @@ fn target_dir() -> PathBuf {
     exe.ancestors().nth(3).unwrap().to_path_buf()
 }
 
-/// Builds the firmware binaries for `board` (own target dir: no lock contention with the
-/// outer cargo).
-fn build_firmware(board: &Board) -> PathBuf {
-    let dir = target_dir().join("firmware-qemu");
+/// `cargo <args>` on `firmware-example` with the controller `weights` (a `trainer export
+/// --rust` file; `None`: the built-in pendulum, whatever the caller's environment names),
+/// the test crate's tanh, and a target dir of its own per controller (no lock contention
+/// with the outer cargo); returns the command and that target dir.
+fn firmware_cargo(args: &[&str], weights: Option<&str>) -> (Command, PathBuf) {
+    let dir = target_dir().join(if weights.is_some() {
+        "firmware-qemu-own"
+    } else {
+        "firmware-qemu"
+    });
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "-p", "firmware-example", "--release", "--bins"])
-        .args(["--target", board.target])
+    cmd.args(args)
+        .args(["-p", "firmware-example", "--release"])
         .env("CARGO_TARGET_DIR", &dir)
-        // The built-in pendulum, whatever the caller's environment names.
-        .env_remove("AMPC_WEIGHTS")
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    match weights {
+        Some(w) => cmd.env("AMPC_WEIGHTS", w),
+        None => cmd.env_remove("AMPC_WEIGHTS"),
+    };
     if controller_core::activation::TANH_KIND == "fast" {
         cmd.args(["--features", "fast-tanh"]);
     }
-    let st = cmd.status().expect("run cargo");
+    (cmd, dir)
+}
+
+/// Builds the firmware binaries for `board` with `weights` (see [`firmware_cargo`]).
+fn build_firmware_with(board: &Board, weights: Option<&str>) -> PathBuf {
+    let (mut cmd, dir) = firmware_cargo(&["build", "-q", "--bins"], weights);
+    let st = cmd
+        .args(["--target", board.target])
+        .status()
+        .expect("run cargo");
     assert!(
         st.success(),
-        "building the firmware failed (is the target installed? rustup target add {})",
+        "building the firmware ({}) failed (is the target installed? rustup target add {})",
+        weights.unwrap_or("the pendulum"),
         board.target
     );
     dir.join(board.target).join("release")
 }
 
+/// Builds the pendulum's firmware binaries for `board`.
+fn build_firmware(board: &Board) -> PathBuf {
+    build_firmware_with(board, None)
+}
+
 fn qemu(board: &Board, elf: &std::path::Path) -> String {
-    // Under coreutils' `timeout`: a firmware that hangs fails the test (status 124)
-    // instead of hanging it.
-    let out = Command::new("timeout")
-        .args(["-k", "5", "300", "qemu-system-arm"])
-        .args(["-cpu", board.cpu, "-machine", board.machine, "-nographic"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(elf)
-        .output()
-        .expect("coreutils' timeout not found");
-    assert!(
-        out.status.success(),
-        "firmware {elf:?} on {} exited with {:?} (124: timed out after 300 s; 127: \
-         qemu-system-arm not found, apt-get install -y qemu-system-arm)",
-        board.machine,
-        out.status
-    );
-    String::from_utf8(out.stdout).unwrap()
+    ampc_tests::qemu(board.cpu, board.machine, elf)
 }
 
 fn parse(csv: &str) -> Vec<Row> {
@@ -349,24 +356,8 @@ fn another_controller_size_runs_on_both_boards() {
         env!("CARGO_MANIFEST_DIR"),
         "/fixtures/own-weights/src/weights.rs"
     );
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let dir = target_dir().join("firmware-qemu-362");
-    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
-    let host = Command::new(&cargo)
-        .args([
-            "run",
-            "-q",
-            "-p",
-            "firmware-example",
-            "--release",
-            "--bin",
-            "evaluate-check",
-        ])
-        .env("CARGO_TARGET_DIR", &dir)
-        .env("AMPC_WEIGHTS", weights)
-        .current_dir(root)
-        .output()
-        .expect("run cargo");
+    let (mut host, _) = firmware_cargo(&["run", "-q", "--bin", "evaluate-check"], Some(weights));
+    let host = host.output().expect("run cargo");
     assert!(
         host.status.success(),
         "{}",
@@ -404,27 +395,7 @@ fn another_controller_size_runs_on_both_boards() {
     );
     assert!(rows.iter().any(|r| r[6] != 0));
     for board in [&M4, &M0] {
-        let st = Command::new(&cargo)
-            .args([
-                "build",
-                "-q",
-                "-p",
-                "firmware-example",
-                "--release",
-                "--bins",
-            ])
-            .args(["--target", board.target])
-            .env("CARGO_TARGET_DIR", &dir)
-            .env("AMPC_WEIGHTS", weights)
-            .current_dir(root)
-            .status()
-            .expect("run cargo");
-        assert!(
-            st.success(),
-            "building the 3-6-2 firmware for {}",
-            board.target
-        );
-        let bins = dir.join(board.target).join("release");
+        let bins = build_firmware_with(board, Some(weights));
         assert_eq!(
             qemu(board, &bins.join("evaluate-check")),
             host,

@@ -95,3 +95,25 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         )
     })
 }
+
+/// Runs the firmware `elf` on QEMU's `machine` with `cpu` (semihosting on) and returns its
+/// standard output; panics, naming the file, unless it exits with status 0. Under coreutils'
+/// `timeout` (300 s): a firmware that hangs fails the test instead of hanging it.
+pub fn qemu(cpu: &str, machine: &str, elf: &std::path::Path) -> String {
+    let out = Command::new("timeout")
+        .args(["-k", "5", "300", "qemu-system-arm"])
+        .args(["-cpu", cpu, "-machine", machine, "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(elf)
+        .output()
+        .expect("coreutils' timeout not found");
+    assert!(
+        out.status.success(),
+        "firmware {} on {machine} exited with {:?} (124: timed out after 300 s; 127: \
+         qemu-system-arm not found, apt-get install -y qemu-system-arm): {}",
+        elf.display(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("firmware output is UTF-8")
+}

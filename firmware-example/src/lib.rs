@@ -13,8 +13,9 @@
 //! [`STEPS`] steps from (−π, 0) with [`evaluate`] and hands each row to a sink; the
 //! firmware prints them over semihosting, the host test collects them. It runs only with the
 //! built-in pendulum controller ([`CLOSED_LOOP`]: no `AMPC_WEIGHTS`); another plant, or
-//! another controller of the same sizes, needs its own f32 model in place of `plant.rs`. No `core::fmt` anywhere: [`decimal::write_f32`]
-//! prints floats with 9 significant digits, which round-trip exactly to the same f32.
+//! another controller of the same sizes, needs its own f32 model in place of `plant.rs`.
+//! No `core::fmt` anywhere: [`decimal::write_f32`] prints floats with 9 significant digits,
+//! which round-trip exactly to the same f32.
 #![cfg_attr(not(test), no_std)]
 
 pub mod decimal;

@@ -1,8 +1,8 @@
 //! Check firmware: the controller's `evaluate` on the [`firmware_example::PROBES`] states
 //! of [`firmware_example::probe_state`], one line `i,x1_bits,…,u1_bits,…,flags` each (each
-//! x and u as the decimal of its f32 bit pattern), then exit 0. `tests/firmware_in_qemu.rs` runs it on the
-//! Cortex-M4 (mps2-an386) and the Cortex-M0 (microbit) and compares every line with the
-//! host. On the host it prints the same lines (the host's reference), see [`lines`].
+//! x and u as the decimal of its f32 bit pattern), then exit 0. `tests/firmware_in_qemu.rs`
+//! runs it on the Cortex-M4 (mps2-an386) and the Cortex-M0 (microbit) and compares every
+//! line with the host. On the host it prints the same lines (the host's reference), see [`lines`].
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
