@@ -3,10 +3,8 @@
 //! Iteration (Nocedal & Wright, Alg. 18.3 with an ℓ₁ merit function):
 //! 1. At (z, λ, ν) evaluate ∇f, c, ∇c (exact, AD) and the exact Hessian of the Lagrangian
 //!    `∇²L = ∇²f + Σ_k ∇²(λ_{k+1}ᵀ F(x_k, u_k))`, stage block by stage block.
-//! 2. Keep the exact Hessian if the problem is the hard one without nonlinear constraint
-//!    rows and the QP is
-//!    strictly convex with it on the null space of the linearised dynamics (`convexity`
-//!    module: a Riccati recursion, O(N)); otherwise
+//! 2. Keep the exact Hessian if the QP is strictly convex with it on the null space of the
+//!    linearised dynamics (`convexity` module: a Riccati recursion, O(N)); otherwise
 //!    convexify block by block: keep the exact block where it is positive semidefinite, use
 //!    the Gauss–Newton block (the objective's Hessian 2·diag(Q, R)) where it is not. Solve
 //!    the QP subproblem (`qp` module: structured interior point, or clarabel) for the step d
@@ -554,16 +552,13 @@ impl SqpSolver {
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
-            // The soft problem and nonlinear constraint rows keep the blockwise rule: with the
-            // exact Hessian both QP backends failed on QPs that pass the test (a soft
-            // pendulum_curved state of mpc::constraint_checks; a Gymnasium cart-pole state,
-            // 93 of `ipopt_compare`'s seed-7 draw, whose soft solve then failed).
-            // A QP with the exact Hessian that the QP solvers fail on (seen once in 300
-            // hard re-solves of the Gymnasium cart-pole from a soft optimum) is re-solved with
-            // the blockwise rule.
+            // The exact Hessian wherever the test passes, the soft problem and nonlinear
+            // constraint rows included: there the blockwise rule drops the curvature
+            // λᵀ∇²F of multipliers as large as the slack weight (~1e4) and crawled to the
+            // iteration limit on infeasible ball-beam states (BENCHMARKS, "Soft problems").
+            // A QP with the exact Hessian that the QP solver fails on is re-solved with the
+            // blockwise rule.
             let mut exact = !conservative
-                && self.ocp.n_slack == 0
-                && !self.ocp.has_nonlinear_rows()
                 && self
                     .convexity
                     .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
