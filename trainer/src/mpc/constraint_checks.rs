@@ -395,6 +395,91 @@ fn infeasible_ball_beam_state_gets_a_soft_label_without_the_ladder() {
     assert!(l.u.iter().chain(&l.du_dx).all(|v| v.is_finite()));
 }
 
+/// A hard-infeasible state of the Gymnasium cart-pole with a curved speed–force constraint and
+/// a terminal region (`tests/reference/cartpole_public_nl.toml`): the soft SQP's full steps
+/// were rejected by the ℓ₁ merit under a penalty μ ≈ 2·10⁵ (the Maratos effect; steps of
+/// 1/16–1/128 to the iteration limit, then the ladder failed too). With the second-order
+/// correction the plain solve gives it a soft label.
+#[test]
+fn maratos_state_gets_a_soft_label_with_the_second_order_correction() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/reference/cartpole_public_nl.toml"
+    );
+    let cfg = ProblemConfig::load(std::path::Path::new(path)).unwrap();
+    let x = [
+        -1.2199507514152268,
+        1.4509271241882833,
+        0.0934950945540256,
+        0.7091021636711219,
+    ];
+    let (l, _) = MpcLaw::new(&cfg).solve(&x, None);
+    assert_eq!(l.status, SqpStatus::Soft, "{:?}", l.info);
+    assert_eq!(l.retry, None);
+    assert!(l.max_slack > SLACK_TOL, "{}", l.max_slack);
+    assert!(l.info.kkt.max() <= cfg.solver.tol, "{:?}", l.info.kkt);
+    assert!(l.u.iter().chain(&l.du_dx).all(|v| v.is_finite()));
+}
+
+/// `shift_for_correction` moves each nonlinear row's right-hand side by the remainder
+/// `g(z + d) − g(z) − ∇g(z)ᵀd` (g evaluated directly, ∇g by central differences) and
+/// `restore_rhs` undoes it; affine rows do not move.
+#[test]
+fn correction_shift_is_the_linearisation_remainder() {
+    let cfg = pendulum_curved();
+    let mut ocp = crate::mpc::ocp::Ocp::new(&cfg, true);
+    let n = ocp.n_var;
+    let z: Vec<f64> = (0..n)
+        .map(|i| 0.3 * uniform(5, i as u64, 0) - 0.1)
+        .collect();
+    let d: Vec<f64> = (0..n)
+        .map(|i| 0.2 * uniform(6, i as u64, 0) - 0.1)
+        .collect();
+    ocp.relinearize(&z);
+    let before: Vec<f64> = ocp.rows.iter().map(|r| r.rhs).collect();
+    let saved = ocp.shift_for_correction(&z, &d);
+    let nl: Vec<usize> = ocp.nonlinear_rows().collect();
+    assert!(!nl.is_empty());
+    // g_r(w) = −(slack of row r at w after relinearising at w, without its slack entry):
+    // read through a clone relinearised at w.
+    let g_of = |w: &[f64], r: usize| {
+        let mut o = crate::mpc::ocp::Ocp::new(&cfg, true);
+        o.relinearize(w);
+        let row = o.rows[r];
+        let s: f64 = (0..row.len)
+            .filter(|&j| row.idx[j] >= o.is())
+            .map(|j| row.coef[j] * w[row.idx[j]])
+            .sum();
+        -(row.rhs - (row.dot(w) - s))
+    };
+    let zd: Vec<f64> = z.iter().zip(&d).map(|(a, b)| a + b).collect();
+    let mut largest = 0.0f64;
+    for (r, row) in ocp.rows.iter().enumerate() {
+        if !nl.contains(&r) {
+            assert_eq!(row.rhs, before[r], "affine row {r} moved");
+            continue;
+        }
+        // ∇g(z)ᵀd by a central difference along d.
+        let h = 1e-6;
+        let zp: Vec<f64> = z.iter().zip(&d).map(|(a, b)| a + h * b).collect();
+        let zm: Vec<f64> = z.iter().zip(&d).map(|(a, b)| a - h * b).collect();
+        let lin = (g_of(&zp, r) - g_of(&zm, r)) / (2.0 * h);
+        let rem = g_of(&zd, r) - g_of(&z, r) - lin;
+        let moved = before[r] - row.rhs;
+        largest = largest.max(rem.abs());
+        assert!(
+            (moved - rem).abs() <= 1e-7 * (1.0 + rem.abs()),
+            "row {r}: {moved} vs {rem}"
+        );
+    }
+    assert!(
+        largest > 1e-5,
+        "the remainders are all ≈ 0 ({largest}): no check"
+    );
+    ocp.restore_rhs(&saved);
+    assert!(ocp.rows.iter().zip(&before).all(|(r, b)| r.rhs == *b));
+}
+
 /// The robust design's margins reach the OCP: the row of an affine mixed constraint at
 /// stage 1 has b − margin (`robust` computes the margins, `mpc` builds the rows from them).
 #[test]

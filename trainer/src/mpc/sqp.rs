@@ -23,6 +23,11 @@
 //!    Measured on 100 random cart-pole states (`examples/profile_solve`, see BENCHMARKS.md):
 //!    mean 14.1 SQP + polish iterations with `1.1·‖λ⁺‖_∞` and blockwise convexification,
 //!    6.1 with this penalty, 5.7 with both changes; pendulum 3.27 → 3.21.
+//!    Where the full step is rejected on a problem with nonlinear rows or slacks, a
+//!    second-order correction is tried first (Nocedal & Wright §18.3, against the Maratos
+//!    effect): the QP again with the constant terms of the constraints taken at z + d
+//!    (`c(z + d) − ∇c d`, nonlinear rows shifted by their linearisation remainder), its
+//!    step d̂ accepted as a full step if z + d̂ passes the same Armijo test.
 //! 4. Once steps are full and either the KKT residual is below 1e-3 or the QP's active set
 //!    repeated (and the residual is below 0.1), guess the active set
 //!    `A = {r : ν_r > slack_r}` and run Newton's method on the KKT conditions restricted to A
@@ -233,6 +238,30 @@ fn convexify(ocp: &Ocp, exact: &[f64], gauss_newton: &[f64], out: &mut [f64]) {
         let m = DMatrix::from_row_slice(nz, nz, blk);
         if m.symmetric_eigen().eigenvalues.min() < 0.0 {
             blk.copy_from_slice(gn);
+        }
+    }
+}
+
+/// `out = ∇c(z)ᵀ d`, the linearised change of the equalities `c_0 = x_0 − x_s`,
+/// `c_{k+1} = F(x_k, u_k) − x_{k+1}` along `d`.
+fn linearised_change(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], d: &[f64], out: &mut [f64]) {
+    let (nx, nu) = (ocp.nx, ocp.nu);
+    out[..nx].copy_from_slice(&d[..nx]);
+    for k in 0..ocp.horizon {
+        let (ix, iu, ixn) = (ocp.ix(k), ocp.iu(k), ocp.ix(k + 1));
+        let (a, b) = (
+            &jac_x[k * nx * nx..(k + 1) * nx * nx],
+            &jac_u[k * nx * nu..(k + 1) * nx * nu],
+        );
+        for r in 0..nx {
+            let mut acc = -d[ixn + r];
+            for j in 0..nx {
+                acc += a[r * nx + j] * d[ix + j];
+            }
+            for j in 0..nu {
+                acc += b[r * nu + j] * d[iu + j];
+            }
+            out[(k + 1) * nx + r] = acc;
         }
     }
 }
@@ -513,6 +542,15 @@ impl SqpSolver {
         let mut lam_qp = vec![0.0; self.ocp.n_eq];
         let mut nu_qp = vec![0.0; self.ocp.rows.len()];
         let mut c_trial = vec![0.0; self.ocp.n_eq];
+        // The second-order correction acts where the merit's curvature comes from
+        // constraints the linearisation misses: nonlinear rows, and the soft problem (whose
+        // multipliers, up to the slack weight, raise the penalty μ so far that the dynamics'
+        // second-order error rejects full steps). Elsewhere the line search is as before.
+        let soc_enabled = self.ocp.has_nonlinear_rows() || self.ocp.n_slack > 0;
+        let mut c_soc = vec![0.0; self.ocp.n_eq];
+        let mut d_soc = vec![0.0; n_var];
+        let mut lam_soc = vec![0.0; self.ocp.n_eq];
+        let mut nu_soc = vec![0.0; self.ocp.rows.len()];
         let mut z_trial = vec![0.0; n_var];
         let mut mu = 1.0f64;
         // Rounding floor of the merit function near a setpoint (x_ref, u_ref) ≠ 0: there the
@@ -633,6 +671,46 @@ impl SqpSolver {
                         <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
                 {
                     break true;
+                }
+                if alpha == 1.0 && soc_enabled {
+                    // Second-order correction (Nocedal & Wright §18.3): the QP again with the
+                    // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
+                    // nonlinear rows shifted alike), tried as a full step before backtracking.
+                    linearised_change(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
+                    for (cs, ct) in c_soc.iter_mut().zip(&c_trial) {
+                        *cs = ct - *cs;
+                    }
+                    let saved = self.ocp.shift_for_correction(&p.z, &d);
+                    let data = QpData {
+                        z: &p.z,
+                        hess: &hreg,
+                        grad: &ev.grad,
+                        c: &c_soc,
+                        jac_x: &ev.jac_x,
+                        jac_u: &ev.jac_u,
+                    };
+                    let st = self
+                        .qp
+                        .solve(&self.ocp, &data, &mut d_soc, &mut lam_soc, &mut nu_soc);
+                    info.qp_iterations += self.qp.last_iterations as usize;
+                    self.ocp.restore_rhs(&saved);
+                    if st == QpStatus::Solved {
+                        for i in 0..n_var {
+                            z_trial[i] = p.z[i] + d_soc[i];
+                        }
+                        self.ocp.constraint_values(&z_trial, xs, &mut c_trial);
+                        let phi = self.ocp.objective(&z_trial)
+                            + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
+                                + self.ocp.inequality_violation(&z_trial));
+                        if phi.is_finite()
+                            && phi
+                                <= phi0 + 1e-4 * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
+                        {
+                            lam_qp.copy_from_slice(&lam_soc);
+                            nu_qp.copy_from_slice(&nu_soc);
+                            break true;
+                        }
+                    }
                 }
                 alpha *= 0.5;
                 if alpha < 1e-10 {

@@ -358,4 +358,43 @@ impl Ocp {
         });
         total
     }
+
+    /// Shifts the nonlinear rows (linearised at `z`) for a second-order correction of the
+    /// step `d`: `h_r −= g_r(z + d) − g_r(z) − ∇g_r(z)ᵀd`, the remainder of the
+    /// linearisation, so that the row reads `∇g_r(z)ᵀd̂ ≤ −g_r(z + d) + ∇g_r(z)ᵀd` (Nocedal &
+    /// Wright §18.3; affine rows have no remainder). Returns the previous right-hand sides
+    /// for [`Ocp::restore_rhs`].
+    pub fn shift_for_correction(&mut self, z: &[f64], d: &[f64]) -> Vec<(usize, f64)> {
+        let Some(cs) = self.constraints.as_ref() else {
+            return Vec::new();
+        };
+        let zd: Vec<f64> = z.iter().zip(d).map(|(a, b)| a + b).collect();
+        let zero_u = vec![0.0; self.nu];
+        let (mut g0, mut g1) = (vec![0.0; cs.len()], vec![0.0; cs.len()]);
+        let mut shifts = Vec::with_capacity(self.nl_rows.len());
+        self.for_nl_stages(|k, rows| {
+            let (x, u) = self.stage_point(z, k, &zero_u);
+            cs.values(x, u, &mut g0);
+            let (x, u) = self.stage_point(&zd, k, &zero_u);
+            cs.values(x, u, &mut g1);
+            for r in rows {
+                let row = &self.rows[r.row];
+                let lin: f64 = (0..r.n_vars).map(|j| row.coef[j] * d[row.idx[j]]).sum();
+                shifts.push((r.row, g1[r.con] - g0[r.con] - lin));
+            }
+        });
+        let mut saved = Vec::with_capacity(shifts.len());
+        for (i, rem) in shifts {
+            saved.push((i, self.rows[i].rhs));
+            self.rows[i].rhs -= rem;
+        }
+        saved
+    }
+
+    /// Puts back the right-hand sides saved by [`Ocp::shift_for_correction`].
+    pub fn restore_rhs(&mut self, saved: &[(usize, f64)]) {
+        for &(i, rhs) in saved {
+            self.rows[i].rhs = rhs;
+        }
+    }
 }
