@@ -520,6 +520,28 @@ impl SqpSolver {
         }
     }
 
+    /// The ℓ₁ merit `φ(z + α·step) = f + μ(‖c‖₁ + Σ max(0, g))` at the trial point, which
+    /// is left in `z_trial` (its equality residuals in `c_trial`).
+    #[allow(clippy::too_many_arguments)]
+    fn trial_merit(
+        &self,
+        z: &[f64],
+        step: &[f64],
+        alpha: f64,
+        xs: &[f64],
+        mu: f64,
+        z_trial: &mut [f64],
+        c_trial: &mut [f64],
+    ) -> f64 {
+        for ((t, &zi), &si) in z_trial.iter_mut().zip(z).zip(step) {
+            *t = zi + alpha * si;
+        }
+        self.ocp.constraint_values(z_trial, xs, c_trial);
+        self.ocp.objective(z_trial)
+            + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
+                + self.ocp.inequality_violation(z_trial))
+    }
+
     /// Solves OCP(xs) from the primal-dual guess `start`.
     pub fn solve(&mut self, xs: &[f64], start: PrimalDual) -> SqpResult {
         let tol = self.settings.tol;
@@ -657,19 +679,15 @@ impl SqpSolver {
             let f0 = self.ocp.objective(&p.z);
             let phi0 = f0 + mu * c1;
             let dd = gd - mu * c1;
-            let mut alpha = 1.0;
-            let accepted = loop {
-                for i in 0..n_var {
-                    z_trial[i] = p.z[i] + alpha * d[i];
-                }
-                self.ocp.constraint_values(&z_trial, xs, &mut c_trial);
-                let phi = self.ocp.objective(&z_trial)
-                    + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
-                        + self.ocp.inequality_violation(&z_trial));
-                if phi.is_finite()
+            let armijo = |phi: f64, alpha: f64| {
+                phi.is_finite()
                     && phi
                         <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
-                {
+            };
+            let mut alpha = 1.0;
+            let accepted = loop {
+                let phi = self.trial_merit(&p.z, &d, alpha, xs, mu, &mut z_trial, &mut c_trial);
+                if armijo(phi, alpha) {
                     break true;
                 }
                 if alpha == 1.0 && soc_enabled {
@@ -695,17 +713,9 @@ impl SqpSolver {
                     info.qp_iterations += self.qp.last_iterations as usize;
                     self.ocp.restore_rhs(&saved);
                     if st == QpStatus::Solved {
-                        for i in 0..n_var {
-                            z_trial[i] = p.z[i] + d_soc[i];
-                        }
-                        self.ocp.constraint_values(&z_trial, xs, &mut c_trial);
-                        let phi = self.ocp.objective(&z_trial)
-                            + mu * (c_trial.iter().map(|v| v.abs()).sum::<f64>()
-                                + self.ocp.inequality_violation(&z_trial));
-                        if phi.is_finite()
-                            && phi
-                                <= phi0 + 1e-4 * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
-                        {
+                        let phi =
+                            self.trial_merit(&p.z, &d_soc, 1.0, xs, mu, &mut z_trial, &mut c_trial);
+                        if armijo(phi, 1.0) {
                             lam_qp.copy_from_slice(&lam_soc);
                             nu_qp.copy_from_slice(&nu_soc);
                             break true;
