@@ -2,7 +2,8 @@
 //!
 //! Iteration (Nocedal & Wright, Alg. 18.3 with an ℓ₁ merit function):
 //! 1. At (z, λ, ν) evaluate ∇f, c, ∇c (exact, AD) and the exact Hessian of the Lagrangian
-//!    `∇²L = ∇²f + Σ_k ∇²(λ_{k+1}ᵀ F(x_k, u_k))`, stage block by stage block.
+//!    `∇²L = ∇²f + Σ_k ∇²(λ_{k+1}ᵀ F(x_k, u_k)) + Σ_r ν_r ∇²g_r` (the last sum over the
+//!    nonlinear constraint rows), stage block by stage block.
 //! 2. Keep the exact Hessian if the QP is strictly convex with it on the null space of the
 //!    linearised dynamics (`convexity` module: a Riccati recursion, O(N)); otherwise
 //!    convexify block by block: keep the exact block where it is positive semidefinite, use
@@ -467,8 +468,8 @@ impl SqpSolver {
             // constraint rows included: there the blockwise rule drops the curvature
             // λᵀ∇²F of multipliers as large as the slack weight (~1e4) and crawled to the
             // iteration limit on infeasible ball-beam states (BENCHMARKS, "Soft problems").
-            // A QP with the exact Hessian that the QP solver fails on is re-solved with the
-            // blockwise rule.
+            // A QP with the exact Hessian that the QP solver fails on (or calls infeasible) is
+            // re-solved with the blockwise rule.
             let mut exact = !conservative
                 && self
                     .convexity
@@ -496,7 +497,9 @@ impl SqpSolver {
                     .qp
                     .solve(&self.ocp, &data, &mut d, &mut lam_qp, &mut nu_qp);
                 info.qp_iterations += self.qp.last_iterations as usize;
-                if st == QpStatus::Failed && exact {
+                // (Also on `Infeasible`: the soft problem's QP is feasible whenever its hard
+                // input rows are, and an indefinite full H may mislead the QP solver.)
+                if st != QpStatus::Solved && exact {
                     exact = false;
                     continue;
                 }
@@ -541,7 +544,12 @@ impl SqpSolver {
                 if armijo(phi, alpha) {
                     break true;
                 }
-                if alpha == 1.0 && soc_enabled {
+                // (Not from a non-finite trial point: its data would only fail the QP.)
+                if alpha == 1.0
+                    && soc_enabled
+                    && phi.is_finite()
+                    && c_trial.iter().all(|v| v.is_finite())
+                {
                     // Second-order correction (Nocedal & Wright §18.3): the QP again with the
                     // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
                     // nonlinear rows shifted alike), tried as a full step before backtracking.
