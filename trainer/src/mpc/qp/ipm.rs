@@ -97,8 +97,9 @@ fn mul_h(ocp: &Ocp, hess: &[f64], x: &[f64], out: &mut [f64]) {
     }
 }
 
-/// `out = E x` with `E = ∇c(z)ᵀ` (rows c_0 = x_0 − x_s, c_{k+1} = F(x_k, u_k) − x_{k+1}).
-fn mul_e(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mut [f64]) {
+/// `out = E x` with `E = ∇c(z)ᵀ` (rows c_0 = x_0 − x_s, c_{k+1} = F(x_k, u_k) − x_{k+1}):
+/// the linearised change of the equalities along x (also the SQP's second-order correction).
+pub(crate) fn mul_e(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mut [f64]) {
     let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
     out[..nx].copy_from_slice(&x[..nx]);
     for k in 0..n {

@@ -42,6 +42,7 @@
 use crate::mpc::convexity::ReducedHessian;
 use crate::mpc::kkt::ActiveSetKkt;
 use crate::mpc::ocp::Ocp;
+use crate::mpc::qp::ipm::mul_e;
 use crate::mpc::qp::{QpData, QpSolver, QpStatus};
 use crate::problem::{ProblemConfig, SolverSettings};
 use nalgebra::DMatrix;
@@ -241,30 +242,6 @@ fn convexify(ocp: &Ocp, exact: &[f64], gauss_newton: &[f64], out: &mut [f64]) {
         let m = DMatrix::from_row_slice(nz, nz, blk);
         if m.symmetric_eigen().eigenvalues.min() < 0.0 {
             blk.copy_from_slice(gn);
-        }
-    }
-}
-
-/// `out = ∇c(z)ᵀ d`, the linearised change of the equalities `c_0 = x_0 − x_s`,
-/// `c_{k+1} = F(x_k, u_k) − x_{k+1}` along `d`.
-fn linearised_change(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], d: &[f64], out: &mut [f64]) {
-    let (nx, nu) = (ocp.nx, ocp.nu);
-    out[..nx].copy_from_slice(&d[..nx]);
-    for k in 0..ocp.horizon {
-        let (ix, iu, ixn) = (ocp.ix(k), ocp.iu(k), ocp.ix(k + 1));
-        let (a, b) = (
-            &jac_x[k * nx * nx..(k + 1) * nx * nx],
-            &jac_u[k * nx * nu..(k + 1) * nx * nu],
-        );
-        for r in 0..nx {
-            let mut acc = -d[ixn + r];
-            for j in 0..nx {
-                acc += a[r * nx + j] * d[ix + j];
-            }
-            for j in 0..nu {
-                acc += b[r * nu + j] * d[iu + j];
-            }
-            out[(k + 1) * nx + r] = acc;
         }
     }
 }
@@ -553,7 +530,7 @@ impl SqpSolver {
                     // Second-order correction (Nocedal & Wright §18.3): the QP again with the
                     // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
                     // nonlinear rows shifted alike), tried as a full step before backtracking.
-                    linearised_change(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
+                    mul_e(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
                     for (cs, ct) in c_soc.iter_mut().zip(&c_trial) {
                         *cs = ct - *cs;
                     }
