@@ -23,6 +23,9 @@
 
 use super::loss::{value_error, Batch, Grad, LossParts, LossWeights};
 use super::{Activation, Mlp};
+use kernels::{dot_chunk, outer_chunk};
+
+mod kernels;
 
 /// Samples per group (lanes of one vector).
 pub const L: usize = 8;
@@ -31,12 +34,45 @@ const FLUSH: usize = 64;
 
 type V = [f32; L];
 
+/// Lane-wise a + b.
+#[inline(always)]
+fn add(a: V, b: V) -> V {
+    let mut r = a;
+    for i in 0..L {
+        r[i] = a[i] + b[i];
+    }
+    r
+}
+
+/// Lane-wise a·b.
+#[inline(always)]
+fn mul(a: V, b: V) -> V {
+    let mut r = a;
+    for i in 0..L {
+        r[i] = a[i] * b[i];
+    }
+    r
+}
+
+/// Groups per chunk for jets of `q` vectors and layers up to `maxw` units: the groups of a
+/// chunk go through each layer together (the kernels keep several groups' accumulators in
+/// registers); fewer groups when a chunk's jets would not stay in the L1 cache. Always a
+/// divisor of [`FLUSH`], so that the flushes fall where they would group by group.
+fn chunk_groups(maxw: usize, q: usize) -> usize {
+    match maxw * q {
+        0..=64 => 8,
+        65..=128 => 4,
+        129..=256 => 2,
+        _ => 1,
+    }
+}
+
 /// Reusable buffers of the lane engine and the f32 copy of the weights.
 ///
-/// Values and tangents travel together as *jets*: unit c of layer j holds `Q = 1 + nx`
-/// lane vectors at `h[j][c·Q ..]`, the value a_c first, then the tangents T_{c,k}
-/// (`Q = 1` without the tangent pass). The reverse pass uses the same layout for
-/// ∂loss/∂a, ∂loss/∂T.
+/// Values and tangents travel together as *jets*: unit c of layer j (n units) in group g
+/// of the current chunk holds `Q = 1 + nx` lane vectors at `h[j][(g·n + c)·Q ..]`, the
+/// value a_c first, then the tangents T_{c,k} (`Q = 1` without the tangent pass). The
+/// reverse pass uses the same layout for ∂loss/∂a, ∂loss/∂T.
 #[derive(Debug, Clone, Default)]
 pub struct Lanes {
     /// Widths `[nx, h₁, …, nu]` the buffers are sized for.
@@ -47,15 +83,15 @@ pub struct Lanes {
     b: Vec<Vec<f32>>,
     /// Jets of every layer (layer 0 the scaled input, layer m the raw output y, Y).
     h: Vec<Vec<V>>,
-    /// Pre-activation tangents Z_j of the hidden layers (`[r·nx + k]`).
+    /// Pre-activation tangents Z_j of the hidden layers (`[(g·n + r)·nx + k]`).
     zt: Vec<Vec<V>>,
-    /// α′(z_j), α″(z_j) of the hidden layers.
+    /// α′(z_j), α″(z_j) of the hidden layers (`[g·n + r]`).
     d: Vec<Vec<V>>,
     dd: Vec<Vec<V>>,
     /// Jets of ∂loss/∂(a, T) of the current layer and of the one below.
     g: Vec<V>,
     g2: Vec<V>,
-    /// Accumulator jet of one unit.
+    /// Accumulator jet of one unit (kernels without a specialised jet size).
     acc: Vec<V>,
 
     /// Per-lane gradient accumulators.
@@ -63,103 +99,127 @@ pub struct Lanes {
     gb: Vec<Vec<V>>,
 }
 
-/// `acc[i] += w·v[i]` over the lanes.
+/// (α(z), α′(z), α″(z)) over the lanes of `z`.
 #[inline(always)]
-fn fma_lanes(acc: &mut V, w: f32, v: &V) {
-    // Through locals: the compiler then sees whole-vector loads and stores.
-    let (mut a, x) = (*acc, *v);
-    for i in 0..L {
-        a[i] += w * x[i];
-    }
-    *acc = a;
-}
-
-/// `acc += Σ_c w[c]·h_c` over units c whose jets (q vectors each) are consecutive in `h`.
-/// Specialised for the jet sizes 1–5 and 7 (nx ≤ 4 and nx = 6, and every net without the
-/// tangent pass) so that the accumulators stay in registers.
-#[inline(always)]
-fn dot_jets(w: &[f32], h: &[V], acc: &mut [V]) {
-    match acc.len() {
-        1 => dot_jets_q::<1>(w, h, acc),
-        2 => dot_jets_q::<2>(w, h, acc),
-        3 => dot_jets_q::<3>(w, h, acc),
-        4 => dot_jets_q::<4>(w, h, acc),
-        5 => dot_jets_q::<5>(w, h, acc),
-        7 => dot_jets_q::<7>(w, h, acc),
-        q => {
-            for (&wc, hc) in w.iter().zip(h.chunks_exact(q)) {
-                for (a, v) in acc.iter_mut().zip(hc) {
-                    fma_lanes(a, wc, v);
-                }
-            }
-        }
-    }
-}
-
-#[inline(always)]
-fn dot_jets_q<const Q: usize>(w: &[f32], h: &[V], acc: &mut [V]) {
-    let mut a: [V; Q] = std::array::from_fn(|k| acc[k]);
-    for (&wc, hc) in w.iter().zip(h.chunks_exact(Q)) {
-        for (ak, hk) in a.iter_mut().zip(hc) {
-            let x = *hk;
-            for i in 0..L {
-                ak[i] += wc * x[i];
-            }
-        }
-    }
-    acc.copy_from_slice(&a);
-}
-
-/// `gw[c] += Σ_q g[q]·h_c[q]` lane-wise for every unit c (jets of `g.len()` vectors
-/// consecutive in `h`): one row of a weight gradient.
-#[inline(always)]
-fn outer_jets(g: &[V], h: &[V], gw: &mut [V]) {
-    let q = g.len();
-    for (acc, hc) in gw.iter_mut().zip(h.chunks_exact(q)) {
-        let mut s = [0.0f32; L];
-        for (a, b) in g.iter().zip(hc) {
-            let (a, b) = (*a, *b);
-            for i in 0..L {
-                s[i] += a[i] * b[i];
-            }
-        }
-        let mut t = *acc;
-        for i in 0..L {
-            t[i] += s[i];
-        }
-        *acc = t;
-    }
-}
-
-/// α, α′, α″ over the lanes of `z` (in place: `z` becomes α(z)).
-#[inline(always)]
-fn activate(act: Activation, z: &mut V, d: &mut V, dd: &mut V) {
+fn activate(act: Activation, z: V) -> (V, V, V) {
     match act {
         Activation::Tanh => {
-            let t = super::tanh32::tanh_lanes(z);
+            let t = super::tanh32::tanh_lanes(&z);
+            let (mut d, mut dd) = ([0.0; L], [0.0; L]);
             for i in 0..L {
                 let s = 1.0 - t[i] * t[i];
-                z[i] = t[i];
                 d[i] = s;
                 dd[i] = -2.0 * t[i] * s;
             }
+            (t, d, dd)
         }
         Activation::Softplus => {
-            for ((z, d), dd) in z.iter_mut().zip(d.iter_mut()).zip(dd.iter_mut()) {
-                let s = 1.0 / (1.0 + (-*z).exp());
-                *z = if *z > 30.0 { *z } else { z.exp().ln_1p() };
-                *d = s;
-                *dd = s * (1.0 - s);
+            let (mut a, mut d, mut dd) = (z, [0.0; L], [0.0; L]);
+            for i in 0..L {
+                let s = 1.0 / (1.0 + (-z[i]).exp());
+                a[i] = if z[i] > 30.0 {
+                    z[i]
+                } else {
+                    z[i].exp().ln_1p()
+                };
+                d[i] = s;
+                dd[i] = s * (1.0 - s);
             }
+            (a, d, dd)
         }
         Activation::Relu => {
-            for ((z, d), dd) in z.iter_mut().zip(d.iter_mut()).zip(dd.iter_mut()) {
-                let on = *z > 0.0;
-                *z = if on { *z } else { 0.0 };
-                *d = if on { 1.0 } else { 0.0 };
-                *dd = 0.0;
+            let (mut a, mut d) = (z, [0.0; L]);
+            for i in 0..L {
+                let on = z[i] > 0.0;
+                a[i] = if on { z[i] } else { 0.0 };
+                d[i] = if on { 1.0 } else { 0.0 };
+            }
+            (a, d, [0.0; L])
+        }
+    }
+}
+
+/// The activation of a hidden layer over a chunk, in place on the jets `h` (q vectors per
+/// unit u, (z, Z) in, (a, T) out): `a = α(z)`, `T = α′(z)·Z`, keeping α′, α″ and Z for the
+/// reverse pass. The tanh runs on four units at a time (32 lanes: independent chains).
+#[inline(always)]
+fn activate_chunk(act: Activation, h: &mut [V], d: &mut [V], dd: &mut [V], zt: &mut [V], q: usize) {
+    let n = h.len() / q;
+    let mut u0 = 0;
+    let finish = |h: &mut [V], zt: &mut [V], u: usize, a: V, dv: V| {
+        let hu = &mut h[u * q..(u + 1) * q];
+        hu[0] = a;
+        zt[u * (q - 1)..(u + 1) * (q - 1)].copy_from_slice(&hu[1..]);
+        for t in hu[1..].iter_mut() {
+            *t = mul(dv, *t);
+        }
+    };
+    if act == Activation::Tanh {
+        const B: usize = 4;
+        while u0 + B <= n {
+            let z: [f32; B * L] = std::array::from_fn(|i| h[(u0 + i / L) * q][i % L]);
+            let t = super::tanh32::tanh_lanes(&z);
+            for b in 0..B {
+                let u = u0 + b;
+                let tb: V = std::array::from_fn(|i| t[b * L + i]);
+                let (mut dv, mut ddv) = ([0.0; L], [0.0; L]);
+                for i in 0..L {
+                    let s = 1.0 - tb[i] * tb[i];
+                    dv[i] = s;
+                    ddv[i] = -2.0 * tb[i] * s;
+                }
+                (d[u], dd[u]) = (dv, ddv);
+                finish(h, zt, u, tb, dv);
+            }
+            u0 += B;
+        }
+    }
+    for u in u0..n {
+        let (a, dv, ddv) = activate(act, h[u * q]);
+        (d[u], dd[u]) = (dv, ddv);
+        finish(h, zt, u, a, dv);
+    }
+}
+
+/// ∂/∂a, ∂/∂T → ∂/∂z, ∂/∂Z of a hidden layer over a chunk, in place on the jets `g` (q
+/// vectors per unit u): `∂/∂z = α′·∂/∂a + α″·Σ_k (∂/∂T)_k Z_k`, `∂/∂Z = α′·∂/∂T`.
+#[inline(always)]
+fn activation_back(g: &mut [V], d: &[V], dd: &[V], zt: &[V], q: usize) {
+    match q {
+        1 => act_back_q::<1>(g, d, dd, zt),
+        2 => act_back_q::<2>(g, d, dd, zt),
+        3 => act_back_q::<3>(g, d, dd, zt),
+        4 => act_back_q::<4>(g, d, dd, zt),
+        5 => act_back_q::<5>(g, d, dd, zt),
+        7 => act_back_q::<7>(g, d, dd, zt),
+        _ => {
+            for (u, gr) in g.chunks_exact_mut(q).enumerate() {
+                let (dv, ddv) = (d[u], dd[u]);
+                let z = &zt[u * (q - 1)..(u + 1) * (q - 1)];
+                let mut acc = [0.0f32; L];
+                for (gk, &zk) in gr[1..].iter_mut().zip(z) {
+                    acc = add(acc, mul(*gk, zk));
+                    *gk = mul(*gk, dv);
+                }
+                gr[0] = add(mul(dv, gr[0]), mul(ddv, acc));
             }
         }
+    }
+}
+
+#[inline(always)]
+fn act_back_q<const Q: usize>(g: &mut [V], d: &[V], dd: &[V], zt: &[V]) {
+    for (u, gr) in g.chunks_exact_mut(Q).enumerate() {
+        let (dv, ddv) = (d[u], dd[u]);
+        let mut jet: [V; Q] = (&*gr).try_into().expect("Q vectors");
+        let z = &zt[u * (Q - 1)..(u + 1) * (Q - 1)];
+        let mut acc = [0.0f32; L];
+        for k in 1..Q {
+            acc = add(acc, mul(jet[k], z[k - 1]));
+            jet[k] = mul(jet[k], dv);
+        }
+        jet[0] = add(mul(dv, jet[0]), mul(ddv, acc));
+        gr.copy_from_slice(&jet);
     }
 }
 
@@ -176,16 +236,18 @@ impl Lanes {
         if !same {
             let widths = mlp.widths();
             let q = 1 + mlp.nx();
+            let maxw = widths.iter().copied().max().unwrap_or(0);
+            // Vectors per unit of a chunk, for both jet sizes in use.
+            let f = (chunk_groups(maxw, 1)).max(chunk_groups(maxw, q) * q);
             let per = |f: usize| -> Vec<Vec<V>> {
                 widths.iter().map(|&n| vec![[0.0; L]; n * f]).collect()
             };
-            let maxw = widths.iter().copied().max().unwrap_or(0);
-            self.h = per(q);
-            self.zt = per(q - 1);
-            self.d = per(1);
-            self.dd = per(1);
-            self.g = vec![[0.0; L]; maxw * q];
-            self.g2 = vec![[0.0; L]; maxw * q];
+            self.h = per(f);
+            self.zt = per(f);
+            self.d = per(8);
+            self.dd = per(8);
+            self.g = vec![[0.0; L]; maxw * f];
+            self.g2 = vec![[0.0; L]; maxw * f];
             self.acc = vec![[0.0; L]; q];
             self.gw = mlp
                 .layers
@@ -222,51 +284,46 @@ impl Lanes {
         }
     }
 
-    /// Forward (and, with `q = 1 + nx`, tangent) pass of one group: `x` holds `nb ≤ L`
-    /// states (row-major); the other lanes get the centre of X (their results are unused).
+    /// Forward (and, with `q = 1 + nx`, tangent) pass of one chunk of `ng` groups: `x`
+    /// holds `nb ≤ ng·L` states (row-major, sample s in lane s mod L of group s / L); the
+    /// other lanes get the centre of X (their results are unused).
     #[inline(always)]
-    fn pass(&mut self, mlp: &Mlp, x: &[f64], nb: usize, q: usize) {
+    fn pass(&mut self, mlp: &Mlp, x: &[f64], nb: usize, q: usize, ng: usize) {
         let nx = mlp.nx();
         let m = mlp.layers.len();
-        for (c, h0) in self.h[0][..nx * q].chunks_exact_mut(q).enumerate() {
-            let (cc, hw) = (mlp.in_center[c], mlp.in_half[c]);
-            for (i, v) in h0[0].iter_mut().enumerate() {
-                *v = if i < nb {
-                    ((x[i * nx + c] - cc) / hw) as f32
-                } else {
-                    0.0
-                };
-            }
-            // T_0 = D.
-            for (k, t) in h0[1..].iter_mut().enumerate() {
-                *t = [if c == k { (1.0 / hw) as f32 } else { 0.0 }; L];
+        for (g, h0g) in self.h[0][..ng * nx * q]
+            .chunks_exact_mut(nx * q)
+            .enumerate()
+        {
+            for (c, h0) in h0g.chunks_exact_mut(q).enumerate() {
+                let (cc, hw) = (mlp.in_center[c], mlp.in_half[c]);
+                for (i, v) in h0[0].iter_mut().enumerate() {
+                    let s = g * L + i;
+                    *v = if s < nb {
+                        ((x[s * nx + c] - cc) / hw) as f32
+                    } else {
+                        0.0
+                    };
+                }
+                // T_0 = D.
+                for (k, t) in h0[1..].iter_mut().enumerate() {
+                    *t = [if c == k { (1.0 / hw) as f32 } else { 0.0 }; L];
+                }
             }
         }
+        let act = mlp.activation;
         for j in 0..m {
             let (inp, out) = (mlp.layers[j].inp, mlp.layers[j].out);
             let hidden = j + 1 < m;
             let (w, b) = (&self.w[j], &self.b[j]);
             let (hlo, hhi) = self.h.split_at_mut(j + 1);
-            let (hp, hn) = (&hlo[j][..inp * q], &mut hhi[0][..out * q]);
-            let acc = &mut self.acc[..q];
-            for (r, (hr, wr)) in hn.chunks_exact_mut(q).zip(w.chunks_exact(inp)).enumerate() {
-                acc.fill([0.0; L]);
-                acc[0] = [b[r]; L];
-                dot_jets(wr, hp, acc);
-                if hidden {
-                    let (d, dd) = (&mut self.d[j + 1][r], &mut self.dd[j + 1][r]);
-                    hr[0] = acc[0];
-                    activate(mlp.activation, &mut hr[0], d, dd);
-                    let zt = &mut self.zt[j + 1][r * (q - 1)..(r + 1) * (q - 1)];
-                    for ((t, z), a) in hr[1..].iter_mut().zip(zt.iter_mut()).zip(&acc[1..]) {
-                        *z = *a;
-                        for i in 0..L {
-                            t[i] = d[i] * a[i];
-                        }
-                    }
-                } else {
-                    hr.copy_from_slice(acc);
-                }
+            let (hp, hn) = (&hlo[j][..ng * inp * q], &mut hhi[0][..ng * out * q]);
+            let (d, dd, zt) = (&mut self.d[j + 1], &mut self.dd[j + 1], &mut self.zt[j + 1]);
+            for (r, wr) in w.chunks_exact(inp).enumerate() {
+                dot_chunk(wr, hp, inp * q, ng, q, b[r], &mut self.acc, hn, out * q, r);
+            }
+            if hidden {
+                activate_chunk(act, hn, d, dd, zt, q);
             }
         }
     }
@@ -324,38 +381,42 @@ impl Lanes {
                 gb.fill(0.0);
             }
         }
-        self.zero_acc();
+        // The lane accumulators are zero here: `load` allocates them zeroed and every
+        // call with a gradient ends with a flush, which zeroes them.
         let mut parts = LossParts::default();
         let mut groups = 0;
-        for i0 in (0..bsz).step_by(L) {
-            let nb = L.min(bsz - i0);
-            self.pass(mlp, &batch.x[i0 * nx..(i0 + nb) * nx], nb, q);
+        let maxw = self.widths.iter().copied().max().unwrap_or(0);
+        let span = chunk_groups(maxw, q) * L;
+        for i0 in (0..bsz).step_by(span) {
+            let nb = span.min(bsz - i0);
+            let ng = nb.div_ceil(L);
+            self.pass(mlp, &batch.x[i0 * nx..(i0 + nb) * nx], nb, q, ng);
             // Output errors in f64 from the f32 outputs; padding lanes get zero gradients.
-            self.g[..nu * q].fill([0.0; L]);
+            self.g[..ng * nu * q].fill([0.0; L]);
             let y = &self.h[m];
-            for i in 0..nb {
-                let gi = i0 + i;
+            for s in 0..nb {
+                let (gi, o, i) = (i0 + s, (s / L) * nu * q, s % L);
                 let use_jac = tangent && batch.use_jac[gi];
                 for r in 0..nu {
-                    let s = mlp.out_half[r];
-                    let pred = mlp.out_center[r] + s * f64::from(y[r * q][i]);
+                    let sc = mlp.out_half[r];
+                    let pred = mlp.out_center[r] + sc * f64::from(y[o + r * q][i]);
                     let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
                     parts.value += lam.value * inv_b * e * e;
-                    self.g[r * q][i] = (2.0 * lam.value * inv_b * e * s) as f32;
+                    self.g[o + r * q][i] = (2.0 * lam.value * inv_b * e * sc) as f32;
                     if !use_jac || exact {
                         continue;
                     }
                     for k in 0..nx {
-                        let yk = f64::from(y[r * q + 1 + k][i]);
-                        let e = s * yk - batch.du[gi * nu * nx + r * nx + k];
+                        let yk = f64::from(y[o + r * q + 1 + k][i]);
+                        let e = sc * yk - batch.du[gi * nu * nx + r * nx + k];
                         parts.jacobian += lam.jacobian * inv_b * e * e;
-                        self.g[r * q + 1 + k][i] = (2.0 * lam.jacobian * inv_b * e * s) as f32;
+                        self.g[o + r * q + 1 + k][i] = (2.0 * lam.jacobian * inv_b * e * sc) as f32;
                     }
                 }
             }
             if let Some(g) = grad.as_deref_mut() {
-                self.backward(mlp, q);
-                groups += 1;
+                self.backward(mlp, q, ng);
+                groups += ng;
                 if groups % FLUSH == 0 {
                     self.flush(g);
                 }
@@ -369,72 +430,55 @@ impl Lanes {
         parts
     }
 
-    fn zero_acc(&mut self) {
-        for v in self.gw.iter_mut().chain(self.gb.iter_mut()) {
-            v.fill([0.0; L]);
-        }
-    }
-
     /// Adds the lane accumulators into `g` (lanes in order) and zeroes them.
     fn flush(&mut self, g: &mut Grad) {
         for (acc, dst) in self
             .gw
-            .iter()
-            .chain(&self.gb)
+            .iter_mut()
+            .chain(self.gb.iter_mut())
             .zip(g.w.iter_mut().chain(g.b.iter_mut()))
         {
-            for (v, d) in acc.iter().zip(dst.iter_mut()) {
+            for (v, d) in acc.iter_mut().zip(dst.iter_mut()) {
                 *d += v.iter().map(|&x| f64::from(x)).sum::<f64>();
+                *v = [0.0; L];
             }
         }
-        self.zero_acc();
     }
 
-    /// Reverse pass of one group from the output jets in `g` (∂/∂y, ∂/∂Y) into the lane
-    /// accumulators.
+    /// Reverse pass of one chunk of `ng` groups from the output jets in `g` (∂/∂y, ∂/∂Y)
+    /// into the lane accumulators.
     #[inline(always)]
-    fn backward(&mut self, mlp: &Mlp, q: usize) {
+    fn backward(&mut self, mlp: &Mlp, q: usize, ng: usize) {
         let m = mlp.layers.len();
         for j in (0..m).rev() {
             let (inp, out) = (mlp.layers[j].inp, mlp.layers[j].out);
-            let g = &mut self.g[..out * q];
+            let (so, si) = (out * q, inp * q);
+            let g = &mut self.g[..ng * so];
             if j + 1 < m {
-                // ∂/∂a, ∂/∂T of layer j + 1 → ∂/∂z, ∂/∂Z.
-                let (d, dd) = (&self.d[j + 1], &self.dd[j + 1]);
-                for (r, gr) in g.chunks_exact_mut(q).enumerate() {
-                    let (d, dd) = (&d[r], &dd[r]);
-                    let zt = &self.zt[j + 1][r * (q - 1)..(r + 1) * (q - 1)];
-                    let mut acc = [0.0f32; L];
-                    for (gk, z) in gr[1..].iter_mut().zip(zt) {
-                        for i in 0..L {
-                            acc[i] += gk[i] * z[i];
-                            gk[i] *= d[i];
-                        }
-                    }
-                    let g0 = &mut gr[0];
-                    for i in 0..L {
-                        g0[i] = d[i] * g0[i] + dd[i] * acc[i];
-                    }
-                }
+                // ∂/∂a, ∂/∂T of layer j + 1 → ∂/∂z, ∂/∂Z (unit u = g·out + r of the chunk).
+                activation_back(g, &self.d[j + 1], &self.dd[j + 1], &self.zt[j + 1], q);
             }
-            // ∂/∂W[r, c] += Σ_q g_r[q]·h_c[q] (value and tangent terms), ∂/∂b[r] += g_r[0].
-            let hp = &self.h[j][..inp * q];
-            for ((gr, gwr), gb) in g
-                .chunks_exact(q)
-                .zip(self.gw[j].chunks_exact_mut(inp))
+            // ∂/∂W[r, c] += Σ_q g_r[q]·h_c[q] (value and tangent terms), ∂/∂b[r] += g_r[0],
+            // group after group.
+            let hp = &self.h[j][..ng * si];
+            for (r, (gwr, gb)) in self.gw[j]
+                .chunks_exact_mut(inp)
                 .zip(self.gb[j].iter_mut())
+                .enumerate()
             {
-                for i in 0..L {
-                    gb[i] += gr[0][i];
+                for gg in g.chunks_exact(so) {
+                    let g0 = gg[r * q];
+                    for i in 0..L {
+                        gb[i] += g0[i];
+                    }
                 }
-                outer_jets(gr, hp, gwr);
+                outer_chunk(g, so, r, hp, si, ng, q, gwr);
             }
             if j > 0 {
                 // ∂/∂(a, T)_{j−1} = Wᵀ ∂/∂(z, Z)_j.
-                let g2 = &mut self.g2[..inp * q];
-                for (g2c, wc) in g2.chunks_exact_mut(q).zip(self.wt[j].chunks_exact(out)) {
-                    g2c.fill([0.0; L]);
-                    dot_jets(wc, g, g2c);
+                let g2 = &mut self.g2[..ng * si];
+                for (c, wc) in self.wt[j].chunks_exact(out).enumerate() {
+                    dot_chunk(wc, g, so, ng, q, 0.0, &mut self.acc, g2, si, c);
                 }
                 std::mem::swap(&mut self.g, &mut self.g2);
             }
@@ -471,19 +515,22 @@ impl Lanes {
     ) {
         let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
         let n = x.len() / nx.max(1);
-        for i0 in (0..n).step_by(L) {
-            let nb = L.min(n - i0);
-            let q = if jac.is_some() { 1 + nx } else { 1 };
-            self.pass(mlp, &x[i0 * nx..(i0 + nb) * nx], nb, q);
+        let q = if jac.is_some() { 1 + nx } else { 1 };
+        let maxw = self.widths.iter().copied().max().unwrap_or(0);
+        let span = chunk_groups(maxw, q) * L;
+        for i0 in (0..n).step_by(span) {
+            let nb = span.min(n - i0);
+            self.pass(mlp, &x[i0 * nx..(i0 + nb) * nx], nb, q, nb.div_ceil(L));
             let y = &self.h[m];
-            for i in 0..nb {
+            for s in 0..nb {
+                let (o, i) = ((s / L) * nu * q, s % L);
                 for r in 0..nu {
-                    let s = mlp.out_half[r];
-                    u[(i0 + i) * nu + r] = mlp.out_center[r] + s * f64::from(y[r * q][i]);
+                    let sc = mlp.out_half[r];
+                    u[(i0 + s) * nu + r] = mlp.out_center[r] + sc * f64::from(y[o + r * q][i]);
                     if let Some(jac) = jac.as_deref_mut() {
                         for k in 0..nx {
-                            jac[(i0 + i) * nu * nx + r * nx + k] =
-                                s * f64::from(y[r * q + 1 + k][i]);
+                            jac[(i0 + s) * nu * nx + r * nx + k] =
+                                sc * f64::from(y[o + r * q + 1 + k][i]);
                         }
                     }
                 }
