@@ -4,8 +4,9 @@
 //! and loss of the first repetition, so that two builds can be compared for identical
 //! results as well as for time.
 //!
-//! `cargo run --release -p trainer --example lanes_probe -- DATA.bin MODEL.bin [--loss-only]`
-//! (`--loss-only`: the forward passes and the loss, no gradient).
+//! `cargo run --release -p trainer --example lanes_probe -- DATA.bin MODEL.bin [--loss-only | --grad-only]`
+//! (`--loss-only`: the forward passes and the loss, no gradient; `--grad-only`: the
+//! gradient without the loss terms, as in a training step).
 use std::path::Path;
 use std::time::Instant;
 use trainer::certify::Model;
@@ -16,12 +17,13 @@ use trainer::learn::train::TrainSet;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: lanes_probe DATA.bin MODEL.bin [--loss-only]");
+        eprintln!("usage: lanes_probe DATA.bin MODEL.bin [--loss-only | --grad-only]");
         std::process::exit(2);
     }
     let d = Dataset::load(Path::new(&args[1])).unwrap_or_else(|e| panic!("{e}"));
     let model = Model::load(Path::new(&args[2])).unwrap_or_else(|e| panic!("{e}"));
     let loss_only = args.iter().any(|a| a == "--loss-only");
+    let grad_only = args.iter().any(|a| a == "--grad-only");
     let set = TrainSet::from_dataset(&d);
     let mlp = model.mlp;
     let (nx, nu) = (set.nx, set.nu);
@@ -49,7 +51,12 @@ fn main() {
                 use_jac: &set.use_jac[i..i + bs],
                 band: None,
             };
-            let p = lanes.loss_grad(&mlp, &batch, lam, (!loss_only).then_some(&mut g));
+            let p = if grad_only {
+                lanes.grad(&mlp, &batch, lam, &mut g);
+                Default::default()
+            } else {
+                lanes.loss_grad(&mlp, &batch, lam, (!loss_only).then_some(&mut g))
+            };
             if rep == 0 {
                 let grads = g.w.iter().chain(&g.b).flatten();
                 for v in grads.chain([&p.value, &p.jacobian]) {
@@ -64,6 +71,8 @@ fn main() {
         best * 1e6,
         if loss_only {
             "loss only"
+        } else if grad_only {
+            "gradient only"
         } else {
             "loss and gradient"
         }

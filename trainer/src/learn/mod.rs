@@ -4,6 +4,7 @@
 //! L(θ) = λ₁·(1/N)Σ‖κ(x_i) − κ_NN(x_i)‖² + λ₂·(1/N)Σ‖∂κ/∂x(x_i) − ∂κ_NN/∂x(x_i)‖²_F + λ₃·Σ_j‖W_j‖²_F
 //! ```
 //! - [`mlp`]: the multilayer perceptron, its forward, tangent and backward passes, the loss.
+//! - `adam`: the Adam optimiser's moments and update.
 //! - [`train`]: Adam over the loss, learning-rate schedules, early stopping, the model file.
 //! - [`setpoint`]: the setpoint hold κ_NN(x) − κ_NN(x_ref) + κ(x_ref), folded into the
 //!   last bias after training.
@@ -12,6 +13,7 @@
 //!
 //! Imports `problem`, `mpc` and `data`.
 
+mod adam;
 pub mod mlp;
 pub mod model_file;
 pub mod setpoint;

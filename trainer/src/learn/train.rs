@@ -15,6 +15,7 @@
 //! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
 
 use crate::data::dataset::Dataset;
+use crate::learn::adam::Adam;
 use crate::learn::mlp::{Batch, Lanes, LossParts, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Precision, Schedule, TrainSettings};
@@ -258,14 +259,6 @@ pub struct TrainedModel<C> {
     pub problem_toml: Option<String>,
 }
 
-/// Adam optimiser state.
-#[derive(Debug, Clone, PartialEq)]
-struct Adam {
-    m: Vec<f64>,
-    v: Vec<f64>,
-    t: u64,
-}
-
 fn flatten(mlp: &Mlp) -> Vec<f64> {
     mlp.layers
         .iter()
@@ -360,11 +353,7 @@ pub fn train_from<C>(
     let n = train.len();
     let bs = settings.batch_size.min(n.max(1));
     let n_params = flatten(&mlp).len();
-    let mut adam = Adam {
-        m: vec![0.0; n_params],
-        v: vec![0.0; n_params],
-        t: 0,
-    };
+    let mut adam = Adam::new(n_params);
     let mut grad = mlp.zero_grad();
     let mut ws = Workspace::default();
     let mut lanes = Lanes::default();
@@ -373,7 +362,6 @@ pub fn train_from<C>(
     let mut order: Vec<usize> = (0..n).collect();
     let mut history = Vec::new();
     let mut epochs_run = 0;
-    let (b1, b2) = (0.9f64, 0.999f64);
     for epoch in 0..settings.epochs {
         let lr = match settings.schedule {
             Schedule::Constant => settings.learning_rate,
@@ -408,26 +396,16 @@ pub fn train_from<C>(
                 band,
             };
             if f32_passes {
-                lanes.loss_grad(&mlp, &batch, lam, Some(&mut grad));
+                lanes.grad(&mlp, &batch, lam, &mut grad);
             } else {
                 mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
             }
-            adam.t += 1;
-            let (c1, c2) = (1.0 - b1.powi(adam.t as i32), 1.0 - b2.powi(adam.t as i32));
-            // Update the layers in place; m, v are flat in the order of `flatten`.
-            let (mut am, mut av) = (&mut adam.m[..], &mut adam.v[..]);
-            for (l, (gw, gb)) in mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b)) {
-                for (p, g) in [(&mut l.w, gw), (&mut l.b, gb)] {
-                    let (m0, m1) = std::mem::take(&mut am).split_at_mut(p.len());
-                    let (v0, v1) = std::mem::take(&mut av).split_at_mut(p.len());
-                    (am, av) = (m1, v1);
-                    for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m0).zip(v0) {
-                        *m = b1 * *m + (1.0 - b1) * g;
-                        *v = b2 * *v + (1.0 - b2) * g * g;
-                        *p -= lr * (*m / c1) / ((*v / c2).sqrt() + 1e-8);
-                    }
-                }
-            }
+            let c = adam.begin_step();
+            // The layers in place; the moments are flat in the order of `flatten`.
+            let params = mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b));
+            let params =
+                params.flat_map(|(l, (gw, gb))| [(&mut l.w[..], &gw[..]), (&mut l.b[..], &gb[..])]);
+            adam.update(params, lr, c);
         }
         epochs_run = epoch + 1;
         let last = epoch + 1 == settings.epochs;

@@ -337,14 +337,37 @@ impl Lanes {
         lam: LossWeights,
         grad: Option<&mut Grad>,
     ) -> LossParts {
+        self.dispatch(mlp, batch, lam, grad, true)
+    }
+
+    /// The gradient of `batch`'s loss into `grad` (overwritten) without the loss terms
+    /// themselves (a training step's work): the bits of [`Lanes::loss_grad`]'s gradient.
+    pub fn grad(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, grad: &mut Grad) {
+        self.dispatch(mlp, batch, lam, Some(grad), false);
+    }
+
+    fn dispatch(
+        &mut self,
+        mlp: &Mlp,
+        batch: &Batch,
+        lam: LossWeights,
+        grad: Option<&mut Grad>,
+        with_loss: bool,
+    ) -> LossParts {
         self.load(mlp);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX and AVX2 (checked just above), the one requirement of
+            // calling a `#[target_feature(enable = "avx,avx2")]` function.
+            return unsafe { self.loss_grad_avx2(mlp, batch, lam, grad, with_loss) };
+        }
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX (checked just above), the one requirement of calling
             // a `#[target_feature(enable = "avx")]` function.
-            return unsafe { self.loss_grad_avx(mlp, batch, lam, grad) };
+            return unsafe { self.loss_grad_avx(mlp, batch, lam, grad, with_loss) };
         }
-        self.loss_grad_impl(mlp, batch, lam, grad)
+        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
     }
 
     /// [`Lanes::loss_grad_impl`] compiled with AVX: 8 f32 lanes per instruction instead of
@@ -358,8 +381,25 @@ impl Lanes {
         batch: &Batch,
         lam: LossWeights,
         grad: Option<&mut Grad>,
+        with_loss: bool,
     ) -> LossParts {
-        self.loss_grad_impl(mlp, batch, lam, grad)
+        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
+    }
+
+    /// [`Lanes::loss_grad_impl`] compiled with AVX2 as well: the tanh's exponent arithmetic
+    /// (integer operations on the f32 bits) on 8 lanes too. Integer operations are exact,
+    /// the float ones those of the AVX build: the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2")]
+    fn loss_grad_avx2(
+        &mut self,
+        mlp: &Mlp,
+        batch: &Batch,
+        lam: LossWeights,
+        grad: Option<&mut Grad>,
+        with_loss: bool,
+    ) -> LossParts {
+        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
     }
 
     #[inline(always)]
@@ -369,6 +409,7 @@ impl Lanes {
         batch: &Batch,
         lam: LossWeights,
         mut grad: Option<&mut Grad>,
+        with_loss: bool,
     ) -> LossParts {
         let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
         let bsz = batch.use_jac.len();
@@ -401,7 +442,9 @@ impl Lanes {
                     let sc = mlp.out_half[r];
                     let pred = mlp.out_center[r] + sc * f64::from(y[o + r * q][i]);
                     let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
-                    parts.value += lam.value * inv_b * e * e;
+                    if with_loss {
+                        parts.value += lam.value * inv_b * e * e;
+                    }
                     self.g[o + r * q][i] = (2.0 * lam.value * inv_b * e * sc) as f32;
                     if !use_jac || exact {
                         continue;
@@ -409,7 +452,9 @@ impl Lanes {
                     for k in 0..nx {
                         let yk = f64::from(y[o + r * q + 1 + k][i]);
                         let e = sc * yk - batch.du[gi * nu * nx + r * nx + k];
-                        parts.jacobian += lam.jacobian * inv_b * e * e;
+                        if with_loss {
+                            parts.jacobian += lam.jacobian * inv_b * e * e;
+                        }
                         self.g[o + r * q + 1 + k][i] = (2.0 * lam.jacobian * inv_b * e * sc) as f32;
                     }
                 }
@@ -426,7 +471,7 @@ impl Lanes {
             self.flush(g);
         }
         // Weight term on the physical weights, in f64 (as the f64 path).
-        mlp.add_weight_term(lam, &mut parts, grad);
+        mlp.add_weight_term(lam, with_loss.then_some(&mut parts), grad);
         parts
     }
 
@@ -491,6 +536,11 @@ impl Lanes {
     pub fn eval_batch(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
         self.load(mlp);
         #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX and AVX2 (checked just above), see `loss_grad`.
+            return unsafe { self.eval_batch_avx2(mlp, x, u, jac) };
+        }
+        #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX (checked just above), see `loss_grad`.
             return unsafe { self.eval_batch_avx(mlp, x, u, jac) };
@@ -502,6 +552,13 @@ impl Lanes {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn eval_batch_avx(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
+        self.eval_batch_impl(mlp, x, u, jac)
+    }
+
+    /// [`Lanes::eval_batch_impl`] compiled with AVX2 (the same bits, see `loss_grad_avx2`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2")]
+    fn eval_batch_avx2(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
         self.eval_batch_impl(mlp, x, u, jac)
     }
 

@@ -156,16 +156,17 @@ impl Mlp {
             }
             i0 += nb;
         }
-        self.add_weight_term(lam, &mut parts, grad);
+        self.add_weight_term(lam, Some(&mut parts), grad);
         parts
     }
 
     /// Adds the weight term λ₃ Σ_j ‖W̃_j‖²_F on the physical weights (W̃_1 = W_1 D,
-    /// W̃_m = S W_m) to `parts.weights` and, with `grad`, its gradient to `grad.w`.
+    /// W̃_m = S W_m) to `parts.weights` (if given) and, with `grad`, its gradient to
+    /// `grad.w`.
     pub(super) fn add_weight_term(
         &self,
         lam: LossWeights,
-        parts: &mut LossParts,
+        mut parts: Option<&mut LossParts>,
         mut grad: Option<&mut Grad>,
     ) {
         if lam.weights == 0.0 {
@@ -179,7 +180,9 @@ impl Mlp {
                     let cs = if j == 0 { 1.0 / self.in_half[c] } else { 1.0 };
                     let f = rs * rs * cs * cs;
                     let w = l.w[r * l.inp + c];
-                    parts.weights += lam.weights * f * w * w;
+                    if let Some(parts) = parts.as_deref_mut() {
+                        parts.weights += lam.weights * f * w * w;
+                    }
                     if let Some(grad) = grad.as_deref_mut() {
                         grad.w[j][r * l.inp + c] += 2.0 * lam.weights * f * w;
                     }

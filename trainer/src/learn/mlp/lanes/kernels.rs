@@ -212,8 +212,10 @@ fn outer_block<const Q: usize, const NC: usize>(
         let hg: &[V] = &h[g * sgi + c0 * Q..g * sgi + (c0 + NC) * Q];
         for (cc, a) in acc.iter_mut().enumerate() {
             let hc: [V; Q] = hg[cc * Q..cc * Q + Q].try_into().expect("Q vectors");
-            let mut s = [0.0f32; L];
-            for k in 0..Q {
+            // `0 + g₀h₀` of the one-group formula without the `0 +`: it can only change
+            // the sign of a zero, which the f64 gradient (+0 plus the lanes) never sees.
+            let mut s = mul(gr[0], hc[0]);
+            for k in 1..Q {
                 s = add(s, mul(gr[k], hc[k]));
             }
             *a = add(*a, s);

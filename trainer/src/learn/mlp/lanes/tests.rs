@@ -169,7 +169,7 @@ fn lane_results_are_reproducible_bit_for_bit() {
 /// The AVX build (taken by `loss_grad` and `eval_batch` where the CPU has AVX) and the
 /// portable build of the same code give the same bits.
 #[test]
-fn avx_and_portable_code_give_the_same_bits() {
+fn avx2_avx_and_portable_code_give_the_same_bits() {
     let lam = LossWeights {
         value: 1.0,
         jacobian: 3.0,
@@ -190,13 +190,59 @@ fn avx_and_portable_code_give_the_same_bits() {
         let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
         let la = lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
         lanes.load(&m);
-        let lb = lanes.loss_grad_impl(&m, &batch, lam, Some(&mut gb));
+        let lb = lanes.loss_grad_impl(&m, &batch, lam, Some(&mut gb), true);
         assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // The AVX build as well when the dispatch picks AVX2.
+            let mut gc = m.zero_grad();
+            lanes.load(&m);
+            // SAFETY: AVX2 implies AVX, checked just above.
+            let lc = unsafe { lanes.loss_grad_avx(&m, &batch, lam, Some(&mut gc), true) };
+            assert_eq!((la, &ga), (lc, &gc), "{widths:?}");
+        }
         let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
         let (mut ub, mut jb) = (ua.clone(), ja.clone());
         lanes.eval_batch(&m, &x, &mut ua, Some(&mut ja));
         lanes.load(&m);
         lanes.eval_batch_impl(&m, &x, &mut ub, Some(&mut jb));
-        assert_eq!((ua, ja), (ub, jb), "{widths:?}");
+        assert_eq!((&ua, &ja), (&ub, &jb), "{widths:?}");
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let (mut uc, mut jc) = (ua.clone(), ja.clone());
+            lanes.load(&m);
+            // SAFETY: AVX2 implies AVX, checked just above.
+            unsafe { lanes.eval_batch_avx(&m, &x, &mut uc, Some(&mut jc)) };
+            assert_eq!((ua, ja), (uc, jc), "{widths:?}");
+        }
+    }
+}
+
+/// `Lanes::grad` (a training step: no loss terms) gives `loss_grad`'s gradient bit for bit.
+#[test]
+fn grad_alone_is_the_gradient_of_loss_grad() {
+    let lam = LossWeights {
+        value: 1.0,
+        jacobian: 3.0,
+        weights: 0.05,
+    };
+    for widths in [vec![2, 10, 10, 1], vec![6, 16, 16, 2], vec![12, 8, 8, 4]] {
+        let m = net(5, Activation::Tanh, &widths);
+        let (nx, nu) = (m.nx(), m.nu());
+        for bsz in [1, 35, 600] {
+            let (x, u, du, uj) = data(9, nx, nu, bsz);
+            let batch = Batch {
+                x: &x,
+                u: &u,
+                du: &du,
+                use_jac: &uj,
+                band: None,
+            };
+            let mut lanes = Lanes::default();
+            let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
+            lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
+            lanes.grad(&m, &batch, lam, &mut gb);
+            assert_eq!(ga, gb, "{widths:?}, batch {bsz}");
+        }
     }
 }
