@@ -475,16 +475,39 @@ impl Lanes {
         parts
     }
 
-    /// Adds the lane accumulators into `g` (lanes in order) and zeroes them.
+    /// Adds the lane accumulators into `g` and zeroes them: entry e gets
+    /// `d_e + (((−0 + l₀) + l₁) + … + l₇)` in f64, the lanes in order (`Iterator::sum`'s
+    /// operations), four entries at a time.
+    #[inline(always)]
     fn flush(&mut self, g: &mut Grad) {
+        const E: usize = 4;
         for (acc, dst) in self
             .gw
             .iter_mut()
             .chain(self.gb.iter_mut())
             .zip(g.w.iter_mut().chain(g.b.iter_mut()))
         {
-            for (v, d) in acc.iter_mut().zip(dst.iter_mut()) {
-                *d += v.iter().map(|&x| f64::from(x)).sum::<f64>();
+            let mut a4 = acc.chunks_exact_mut(E);
+            let mut d4 = dst.chunks_exact_mut(E);
+            for (v, d) in (&mut a4).zip(&mut d4) {
+                let v: &mut [V; E] = v.try_into().expect("E entries");
+                let mut s = [-0.0f64; E];
+                for i in 0..L {
+                    for e in 0..E {
+                        s[e] += f64::from(v[e][i]);
+                    }
+                }
+                for e in 0..E {
+                    d[e] += s[e];
+                }
+                *v = [[0.0; L]; E];
+            }
+            for (v, d) in a4.into_remainder().iter_mut().zip(d4.into_remainder()) {
+                let mut s = -0.0f64;
+                for x in *v {
+                    s += f64::from(x);
+                }
+                *d += s;
                 *v = [0.0; L];
             }
         }
