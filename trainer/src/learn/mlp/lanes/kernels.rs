@@ -98,15 +98,17 @@ fn dot_block<const Q: usize, const G: usize>(
     g0: usize,
     init: f32,
 ) -> [[V; Q]; G] {
-    let n = w.len() * Q;
-    let hs: [&[V]; G] = std::array::from_fn(|g| &h[(g0 + g) * sg..(g0 + g) * sg + n]);
+    let n = w.len();
+    // Each group's jets as n arrays of Q vectors (the bounds checked once, here).
+    let hs: [&[[V; Q]]; G] =
+        std::array::from_fn(|g| &h[(g0 + g) * sg..(g0 + g) * sg + n * Q].as_chunks::<Q>().0[..n]);
     let mut a = [[[0.0f32; L]; Q]; G];
     for ag in a.iter_mut() {
         ag[0] = [init; L];
     }
     for (c, &wc) in w.iter().enumerate() {
         for (ag, hg) in a.iter_mut().zip(&hs) {
-            let hc: &[V; Q] = hg[c * Q..c * Q + Q].try_into().expect("Q vectors");
+            let hc: &[V; Q] = &hg[c];
             for (ak, hk) in ag.iter_mut().zip(hc) {
                 let x = *hk;
                 for i in 0..L {
@@ -205,11 +207,10 @@ fn outer_block<const Q: usize, const NC: usize>(
     gw: &mut [V],
 ) {
     let mut acc: [V; NC] = gw[c0..c0 + NC].try_into().expect("NC columns");
-    for g in 0..ng {
-        let gr: [V; Q] = g_all[g * sgo + r * Q..g * sgo + r * Q + Q]
-            .try_into()
-            .expect("Q vectors");
-        let hg: &[V] = &h[g * sgi + c0 * Q..g * sgi + (c0 + NC) * Q];
+    // Group by group through whole chunks, so that the bounds checks are loop-invariant.
+    for (gg, hg) in g_all.chunks_exact(sgo).zip(h.chunks_exact(sgi)).take(ng) {
+        let gr: [V; Q] = gg[r * Q..r * Q + Q].try_into().expect("Q vectors");
+        let hg: &[V] = &hg[c0 * Q..(c0 + NC) * Q];
         for (cc, a) in acc.iter_mut().enumerate() {
             let hc: [V; Q] = hg[cc * Q..cc * Q + Q].try_into().expect("Q vectors");
             // `0 + g₀h₀` of the one-group formula without the `0 +`: it can only change
