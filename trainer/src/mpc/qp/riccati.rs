@@ -27,6 +27,22 @@
 
 use crate::mpc::ocp::Ocp;
 
+/// Calls `$self.$method::<NX>(…)` with the state dimension `$nx` as the constant `NX` for
+/// every `nx < 16` (`MAX_NZ`; the kernels' loops then have fixed trip counts: unrolled, no loop
+/// overhead; the same operations in the same order, so the same bits), `NX = 0` (runtime
+/// size) otherwise.
+macro_rules! by_nx {
+    ($nx:expr, $self:ident . $method:ident $args:tt) => {
+        by_nx!(@ $nx, $self.$method $args, 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15)
+    };
+    (@ $nx:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
+        match $nx {
+            $($n => $self.$method::<$n> $args,)*
+            _ => $self.$method::<0> $args,
+        }
+    };
+}
+
 /// Relative size below which a Cholesky pivot of R̃_k counts as not positive.
 const PIVOT_TOL: f64 = 1e-13;
 
@@ -118,7 +134,21 @@ impl RiccatiKkt {
         jac_u: &[f64],
         w: &[f64],
     ) -> bool {
-        let (nx, nu, n) = (self.nx, self.nu, self.n);
+        by_nx!(self.nx, self.factor_nx(ocp, hess, jac_x, jac_u, w))
+    }
+
+    /// [`RiccatiKkt::factor`] with the state dimension a constant `NX` (0: `self.nx`).
+    #[inline(always)]
+    fn factor_nx<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+        w: &[f64],
+    ) -> bool {
+        let nx = if NX == 0 { self.nx } else { NX };
+        let (nu, n) = (self.nu, self.n);
         let nz = nx + nu;
         self.stage_block(ocp, hess, w, n);
         for i in 0..nx {
@@ -241,7 +271,20 @@ impl RiccatiKkt {
     /// Solves the system for `rhs = (r_d, r_e)` in place (natural order `(d, λ)`), with the
     /// factors of the last successful [`RiccatiKkt::factor`].
     pub fn solve_in_place(&mut self, ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], rhs: &mut [f64]) {
-        let (nx, nu, n) = (self.nx, self.nu, self.n);
+        by_nx!(self.nx, self.solve_nx(ocp, jac_x, jac_u, rhs))
+    }
+
+    /// [`RiccatiKkt::solve_in_place`] with the state dimension a constant `NX` (0: `self.nx`).
+    #[inline(always)]
+    fn solve_nx<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        jac_x: &[f64],
+        jac_u: &[f64],
+        rhs: &mut [f64],
+    ) {
+        let nx = if NX == 0 { self.nx } else { NX };
+        let (nu, n) = (self.nu, self.n);
         let nz = nx + nu;
         let nv = ocp.n_var;
         // Backward: p_N = q_N.
