@@ -16,6 +16,22 @@
 //! structured interior-point method, falling back to clarabel for a QP it cannot solve
 //! (e.g. an infeasible linearisation, which clarabel certifies), or clarabel alone.
 
+/// Calls `$self.$method::<NX>(…)` with the state dimension `$nx` as the constant `NX` for
+/// every `nx < 16` (`MAX_NZ`; the kernels' loops then have fixed trip counts: unrolled, no loop
+/// overhead; the same operations in the same order, so the same bits), `NX = 0` (runtime
+/// size) otherwise.
+macro_rules! by_nx {
+    ($nx:expr, $self:ident . $method:ident $args:tt) => {
+        by_nx!(@ $nx, $self.$method $args, 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15)
+    };
+    (@ $nx:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
+        match $nx {
+            $($n => $self.$method::<$n> $args,)*
+            _ => $self.$method::<0> $args,
+        }
+    };
+}
+
 pub mod ipm;
 pub mod riccati;
 

@@ -75,9 +75,20 @@ pub struct IpmQp {
     pub last_iterations: u32,
 }
 
+/// The state dimension: the constant `NX` of a kernel specialised by `by_nx!`, else (0) the
+/// OCP's.
+#[inline(always)]
+fn dim_x<const NX: usize>(ocp: &Ocp) -> usize {
+    if NX == 0 {
+        ocp.nx
+    } else {
+        NX
+    }
+}
+
 /// `out = H x` for the stage-block Hessian plus the slack diagonal.
-fn mul_h(ocp: &Ocp, hess: &[f64], x: &[f64], out: &mut [f64]) {
-    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+fn mul_h<const NX: usize>(ocp: &Ocp, hess: &[f64], x: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (dim_x::<NX>(ocp), ocp.nu, ocp.horizon);
     let nz = nx + nu;
     for s in 0..=n {
         let off = s * nz;
@@ -100,7 +111,12 @@ fn mul_h(ocp: &Ocp, hess: &[f64], x: &[f64], out: &mut [f64]) {
 /// `out = E x` with `E = ∇c(z)ᵀ` (rows c_0 = x_0 − x_s, c_{k+1} = F(x_k, u_k) − x_{k+1}):
 /// the linearised change of the equalities along x (also the SQP's second-order correction).
 pub(crate) fn mul_e(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mut [f64]) {
-    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+    mul_e_nx::<0>(ocp, jac_x, jac_u, x, out)
+}
+
+/// [`mul_e`] with the state dimension `NX` (0: the OCP's).
+fn mul_e_nx<const NX: usize>(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (dim_x::<NX>(ocp), ocp.nu, ocp.horizon);
     out[..nx].copy_from_slice(&x[..nx]);
     for k in 0..n {
         let (ix, iu, ixn) = (ocp.ix(k), ocp.iu(k), ocp.ix(k + 1));
@@ -118,8 +134,8 @@ pub(crate) fn mul_e(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], x: &[f64], out: &mu
 }
 
 /// `out += Eᵀ y`.
-fn add_et(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], y: &[f64], out: &mut [f64]) {
-    let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+fn add_et<const NX: usize>(ocp: &Ocp, jac_x: &[f64], jac_u: &[f64], y: &[f64], out: &mut [f64]) {
+    let (nx, nu, n) = (dim_x::<NX>(ocp), ocp.nu, ocp.horizon);
     for i in 0..nx {
         out[i] += y[i];
     }
@@ -199,7 +215,7 @@ impl IpmQp {
 
     /// Residuals r_d, r_e, r_i at the current iterate; returns the objective ½dᵀHd + gᵀd.
     #[allow(clippy::too_many_arguments)]
-    fn residuals(
+    fn residuals<const NX: usize>(
         &mut self,
         ocp: &Ocp,
         hess: &[f64],
@@ -208,15 +224,15 @@ impl IpmQp {
         jx: &[f64],
         ju: &[f64],
     ) -> f64 {
-        mul_h(ocp, hess, &self.d, &mut self.rd);
+        mul_h::<NX>(ocp, hess, &self.d, &mut self.rd);
         let mut pobj = 0.0;
         for ((r, g), d) in self.rd.iter_mut().zip(grad).zip(&self.d) {
             pobj += (0.5 * *r + g) * d;
             *r += g;
         }
-        add_et(ocp, jx, ju, &self.lam, &mut self.rd);
+        add_et::<NX>(ocp, jx, ju, &self.lam, &mut self.rd);
         add_gt(ocp, &self.nu, &mut self.rd);
-        mul_e(ocp, jx, ju, &self.d, &mut self.re);
+        mul_e_nx::<NX>(ocp, jx, ju, &self.d, &mut self.re);
         for (r, ci) in self.re.iter_mut().zip(c) {
             *r += ci;
         }
@@ -228,10 +244,17 @@ impl IpmQp {
 
     /// Factorises `H + Gᵀ diag(self.w) G` (with E): by Riccati while it applies, else by the
     /// band LU (assembled on first use in this QP). Returns false if singular.
-    fn factor(&mut self, ocp: &Ocp, hess: &[f64], jx: &[f64], ju: &[f64], min_ratio: f64) -> bool {
+    fn factor<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        jx: &[f64],
+        ju: &[f64],
+        min_ratio: f64,
+    ) -> bool {
         if self.use_riccati {
             if let Some(r) = self.riccati.as_mut() {
-                if r.factor(ocp, hess, jx, ju, &self.w) {
+                if r.factor_nx::<NX>(ocp, hess, jx, ju, &self.w) {
                     return true;
                 }
             }
@@ -248,10 +271,10 @@ impl IpmQp {
     }
 
     /// Solves the factorised system for `self.rhs` in place.
-    fn solve_system(&mut self, ocp: &Ocp, jx: &[f64], ju: &[f64]) -> bool {
+    fn solve_system<const NX: usize>(&mut self, ocp: &Ocp, jx: &[f64], ju: &[f64]) -> bool {
         match self.riccati.as_mut() {
             Some(r) if self.use_riccati => {
-                r.solve_in_place(ocp, jx, ju, &mut self.rhs);
+                r.solve_nx::<NX>(ocp, jx, ju, &mut self.rhs);
                 self.rhs.iter().all(|v| v.is_finite())
             }
             _ => self.kkt.solve_in_place(&mut self.rhs, &mut self.scratch),
@@ -260,7 +283,13 @@ impl IpmQp {
 
     /// Solves the Newton system for the complementarity target `rc` (in `self.tmp`) with the
     /// current factorisation; writes Δd, Δλ into `self.rhs` and Δt, Δν into `dt`, `dnu`.
-    fn newton(&mut self, ocp: &Ocp, jx: &[f64], ju: &[f64], use_aff: bool) -> bool {
+    fn newton<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        jx: &[f64],
+        ju: &[f64],
+        use_aff: bool,
+    ) -> bool {
         let (nv, ne) = (ocp.n_var, ocp.n_eq);
         // rhs_z = −r_d − Gᵀ((r_c + ν∘r_i)/t), rhs_λ = −r_e.
         for i in 0..nv {
@@ -275,7 +304,7 @@ impl IpmQp {
                 self.rhs[row.idx[j]] -= row.coef[j] * v;
             }
         }
-        if !self.solve_system(ocp, jx, ju) {
+        if !self.solve_system::<NX>(ocp, jx, ju) {
             return false;
         }
         let (dt, dnu) = if use_aff {
@@ -294,6 +323,18 @@ impl IpmQp {
     /// [`QpStatus::Failed`] at the iteration limit, on divergence (e.g. an infeasible QP)
     /// or on a singular Newton system.
     pub fn solve(
+        &mut self,
+        ocp: &Ocp,
+        data: &QpData,
+        d: &mut [f64],
+        lam: &mut [f64],
+        nu: &mut [f64],
+    ) -> QpStatus {
+        by_nx!(ocp.nx, self.solve_nx(ocp, data, d, lam, nu))
+    }
+
+    /// [`IpmQp::solve`] with the state dimension `NX` (0: the OCP's) in every kernel.
+    fn solve_nx<const NX: usize>(
         &mut self,
         ocp: &Ocp,
         data: &QpData,
@@ -324,7 +365,7 @@ impl IpmQp {
         self.use_riccati = self.riccati.is_some();
         self.band_ready = false;
         self.w.fill(1.0);
-        if !self.factor(ocp, hess, jac_x, jac_u, 1e-14) {
+        if !self.factor::<NX>(ocp, hess, jac_x, jac_u, 1e-14) {
             return QpStatus::Failed;
         }
         for i in 0..nv {
@@ -334,7 +375,7 @@ impl IpmQp {
             self.rhs[nv + i] = -c[i];
         }
         add_gt(ocp, &self.b, &mut self.rhs[..nv]);
-        if !self.solve_system(ocp, jac_x, jac_u) {
+        if !self.solve_system::<NX>(ocp, jac_x, jac_u) {
             return QpStatus::Failed;
         }
         self.d.copy_from_slice(&self.rhs[..nv]);
@@ -364,7 +405,7 @@ impl IpmQp {
         let mut it = 0;
         loop {
             self.last_iterations = it;
-            let pobj = self.residuals(ocp, hess, grad, c, jac_x, jac_u);
+            let pobj = self.residuals::<NX>(ocp, hess, grad, c, jac_x, jac_u);
             let gap: f64 = self.t.iter().zip(&self.nu).map(|(a, b)| a * b).sum();
             let mu = gap / m as f64;
             let residual = (inf_norm(&self.rd) / scale_g)
@@ -402,7 +443,7 @@ impl IpmQp {
             for i in 0..m {
                 self.w[i] = self.nu[i] / self.t[i];
             }
-            if !self.factor(ocp, hess, jac_x, jac_u, 0.0) {
+            if !self.factor::<NX>(ocp, hess, jac_x, jac_u, 0.0) {
                 if err <= TOL_REDUCED {
                     break;
                 }
@@ -412,7 +453,7 @@ impl IpmQp {
             for i in 0..m {
                 self.tmp[i] = -self.t[i] * self.nu[i];
             }
-            if !self.newton(ocp, jac_x, jac_u, true) {
+            if !self.newton::<NX>(ocp, jac_x, jac_u, true) {
                 return QpStatus::Failed;
             }
             let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
@@ -427,7 +468,7 @@ impl IpmQp {
                 self.tmp[i] =
                     sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
             }
-            if !self.newton(ocp, jac_x, jac_u, false) {
+            if !self.newton::<NX>(ocp, jac_x, jac_u, false) {
                 return QpStatus::Failed;
             }
             let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));

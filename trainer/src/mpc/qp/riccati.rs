@@ -27,22 +27,6 @@
 
 use crate::mpc::ocp::Ocp;
 
-/// Calls `$self.$method::<NX>(…)` with the state dimension `$nx` as the constant `NX` for
-/// every `nx < 16` (`MAX_NZ`; the kernels' loops then have fixed trip counts: unrolled, no loop
-/// overhead; the same operations in the same order, so the same bits), `NX = 0` (runtime
-/// size) otherwise.
-macro_rules! by_nx {
-    ($nx:expr, $self:ident . $method:ident $args:tt) => {
-        by_nx!(@ $nx, $self.$method $args, 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15)
-    };
-    (@ $nx:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
-        match $nx {
-            $($n => $self.$method::<$n> $args,)*
-            _ => $self.$method::<0> $args,
-        }
-    };
-}
-
 /// Relative size below which a Cholesky pivot of R̃_k counts as not positive.
 const PIVOT_TOL: f64 = 1e-13;
 
@@ -139,7 +123,7 @@ impl RiccatiKkt {
 
     /// [`RiccatiKkt::factor`] with the state dimension a constant `NX` (0: `self.nx`).
     #[inline(always)]
-    fn factor_nx<const NX: usize>(
+    pub(super) fn factor_nx<const NX: usize>(
         &mut self,
         ocp: &Ocp,
         hess: &[f64],
@@ -276,7 +260,7 @@ impl RiccatiKkt {
 
     /// [`RiccatiKkt::solve_in_place`] with the state dimension a constant `NX` (0: `self.nx`).
     #[inline(always)]
-    fn solve_nx<const NX: usize>(
+    pub(super) fn solve_nx<const NX: usize>(
         &mut self,
         ocp: &Ocp,
         jac_x: &[f64],
