@@ -209,7 +209,8 @@ impl Ocp {
                 &z[self.ix(k)..self.ix(k) + nx],
                 &z[self.iu(k)..self.iu(k) + nu],
             );
-            self.model.linearize(
+            self.model.linearize_at(
+                k,
                 xk,
                 uk,
                 &mut f[..nx],
@@ -253,7 +254,8 @@ impl Ocp {
         let bs = nz * nz;
         for k in 0..self.horizon {
             let blk = &mut blocks[k * bs..(k + 1) * bs];
-            self.model.lagrangian_hessian(
+            self.model.lagrangian_hessian_at(
+                k,
                 &z[self.ix(k)..self.ix(k) + nx],
                 &z[self.iu(k)..self.iu(k) + nu],
                 &lam[(k + 1) * nx..(k + 2) * nx],

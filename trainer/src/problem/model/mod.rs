@@ -34,6 +34,7 @@ mod double_integrator;
 pub mod expr;
 mod pendulum;
 mod plant;
+mod staged;
 #[cfg(test)]
 pub(crate) mod test_plants;
 

@@ -24,16 +24,29 @@
 //! in flat per-thread buffers (grown on the first call, then reused: no allocation). Values are
 //! those of the f64 tape (the same `f64` functions); derivatives agree with the dual numbers'
 //! to rounding (tested to 1e-12 relative).
+//!
+//! **Shared forward sweep.** The OCP linearises every stage at an iterate and then asks for
+//! the Hessians at the same points. [`Sweep::linearize_at`] and
+//! [`Sweep::lagrangian_hessian_at`] keep one forward sweep (values, partials, tangents) per
+//! stage index in the per-thread buffers, tagged with the sweep's identity and the exact bits
+//! of `(x, u)`; a call at the same point reuses it instead of sweeping again (a deterministic
+//! sweep of the same program at the same bits: the results are the bits a new sweep gives).
 
 use super::super::plant::by_nz;
 use super::super::MAX_NZ;
 use super::tape::{args, operands, rename, Op, Tape};
 use num_dual::DualNum;
 use std::cell::RefCell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Source of [`Sweep`] identities (for the per-thread cache of forward sweeps).
+static NEXT_ID: AtomicU64 = AtomicU64::new(0);
 
 /// The discrete map as a program on slots, for one sampling time and sub-step count.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Sweep {
+    /// Identity of this program (clones share it), the key of cached forward sweeps.
+    id: u64,
     nx: usize,
     nu: usize,
     /// Instruction `k` writes slot `nz + k`; its operands are slots `< nz + k`.
@@ -42,6 +55,20 @@ pub struct Sweep {
     outs: Vec<u32>,
     ts: f64,
     substeps: usize,
+}
+
+/// Equal programs (whatever their identities).
+impl PartialEq for Sweep {
+    fn eq(&self, o: &Self) -> bool {
+        (
+            self.nx,
+            self.nu,
+            &self.code,
+            &self.outs,
+            self.ts,
+            self.substeps,
+        ) == (o.nx, o.nu, &o.code, &o.outs, o.ts, o.substeps)
+    }
 }
 
 /// Emits instructions; slot numbers follow the instruction count.
@@ -119,6 +146,7 @@ impl Sweep {
             }
         }
         let sweep = Sweep {
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             nx,
             nu,
             code: b.code,
@@ -152,50 +180,130 @@ impl Sweep {
 
     /// `f = F(x, u)`, `jx = ∂F/∂x` (row-major nx×nx), `ju = ∂F/∂u` (row-major nx×nu).
     pub fn linearize(&self, x: &[f64], u: &[f64], f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
-        let (nx, nu) = (self.nx, self.nu);
         with_work(|w| {
-            by_nz!(self.nz(), self.forward_first(x, u, w));
-            let nz = self.nz();
-            for (i, &o) in self.outs.iter().enumerate() {
-                let o = o as usize;
-                f[i] = w.val[o];
-                let t = &w.tan[o * nz..o * nz + nz];
-                jx[i * nx..i * nx + nx].copy_from_slice(&t[..nx]);
-                ju[i * nu..i * nu + nu].copy_from_slice(&t[nx..]);
-            }
+            by_nz!(self.nz(), self.forward_first(x, u, &mut w.scratch));
+            self.outputs(&w.scratch, f, jx, ju);
+        })
+    }
+
+    /// [`Sweep::linearize`] through the forward sweep cached for `stage` (see the module doc):
+    /// reused if it was taken at these `(x, u)`, else swept (partials kept) and cached.
+    pub fn linearize_at(
+        &self,
+        stage: usize,
+        x: &[f64],
+        u: &[f64],
+        f: &mut [f64],
+        jx: &mut [f64],
+        ju: &mut [f64],
+    ) {
+        with_work(|w| {
+            let fw = self.cached_forward(stage, x, u, w);
+            self.outputs(&w.stages[fw], f, jx, ju);
         })
     }
 
     /// `hess = ∇²_{(x,u)} (λᵀF(x, u))`, row-major (nx+nu)×(nx+nu), symmetric.
     pub fn lagrangian_hessian(&self, x: &[f64], u: &[f64], lam: &[f64], hess: &mut [f64]) {
         with_work(|w| {
-            by_nz!(self.nz(), self.forward(x, u, w));
-            by_nz!(self.nz(), self.reverse(lam, w));
-            let nz = self.nz();
-            for r in 0..nz {
-                for c in 0..=r {
-                    let v = 0.5 * (w.adt[r * nz + c] + w.adt[c * nz + r]);
-                    hess[r * nz + c] = v;
-                    hess[c * nz + r] = v;
-                }
-            }
+            by_nz!(self.nz(), self.forward(x, u, &mut w.scratch));
+            let Work {
+                scratch, adj, adt, ..
+            } = w;
+            by_nz!(self.nz(), self.reverse(lam, scratch, adj, adt));
+            self.symmetrised(adt, hess);
         })
     }
 
+    /// [`Sweep::lagrangian_hessian`] through the forward sweep cached for `stage`.
+    pub fn lagrangian_hessian_at(
+        &self,
+        stage: usize,
+        x: &[f64],
+        u: &[f64],
+        lam: &[f64],
+        hess: &mut [f64],
+    ) {
+        with_work(|w| {
+            let fw = self.cached_forward(stage, x, u, w);
+            let Work {
+                stages, adj, adt, ..
+            } = w;
+            by_nz!(self.nz(), self.reverse(lam, &stages[fw], adj, adt));
+            self.symmetrised(adt, hess);
+        })
+    }
+
+    /// The index in `w.stages` of a forward sweep (partials kept) at `(x, u)` for `stage`:
+    /// the cached one if it is this program's at these bits, else a new one.
+    fn cached_forward(&self, stage: usize, x: &[f64], u: &[f64], w: &mut Work) -> usize {
+        if w.stages.len() <= stage {
+            w.stages.resize_with(stage + 1, Forward::default);
+        }
+        let fw = &mut w.stages[stage];
+        let (nx, nu) = (self.nx, self.nu);
+        let same = fw.id == Some(self.id)
+            && fw.at.len() == nx + nu
+            && x[..nx]
+                .iter()
+                .chain(&u[..nu])
+                .zip(&fw.at)
+                .all(|(v, b)| v.to_bits() == *b);
+        if !same {
+            fw.id = None;
+            by_nz!(self.nz(), self.forward(x, u, fw));
+            fw.at.clear();
+            fw.at
+                .extend(x[..nx].iter().chain(&u[..nu]).map(|v| v.to_bits()));
+            fw.id = Some(self.id);
+        }
+        stage
+    }
+
+    /// `F` and its Jacobians from a forward sweep.
+    fn outputs(&self, fw: &Forward, f: &mut [f64], jx: &mut [f64], ju: &mut [f64]) {
+        let (nx, nu) = (self.nx, self.nu);
+        let nz = self.nz();
+        for (i, &o) in self.outs.iter().enumerate() {
+            let o = o as usize;
+            f[i] = fw.val[o];
+            let t = &fw.tan[o * nz..o * nz + nz];
+            jx[i * nx..i * nx + nx].copy_from_slice(&t[..nx]);
+            ju[i * nu..i * nu + nu].copy_from_slice(&t[nx..]);
+        }
+    }
+
+    /// The Hessian `(H + Hᵀ)/2` from the inputs' adjoint tangents `adt`.
+    fn symmetrised(&self, adt: &[f64], hess: &mut [f64]) {
+        let nz = self.nz();
+        for r in 0..nz {
+            for c in 0..=r {
+                let v = 0.5 * (adt[r * nz + c] + adt[c * nz + r]);
+                hess[r * nz + c] = v;
+                hess[c * nz + r] = v;
+            }
+        }
+    }
+
     /// Values and tangents of every slot (for `∂F`).
-    fn forward_first<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+    fn forward_first<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Forward) {
         self.sweep_forward::<NZ, false>(x, u, w)
     }
 
     /// Values, local partials and tangents of every slot (for the reverse sweep).
-    fn forward<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+    fn forward<const NZ: usize>(&self, x: &[f64], u: &[f64], w: &mut Forward) {
         self.sweep_forward::<NZ, true>(x, u, w)
     }
 
     /// The forward sweep; the local partials are kept (for [`Sweep::reverse`]) when `KEEP`
     /// (else their second-order entries are unused, and left to the optimiser to drop).
     #[inline(always)]
-    fn sweep_forward<const NZ: usize, const KEEP: bool>(&self, x: &[f64], u: &[f64], w: &mut Work) {
+    fn sweep_forward<const NZ: usize, const KEEP: bool>(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        w: &mut Forward,
+    ) {
         let n = NZ + self.code.len();
         w.val.resize(n, 0.0);
         w.tan.resize(n * NZ, 0.0);
@@ -261,20 +369,27 @@ impl Sweep {
         }
     }
 
-    /// Adjoints and their tangents, seeded by `λ` at the outputs (after [`Sweep::forward`]).
-    fn reverse<const NZ: usize>(&self, lam: &[f64], w: &mut Work) {
+    /// Adjoints `adj` and their tangents `adt`, seeded by `λ` at the outputs, after the
+    /// forward sweep `w` (partials kept: [`Sweep::forward`]).
+    fn reverse<const NZ: usize>(
+        &self,
+        lam: &[f64],
+        w: &Forward,
+        adj: &mut Vec<f64>,
+        adt: &mut Vec<f64>,
+    ) {
         let n = NZ + self.code.len();
-        w.adj.clear();
-        w.adj.resize(n, 0.0);
-        w.adt.clear();
-        w.adt.resize(n * NZ, 0.0);
+        adj.clear();
+        adj.resize(n, 0.0);
+        adt.clear();
+        adt.resize(n * NZ, 0.0);
         for (i, &o) in self.outs.iter().enumerate() {
-            w.adj[o as usize] += lam[i];
+            adj[o as usize] += lam[i];
         }
         for (k, op) in self.code.iter().enumerate().rev() {
             let s = NZ + k;
-            let c = w.adj[s];
-            let (lo, hi) = w.adt.split_at_mut(s * NZ);
+            let c = adj[s];
+            let (lo, hi) = adt.split_at_mut(s * NZ);
             let ct: &[f64; NZ] = (&hi[..NZ]).try_into().expect("NZ");
             if c == 0.0 && ct.iter().all(|&v| v == 0.0) {
                 continue;
@@ -284,7 +399,7 @@ impl Sweep {
             match arity(op) {
                 (0, _, _) => {}
                 (1, a, _) => {
-                    w.adj[a] += c * p[0];
+                    adj[a] += c * p[0];
                     let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
                     let at: &mut [f64; NZ] = (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
                     let caa = c * p[2];
@@ -293,8 +408,8 @@ impl Sweep {
                     }
                 }
                 (_, a, b) => {
-                    w.adj[a] += c * p[0];
-                    w.adj[b] += c * p[1];
+                    adj[a] += c * p[0];
+                    adj[b] += c * p[1];
                     let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
                     let tb: &[f64; NZ] = tan[b * NZ..b * NZ + NZ].try_into().expect("NZ");
                     let (caa, cab, cbb) = (c * p[2], c * p[3], c * p[4]);
@@ -501,12 +616,25 @@ fn local(op: Op, v: &[f64]) -> (f64, [f64; 5]) {
     }
 }
 
-/// Per-thread buffers of the sweeps.
+/// One forward sweep: values, local partials (if kept) and tangents of every slot.
 #[derive(Default)]
-struct Work {
+struct Forward {
+    /// The [`Sweep`] it belongs to, if it is a cached one (see `at`).
+    id: Option<u64>,
+    /// The bits of `(x, u)` it was taken at (cached ones).
+    at: Vec<u64>,
     val: Vec<f64>,
     part: Vec<[f64; 5]>,
     tan: Vec<f64>,
+}
+
+/// Per-thread buffers of the sweeps.
+#[derive(Default)]
+struct Work {
+    /// The forward sweep of the uncached calls.
+    scratch: Forward,
+    /// The cached forward sweep of each stage index.
+    stages: Vec<Forward>,
     adj: Vec<f64>,
     adt: Vec<f64>,
 }
