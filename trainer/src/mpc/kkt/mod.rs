@@ -29,6 +29,19 @@
 use crate::mpc::ocp::Ocp;
 use nalgebra::{DMatrix, DVector};
 
+/// `$self.solve_many_m::<M>($b, $m)` with `M = $m` a constant for `m ≤ 15`, else 0.
+macro_rules! by_rhs_count {
+    ($m:expr, $self:ident, $b:ident) => {
+        by_rhs_count!(@ $m, $self, $b, 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15)
+    };
+    (@ $m:expr, $self:ident, $b:ident, $($n:literal)*) => {
+        match $m {
+            $($n => $self.solve_many_m::<$n>($b, $n),)*
+            m => $self.solve_many_m::<0>($b, m),
+        }
+    };
+}
+
 /// A square banded matrix (lower bandwidth `kl`, upper `ku`) with room for the fill of LU
 /// with partial pivoting, factorised in place (`P A = L U`).
 ///
@@ -169,6 +182,69 @@ impl BandLu {
             let row = &self.a[rk0 + 1..rk0 + len];
             let s: f64 = row.iter().zip(&b[k + 1..k + len]).map(|(a, x)| a * x).sum();
             b[k] = (b[k] - s) / self.a[rk0];
+        }
+    }
+
+    /// [`BandLu::solve_in_place`] for `m` right-hand sides at once: `b` is row-major n × m
+    /// (row i holds the i-th entry of every right-hand side). Each column sees the single
+    /// solve's operations in the same order (the same bits); the columns' independent sums
+    /// overlap, and each factor entry is read once for all of them.
+    pub fn solve_many_in_place(&self, b: &mut [f64], m: usize) {
+        // A constant count for the sensitivities' nx ≤ 15 columns (unrolled loops).
+        by_rhs_count!(m, self, b)
+    }
+
+    /// [`BandLu::solve_many_in_place`] with `M` right-hand sides (0: `m`).
+    #[inline(always)]
+    fn solve_many_m<const M: usize>(&self, b: &mut [f64], m: usize) {
+        let m = if M == 0 { m } else { M };
+        if m == 0 {
+            return;
+        }
+        let (n, kl, w) = (self.n, self.kl, self.w);
+        let ubw = kl + self.ku;
+        for k in 0..n {
+            let p = self.piv[k];
+            if p != k {
+                for c in 0..m {
+                    b.swap(k * m + c, p * m + c);
+                }
+            }
+            let (head, tail) = b.split_at_mut((k + 1) * m);
+            let bk = &head[k * m..];
+            if bk.iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let mut idx = k * w + kl + (w - 1);
+            for bi in tail.chunks_exact_mut(m).take((k + kl).min(n - 1) - k) {
+                let a = self.a[idx];
+                for (x, &v) in bi.iter_mut().zip(bk) {
+                    // (As the single solve, which skips a zero b_k.)
+                    *x = if v != 0.0 { *x - a * v } else { *x };
+                }
+                idx += w - 1;
+            }
+        }
+        // The initial value of `Iterator::sum` (the single solve's dot products).
+        let zero: f64 = std::iter::empty::<f64>().sum();
+        const G: usize = 16;
+        for c0 in (0..m).step_by(G) {
+            let g = G.min(m - c0);
+            for k in (0..n).rev() {
+                let len = (k + ubw).min(n - 1) - k + 1;
+                let rk0 = k * w + kl;
+                let mut s = [zero; G];
+                for (j, &a) in self.a[rk0 + 1..rk0 + len].iter().enumerate() {
+                    let x = &b[(k + 1 + j) * m + c0..(k + 1 + j) * m + c0 + g];
+                    for (sc, &xc) in s.iter_mut().zip(x) {
+                        *sc += a * xc;
+                    }
+                }
+                let d = self.a[rk0];
+                for (bc, sc) in b[k * m + c0..k * m + c0 + g].iter_mut().zip(&s) {
+                    *bc = (*bc - sc) / d;
+                }
+            }
         }
     }
 }
@@ -487,6 +563,22 @@ impl BandedKkt {
         }
         b.iter().all(|v| v.is_finite())
     }
+
+    /// [`BandedKkt::solve_in_place`] for `m` right-hand sides, `b` row-major dim × m (the
+    /// same bits per column).
+    pub fn solve_many_in_place(&self, b: &mut [f64], m: usize, scratch: &mut Vec<f64>) -> bool {
+        let dim = self.layout.dim();
+        scratch.clear();
+        scratch.resize(dim * m, 0.0);
+        for (i, &p) in self.layout.pos.iter().enumerate() {
+            scratch[p * m..(p + 1) * m].copy_from_slice(&b[i * m..(i + 1) * m]);
+        }
+        self.lu.solve_many_in_place(scratch, m);
+        for (i, &p) in self.layout.pos.iter().enumerate() {
+            b[i * m..(i + 1) * m].copy_from_slice(&scratch[p * m..(p + 1) * m]);
+        }
+        b.iter().all(|v| v.is_finite())
+    }
 }
 
 /// A factorised active-set KKT matrix.
@@ -538,18 +630,25 @@ impl ActiveSetKkt {
             .then_some(x)
     }
 
-    /// Solves `K X = RHS` for several right-hand sides.
+    /// Solves `K X = RHS` for several right-hand sides (all at once; each column's bits are
+    /// those of [`ActiveSetKkt::solve`]); `None` if K is singular or a result is not finite.
     pub fn solve_many(&self, rhs: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-        let mut x = rhs.clone();
-        let mut scratch = Vec::new();
-        for mut col in x.column_iter_mut() {
-            let mut v: Vec<f64> = col.iter().copied().collect();
-            if !self.solve_slice(&mut v, &mut scratch) {
-                return None;
-            }
-            col.copy_from_slice(&v);
+        let (n, m) = rhs.shape();
+        if self.is_singular() || n != self.dim() {
+            return None;
         }
-        Some(x)
+        // Row-major copy of the column-major RHS.
+        let mut b = vec![0.0; n * m];
+        for (c, col) in rhs.column_iter().enumerate() {
+            for (i, &v) in col.iter().enumerate() {
+                b[i * m + c] = v;
+            }
+        }
+        let mut scratch = Vec::new();
+        if !self.kkt.solve_many_in_place(&mut b, m, &mut scratch) {
+            return None;
+        }
+        Some(DMatrix::from_row_slice(n, m, &b))
     }
 }
 
