@@ -148,25 +148,24 @@ impl RiccatiKkt {
             let pn = &tail[..nx * nx];
             let pk = &mut head[k * nx * nx..];
             let (pa, pb, h) = (&mut self.pa, &mut self.pb, &self.h);
-            // pa = P A, pb = P B. Row by row as axpys (contiguous, vectorisable); every
-            // entry is still summed over l in ascending order from 0, so the bits are those
-            // of the dot-product form.
+            // pa = P A, pb = P B. Every entry is summed over l in ascending order from 0 (the
+            // bits of the dot-product form): P A row by row as axpys (contiguous,
+            // vectorisable), P B as dot products (no loop over the runtime nu innermost).
             pa.fill(0.0);
-            pb.fill(0.0);
-            for ((prow, parow), pbrow) in pn
-                .chunks_exact(nx)
-                .zip(pa.chunks_exact_mut(nx))
-                .zip(pb.chunks_exact_mut(nu))
-            {
-                for ((&p, arow), brow) in
-                    prow.iter().zip(a.chunks_exact(nx)).zip(b.chunks_exact(nu))
-                {
+            for (prow, parow) in pn.chunks_exact(nx).zip(pa.chunks_exact_mut(nx)) {
+                for (&p, arow) in prow.iter().zip(a.chunks_exact(nx)) {
                     for (d, &v) in parow.iter_mut().zip(arow) {
                         *d += p * v;
                     }
-                    for (d, &v) in pbrow.iter_mut().zip(brow) {
-                        *d += p * v;
+                }
+            }
+            for (prow, pbrow) in pn.chunks_exact(nx).zip(pb.chunks_exact_mut(nu)) {
+                for (j, d) in pbrow.iter_mut().enumerate() {
+                    let mut acc = 0.0;
+                    for (l, &p) in prow.iter().enumerate() {
+                        acc += p * b[l * nu + j];
                     }
+                    *d = acc;
                 }
             }
             let lk = &mut self.l[k * nu * nu..(k + 1) * nu * nu];
@@ -178,12 +177,14 @@ impl RiccatiKkt {
                 lk[i * nu..i * nu + i + 1].copy_from_slice(&hrow[nx..nx + i + 1]);
                 st[i * nx..(i + 1) * nx].copy_from_slice(&hrow[..nx]);
             }
-            for ((brow, pbrow), parow) in b
-                .chunks_exact(nu)
-                .zip(pb.chunks_exact(nu))
-                .zip(pa.chunks_exact(nx))
-            {
-                for ((i, &bi), strow) in brow.iter().enumerate().zip(st.chunks_exact_mut(nx)) {
+            // (Input row i outermost: the l loop inside has the constant trip count nx.)
+            for (i, strow) in st.chunks_exact_mut(nx).enumerate() {
+                for ((brow, pbrow), parow) in b
+                    .chunks_exact(nu)
+                    .zip(pb.chunks_exact(nu))
+                    .zip(pa.chunks_exact(nx))
+                {
+                    let bi = brow[i];
                     for (d, &v) in lk[i * nu..i * nu + i + 1].iter_mut().zip(pbrow) {
                         *d += bi * v;
                     }
@@ -215,9 +216,9 @@ impl RiccatiKkt {
                     lk[i * nu + j] = v / d;
                 }
             }
-            // S̃ ← L⁻¹ S̃.
-            for c in 0..nx {
-                for i in 0..nu {
+            // S̃ ← L⁻¹ S̃ (row i after rows l < i: each entry as column by column).
+            for i in 0..nu {
+                for c in 0..nx {
                     let mut v = st[i * nx + c];
                     for l in 0..i {
                         v -= lk[i * nu + l] * st[l * nx + c];
