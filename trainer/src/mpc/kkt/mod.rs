@@ -594,13 +594,37 @@ impl ActiveSetKkt {
     /// Assembles and factorises K from the exact Hessian blocks, the dynamics Jacobians and
     /// the active rows.
     pub fn new(ocp: &Ocp, hess: &[f64], jac_x: &[f64], jac_u: &[f64], active: Vec<usize>) -> Self {
-        let mut kkt = BandedKkt::new(KktLayout::new(ocp, active.clone()));
+        Self::with_layout(ocp, hess, jac_x, jac_u, KktLayout::new(ocp, active))
+    }
+
+    /// [`ActiveSetKkt::new`] for the active rows of `layout`, an ordering already computed
+    /// (by [`KktLayout::new`] for this OCP structure) and reused.
+    pub fn with_layout(
+        ocp: &Ocp,
+        hess: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+        layout: KktLayout,
+    ) -> Self {
+        let active = layout.active.clone();
+        let mut kkt = BandedKkt::new(layout);
         let pivot_ratio = kkt.factor(ocp, hess, jac_x, jac_u, None);
         ActiveSetKkt {
             kkt,
             active,
             pivot_ratio,
         }
+    }
+
+    /// Assembles and factorises K anew for new Hessian blocks and Jacobians (same OCP and
+    /// active rows), reusing the ordering and the storage (the bits of a new one).
+    pub fn refactor(&mut self, ocp: &Ocp, hess: &[f64], jac_x: &[f64], jac_u: &[f64]) {
+        self.pivot_ratio = self.kkt.factor(ocp, hess, jac_x, jac_u, None);
+    }
+
+    /// The ordering (to reuse for the same active rows).
+    pub fn layout(&self) -> &KktLayout {
+        &self.kkt.layout
     }
 
     /// Dimension of K.

@@ -40,7 +40,7 @@
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
 
 use crate::mpc::convexity::ReducedHessian;
-use crate::mpc::kkt::ActiveSetKkt;
+use crate::mpc::kkt::{ActiveSetKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
 use crate::mpc::qp::ipm::mul_e;
 use crate::mpc::qp::{QpData, QpSolver, QpStatus};
@@ -280,6 +280,8 @@ pub struct SqpSolver {
     u_lo: Vec<f64>,
     u_hi: Vec<f64>,
     globalisation: Globalisation,
+    /// The KKT ordering of the last successful polish (reused by [`Self::active_set_kkt`]).
+    polish_layout: Option<KktLayout>,
 }
 
 impl SqpSolver {
@@ -309,6 +311,7 @@ impl SqpSolver {
             u_lo: cfg.ocp.u_lo.clone(),
             u_hi: cfg.ocp.u_hi.clone(),
             globalisation: Globalisation::Default,
+            polish_layout: None,
         }
     }
 
@@ -346,7 +349,14 @@ impl SqpSolver {
         let mut ev = Evals::new(&self.ocp);
         ev.first_order(&self.ocp, &p.z, xs);
         self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
-        ActiveSetKkt::new(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active)
+        match &self.polish_layout {
+            // The ordering of the polish's last factorisation, for the same active rows (the
+            // ordering is a function of the OCP's structure and the active rows only).
+            Some(l) if l.active == active => {
+                ActiveSetKkt::with_layout(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u, l.clone())
+            }
+            _ => ActiveSetKkt::new(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active),
+        }
     }
 
     /// The ℓ₁ merit `φ(z + α·step) = f + μ(‖c‖₁ + Σ max(0, g))` at the trial point, which

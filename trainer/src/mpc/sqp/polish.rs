@@ -84,6 +84,10 @@ impl SqpSolver {
         let mut last = f64::INFINITY;
         let mut drops = 0;
         let mut it = 0;
+        // The factorisation of the last iteration: its ordering and storage are reused while
+        // the active set stays (and the ordering kept for the sensitivity's, see
+        // `SqpSolver::active_set_kkt`).
+        let mut fact: Option<ActiveSetKkt> = None;
         while it < 8 {
             self.ocp.relinearize(&p.z);
             let ocp = &self.ocp;
@@ -92,6 +96,7 @@ impl SqpSolver {
             if res.max() <= self.settings.tol {
                 info.kkt = res;
                 info.polished = true;
+                self.polish_layout = fact.map(|k| k.layout().clone());
                 return Some(p);
             }
             // Newton on the right active set converges quadratically; anything else is a
@@ -101,7 +106,19 @@ impl SqpSolver {
             }
             last = res.max();
             ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
-            let kkt = ActiveSetKkt::new(ocp, &ev.hess, &ev.jac_x, &ev.jac_u, active.clone());
+            let kkt = match fact.as_mut() {
+                Some(k) if k.active == active => {
+                    k.refactor(ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
+                    k
+                }
+                _ => fact.insert(ActiveSetKkt::new(
+                    ocp,
+                    &ev.hess,
+                    &ev.jac_x,
+                    &ev.jac_u,
+                    active.clone(),
+                )),
+            };
             let (nv, ne) = (ocp.n_var, ocp.n_eq);
             let mut rhs = DVector::zeros(nv + ne + active.len());
             for i in 0..nv {
@@ -163,6 +180,7 @@ impl SqpSolver {
         if res.max() <= self.settings.tol {
             info.kkt = res;
             info.polished = true;
+            self.polish_layout = fact.map(|k| k.layout().clone());
             Some(p)
         } else {
             None
