@@ -15,6 +15,7 @@
 //! workspace; it is tested against the eigenvalues of the dense `ZᵀHZ`.
 
 use crate::mpc::ocp::Ocp;
+use crate::mpc::qp::by_nx;
 
 /// Workspace of the Riccati test (sized once per OCP structure).
 #[derive(Debug, Clone, Default)]
@@ -54,7 +55,20 @@ impl ReducedHessian {
         jac_x: &[f64],
         jac_u: &[f64],
     ) -> bool {
-        let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+        by_nx!(ocp.nx, self.test_nx(ocp, hess, jac_x, jac_u))
+    }
+
+    /// [`ReducedHessian::is_positive_definite`] with the state dimension the constant `NX`
+    /// (0: the OCP's; `qp::by_nx!`), the same operations.
+    fn test_nx<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+    ) -> bool {
+        let nx = if NX == 0 { ocp.nx } else { NX };
+        let (nu, n) = (ocp.nu, ocp.horizon);
         let nz = nx + nu;
         let ReducedHessian {
             p,

@@ -32,6 +32,8 @@ macro_rules! by_nx {
     };
 }
 
+pub(crate) use by_nx;
+
 pub mod ipm;
 pub mod riccati;
 
