@@ -121,8 +121,8 @@ impl RiccatiKkt {
         by_nx!(self.nx, self.factor_nx(ocp, hess, jac_x, jac_u, w))
     }
 
-    /// [`RiccatiKkt::factor`] with the state dimension a constant `NX` (0: `self.nx`).
-    #[inline(always)]
+    /// [`RiccatiKkt::factor`] with the state dimension a constant `NX` (0: `self.nx`), and
+    /// the input dimension a constant too for `nu ≤ 4`.
     pub(super) fn factor_nx<const NX: usize>(
         &mut self,
         ocp: &Ocp,
@@ -131,8 +131,28 @@ impl RiccatiKkt {
         jac_u: &[f64],
         w: &[f64],
     ) -> bool {
+        match self.nu {
+            1 => self.factor_k::<NX, 1>(ocp, hess, jac_x, jac_u, w),
+            2 => self.factor_k::<NX, 2>(ocp, hess, jac_x, jac_u, w),
+            3 => self.factor_k::<NX, 3>(ocp, hess, jac_x, jac_u, w),
+            4 => self.factor_k::<NX, 4>(ocp, hess, jac_x, jac_u, w),
+            _ => self.factor_k::<NX, 0>(ocp, hess, jac_x, jac_u, w),
+        }
+    }
+
+    /// The factorisation with dimensions `NX`, `NU` (0: runtime sizes).
+    #[inline(always)]
+    fn factor_k<const NX: usize, const NU: usize>(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+        w: &[f64],
+    ) -> bool {
         let nx = if NX == 0 { self.nx } else { NX };
-        let (nu, n) = (self.nu, self.n);
+        let nu = if NU == 0 { self.nu } else { NU };
+        let n = self.n;
         let nz = nx + nu;
         self.stage_block(ocp, hess, w, n);
         for i in 0..nx {
@@ -259,8 +279,8 @@ impl RiccatiKkt {
         by_nx!(self.nx, self.solve_nx(ocp, jac_x, jac_u, rhs))
     }
 
-    /// [`RiccatiKkt::solve_in_place`] with the state dimension a constant `NX` (0: `self.nx`).
-    #[inline(always)]
+    /// [`RiccatiKkt::solve_in_place`] with the state dimension a constant `NX` (0: `self.nx`),
+    /// and the input dimension a constant too for `nu ≤ 4`.
     pub(super) fn solve_nx<const NX: usize>(
         &mut self,
         ocp: &Ocp,
@@ -268,8 +288,27 @@ impl RiccatiKkt {
         jac_u: &[f64],
         rhs: &mut [f64],
     ) {
+        match self.nu {
+            1 => self.solve_k::<NX, 1>(ocp, jac_x, jac_u, rhs),
+            2 => self.solve_k::<NX, 2>(ocp, jac_x, jac_u, rhs),
+            3 => self.solve_k::<NX, 3>(ocp, jac_x, jac_u, rhs),
+            4 => self.solve_k::<NX, 4>(ocp, jac_x, jac_u, rhs),
+            _ => self.solve_k::<NX, 0>(ocp, jac_x, jac_u, rhs),
+        }
+    }
+
+    /// The solve with dimensions `NX`, `NU` (0: runtime sizes).
+    #[inline(always)]
+    fn solve_k<const NX: usize, const NU: usize>(
+        &mut self,
+        ocp: &Ocp,
+        jac_x: &[f64],
+        jac_u: &[f64],
+        rhs: &mut [f64],
+    ) {
         let nx = if NX == 0 { self.nx } else { NX };
-        let (nu, n) = (self.nu, self.n);
+        let nu = if NU == 0 { self.nu } else { NU };
+        let n = self.n;
         let nz = nx + nu;
         let nv = ocp.n_var;
         // Backward: p_N = q_N.
