@@ -166,9 +166,8 @@ pub(super) fn outer_chunk(
     }
 }
 
-/// Columns in registers per block of [`outer_chunk`].
-const C: usize = 1;
-
+/// [`outer_chunk`] for jets of `Q` vectors: column after column, the column's accumulator
+/// in a register while the groups' terms are added in order.
 #[inline(always)]
 fn outer_blocks<const Q: usize>(
     g_all: &[V],
@@ -179,48 +178,20 @@ fn outer_blocks<const Q: usize>(
     ng: usize,
     gw: &mut [V],
 ) {
-    let inp = gw.len();
-    let mut c0 = 0;
-    while c0 < inp {
-        let nc = C.min(inp - c0);
-        if nc == C {
-            outer_block::<Q, C>(g_all, sgo, r, h, sgi, ng, c0, gw);
-        } else {
-            for c in c0..inp {
-                outer_block::<Q, 1>(g_all, sgo, r, h, sgi, ng, c, gw);
-            }
-        }
-        c0 += nc;
-    }
-}
-
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn outer_block<const Q: usize, const NC: usize>(
-    g_all: &[V],
-    sgo: usize,
-    r: usize,
-    h: &[V],
-    sgi: usize,
-    ng: usize,
-    c0: usize,
-    gw: &mut [V],
-) {
-    let mut acc: [V; NC] = gw[c0..c0 + NC].try_into().expect("NC columns");
-    // Group by group through whole chunks, so that the bounds checks are loop-invariant.
-    for (gg, hg) in g_all.chunks_exact(sgo).zip(h.chunks_exact(sgi)).take(ng) {
-        let gr: [V; Q] = gg[r * Q..r * Q + Q].try_into().expect("Q vectors");
-        let hg: &[V] = &hg[c0 * Q..(c0 + NC) * Q];
-        for (cc, a) in acc.iter_mut().enumerate() {
-            let hc: [V; Q] = hg[cc * Q..cc * Q + Q].try_into().expect("Q vectors");
+    for (c, acc) in gw.iter_mut().enumerate() {
+        let mut t = *acc;
+        // Group by group through whole chunks, so that the bounds checks are loop-invariant.
+        for (gg, hg) in g_all.chunks_exact(sgo).zip(h.chunks_exact(sgi)).take(ng) {
+            let gr: [V; Q] = gg[r * Q..r * Q + Q].try_into().expect("Q vectors");
+            let hc: [V; Q] = hg[c * Q..c * Q + Q].try_into().expect("Q vectors");
             // `0 + g₀h₀` of the one-group formula without the `0 +`: it can only change
             // the sign of a zero, which the f64 gradient (+0 plus the lanes) never sees.
             let mut s = mul(gr[0], hc[0]);
             for k in 1..Q {
                 s = add(s, mul(gr[k], hc[k]));
             }
-            *a = add(*a, s);
+            t = add(t, s);
         }
+        *acc = t;
     }
-    gw[c0..c0 + NC].copy_from_slice(&acc);
 }
