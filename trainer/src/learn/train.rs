@@ -382,10 +382,11 @@ pub fn train_from<C>(
             bu.clear();
             bdu.clear();
             bj.clear();
+            // Element by element: rows this short cost more as `memcpy` calls.
             for &i in chunk {
-                bx.extend_from_slice(&train.x[i * nx..(i + 1) * nx]);
-                bu.extend_from_slice(&train.u[i * nu..(i + 1) * nu]);
-                bdu.extend_from_slice(&train.du[i * nu * nx..(i + 1) * nu * nx]);
+                bx.extend(train.x[i * nx..(i + 1) * nx].iter());
+                bu.extend(train.u[i * nu..(i + 1) * nu].iter());
+                bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
                 bj.push(train.use_jac[i]);
             }
             let batch = Batch {

@@ -97,6 +97,11 @@ pub struct Lanes {
     /// Per-lane gradient accumulators.
     gw: Vec<Vec<V>>,
     gb: Vec<Vec<V>>,
+
+    /// The weight term's gradient factors ([`Mlp::weight_grad_factors`]) and what they were
+    /// formed for: the bits of λ₃ and of the input and output half-widths.
+    wf: Vec<Vec<f64>>,
+    wf_key: Vec<u64>,
 }
 
 /// (α(z), α′(z), α″(z)) over the lanes of `z`.
@@ -146,22 +151,28 @@ fn activate(act: Activation, z: V) -> (V, V, V) {
 fn activate_chunk(act: Activation, h: &mut [V], d: &mut [V], dd: &mut [V], zt: &mut [V], q: usize) {
     let n = h.len() / q;
     let mut u0 = 0;
+    // Z saved and T formed in one loop (a separate copy of a few vectors is a `memcpy` call).
     let finish = |h: &mut [V], zt: &mut [V], u: usize, a: V, dv: V| {
         let hu = &mut h[u * q..(u + 1) * q];
         hu[0] = a;
-        zt[u * (q - 1)..(u + 1) * (q - 1)].copy_from_slice(&hu[1..]);
-        for t in hu[1..].iter_mut() {
+        for (t, z) in hu[1..]
+            .iter_mut()
+            .zip(&mut zt[u * (q - 1)..(u + 1) * (q - 1)])
+        {
+            *z = *t;
             *t = mul(dv, *t);
         }
     };
     if act == Activation::Tanh {
         const B: usize = 4;
         while u0 + B <= n {
-            let z: [f32; B * L] = std::array::from_fn(|i| h[(u0 + i / L) * q][i % L]);
+            let mut z = [0.0f32; B * L];
+            for (b, zb) in z.as_chunks_mut::<L>().0.iter_mut().enumerate() {
+                *zb = h[(u0 + b) * q];
+            }
             let t = super::tanh32::tanh_lanes(&z);
-            for b in 0..B {
+            for (b, &tb) in t.as_chunks::<L>().0.iter().enumerate() {
                 let u = u0 + b;
-                let tb: V = std::array::from_fn(|i| t[b * L + i]);
                 let (mut dv, mut ddv) = ([0.0; L], [0.0; L]);
                 for i in 0..L {
                     let s = 1.0 - tb[i] * tb[i];
@@ -262,6 +273,7 @@ impl Lanes {
             self.w = mlp.layers.iter().map(|l| vec![0.0; l.w.len()]).collect();
             self.wt = self.w.clone();
             self.b = mlp.layers.iter().map(|l| vec![0.0; l.b.len()]).collect();
+            self.wf.clear();
             self.widths = widths;
         }
         for (l, ((w, wt), b)) in mlp.layers.iter().zip(
@@ -470,9 +482,33 @@ impl Lanes {
         if let Some(g) = grad.as_deref_mut() {
             self.flush(g);
         }
-        // Weight term on the physical weights, in f64 (as the f64 path).
-        mlp.add_weight_term(lam, with_loss.then_some(&mut parts), grad);
+        // Weight term on the physical weights, in f64 (as the f64 path); a step's gradient
+        // alone from the cached factors (the same bits).
+        match grad {
+            Some(g) if !with_loss && lam.weights != 0.0 => self.add_weight_grad(mlp, lam, g),
+            grad => mlp.add_weight_term(lam, with_loss.then_some(&mut parts), grad),
+        }
         parts
+    }
+
+    /// The gradient of the weight term added to `g`: factor·w per weight, the factors formed
+    /// once per λ₃ and scaling ([`Mlp::add_weight_term`]'s gradient bit for bit).
+    #[inline(always)]
+    fn add_weight_grad(&mut self, mlp: &Mlp, lam: LossWeights, g: &mut Grad) {
+        let key = || {
+            let halves = mlp.in_half.iter().chain(&mlp.out_half);
+            std::iter::once(lam.weights.to_bits()).chain(halves.map(|v| v.to_bits()))
+        };
+        if self.wf.len() != mlp.layers.len() || !key().eq(self.wf_key.iter().copied()) {
+            mlp.weight_grad_factors(lam, &mut self.wf);
+            self.wf_key.clear();
+            self.wf_key.extend(key());
+        }
+        for ((gw, f), l) in g.w.iter_mut().zip(&self.wf).zip(&mlp.layers) {
+            for ((d, &f), &w) in gw.iter_mut().zip(f).zip(&l.w) {
+                *d += f * w;
+            }
+        }
     }
 
     /// Adds the lane accumulators into `g` and zeroes them: entry e gets

@@ -172,13 +172,10 @@ impl Mlp {
         if lam.weights == 0.0 {
             return;
         }
-        let m = self.layers.len();
         for (j, l) in self.layers.iter().enumerate() {
             for r in 0..l.out {
-                let rs = if j + 1 == m { self.out_half[r] } else { 1.0 };
                 for c in 0..l.inp {
-                    let cs = if j == 0 { 1.0 / self.in_half[c] } else { 1.0 };
-                    let f = rs * rs * cs * cs;
+                    let f = self.weight_scale(j, r, c);
                     let w = l.w[r * l.inp + c];
                     if let Some(parts) = parts.as_deref_mut() {
                         parts.weights += lam.weights * f * w * w;
@@ -188,6 +185,35 @@ impl Mlp {
                     }
                 }
             }
+        }
+    }
+
+    /// The factor f = r²c² of weight (j, r, c) in the weight term (r = s_r on the last
+    /// layer, c = 1/h_c on the first, 1 elsewhere): ‖W̃_j‖²_F = Σ f·w².
+    #[inline(always)]
+    fn weight_scale(&self, j: usize, r: usize, c: usize) -> f64 {
+        let rs = if j + 1 == self.layers.len() {
+            self.out_half[r]
+        } else {
+            1.0
+        };
+        let cs = if j == 0 { 1.0 / self.in_half[c] } else { 1.0 };
+        rs * rs * cs * cs
+    }
+
+    /// The weight term's gradient factors `(2λ₃)·f` per weight, row-major per layer, into
+    /// `out`: adding factor·w to the gradient is [`Mlp::add_weight_term`]'s gradient, bit
+    /// for bit (the same operations).
+    pub(super) fn weight_grad_factors(&self, lam: LossWeights, out: &mut Vec<Vec<f64>>) {
+        out.clear();
+        for (j, l) in self.layers.iter().enumerate() {
+            let mut v = Vec::with_capacity(l.w.len());
+            for r in 0..l.out {
+                for c in 0..l.inp {
+                    v.push(2.0 * lam.weights * self.weight_scale(j, r, c));
+                }
+            }
+            out.push(v);
         }
     }
 

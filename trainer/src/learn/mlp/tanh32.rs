@@ -73,38 +73,48 @@ pub fn tanh_accurate(x: f32) -> f32 {
 /// bits as `tanh_accurate` lane by lane.
 #[inline(always)]
 pub fn tanh_lanes<const N: usize>(x: &[f32; N]) -> [f32; N] {
-    let map = |f: &dyn Fn(usize) -> f32| -> [f32; N] { std::array::from_fn(f) };
-    let a = map(&|i| f32::from_bits(x[i].to_bits() & 0x7fff_ffff));
+    // One plain loop per operation (not `array::from_fn`, which the compiler may leave as
+    // a call per element).
+    macro_rules! map {
+        (&|$i:ident| $e:expr) => {{
+            let mut r = [0.0f32; N];
+            for $i in 0..N {
+                r[$i] = $e;
+            }
+            r
+        }};
+    }
+    let a = map!(&|i| f32::from_bits(x[i].to_bits() & 0x7fff_ffff));
     let [p0, p1, p2, p3, p4, p5] = ACC_P;
-    let z = map(&|i| x[i] * x[i]);
-    let p = map(&|i| p0 + z[i] * (p1 + z[i] * (p2 + z[i] * (p3 + z[i] * (p4 + z[i] * p5)))));
-    let small = map(&|i| x[i] + x[i] * (z[i] * p[i]));
-    let y = map(&|i| {
+    let z = map!(&|i| x[i] * x[i]);
+    let p = map!(&|i| p0 + z[i] * (p1 + z[i] * (p2 + z[i] * (p3 + z[i] * (p4 + z[i] * p5)))));
+    let small = map!(&|i| x[i] + x[i] * (z[i] * p[i]));
+    let y = map!(&|i| {
         let c = if a[i] < ACC_CLIP { a[i] } else { ACC_CLIP };
         c + c
     });
-    let v = map(&|i| y[i] * LOG2E + 0.5);
-    let nearest = map(&|i| (v[i] + MAGIC) - MAGIC);
-    let kf = map(&|i| {
+    let v = map!(&|i| y[i] * LOG2E + 0.5);
+    let nearest = map!(&|i| (v[i] + MAGIC) - MAGIC);
+    let kf = map!(&|i| {
         if nearest[i] > v[i] {
             nearest[i] - 1.0
         } else {
             nearest[i]
         }
     });
-    let r = map(&|i| (y[i] - kf[i] * LN2_HI) - kf[i] * LN2_LO);
+    let r = map!(&|i| (y[i] - kf[i] * LN2_HI) - kf[i] * LN2_LO);
     let [q0, q1, q2, q3, q4] = ACC_Q;
-    let e1 = map(&|i| {
+    let e1 = map!(&|i| {
         let r = r[i];
         let q = q0 + r * (q1 + r * (q2 + r * (q3 + r * q4)));
         1.0 + (r + r * (r * q))
     });
-    let e = map(&|i| {
+    let e = map!(&|i| {
         let k = (kf[i] + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
         f32::from_bits(e1[i].to_bits().wrapping_add(k << 23))
     });
-    let t = map(&|i| 1.0 - 2.0 / (e[i] + 1.0));
-    map(&|i| {
+    let t = map!(&|i| 1.0 - 2.0 / (e[i] + 1.0));
+    map!(&|i| {
         let big = f32::from_bits(t[i].to_bits() | (x[i].to_bits() & 0x8000_0000));
         if a[i] < ACC_CUT {
             small[i]

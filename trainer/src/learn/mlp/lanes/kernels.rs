@@ -100,8 +100,10 @@ fn dot_block<const Q: usize, const G: usize>(
 ) -> [[V; Q]; G] {
     let n = w.len();
     // Each group's jets as n arrays of Q vectors (the bounds checked once, here).
-    let hs: [&[[V; Q]]; G] =
-        std::array::from_fn(|g| &h[(g0 + g) * sg..(g0 + g) * sg + n * Q].as_chunks::<Q>().0[..n]);
+    let mut hs: [&[[V; Q]]; G] = [&[]; G];
+    for (g, hg) in hs.iter_mut().enumerate() {
+        *hg = &h[(g0 + g) * sg..(g0 + g) * sg + n * Q].as_chunks::<Q>().0[..n];
+    }
     let mut a = [[[0.0f32; L]; Q]; G];
     for ag in a.iter_mut() {
         ag[0] = [init; L];

@@ -221,15 +221,17 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
 /// `Lanes::grad` (a training step: no loss terms) gives `loss_grad`'s gradient bit for bit.
 #[test]
 fn grad_alone_is_the_gradient_of_loss_grad() {
-    let lam = LossWeights {
-        value: 1.0,
-        jacobian: 3.0,
-        weights: 0.05,
-    };
+    // One engine throughout: its cached weight-term factors must follow λ₃ and the shape.
+    let mut lanes = Lanes::default();
     for widths in [vec![2, 10, 10, 1], vec![6, 16, 16, 2], vec![12, 8, 8, 4]] {
         let m = net(5, Activation::Tanh, &widths);
         let (nx, nu) = (m.nx(), m.nu());
-        for bsz in [1, 35, 600] {
+        for (bsz, l3) in [(1, 0.05), (35, 0.05), (35, 0.2), (600, 0.0), (600, 0.05)] {
+            let lam = LossWeights {
+                value: 1.0,
+                jacobian: 3.0,
+                weights: l3,
+            };
             let (x, u, du, uj) = data(9, nx, nu, bsz);
             let batch = Batch {
                 x: &x,
@@ -238,11 +240,10 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
                 use_jac: &uj,
                 band: None,
             };
-            let mut lanes = Lanes::default();
             let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
             lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
             lanes.grad(&m, &batch, lam, &mut gb);
-            assert_eq!(ga, gb, "{widths:?}, batch {bsz}");
+            assert_eq!(ga, gb, "{widths:?}, batch {bsz}, λ₃ = {l3}");
         }
     }
 }
