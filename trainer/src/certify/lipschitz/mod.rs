@@ -28,7 +28,10 @@
 //! points and the largest difference quotient between neighbouring points.
 
 use crate::learn::mlp::{Layer, Mlp, Workspace};
+use dense::DenseWork;
 use nalgebra::{DMatrix, DVector};
+
+mod dense;
 
 fn mat(l: &Layer) -> DMatrix<f64> {
     DMatrix::from_row_slice(l.out, l.inp, &l.w)
@@ -56,6 +59,8 @@ struct LipSdp {
     sizes: Vec<usize>,
     offs: Vec<usize>,
     nh: usize,
+    /// W̃_mᵀW̃_m (the last hidden layer's block of K does not depend on T).
+    wtw: DMatrix<f64>,
 }
 
 impl LipSdp {
@@ -67,7 +72,15 @@ impl LipSdp {
             offs.push(offs.last().copied().unwrap_or(0) + s);
         }
         let nh = offs.last().copied().unwrap_or(0);
-        LipSdp { w, sizes, offs, nh }
+        let last = &w[w.len() - 1];
+        let wtw = last.transpose() * last;
+        LipSdp {
+            w,
+            sizes,
+            offs,
+            nh,
+            wtw,
+        }
     }
 
     /// K(T) = −(hidden part of M).
@@ -92,15 +105,42 @@ impl LipSdp {
                 }
             }
         }
-        let last = &self.w[m - 1];
         let o = self.offs[m - 2];
-        let wtw = last.transpose() * last;
         for a in 0..self.sizes[m - 2] {
             for b in 0..self.sizes[m - 2] {
-                k[(o + a, o + b)] -= wtw[(a, b)];
+                k[(o + a, o + b)] -= self.wtw[(a, b)];
             }
         }
         k
+    }
+
+    /// [`LipSdp::k`] into the column-major buffer `k` (the same entries).
+    fn k_into(&self, t: &[f64], k: &mut Vec<f64>) {
+        let (m, n) = (self.w.len(), self.nh);
+        k.clear();
+        k.resize(n * n, 0.0);
+        for j in 0..m - 1 {
+            let o = self.offs[j];
+            for a in 0..self.sizes[j] {
+                k[(o + a) * n + o + a] = 2.0 * t[o + a];
+            }
+            if j >= 1 {
+                let op = self.offs[j - 1];
+                for a in 0..self.sizes[j - 1] {
+                    for b in 0..self.sizes[j] {
+                        let v = -self.w[j][(b, a)] * t[o + b];
+                        k[(o + b) * n + op + a] = v;
+                        k[(op + a) * n + o + b] = v;
+                    }
+                }
+            }
+        }
+        let o = self.offs[m - 2];
+        for b in 0..self.sizes[m - 2] {
+            for a in 0..self.sizes[m - 2] {
+                k[(o + b) * n + o + a] -= self.wtw[(a, b)];
+            }
+        }
     }
 
     /// N₁ᵀ (nh × n0): rows of hidden layer 1 are T_1 W̃_1.
@@ -121,7 +161,83 @@ impl LipSdp {
     /// `∂λ/∂t_{j,k} = 2 w_{j,k} ((W̃_j w_{j−1})_k − w_{j,k})`, `w = K⁻¹N₁ᵀv`, `w_0 = v`. The
     /// smoothing makes the descent converge where eigenvalues of A coalesce (the typical
     /// situation at the optimum), at which λ_max itself is not differentiable.
-    fn rho(&self, t: &[f64], mu: f64) -> Option<(f64, f64, Vec<f64>)> {
+    ///
+    /// Computed on the buffers of `ws` by the kernels of [`dense`], the operations of the
+    /// `nalgebra` version ([`LipSdp::rho_nalgebra`], kept for the tests) in the same order.
+    fn rho(&self, t: &[f64], mu: f64, ws: &mut DenseWork) -> Option<(f64, f64, Vec<f64>)> {
+        let (n, n0) = (self.nh, self.w[0].ncols());
+        self.k_into(t, &mut ws.k);
+        if !dense::cholesky_in_place(&mut ws.k, n) {
+            return None;
+        }
+        ws.nt.clear();
+        ws.nt.resize(n * n0, 0.0);
+        for c in 0..n0 {
+            for a in 0..self.sizes[0] {
+                ws.nt[c * n + a] = t[a] * self.w[0][(a, c)];
+            }
+        }
+        ws.kin.clone_from(&ws.nt);
+        dense::solve_cols(&ws.k, n, &mut ws.kin, n0);
+        // A = N₁ K⁻¹ N₁ᵀ (n0 × n0), column after column as `gemv`, then symmetrised.
+        let mut a = DMatrix::<f64>::zeros(n0, n0);
+        for j1 in 0..n0 {
+            let kc = &ws.kin[j1 * n..(j1 + 1) * n];
+            for i in 0..n0 {
+                let nc = &ws.nt[i * n..(i + 1) * n];
+                let mut y = nc[0] * kc[0];
+                for c in 1..n {
+                    y += nc[c] * kc[c];
+                }
+                a[(i, j1)] = y;
+            }
+        }
+        let a = 0.5 * (&a + a.transpose());
+        let eig = a.symmetric_eigen();
+        let lmax = eig
+            .eigenvalues
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        let wts: Vec<f64> = eig
+            .eigenvalues
+            .iter()
+            .map(|&l| ((l - lmax) / mu).exp())
+            .collect();
+        let z: f64 = wts.iter().sum();
+        let f = lmax + mu * z.ln();
+        let mut g = vec![0.0; self.nh];
+        ws.w.resize(n, 0.0);
+        ws.wp
+            .resize(self.sizes.iter().copied().max().unwrap_or(0), 0.0);
+        for (i, &wt) in wts.iter().enumerate() {
+            let p = wt / z;
+            if p < 1e-300 {
+                continue;
+            }
+            let v = eig.eigenvectors.column(i);
+            dense::gemv_cols(&ws.kin, n, v.as_slice(), &mut ws.w);
+            let w = &ws.w;
+            for j in 0..self.w.len() - 1 {
+                let o = self.offs[j];
+                let prev = if j == 0 {
+                    v.as_slice()
+                } else {
+                    &w[self.offs[j - 1]..self.offs[j - 1] + self.sizes[j - 1]]
+                };
+                let wp = &mut ws.wp[..self.sizes[j]];
+                dense::gemv_cols(self.w[j].as_slice(), self.sizes[j], prev, wp);
+                for k in 0..self.sizes[j] {
+                    g[o + k] += p * 2.0 * w[o + k] * (wp[k] - w[o + k]);
+                }
+            }
+        }
+        Some((lmax, f, g))
+    }
+
+    /// [`LipSdp::rho`] with `nalgebra`'s allocating routines (the reference of its tests).
+    #[cfg(test)]
+    fn rho_nalgebra(&self, t: &[f64], mu: f64) -> Option<(f64, f64, Vec<f64>)> {
         let chol = nalgebra::Cholesky::new(self.k(t))?;
         let nt = self.n1t(t);
         let kin = chol.solve(&nt);
@@ -221,11 +337,12 @@ pub fn lipsdp_multipliers(mlp: &Mlp) -> Option<(f64, Vec<f64>)> {
             .unwrap_or_else(|| DMatrix::identity(sdp.sizes[j], sdp.sizes[j]));
     }
     // Scale T up until K(T) ≻ 0 (the last block subtracts W̃_mᵀW̃_m); ρ scales accordingly.
+    let mut ws = DenseWork::default();
     let mut scale = 1.0;
     let mut cur = None;
     for _ in 0..200 {
         let ts: Vec<f64> = t.iter().map(|v| v * scale).collect();
-        if let Some(r) = sdp.rho(&ts, 1.0) {
+        if let Some(r) = sdp.rho(&ts, 1.0, &mut ws) {
             t = ts;
             cur = Some(r.0);
             break;
@@ -242,7 +359,7 @@ pub fn lipsdp_multipliers(mlp: &Mlp) -> Option<(f64, Vec<f64>)> {
     let mut mu = 1e-2 * rho0.max(1e-300);
     for _stage in 0..10 {
         let t: Vec<f64> = theta.iter().map(|v| v.exp()).collect();
-        let Some((_, mut f, g)) = sdp.rho(&t, mu) else {
+        let Some((_, mut f, g)) = sdp.rho(&t, mu, &mut ws) else {
             break;
         };
         let mut gt: Vec<f64> = g.iter().zip(&t).map(|(g, t)| g * t).collect();
@@ -255,7 +372,7 @@ pub fn lipsdp_multipliers(mlp: &Mlp) -> Option<(f64, Vec<f64>)> {
             for _ in 0..40 {
                 let th2: Vec<f64> = theta.iter().zip(&gt).map(|(th, g)| th - step * g).collect();
                 let t2: Vec<f64> = th2.iter().map(|v| v.exp()).collect();
-                if let Some((l2, f2, g2)) = sdp.rho(&t2, mu) {
+                if let Some((l2, f2, g2)) = sdp.rho(&t2, mu, &mut ws) {
                     if f2 <= f - 1e-4 * step * gn * gn {
                         let gt2: Vec<f64> = g2.iter().zip(&t2).map(|(g, t)| g * t).collect();
                         // Barzilai–Borwein step for the next iteration.

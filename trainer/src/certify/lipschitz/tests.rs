@@ -439,3 +439,67 @@ fn sampled_lower_bound_is_the_serial_search_for_any_thread_count() {
         }
     }
 }
+
+/// The search's objective on reusable buffers gives the bits of the `nalgebra` version
+/// (value, smoothing and gradient, or `None` for both) at random multipliers around the
+/// certified ones, for nets with up to 5 inputs (wider inputs take `matrixmultiply` in
+/// `nalgebra`'s product N₁K⁻¹N₁ᵀ, whose order is its own: there ρ and f_μ within 1e-12
+/// and the gradient within 1e-6 of its largest entry — the eigenvectors of nearly equal
+/// eigenvalues amplify the last bits of A).
+#[test]
+fn rho_on_buffers_is_the_nalgebra_rho() {
+    let mut ws = DenseWork::default();
+    for (seed, widths) in [
+        (1u64, [2usize, 10, 10, 1].as_slice()),
+        (2, &[2, 4, 3, 1]),
+        (3, &[3, 5, 4, 2]),
+        (4, &[4, 16, 16, 16, 2]),
+        (5, &[5, 9, 1]),
+        (6, &[6, 32, 32, 2]),
+        (7, &[12, 8, 8, 4]),
+    ] {
+        let m = net(seed, widths);
+        let sdp = LipSdp::new(&m);
+        let (_, t_opt) = lipsdp_multipliers(&m).expect("a certificate");
+        let mut s = seed;
+        let mut r = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut seen_some = false;
+        for trial in 0..40 {
+            // Around the certified multipliers: some perturbations leave K(T) ≻ 0, some not.
+            let spread = 0.05 * trial as f64;
+            let t: Vec<f64> = t_opt
+                .iter()
+                .map(|v| v * (spread * (2.0 * r() - 1.0)).exp())
+                .collect();
+            let mu = 10f64.powf(-6.0 * r());
+            let a = sdp.rho(&t, mu, &mut ws);
+            let b = sdp.rho_nalgebra(&t, mu);
+            assert_eq!(a.is_some(), b.is_some(), "{widths:?} trial {trial}");
+            let (Some((l1, f1, g1)), Some((l2, f2, g2))) = (a, b) else {
+                continue;
+            };
+            seen_some = true;
+            if widths[0] <= 5 {
+                assert_eq!(l1.to_bits(), l2.to_bits(), "{widths:?} trial {trial}");
+                assert_eq!(f1.to_bits(), f2.to_bits(), "{widths:?} trial {trial}");
+                let bits = |g: &[f64]| g.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&g1), bits(&g2), "{widths:?} trial {trial}");
+            } else {
+                let close =
+                    |x: f64, y: f64| (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1e-300);
+                assert!(close(l1, l2) && close(f1, f2), "{widths:?} trial {trial}");
+                let gs = g2.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(
+                    g1.iter().zip(&g2).all(|(x, y)| (x - y).abs() <= 1e-6 * gs),
+                    "{widths:?} trial {trial}: {g1:?} vs {g2:?}"
+                );
+            }
+        }
+        assert!(seen_some, "{widths:?}: no feasible multipliers tried");
+    }
+}

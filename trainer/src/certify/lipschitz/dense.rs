@@ -1,0 +1,183 @@
+//! The dense kernels of the LipSDP search ([`DenseWork`]): K(T) = L Lᵀ (Cholesky), the solve
+//! K⁻¹N₁ᵀ, the products N₁K⁻¹N₁ᵀ and K⁻¹N₁ᵀv, `W̃_j x` — on column-major buffers allocated
+//! once per search, each with the operations of the `nalgebra` routine it replaces, in the
+//! same order:
+//! ```text
+//! Cholesky (left-looking):  L_{j:,j} ← K_{j:,j} + Σ_{k<j} (−L_{j,k})·L_{j:,k};  L_{jj} ← √L_{jj};  L_{j+1:,j} ← L_{j+1:,j} / L_{jj}
+//! forward:  b_i ← b_i / L_ii,  b_{i+1:} ← (−b_i)·L_{i+1:,i} + b_{i+1:}
+//! backward: b_i ← (b_i − L_{i+1:,i}·b_{i+1:}) / L_ii   (dot: 8 partial sums, then the tail)
+//! A·x:      y ← A_{:,0}·x_0,  y ← A_{:,c}·x_c + y  (c = 1, 2, …)
+//! ```
+//! so the search's results are those of the allocating `nalgebra` version bit for bit
+//! (checked by the tests of the parent module), at a fraction of the cost: the search
+//! evaluates ρ(T) thousands of times.
+
+/// Reusable buffers of one LipSDP search (column-major n × n and n × n0 matrices).
+#[derive(Debug, Clone, Default)]
+pub(super) struct DenseWork {
+    /// K(T), overwritten by its Cholesky factor L (lower triangle).
+    pub k: Vec<f64>,
+    /// N₁ᵀ (n × n0).
+    pub nt: Vec<f64>,
+    /// K⁻¹N₁ᵀ (n × n0).
+    pub kin: Vec<f64>,
+    /// K⁻¹N₁ᵀv (n) and `W̃_j w_{j−1}` (the widest layer).
+    pub w: Vec<f64>,
+    pub wp: Vec<f64>,
+}
+
+/// Cholesky factorisation of the n × n column-major `m` in place (lower triangle; the upper
+/// one is not read): `false` where a pivot is zero, negative or NaN (as `nalgebra`).
+pub(super) fn cholesky_in_place(m: &mut [f64], n: usize) -> bool {
+    for j in 0..n {
+        let (left, right) = m.split_at_mut(j * n);
+        let col_j = &mut right[..n];
+        for k in 0..j {
+            let col_k = &left[k * n..(k + 1) * n];
+            let factor = -col_k[j];
+            for (y, &x) in col_j[j..].iter_mut().zip(&col_k[j..]) {
+                *y += factor * x;
+            }
+        }
+        let diag = col_j[j];
+        if diag == 0.0 || !(diag >= 0.0) {
+            return false;
+        }
+        let denom = diag.sqrt();
+        col_j[j] = denom;
+        for y in &mut col_j[j + 1..] {
+            *y /= denom;
+        }
+    }
+    true
+}
+
+/// Solves L Lᵀ X = B in place for the `cols` columns of the n × cols column-major `b`, with
+/// `l` the factor from [`cholesky_in_place`] (nalgebra's `Cholesky::solve_mut`).
+pub(super) fn solve_cols(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
+    for bc in b.chunks_exact_mut(n).take(cols) {
+        // L y = b.
+        for i in 0..n {
+            let coeff = bc[i] / l[i * n + i];
+            bc[i] = coeff;
+            let li = &l[i * n..(i + 1) * n];
+            for (y, &x) in bc[i + 1..].iter_mut().zip(&li[i + 1..]) {
+                *y += -coeff * x;
+            }
+        }
+        // Lᵀ x = y.
+        for i in (0..n).rev() {
+            let li = &l[i * n..(i + 1) * n];
+            let dot = dot8(&li[i + 1..], &bc[i + 1..]);
+            bc[i] = (bc[i] - dot) / li[i];
+        }
+    }
+}
+
+/// Σ a_i b_i with `nalgebra`'s order: eight partial sums over whole blocks of 8, combined
+/// as (s₀ + s₄), (s₁ + s₅), (s₂ + s₆), (s₃ + s₇) into 0, then the tail one by one.
+pub(super) fn dot8(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let mut acc = [0.0f64; 8];
+    let mut i = 0;
+    while n - i >= 8 {
+        for (k, s) in acc.iter_mut().enumerate() {
+            *s += a[i + k] * b[i + k];
+        }
+        i += 8;
+    }
+    let mut res = 0.0;
+    res += acc[0] + acc[4];
+    res += acc[1] + acc[5];
+    res += acc[2] + acc[6];
+    res += acc[3] + acc[7];
+    for k in i..n {
+        res += a[k] * b[k];
+    }
+    res
+}
+
+/// y = A x for the rows × cols column-major `a` (nalgebra's `gemv` with α = 1, β = 0:
+/// column after column). `y` has `rows` entries.
+pub(super) fn gemv_cols(a: &[f64], rows: usize, x: &[f64], y: &mut [f64]) {
+    let mut cols = a.chunks_exact(rows).zip(x);
+    if let Some((c0, &x0)) = cols.next() {
+        for (y, &a) in y.iter_mut().zip(c0) {
+            *y = a * x0;
+        }
+    } else {
+        y.fill(0.0);
+    }
+    for (c, &xc) in cols {
+        for (y, &a) in y.iter_mut().zip(c) {
+            *y += a * xc;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// A symmetric positive definite n × n matrix with entries of mixed magnitude.
+    fn spd(n: usize, seed: u64) -> DMatrix<f64> {
+        let mut s = seed;
+        let mut r = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        let b = DMatrix::from_fn(n, n, |_, _| r());
+        &b * b.transpose() + DMatrix::identity(n, n) * 0.1
+    }
+
+    /// Factor, solve, dot and products give nalgebra's bits, for sizes around the dot's
+    /// blocks of 8; a matrix that is not positive definite is refused by both.
+    #[test]
+    fn kernels_give_the_bits_of_nalgebra() {
+        for n in [1, 2, 7, 8, 9, 16, 20, 21, 33] {
+            for seed in 0..3 {
+                let k = spd(n, seed * 31 + n as u64);
+                let chol = nalgebra::Cholesky::new(k.clone()).expect("spd");
+                let mut m = k.as_slice().to_vec();
+                assert!(cholesky_in_place(&mut m, n));
+                let l = chol.l();
+                for c in 0..n {
+                    for r in c..n {
+                        assert_eq!(
+                            m[c * n + r].to_bits(),
+                            l[(r, c)].to_bits(),
+                            "n {n} L[{r},{c}]"
+                        );
+                    }
+                }
+                let cols = 3;
+                let b = DMatrix::from_fn(n, cols, |r, c| ((r * 7 + c * 3) as f64).sin());
+                let x = chol.solve(&b);
+                let mut bb = b.as_slice().to_vec();
+                solve_cols(&m, n, &mut bb, cols);
+                for (a, e) in bb.iter().zip(x.as_slice()) {
+                    assert_eq!(a.to_bits(), e.to_bits(), "n {n} solve");
+                }
+                let v = DVector::from_fn(cols, |i, _| 0.3 - i as f64);
+                let y = &x * &v;
+                let mut yy = vec![0.0; n];
+                gemv_cols(x.as_slice(), n, v.as_slice(), &mut yy);
+                for (a, e) in yy.iter().zip(y.as_slice()) {
+                    assert_eq!(a.to_bits(), e.to_bits(), "n {n} gemv");
+                }
+                let (p, q) = (k.column(0), k.column(n - 1));
+                assert_eq!(
+                    dot8(p.as_slice(), q.as_slice()).to_bits(),
+                    p.dot(&q).to_bits(),
+                    "n {n} dot"
+                );
+                let mut neg = (-k).as_slice().to_vec();
+                assert!(!cholesky_in_place(&mut neg, n));
+                assert!(nalgebra::Cholesky::new(-spd(n, seed)).is_none());
+            }
+        }
+    }
+}
