@@ -40,7 +40,9 @@ pub(super) fn cholesky_in_place(m: &mut [f64], n: usize) -> bool {
             }
         }
         let diag = col_j[j];
-        if diag == 0.0 || !(diag >= 0.0) {
+        // Zero, negative or NaN: no factor (`try_sqrt` refuses what is not ≥ 0).
+        if diag == 0.0 || diag.partial_cmp(&0.0) == Some(std::cmp::Ordering::Less) || diag.is_nan()
+        {
             return false;
         }
         let denom = diag.sqrt();
