@@ -29,6 +29,25 @@ pub(super) struct DenseWork {
 /// Cholesky factorisation of the n × n column-major `m` in place (lower triangle; the upper
 /// one is not read): `false` where a pivot is zero, negative or NaN (as `nalgebra`).
 pub(super) fn cholesky_in_place(m: &mut [f64], n: usize) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above), the one requirement of calling a
+        // `#[target_feature(enable = "avx")]` function.
+        return unsafe { cholesky_avx(m, n) };
+    }
+    cholesky_impl(m, n)
+}
+
+/// [`cholesky_impl`] compiled with AVX (4 f64 lanes; the same IEEE operations — no fused
+/// multiply-add — hence the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn cholesky_avx(m: &mut [f64], n: usize) -> bool {
+    cholesky_impl(m, n)
+}
+
+#[inline(always)]
+fn cholesky_impl(m: &mut [f64], n: usize) -> bool {
     for j in 0..n {
         let (left, right) = m.split_at_mut(j * n);
         let col_j = &mut right[..n];
@@ -57,6 +76,23 @@ pub(super) fn cholesky_in_place(m: &mut [f64], n: usize) -> bool {
 /// Solves L Lᵀ X = B in place for the `cols` columns of the n × cols column-major `b`, with
 /// `l` the factor from [`cholesky_in_place`] (nalgebra's `Cholesky::solve_mut`).
 pub(super) fn solve_cols(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above), see `cholesky_in_place`.
+        return unsafe { solve_avx(l, n, b, cols) };
+    }
+    solve_impl(l, n, b, cols)
+}
+
+/// [`solve_impl`] compiled with AVX (the same bits, see `cholesky_avx`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn solve_avx(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
+    solve_impl(l, n, b, cols)
+}
+
+#[inline(always)]
+fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
     for bc in b.chunks_exact_mut(n).take(cols) {
         // L y = b.
         for i in 0..n {
@@ -78,6 +114,7 @@ pub(super) fn solve_cols(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
 
 /// Σ a_i b_i with `nalgebra`'s order: eight partial sums over whole blocks of 8, combined
 /// as (s₀ + s₄), (s₁ + s₅), (s₂ + s₆), (s₃ + s₇) into 0, then the tail one by one.
+#[inline(always)]
 pub(super) fn dot8(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let mut acc = [0.0f64; 8];
