@@ -208,9 +208,13 @@ impl Sweep {
         with_work(|w| {
             by_nz!(self.nz(), self.forward(x, u, &mut w.scratch));
             let Work {
-                scratch, adj, adt, ..
+                scratch,
+                adj,
+                adt,
+                live,
+                ..
             } = w;
-            by_nz!(self.nz(), self.reverse(lam, scratch, adj, adt));
+            by_nz!(self.nz(), self.reverse(lam, scratch, adj, adt, live));
             self.symmetrised(adt, hess);
         })
     }
@@ -227,9 +231,13 @@ impl Sweep {
         with_work(|w| {
             let fw = self.cached_forward(stage, x, u, w);
             let Work {
-                stages, adj, adt, ..
+                stages,
+                adj,
+                adt,
+                live,
+                ..
             } = w;
-            by_nz!(self.nz(), self.reverse(lam, &stages[fw], adj, adt));
+            by_nz!(self.nz(), self.reverse(lam, &stages[fw], adj, adt, live));
             self.symmetrised(adt, hess);
         })
     }
@@ -371,18 +379,29 @@ impl Sweep {
 
     /// Adjoints `adj` and their tangents `adt`, seeded by `λ` at the outputs, after the
     /// forward sweep `w` (partials kept: [`Sweep::forward`]).
+    ///
+    /// `adt` is not cleared: `live[s]` says whether slot `s`'s adjoint tangent has been
+    /// written in this sweep (its first write stores `0 + v`, what `+=` on a zeroed entry
+    /// gives; an unwritten one reads as zeros), so the `O(n·NZ)` clear is an `O(n)` one.
+    /// Operations whose local second derivatives vanish identically (sums, differences,
+    /// constant scalings, `abs`, `min`, `max`; `a·b` has only `φ_ab`) skip the terms those
+    /// zeros multiply, and an unwritten adjoint tangent passes nothing on through them.
     fn reverse<const NZ: usize>(
         &self,
         lam: &[f64],
         w: &Forward,
         adj: &mut Vec<f64>,
         adt: &mut Vec<f64>,
+        live: &mut Vec<bool>,
     ) {
         let n = NZ + self.code.len();
         adj.clear();
         adj.resize(n, 0.0);
-        adt.clear();
-        adt.resize(n * NZ, 0.0);
+        live.clear();
+        live.resize(n, false);
+        if adt.len() < n * NZ {
+            adt.resize(n * NZ, 0.0);
+        }
         for (i, &o) in self.outs.iter().enumerate() {
             adj[o as usize] += lam[i];
         }
@@ -390,43 +409,97 @@ impl Sweep {
             let s = NZ + k;
             let c = adj[s];
             let (lo, hi) = adt.split_at_mut(s * NZ);
-            let ct: &[f64; NZ] = (&hi[..NZ]).try_into().expect("NZ");
+            let ct: [f64; NZ] = if live[s] {
+                (&hi[..NZ]).try_into().expect("NZ")
+            } else {
+                [0.0; NZ]
+            };
             if c == 0.0 && ct.iter().all(|&v| v == 0.0) {
                 continue;
             }
             let p = w.part[k];
             let tan = &w.tan;
-            match arity(op) {
-                (0, _, _) => {}
-                (1, a, _) => {
+            let tangent =
+                |a: usize| -> &[f64; NZ] { tan[a * NZ..a * NZ + NZ].try_into().expect("NZ") };
+            match *op {
+                Op::Const(_) => {}
+                Op::AddC(..)
+                | Op::CSub(..)
+                | Op::MulC(..)
+                | Op::DivC(..)
+                | Op::Neg(_)
+                | Op::Abs(_) => {
+                    let a = arity(op).1;
                     adj[a] += c * p[0];
-                    let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
-                    let at: &mut [f64; NZ] = (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
-                    let caa = c * p[2];
-                    for j in 0..NZ {
-                        at[j] += ct[j] * p[0] + caa * ta[j];
+                    if live[s] {
+                        accumulate::<NZ>(lo, live, a, |j| ct[j] * p[0]);
                     }
                 }
-                (_, a, b) => {
+                Op::Add(..) | Op::Sub(..) | Op::Min(..) | Op::Max(..) => {
+                    let (_, a, b) = arity(op);
                     adj[a] += c * p[0];
                     adj[b] += c * p[1];
-                    let ta: &[f64; NZ] = tan[a * NZ..a * NZ + NZ].try_into().expect("NZ");
-                    let tb: &[f64; NZ] = tan[b * NZ..b * NZ + NZ].try_into().expect("NZ");
-                    let (caa, cab, cbb) = (c * p[2], c * p[3], c * p[4]);
-                    {
-                        let at: &mut [f64; NZ] =
-                            (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
-                        for j in 0..NZ {
-                            at[j] += ct[j] * p[0] + caa * ta[j] + cab * tb[j];
-                        }
-                    }
-                    let bt: &mut [f64; NZ] = (&mut lo[b * NZ..b * NZ + NZ]).try_into().expect("NZ");
-                    for j in 0..NZ {
-                        bt[j] += ct[j] * p[1] + cab * ta[j] + cbb * tb[j];
+                    if live[s] {
+                        accumulate::<NZ>(lo, live, a, |j| ct[j] * p[0]);
+                        accumulate::<NZ>(lo, live, b, |j| ct[j] * p[1]);
                     }
                 }
+                Op::Mul(..) => {
+                    let (_, a, b) = arity(op);
+                    adj[a] += c * p[0];
+                    adj[b] += c * p[1];
+                    let (ta, tb) = (tangent(a), tangent(b));
+                    let cab = c * p[3];
+                    accumulate::<NZ>(lo, live, a, |j| ct[j] * p[0] + cab * tb[j]);
+                    accumulate::<NZ>(lo, live, b, |j| ct[j] * p[1] + cab * ta[j]);
+                }
+                _ => match arity(op) {
+                    (0, _, _) => {}
+                    (1, a, _) => {
+                        adj[a] += c * p[0];
+                        let ta = tangent(a);
+                        let caa = c * p[2];
+                        accumulate::<NZ>(lo, live, a, |j| ct[j] * p[0] + caa * ta[j]);
+                    }
+                    (_, a, b) => {
+                        adj[a] += c * p[0];
+                        adj[b] += c * p[1];
+                        let (ta, tb) = (tangent(a), tangent(b));
+                        let (caa, cab, cbb) = (c * p[2], c * p[3], c * p[4]);
+                        accumulate::<NZ>(lo, live, a, |j| ct[j] * p[0] + caa * ta[j] + cab * tb[j]);
+                        accumulate::<NZ>(lo, live, b, |j| ct[j] * p[1] + cab * ta[j] + cbb * tb[j]);
+                    }
+                },
             }
         }
+        // The inputs' adjoint tangents (the Hessian's rows): zeros where never written.
+        for (i, &l) in live[..NZ].iter().enumerate() {
+            if !l {
+                adt[i * NZ..i * NZ + NZ].fill(0.0);
+            }
+        }
+    }
+}
+
+/// `adt[a] += v` over the NZ tangent directions, or `adt[a] = 0 + v` (the same bits as `+=`
+/// on a zeroed entry) if slot `a` was not written yet in this sweep.
+#[inline(always)]
+fn accumulate<const NZ: usize>(
+    lo: &mut [f64],
+    live: &mut [bool],
+    a: usize,
+    v: impl Fn(usize) -> f64,
+) {
+    let at: &mut [f64; NZ] = (&mut lo[a * NZ..a * NZ + NZ]).try_into().expect("NZ");
+    if live[a] {
+        for (j, x) in at.iter_mut().enumerate() {
+            *x += v(j);
+        }
+    } else {
+        for (j, x) in at.iter_mut().enumerate() {
+            *x = 0.0 + v(j);
+        }
+        live[a] = true;
     }
 }
 
@@ -637,6 +710,8 @@ struct Work {
     stages: Vec<Forward>,
     adj: Vec<f64>,
     adt: Vec<f64>,
+    /// Which slots' entries of `adt` the current reverse sweep has written.
+    live: Vec<bool>,
 }
 
 fn with_work<R>(f: impl FnOnce(&mut Work) -> R) -> R {
