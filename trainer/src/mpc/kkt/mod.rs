@@ -46,6 +46,13 @@ macro_rules! by_rhs_count {
 /// with partial pivoting, factorised in place (`P A = L U`).
 ///
 /// Storage is row-major by band: row i holds columns `i − kl ..= i + kl + ku`.
+///
+/// The factorisation and the solves skip what is structurally zero within the band: each
+/// row's entries right of its last nonzero (a row's extent grows only to that of the pivot
+/// rows that update it) and each column's multipliers below its last nonzero one. The terms
+/// skipped are products with an exact zero, so the results are the full band's values (for a
+/// nonsingular matrix; with a zero pivot, where the full band's solves spread infinities and
+/// NaNs, fewer entries may be non-finite).
 #[derive(Debug, Clone, Default)]
 pub struct BandLu {
     n: usize,
@@ -54,6 +61,12 @@ pub struct BandLu {
     w: usize,
     a: Vec<f64>,
     piv: Vec<usize>,
+    /// Per row position: the last column that may hold a nonzero (of U after the factor).
+    end: Vec<usize>,
+    /// Per column k of L: the last row with a possibly nonzero multiplier (k if none).
+    lend: Vec<usize>,
+    /// Work space of the factorisation (column ends).
+    cend: Vec<usize>,
     /// Smallest over largest |U_ii| after [`BandLu::factor`] (0 if a pivot is 0 or not finite).
     pub pivot_ratio: f64,
 }
@@ -98,11 +111,42 @@ impl BandLu {
     /// LU factorisation with partial pivoting, in place. Sets [`BandLu::pivot_ratio`]; a zero
     /// pivot column is skipped (the factor is then singular, ratio 0).
     pub fn factor(&mut self) {
+        let (n, kl, w) = (self.n, self.kl, self.w);
+        // Each row's last nonzero column and each column's last nonzero row, from the values
+        // (entry t of row i is column i + t − kl).
+        let mut row_end: Vec<usize> = (0..n).collect();
+        let mut col_end: Vec<usize> = (0..n).collect();
+        for i in 0..n {
+            for (t, &v) in self.a[i * w..(i + 1) * w].iter().enumerate() {
+                if v != 0.0 && i + t >= kl && i + t - kl < n {
+                    let j = i + t - kl;
+                    row_end[i] = row_end[i].max(j);
+                    col_end[j] = col_end[j].max(i);
+                }
+            }
+        }
+        self.factor_with_ends(&row_end, &col_end);
+    }
+
+    /// [`BandLu::factor`] given, for every row, a column beyond which it holds only zeros
+    /// (`row_end[i] ≥ i`), and for every column a row below which it holds only zeros
+    /// (`col_end[j] ≥ j`) — e.g. from the sparsity pattern. The same values as
+    /// [`BandLu::factor`] (the entries skipped are exact zeros).
+    pub fn factor_with_ends(&mut self, row_end: &[usize], col_end: &[usize]) {
         let (n, kl, ku, w) = (self.n, self.kl, self.ku, self.w);
         let ubw = kl + ku;
         let (mut mn, mut mx) = (f64::INFINITY, 0.0f64);
+        self.end.clear();
+        self.end.extend_from_slice(&row_end[..n]);
+        // `cend[j]`: the last row (of those not yet eliminated) that may hold a nonzero in
+        // column j; grows with the rows that fill column j and with row interchanges.
+        let mut cend = std::mem::take(&mut self.cend);
+        cend.clear();
+        cend.extend_from_slice(&col_end[..n]);
+        self.lend.clear();
+        self.lend.resize(n, 0);
         for k in 0..n {
-            let last = (k + kl).min(n - 1);
+            let last = (k + kl).min(n - 1).min(cend[k].max(k));
             // Entry (i, k) of row i ≥ k sits at i·w + (k + kl − i).
             let mut p = k;
             let mut best = self.a[k * w + kl].abs();
@@ -114,14 +158,22 @@ impl BandLu {
                 }
             }
             self.piv[k] = p;
-            // Columns k..k+len of a row are contiguous.
-            let len = (k + ubw).min(n - 1) - k + 1;
+            // Columns k..k+len of a row are contiguous; beyond `end` they are zeros.
             let rk0 = k * w + kl;
             if p != k {
+                let len = self.end[k].max(self.end[p]).clamp(k, k + ubw) - k + 1;
                 let (head, tail) = self.a.split_at_mut(p * w);
                 let rp0 = k + kl - p;
                 head[rk0..rk0 + len].swap_with_slice(&mut tail[rp0..rp0 + len]);
+                // The former row k, now row p, puts nonzeros into row p of its columns.
+                for c in &mut cend[k + 1..=self.end[k].clamp(k, k + ubw)] {
+                    *c = (*c).max(p);
+                }
+                self.end.swap(k, p);
             }
+            let ek = self.end[k].clamp(k, k + ubw);
+            let len = ek - k + 1;
+            self.lend[k] = k;
             let d = self.a[rk0];
             let ad = d.abs();
             if !ad.is_finite() {
@@ -137,6 +189,7 @@ impl BandLu {
             // j + kl − i, so (i, k) is at kl − (q + 1) and columns k+1.. follow it.
             let (head, tail) = self.a.split_at_mut((k + 1) * w);
             let rk = &head[rk0 + 1..rk0 + len];
+            let ends = &mut self.end[k + 1..];
             for (q, row) in tail.chunks_exact_mut(w).take(last - k).enumerate() {
                 let ri0 = kl - (q + 1);
                 let l = row[ri0] * inv;
@@ -145,9 +198,16 @@ impl BandLu {
                     for (x, y) in row[ri0 + 1..ri0 + len].iter_mut().zip(rk) {
                         *x -= l * y;
                     }
+                    ends[q] = ends[q].max(ek);
+                    self.lend[k] = k + 1 + q;
                 }
             }
+            // Rows up to lend[k] now may hold nonzeros in columns k+1..=ek.
+            for c in &mut cend[k + 1..=ek] {
+                *c = (*c).max(self.lend[k]);
+            }
         }
+        self.cend = cend;
         self.pivot_ratio = if n == 0 {
             1.0
         } else if mx > 0.0 && mx.is_finite() && mn.is_finite() {
@@ -170,14 +230,14 @@ impl BandLu {
             if bk != 0.0 {
                 // Entry (i, k) is at i·w + k + kl − i: a stride of w − 1 down the column.
                 let mut idx = k * w + kl + (w - 1);
-                for bi in &mut b[k + 1..=(k + kl).min(n - 1)] {
+                for bi in &mut b[k + 1..=self.lend[k]] {
                     *bi -= self.a[idx] * bk;
                     idx += w - 1;
                 }
             }
         }
         for k in (0..n).rev() {
-            let len = (k + ubw).min(n - 1) - k + 1;
+            let len = self.end[k].clamp(k, k + ubw) - k + 1;
             let rk0 = k * w + kl;
             let row = &self.a[rk0 + 1..rk0 + len];
             let s: f64 = row.iter().zip(&b[k + 1..k + len]).map(|(a, x)| a * x).sum();
@@ -216,7 +276,7 @@ impl BandLu {
                 continue;
             }
             let mut idx = k * w + kl + (w - 1);
-            for bi in tail.chunks_exact_mut(m).take((k + kl).min(n - 1) - k) {
+            for bi in tail.chunks_exact_mut(m).take(self.lend[k] - k) {
                 let a = self.a[idx];
                 for (x, &v) in bi.iter_mut().zip(bk) {
                     // (As the single solve, which skips a zero b_k.)
@@ -231,7 +291,7 @@ impl BandLu {
         for c0 in (0..m).step_by(G) {
             let g = G.min(m - c0);
             for k in (0..n).rev() {
-                let len = (k + ubw).min(n - 1) - k + 1;
+                let len = self.end[k].clamp(k, k + ubw) - k + 1;
                 let rk0 = k * w + kl;
                 let mut s = [zero; G];
                 for (j, &a) in self.a[rk0 + 1..rk0 + len].iter().enumerate() {
@@ -259,6 +319,9 @@ pub struct KktLayout {
     pos: Vec<usize>,
     /// Half-bandwidth of the permuted K.
     bw: usize,
+    /// Per band position: the last position its row (and, K being structurally symmetric,
+    /// its column) may hold a nonzero in.
+    ends: Vec<usize>,
 }
 
 /// Stage of each variable of z (slacks: the stage of the states and inputs of the rows
@@ -312,12 +375,21 @@ impl KktLayout {
         for (p, &(_, _, i)) in keys.iter().enumerate() {
             pos[i] = p;
         }
-        let mut layout = KktLayout { active, pos, bw: 0 };
+        let mut layout = KktLayout {
+            active,
+            pos,
+            bw: 0,
+            ends: (0..dim).collect(),
+        };
         let mut bw = 0usize;
+        let mut ends = std::mem::take(&mut layout.ends);
         layout.for_each_pattern(ocp, |i, j| {
             bw = bw.max(i.abs_diff(j));
+            ends[i] = ends[i].max(j);
+            ends[j] = ends[j].max(i);
         });
         layout.bw = bw;
+        layout.ends = ends;
         layout
     }
 
@@ -504,7 +576,8 @@ impl BandedKkt {
         for &(s, r, c) in &self.weight_slots {
             self.lu.a[s] += row_weight[r] * c;
         }
-        self.lu.factor();
+        self.lu
+            .factor_with_ends(&self.layout.ends, &self.layout.ends);
         self.lu.pivot_ratio
     }
 
@@ -536,7 +609,8 @@ impl BandedKkt {
         // The pattern walk bounds every entry, so `inside` holds; an entry outside would be a
         // layout bug: report it as singular rather than factorising a wrong matrix.
         if inside {
-            self.lu.factor();
+            self.lu
+                .factor_with_ends(&self.layout.ends, &self.layout.ends);
         } else {
             self.lu.pivot_ratio = 0.0;
         }
