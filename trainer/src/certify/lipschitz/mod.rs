@@ -53,6 +53,15 @@ pub fn naive_bound(mlp: &Mlp) -> f64 {
         .product()
 }
 
+/// λ_max of the eigenvalues `l`, its smoothing `f_μ = λ_max + μ ln Σ exp((λᵢ − λ_max)/μ)`,
+/// the weights exp((λᵢ − λ_max)/μ) and their sum.
+fn smoothed_max(l: &[f64], mu: f64) -> (f64, f64, Vec<f64>, f64) {
+    let lmax = l.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let wts: Vec<f64> = l.iter().map(|&v| ((v - lmax) / mu).exp()).collect();
+    let z: f64 = wts.iter().sum();
+    (lmax, lmax + mu * z.ln(), wts, z)
+}
+
 /// The LipSDP-Neuron problem data for fixed weights.
 struct LipSdp {
     w: Vec<DMatrix<f64>>,
@@ -194,18 +203,7 @@ impl LipSdp {
         }
         let a = 0.5 * (&a + a.transpose());
         let eig = a.symmetric_eigen();
-        let lmax = eig
-            .eigenvalues
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        let wts: Vec<f64> = eig
-            .eigenvalues
-            .iter()
-            .map(|&l| ((l - lmax) / mu).exp())
-            .collect();
-        let z: f64 = wts.iter().sum();
-        let f = lmax + mu * z.ln();
+        let (lmax, f, wts, z) = smoothed_max(eig.eigenvalues.as_slice(), mu);
         let mut g = vec![0.0; self.nh];
         ws.w.resize(n, 0.0);
         ws.wp
@@ -244,18 +242,7 @@ impl LipSdp {
         let a = nt.transpose() * &kin;
         let a = 0.5 * (&a + a.transpose());
         let eig = a.symmetric_eigen();
-        let lmax = eig
-            .eigenvalues
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        let wts: Vec<f64> = eig
-            .eigenvalues
-            .iter()
-            .map(|&l| ((l - lmax) / mu).exp())
-            .collect();
-        let z: f64 = wts.iter().sum();
-        let f = lmax + mu * z.ln();
+        let (lmax, f, wts, z) = smoothed_max(eig.eigenvalues.as_slice(), mu);
         let mut g = vec![0.0; self.nh];
         for (i, &wt) in wts.iter().enumerate() {
             let p = wt / z;
