@@ -31,6 +31,7 @@ mod dag;
 mod error;
 mod model;
 mod parse;
+mod partials;
 mod spec;
 mod sweep;
 mod tape;
