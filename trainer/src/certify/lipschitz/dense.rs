@@ -21,8 +21,9 @@ pub(super) struct DenseWork {
     pub nt: Vec<f64>,
     /// K⁻¹N₁ᵀ (n × n0).
     pub kin: Vec<f64>,
-    /// K⁻¹N₁ᵀv (n) and `W̃_j w_{j−1}` (the widest layer).
+    /// K⁻¹N₁ᵀv (n).
     pub w: Vec<f64>,
+    /// `W̃_j w_{j−1}` (sized for the widest hidden layer).
     pub wp: Vec<f64>,
 }
 
