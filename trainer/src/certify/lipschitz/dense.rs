@@ -8,6 +8,8 @@
 //! backward: b_i ← (b_i − L_{i+1:,i}·b_{i+1:}) / L_ii   (dot: 8 partial sums, then the tail)
 //! A·x:      y ← A_{:,0}·x_0,  y ← A_{:,c}·x_c + y  (c = 1, 2, …)
 //! ```
+//! (terms with a zero L_{j,k} skipped in the factorisation: the structural zeros of
+//! block-tridiagonal K, which add ±0 and so change at most the sign of a zero entry),
 //! so the search's results are those of the allocating `nalgebra` version bit for bit
 //! (checked by the tests of the parent module), at a fraction of the cost: the search
 //! evaluates ρ(T) thousands of times.
@@ -52,12 +54,31 @@ fn cholesky_impl(m: &mut [f64], n: usize) -> bool {
     for j in 0..n {
         let (left, right) = m.split_at_mut(j * n);
         let col_j = &mut right[..n];
-        for k in 0..j {
-            let col_k = &left[k * n..(k + 1) * n];
-            let factor = -col_k[j];
-            for (y, &x) in col_j[j..].iter_mut().zip(&col_k[j..]) {
-                *y += factor * x;
+        // Row j of L left of the diagonal: its leading zeros (the structural zeros of
+        // block-tridiagonal K) would add ±0 products only, which change no entry but a
+        // zero's sign, so the sums start at the first nonzero.
+        let k0 = (0..j).find(|&k| left[k * n + j] != 0.0).unwrap_or(j);
+        // L_{r,j} ← K_{r,j} + Σ_k (−L_{j,k})·L_{r,k}, k in order, for four rows at a time
+        // (the accumulators in registers), then the remaining rows one by one.
+        let mut r = j;
+        while r + 4 <= n {
+            let mut acc: [f64; 4] = col_j[r..r + 4].try_into().expect("4 rows");
+            for k in k0..j {
+                let factor = -left[k * n + j];
+                let x: &[f64; 4] = left[k * n + r..k * n + r + 4].try_into().expect("4 rows");
+                for i in 0..4 {
+                    acc[i] += factor * x[i];
+                }
             }
+            col_j[r..r + 4].copy_from_slice(&acc);
+            r += 4;
+        }
+        for r in r..n {
+            let mut y = col_j[r];
+            for k in k0..j {
+                y += -left[k * n + j] * left[k * n + r];
+            }
+            col_j[r] = y;
         }
         let diag = col_j[j];
         // Zero, negative or NaN: no factor (`try_sqrt` refuses what is not ≥ 0).
@@ -100,9 +121,7 @@ fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
             let coeff = bc[i] / l[i * n + i];
             bc[i] = coeff;
             let li = &l[i * n..(i + 1) * n];
-            for (y, &x) in bc[i + 1..].iter_mut().zip(&li[i + 1..]) {
-                *y += -coeff * x;
-            }
+            axpy(&mut bc[i + 1..], -coeff, &li[i + 1..]);
         }
         // Lᵀ x = y.
         for i in (0..n).rev() {
@@ -110,6 +129,24 @@ fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
             let dot = dot8(&li[i + 1..], &bc[i + 1..]);
             bc[i] = (bc[i] - dot) / li[i];
         }
+    }
+}
+
+/// `y_i += a·x_i` over the common length, four entries at a time (one vector operation
+/// each, also for the short columns the compiler's own vectorised loop leaves scalar),
+/// then the tail: each entry's operations are those of the plain loop.
+#[inline(always)]
+fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
+    let n = y.len().min(x.len());
+    let (y4, yt) = y[..n].as_chunks_mut::<4>();
+    let (x4, xt) = x[..n].as_chunks::<4>();
+    for (yv, xv) in y4.iter_mut().zip(x4) {
+        for i in 0..4 {
+            yv[i] += a * xv[i];
+        }
+    }
+    for (y, &x) in yt.iter_mut().zip(xt) {
+        *y += a * x;
     }
 }
 

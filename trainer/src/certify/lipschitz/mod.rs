@@ -38,11 +38,50 @@ fn mat(l: &Layer) -> DMatrix<f64> {
 }
 
 /// ‖A‖₂ (largest singular value).
+///
+/// A finite row (one output's Jacobian, the common case of the lower bound's thousands of
+/// norms) takes [`row_norm`]: `nalgebra`'s SVD reduced to its operations on a row, the
+/// same bits without the factorisation's allocations.
 pub fn spectral_norm(a: &DMatrix<f64>) -> f64 {
     if a.is_empty() {
         return 0.0;
     }
+    if a.nrows() == 1 && a.iter().all(|v| v.is_finite()) {
+        return row_norm(a.as_slice());
+    }
     a.singular_values().max()
+}
+
+/// ‖x‖₂ of a finite row by the operations `nalgebra`'s SVD performs on a 1 × n matrix:
+/// scaled by its largest |x_i| (`camax`, `unscale_mut`), one Householder reflection whose
+/// norm is `√(0 + x·x)` (the dot product's own summation order, [`dense::dot8`]), the
+/// scale multiplied back.
+fn row_norm(x: &[f64]) -> f64 {
+    let amax = x
+        .iter()
+        .fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
+    if amax == 0.0 {
+        return 0.0;
+    }
+    let scaled = |y: &mut [f64]| {
+        for (y, v) in y.iter_mut().zip(x) {
+            *y = v / amax;
+        }
+        (0.0 + dense::dot8(y, y)).sqrt() * amax
+    };
+    if x.len() <= 16 {
+        scaled(&mut [0.0; 16][..x.len()])
+    } else {
+        scaled(&mut vec![0.0; x.len()])
+    }
+}
+
+/// ‖J‖₂ of the nu × nx row-major `j` ([`spectral_norm`]; a finite row without a matrix).
+fn jacobian_norm(j: &[f64], nu: usize, nx: usize) -> f64 {
+    if nu == 1 && !j.is_empty() && j.iter().all(|v| v.is_finite()) {
+        return row_norm(j);
+    }
+    spectral_norm(&DMatrix::from_row_slice(nu, nx, j))
 }
 
 /// Product of the layers' spectral norms (physical units).
@@ -123,13 +162,24 @@ impl LipSdp {
         k
     }
 
-    /// [`LipSdp::k`] into the column-major buffer `k` (the same entries).
+    /// [`LipSdp::k`] into the column-major buffer `k`: the same lower triangle (the upper
+    /// one is not read by the kernels and may hold anything).
+    ///
+    /// K is block tridiagonal, and so is its Cholesky factor (no fill outside the blocks):
+    /// the entries outside the blocks are zeroed when the buffer is sized and stay zero
+    /// through [`dense::cholesky_in_place`] (only ±0 products are ever added to them), so a
+    /// call rewrites the diagonal blocks' lower triangles and the sub-diagonal blocks only.
     fn k_into(&self, t: &[f64], k: &mut Vec<f64>) {
         let (m, n) = (self.w.len(), self.nh);
-        k.clear();
-        k.resize(n * n, 0.0);
+        if k.len() != n * n {
+            k.clear();
+            k.resize(n * n, 0.0);
+        }
         for j in 0..m - 1 {
             let o = self.offs[j];
+            for c in o..o + self.sizes[j] {
+                k[c * n + c..c * n + o + self.sizes[j]].fill(0.0);
+            }
             for a in 0..self.sizes[j] {
                 k[(o + a) * n + o + a] = 2.0 * t[o + a];
             }
@@ -561,7 +611,7 @@ pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u6
     /// Points per parallel task.
     const CHUNK: usize = 1024;
     let (nx, nu) = (mlp.nx(), mlp.nu());
-    let norm_of = |j: &[f64]| spectral_norm(&DMatrix::from_row_slice(nu, nx, j));
+    let norm_of = |j: &[f64]| jacobian_norm(j, nu, nx);
     let xs: Vec<f64> = (0..n)
         .flat_map(|i| {
             (0..nx).map(move |k| {
@@ -625,8 +675,7 @@ pub fn mpc_estimates(
     let mut max_sens = 0.0f64;
     for i in 0..n {
         if use_jac[i] {
-            let m = DMatrix::from_row_slice(nu, nx, &du[i * nu * nx..(i + 1) * nu * nx]);
-            max_sens = max_sens.max(spectral_norm(&m));
+            max_sens = max_sens.max(jacobian_norm(&du[i * nu * nx..(i + 1) * nu * nx], nu, nx));
         }
     }
     let mut max_q = 0.0f64;
