@@ -4,7 +4,7 @@
 //! same order:
 //! ```text
 //! Cholesky (left-looking):  L_{j:,j} ← K_{j:,j} + Σ_{k<j} (−L_{j,k})·L_{j:,k};  L_{jj} ← √L_{jj};  L_{j+1:,j} ← L_{j+1:,j} / L_{jj}
-//! forward:  b_i ← b_i / L_ii,  b_{i+1:} ← (−b_i)·L_{i+1:,i} + b_{i+1:}
+//! forward:  b_i ← b_i / L_ii,  b_{i+1:} ← (−b_i)·L_{i+1:,i} + b_{i+1:}   (each entry's terms in this order, rows four at a time)
 //! backward: b_i ← (b_i − L_{i+1:,i}·b_{i+1:}) / L_ii   (dot: 8 partial sums, then the tail)
 //! A·x:      y ← A_{:,0}·x_0,  y ← A_{:,c}·x_c + y  (c = 1, 2, …)
 //! ```
@@ -116,12 +116,34 @@ fn solve_avx(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
 #[inline(always)]
 fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
     for bc in b.chunks_exact_mut(n).take(cols) {
-        // L y = b.
-        for i in 0..n {
-            let coeff = bc[i] / l[i * n + i];
-            bc[i] = coeff;
-            let li = &l[i * n..(i + 1) * n];
-            axpy(&mut bc[i + 1..], -coeff, &li[i + 1..]);
+        // L y = b: entry r gets `b_r + (−y_0)·L_{r,0} + (−y_1)·L_{r,1} + …` in order, then
+        // y_r = b_r / L_rr (the column-by-column updates, reordered by rows): four rows at
+        // a time, the terms of the rows above in registers, then the 4 × 4 triangle.
+        let mut r = 0;
+        while r + 4 <= n {
+            let mut acc: [f64; 4] = bc[r..r + 4].try_into().expect("4 rows");
+            for i in 0..r {
+                let f = -bc[i];
+                let x: &[f64; 4] = l[i * n + r..i * n + r + 4].try_into().expect("4 rows");
+                for q in 0..4 {
+                    acc[q] += f * x[q];
+                }
+            }
+            for q in 0..4 {
+                let coeff = acc[q] / l[(r + q) * n + r + q];
+                bc[r + q] = coeff;
+                for q2 in q + 1..4 {
+                    acc[q2] += -coeff * l[(r + q) * n + r + q2];
+                }
+            }
+            r += 4;
+        }
+        for r in r..n {
+            let mut y = bc[r];
+            for i in 0..r {
+                y += -bc[i] * l[i * n + r];
+            }
+            bc[r] = y / l[r * n + r];
         }
         // Lᵀ x = y.
         for i in (0..n).rev() {
@@ -129,24 +151,6 @@ fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
             let dot = dot8(&li[i + 1..], &bc[i + 1..]);
             bc[i] = (bc[i] - dot) / li[i];
         }
-    }
-}
-
-/// `y_i += a·x_i` over the common length, four entries at a time (one vector operation
-/// each, also for the short columns the compiler's own vectorised loop leaves scalar),
-/// then the tail: each entry's operations are those of the plain loop.
-#[inline(always)]
-fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
-    let n = y.len().min(x.len());
-    let (y4, yt) = y[..n].as_chunks_mut::<4>();
-    let (x4, xt) = x[..n].as_chunks::<4>();
-    for (yv, xv) in y4.iter_mut().zip(x4) {
-        for i in 0..4 {
-            yv[i] += a * xv[i];
-        }
-    }
-    for (y, &x) in yt.iter_mut().zip(xt) {
-        *y += a * x;
     }
 }
 
