@@ -32,56 +32,13 @@ use dense::DenseWork;
 use nalgebra::{DMatrix, DVector};
 
 mod dense;
+mod norm;
+
+use norm::jacobian_norm;
+pub use norm::spectral_norm;
 
 fn mat(l: &Layer) -> DMatrix<f64> {
     DMatrix::from_row_slice(l.out, l.inp, &l.w)
-}
-
-/// ‖A‖₂ (largest singular value).
-///
-/// A finite row (one output's Jacobian, the common case of the lower bound's thousands of
-/// norms) takes [`row_norm`]: `nalgebra`'s SVD reduced to its operations on a row, the
-/// same bits without the factorisation's allocations.
-pub fn spectral_norm(a: &DMatrix<f64>) -> f64 {
-    if a.is_empty() {
-        return 0.0;
-    }
-    if a.nrows() == 1 && a.iter().all(|v| v.is_finite()) {
-        return row_norm(a.as_slice());
-    }
-    a.singular_values().max()
-}
-
-/// ‖x‖₂ of a finite row by the operations `nalgebra`'s SVD performs on a 1 × n matrix:
-/// scaled by its largest |x_i| (`camax`, `unscale_mut`), one Householder reflection whose
-/// norm is `√(0 + x·x)` (the dot product's own summation order, [`dense::dot8`]), the
-/// scale multiplied back.
-fn row_norm(x: &[f64]) -> f64 {
-    let amax = x
-        .iter()
-        .fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
-    if amax == 0.0 {
-        return 0.0;
-    }
-    let scaled = |y: &mut [f64]| {
-        for (y, v) in y.iter_mut().zip(x) {
-            *y = v / amax;
-        }
-        (0.0 + dense::dot8(y, y)).sqrt() * amax
-    };
-    if x.len() <= 16 {
-        scaled(&mut [0.0; 16][..x.len()])
-    } else {
-        scaled(&mut vec![0.0; x.len()])
-    }
-}
-
-/// ‖J‖₂ of the nu × nx row-major `j` ([`spectral_norm`]; a finite row without a matrix).
-fn jacobian_norm(j: &[f64], nu: usize, nx: usize) -> f64 {
-    if nu == 1 && !j.is_empty() && j.iter().all(|v| v.is_finite()) {
-        return row_norm(j);
-    }
-    spectral_norm(&DMatrix::from_row_slice(nu, nx, j))
 }
 
 /// Product of the layers' spectral norms (physical units).
