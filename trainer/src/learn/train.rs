@@ -305,17 +305,6 @@ pub fn train<C>(
     )
 }
 
-/// Appends the short row `src` to `dst` one value at a time (`extend` and
-/// `extend_from_slice` become a `memcpy` call per row, which costs more than the copy for
-/// rows of a few numbers).
-#[inline(always)]
-fn push_row(dst: &mut Vec<f64>, src: &[f64]) {
-    dst.reserve(src.len());
-    for &v in src {
-        dst.push(v);
-    }
-}
-
 /// [`train`], started from the weights of `init` (a warm start, e.g. after new data
 /// arrived) instead of the seeded initial weights. `init` must have the settings' layer
 /// widths; its input/output scaling is kept.
@@ -395,9 +384,9 @@ pub fn train_from<C>(
             bj.clear();
             // Element by element: rows this short cost more as `memcpy` calls.
             for &i in chunk {
-                push_row(&mut bx, &train.x[i * nx..(i + 1) * nx]);
-                push_row(&mut bu, &train.u[i * nu..(i + 1) * nu]);
-                push_row(&mut bdu, &train.du[i * nu * nx..(i + 1) * nu * nx]);
+                bx.extend(train.x[i * nx..(i + 1) * nx].iter());
+                bu.extend(train.u[i * nu..(i + 1) * nu].iter());
+                bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
                 bj.push(train.use_jac[i]);
             }
             let batch = Batch {
