@@ -19,6 +19,8 @@
 pub(super) struct DenseWork {
     /// K(T), overwritten by its Cholesky factor L (lower triangle).
     pub k: Vec<f64>,
+    /// The hidden-layer sizes whose block structure `k`'s zeros are laid out for.
+    pub k_shape: Vec<usize>,
     /// N₁ᵀ (n × n0).
     pub nt: Vec<f64>,
     /// K⁻¹N₁ᵀ (n × n0).

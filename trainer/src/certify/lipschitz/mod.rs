@@ -126,11 +126,14 @@ impl LipSdp {
     /// the entries outside the blocks are zeroed when the buffer is sized and stay zero
     /// through [`dense::cholesky_in_place`] (only ±0 products are ever added to them), so a
     /// call rewrites the diagonal blocks' lower triangles and the sub-diagonal blocks only.
-    fn k_into(&self, t: &[f64], k: &mut Vec<f64>) {
+    /// `shape` records the block sizes the buffer's zeros were laid out for: another
+    /// network's blocks (even with as many hidden units) get a freshly zeroed buffer.
+    fn k_into(&self, t: &[f64], k: &mut Vec<f64>, shape: &mut Vec<usize>) {
         let (m, n) = (self.w.len(), self.nh);
-        if k.len() != n * n {
+        if k.len() != n * n || *shape != self.sizes {
             k.clear();
             k.resize(n * n, 0.0);
+            shape.clone_from(&self.sizes);
         }
         for j in 0..m - 1 {
             let o = self.offs[j];
@@ -182,7 +185,7 @@ impl LipSdp {
     /// `nalgebra` version ([`LipSdp::rho_nalgebra`], kept for the tests) in the same order.
     fn rho(&self, t: &[f64], mu: f64, ws: &mut DenseWork) -> Option<(f64, f64, Vec<f64>)> {
         let (n, n0) = (self.nh, self.w[0].ncols());
-        self.k_into(t, &mut ws.k);
+        self.k_into(t, &mut ws.k, &mut ws.k_shape);
         if !dense::cholesky_in_place(&mut ws.k, n) {
             return None;
         }

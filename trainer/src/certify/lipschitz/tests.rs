@@ -457,6 +457,11 @@ fn rho_on_buffers_is_the_nalgebra_rho() {
         (5, &[5, 9, 1]),
         (6, &[6, 32, 32, 2]),
         (7, &[12, 8, 8, 4]),
+        // As many hidden units as each other, other blocks: the shared buffers must not
+        // keep the first net's factor (nonzero in rows 32‥48 × columns 8‥16) where the
+        // second has structural zeros.
+        (8, &[4, 8, 8, 32, 2]),
+        (9, &[4, 16, 16, 16, 2]),
     ] {
         let m = net(seed, widths);
         let sdp = LipSdp::new(&m);
