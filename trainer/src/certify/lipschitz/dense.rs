@@ -8,7 +8,7 @@
 //! backward: b_i ← (b_i − L_{i+1:,i}·b_{i+1:}) / L_ii   (dot: 8 partial sums, then the tail)
 //! A·x:      y ← A_{:,0}·x_0,  y ← A_{:,c}·x_c + y  (c = 1, 2, …)
 //! ```
-//! (terms with a zero L_{j,k} skipped in the factorisation: the structural zeros of
+//! (each row's leading zeros L_{j,k} skipped in the factorisation: the structural zeros of
 //! block-tridiagonal K, which add ±0 and so change at most the sign of a zero entry),
 //! so the search's results are those of the allocating `nalgebra` version bit for bit
 //! (checked by the tests of the parent module), at a fraction of the cost: the search

@@ -14,8 +14,10 @@ pub fn spectral_norm(a: &DMatrix<f64>) -> f64 {
     if a.is_empty() {
         return 0.0;
     }
-    if a.nrows() == 1 && a.iter().all(|v| v.is_finite()) {
-        return row_norm(a.as_slice());
+    if a.nrows() == 1 {
+        if let Some(v) = finite_row_norm(a.as_slice()) {
+            return v;
+        }
     }
     a.singular_values().max()
 }
@@ -24,7 +26,12 @@ pub fn spectral_norm(a: &DMatrix<f64>) -> f64 {
 /// scaled by its largest |x_i| (`camax`, `unscale_mut`), one Householder reflection whose
 /// norm is `√(0 + x·x)` (the dot product's own summation order, [`dense::dot8`]), the
 /// scale multiplied back.
-pub(super) fn row_norm(x: &[f64]) -> f64 {
+/// [`row_norm`] of a nonempty finite row; `None` otherwise (the SVD decides those).
+fn finite_row_norm(x: &[f64]) -> Option<f64> {
+    (!x.is_empty() && x.iter().all(|v| v.is_finite())).then(|| row_norm(x))
+}
+
+fn row_norm(x: &[f64]) -> f64 {
     let amax = x
         .iter()
         .fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
@@ -46,8 +53,10 @@ pub(super) fn row_norm(x: &[f64]) -> f64 {
 
 /// ‖J‖₂ of the nu × nx row-major `j` ([`spectral_norm`]; a finite row without a matrix).
 pub(super) fn jacobian_norm(j: &[f64], nu: usize, nx: usize) -> f64 {
-    if nu == 1 && !j.is_empty() && j.iter().all(|v| v.is_finite()) {
-        return row_norm(j);
+    if nu == 1 {
+        if let Some(v) = finite_row_norm(j) {
+            return v;
+        }
     }
     spectral_norm(&DMatrix::from_row_slice(nu, nx, j))
 }
