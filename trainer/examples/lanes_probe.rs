@@ -6,7 +6,8 @@
 //!
 //! `cargo run --release -p trainer --example lanes_probe -- DATA.bin MODEL.bin [--loss-only | --grad-only]`
 //! (`--loss-only`: the forward passes and the loss, no gradient; `--grad-only`: the
-//! gradient without the loss terms, as in a training step).
+//! gradient without the loss terms, the minibatch read as rows of the set, as in a
+//! training step; its row list is built inside the timed loop).
 use std::path::Path;
 use std::time::Instant;
 use trainer::certify::Model;
@@ -52,7 +53,15 @@ fn main() {
                 band: None,
             };
             let p = if grad_only {
-                lanes.grad(&mlp, &batch, lam, &mut g);
+                let all = Batch {
+                    x: &set.x,
+                    u: &set.u,
+                    du: &set.du,
+                    use_jac: &set.use_jac,
+                    band: None,
+                };
+                let rows: Vec<usize> = (i..i + bs).collect();
+                lanes.grad(&mlp, &all, &rows, lam, &mut g);
                 Default::default()
             } else {
                 lanes.loss_grad(&mlp, &batch, lam, (!loss_only).then_some(&mut g))

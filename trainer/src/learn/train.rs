@@ -16,7 +16,7 @@
 
 use crate::data::dataset::Dataset;
 use crate::learn::adam::Adam;
-use crate::learn::mlp::{Batch, Lanes, LossParts, LossWeights, Mlp, Workspace};
+use crate::learn::mlp::{Batch, Grad, Lanes, LossParts, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Precision, Schedule, TrainSettings};
 use crate::rng::splitmix64;
@@ -305,6 +305,16 @@ pub fn train<C>(
     )
 }
 
+/// One Adam step of `mlp`'s layers (in place) with the gradient `grad`; the moments are
+/// flat in the order of `flatten`.
+fn adam_step(adam: &mut Adam, mlp: &mut Mlp, grad: &Grad, lr: f64) {
+    let c = adam.begin_step();
+    let params = mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b));
+    let params =
+        params.flat_map(|(l, (gw, gb))| [(&mut l.w[..], &gw[..]), (&mut l.b[..], &gb[..])]);
+    adam.update(params, lr, c);
+}
+
 /// [`train`], started from the weights of `init` (a warm start, e.g. after new data
 /// arrived) instead of the seeded initial weights. `init` must have the settings' layer
 /// widths; its input/output scaling is kept.
@@ -362,6 +372,13 @@ pub fn train_from<C>(
     let mut order: Vec<usize> = (0..n).collect();
     let mut history = Vec::new();
     let mut epochs_run = 0;
+    let set = Batch {
+        x: &train.x,
+        u: &train.u,
+        du: &train.du,
+        use_jac: &train.use_jac,
+        band,
+    };
     for epoch in 0..settings.epochs {
         let lr = match settings.schedule {
             Schedule::Constant => settings.learning_rate,
@@ -378,6 +395,12 @@ pub fn train_from<C>(
             order.swap(i, (r % (i as u64 + 1)) as usize);
         }
         for chunk in order.chunks(bs) {
+            if f32_passes {
+                // The lanes read the minibatch's rows in place.
+                lanes.grad(&mlp, &set, chunk, lam, &mut grad);
+                adam_step(&mut adam, &mut mlp, &grad, lr);
+                continue;
+            }
             bx.clear();
             bu.clear();
             bdu.clear();
@@ -396,38 +419,22 @@ pub fn train_from<C>(
                 use_jac: &bj,
                 band,
             };
-            if f32_passes {
-                lanes.grad(&mlp, &batch, lam, &mut grad);
-            } else {
-                mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
-            }
-            let c = adam.begin_step();
-            // The layers in place; the moments are flat in the order of `flatten`.
-            let params = mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b));
-            let params =
-                params.flat_map(|(l, (gw, gb))| [(&mut l.w[..], &gw[..]), (&mut l.b[..], &gb[..])]);
-            adam.update(params, lr, c);
+            mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
+            adam_step(&mut adam, &mut mlp, &grad, lr);
         }
         epochs_run = epoch + 1;
         let last = epoch + 1 == settings.epochs;
         if (epoch + 1) % settings.log_every == 0 || last {
-            let full = Batch {
-                x: &train.x,
-                u: &train.u,
-                du: &train.du,
-                use_jac: &train.use_jac,
-                band,
-            };
             let (loss, st, r2v) = if f32_passes {
                 (
-                    lanes.loss_grad(&mlp, &full, lam, None),
+                    lanes.loss_grad(&mlp, &set, lam, None),
                     // The curve records ε_D only: no Jacobians.
                     errors_lanes(&mut lanes, &mlp, train, false).1,
                     errors_lanes(&mut lanes, &mlp, validation, false).1.r2,
                 )
             } else {
                 (
-                    mlp.loss(&full, lam, &mut ws),
+                    mlp.loss(&set, lam, &mut ws),
                     errors(&mlp, train).1,
                     errors_impl(&mlp, validation, false).1.r2,
                 )

@@ -296,11 +296,22 @@ impl Lanes {
         }
     }
 
-    /// Forward (and, with `q = 1 + nx`, tangent) pass of one chunk of `ng` groups: `x`
-    /// holds `nb ≤ ng·L` states (row-major, sample s in lane s mod L of group s / L); the
-    /// other lanes get the centre of X (their results are unused).
+    /// Forward (and, with `q = 1 + nx`, tangent) pass of one chunk of `ng` groups: samples
+    /// `i0 … i0 + nb − 1` (`nb ≤ ng·L`; sample i0 + s in lane s mod L of group s / L) are the
+    /// rows `rows[i]` of the row-major states `x` (with `rows = None`, row i); the other
+    /// lanes get the centre of X (their results are unused).
     #[inline(always)]
-    fn pass(&mut self, mlp: &Mlp, x: &[f64], nb: usize, q: usize, ng: usize) {
+    #[allow(clippy::too_many_arguments)]
+    fn pass(
+        &mut self,
+        mlp: &Mlp,
+        x: &[f64],
+        rows: Option<&[usize]>,
+        i0: usize,
+        nb: usize,
+        q: usize,
+        ng: usize,
+    ) {
         let nx = mlp.nx();
         let m = mlp.layers.len();
         for (g, h0g) in self.h[0][..ng * nx * q]
@@ -312,7 +323,8 @@ impl Lanes {
                 for (i, v) in h0[0].iter_mut().enumerate() {
                     let s = g * L + i;
                     *v = if s < nb {
-                        ((x[s * nx + c] - cc) / hw) as f32
+                        let row = rows.map_or(i0 + s, |r| r[i0 + s]);
+                        ((x[row * nx + c] - cc) / hw) as f32
                     } else {
                         0.0
                     };
@@ -349,19 +361,29 @@ impl Lanes {
         lam: LossWeights,
         grad: Option<&mut Grad>,
     ) -> LossParts {
-        self.dispatch(mlp, batch, lam, grad, true)
+        self.dispatch(mlp, batch, None, lam, grad, true)
     }
 
-    /// The gradient of `batch`'s loss into `grad` (overwritten) without the loss terms
-    /// themselves (a training step's work): the bits of [`Lanes::loss_grad`]'s gradient.
-    pub fn grad(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, grad: &mut Grad) {
-        self.dispatch(mlp, batch, lam, Some(grad), false);
+    /// The gradient into `grad` (overwritten) of the loss of the minibatch made of the rows
+    /// `rows` of `set` (sample i is row `rows[i]`), without the loss terms themselves: a
+    /// training step's work, with no copy of the minibatch. The bits of
+    /// [`Lanes::loss_grad`]'s gradient on those rows gathered into a batch.
+    pub fn grad(
+        &mut self,
+        mlp: &Mlp,
+        set: &Batch,
+        rows: &[usize],
+        lam: LossWeights,
+        grad: &mut Grad,
+    ) {
+        self.dispatch(mlp, set, Some(rows), lam, Some(grad), false);
     }
 
     fn dispatch(
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
+        rows: Option<&[usize]>,
         lam: LossWeights,
         grad: Option<&mut Grad>,
         with_loss: bool,
@@ -371,15 +393,15 @@ impl Lanes {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX and AVX2 (checked just above), the one requirement of
             // calling a `#[target_feature(enable = "avx,avx2")]` function.
-            return unsafe { self.loss_grad_avx2(mlp, batch, lam, grad, with_loss) };
+            return unsafe { self.loss_grad_avx2(mlp, batch, rows, lam, grad, with_loss) };
         }
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX (checked just above), the one requirement of calling
             // a `#[target_feature(enable = "avx")]` function.
-            return unsafe { self.loss_grad_avx(mlp, batch, lam, grad, with_loss) };
+            return unsafe { self.loss_grad_avx(mlp, batch, rows, lam, grad, with_loss) };
         }
-        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
+        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
     }
 
     /// [`Lanes::loss_grad_impl`] compiled with AVX: 8 f32 lanes per instruction instead of
@@ -391,11 +413,12 @@ impl Lanes {
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
+        rows: Option<&[usize]>,
         lam: LossWeights,
         grad: Option<&mut Grad>,
         with_loss: bool,
     ) -> LossParts {
-        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
+        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
     }
 
     /// [`Lanes::loss_grad_impl`] compiled with AVX2 as well: the tanh's exponent arithmetic
@@ -407,11 +430,12 @@ impl Lanes {
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
+        rows: Option<&[usize]>,
         lam: LossWeights,
         grad: Option<&mut Grad>,
         with_loss: bool,
     ) -> LossParts {
-        self.loss_grad_impl(mlp, batch, lam, grad, with_loss)
+        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
     }
 
     #[inline(always)]
@@ -419,12 +443,13 @@ impl Lanes {
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
+        rows: Option<&[usize]>,
         lam: LossWeights,
         mut grad: Option<&mut Grad>,
         with_loss: bool,
     ) -> LossParts {
         let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
-        let bsz = batch.use_jac.len();
+        let bsz = rows.map_or(batch.use_jac.len(), <[usize]>::len);
         let inv_b = 1.0 / bsz.max(1) as f64;
         let tangent = lam.jacobian != 0.0;
         let q = if tangent { 1 + nx } else { 1 };
@@ -443,12 +468,13 @@ impl Lanes {
         for i0 in (0..bsz).step_by(span) {
             let nb = span.min(bsz - i0);
             let ng = nb.div_ceil(L);
-            self.pass(mlp, &batch.x[i0 * nx..(i0 + nb) * nx], nb, q, ng);
+            self.pass(mlp, batch.x, rows, i0, nb, q, ng);
             // Output errors in f64 from the f32 outputs; padding lanes get zero gradients.
             self.g[..ng * nu * q].fill([0.0; L]);
             let y = &self.h[m];
             for s in 0..nb {
-                let (gi, o, i) = (i0 + s, (s / L) * nu * q, s % L);
+                let (o, i) = ((s / L) * nu * q, s % L);
+                let gi = rows.map_or(i0 + s, |r| r[i0 + s]);
                 let use_jac = tangent && batch.use_jac[gi];
                 for r in 0..nu {
                     let sc = mlp.out_half[r];
@@ -636,7 +662,7 @@ impl Lanes {
         let span = chunk_groups(maxw, q) * L;
         for i0 in (0..n).step_by(span) {
             let nb = span.min(n - i0);
-            self.pass(mlp, &x[i0 * nx..(i0 + nb) * nx], nb, q, nb.div_ceil(L));
+            self.pass(mlp, x, None, i0, nb, q, nb.div_ceil(L));
             let y = &self.h[m];
             for s in 0..nb {
                 let (o, i) = ((s / L) * nu * q, s % L);

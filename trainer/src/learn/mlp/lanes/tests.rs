@@ -190,7 +190,7 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
         let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
         let la = lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
         lanes.load(&m);
-        let lb = lanes.loss_grad_impl(&m, &batch, lam, Some(&mut gb), true);
+        let lb = lanes.loss_grad_impl(&m, &batch, None, lam, Some(&mut gb), true);
         assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -198,7 +198,7 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
             let mut gc = m.zero_grad();
             lanes.load(&m);
             // SAFETY: AVX2 implies AVX, checked just above.
-            let lc = unsafe { lanes.loss_grad_avx(&m, &batch, lam, Some(&mut gc), true) };
+            let lc = unsafe { lanes.loss_grad_avx(&m, &batch, None, lam, Some(&mut gc), true) };
             assert_eq!((la, &ga), (lc, &gc), "{widths:?}");
         }
         let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
@@ -218,7 +218,8 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
     }
 }
 
-/// `Lanes::grad` (a training step: no loss terms) gives `loss_grad`'s gradient bit for bit.
+/// `Lanes::grad` (a training step: no loss terms, the minibatch read as rows of the set)
+/// gives `loss_grad`'s gradient on those rows gathered into a batch, bit for bit.
 #[test]
 fn grad_alone_is_the_gradient_of_loss_grad() {
     // One engine throughout: its cached weight-term factors must follow λ₃ and the shape.
@@ -232,8 +233,25 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
                 jacobian: 3.0,
                 weights: l3,
             };
-            let (x, u, du, uj) = data(9, nx, nu, bsz);
+            // A set of 2·bsz + 3 samples; the minibatch: bsz rows in a scrambled order.
+            let n = 2 * bsz + 3;
+            let (x, u, du, uj) = data(9, nx, nu, n);
+            let rows: Vec<usize> = (0..bsz).map(|i| (i * 7 + 5) % n).collect();
+            let gather = |v: &[f64], w: usize| -> Vec<f64> {
+                rows.iter()
+                    .flat_map(|&r| v[r * w..(r + 1) * w].to_vec())
+                    .collect()
+            };
+            let (bx, bu, bdu) = (gather(&x, nx), gather(&u, nu), gather(&du, nu * nx));
+            let bj: Vec<bool> = rows.iter().map(|&r| uj[r]).collect();
             let batch = Batch {
+                x: &bx,
+                u: &bu,
+                du: &bdu,
+                use_jac: &bj,
+                band: None,
+            };
+            let set = Batch {
                 x: &x,
                 u: &u,
                 du: &du,
@@ -242,7 +260,7 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
             };
             let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
             lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
-            lanes.grad(&m, &batch, lam, &mut gb);
+            lanes.grad(&m, &set, &rows, lam, &mut gb);
             assert_eq!(ga, gb, "{widths:?}, batch {bsz}, λ₃ = {l3}");
         }
     }
