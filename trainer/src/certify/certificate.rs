@@ -392,13 +392,31 @@ pub fn certify(
     let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
     let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
     let naive = lipschitz::naive_bound(&model.mlp);
-    // The three are independent and deterministic: LipSDP beside the other two.
-    let (sdp, (vertex, lower)) = rayon::join(
+    let (nx, nu) = (set.nx, set.nu);
+    // The L_MPC estimates from the data (unless a proven value is given): (s, q) of the
+    // data and of the extra states.
+    let mpc_est = || {
+        opts.l_mpc.is_none().then(|| {
+            let data = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
+            let extra = opts.extra.as_ref().map_or((0.0f64, 0.0f64), |e| {
+                lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu)
+            });
+            (data, extra)
+        })
+    };
+    // The four are independent and deterministic: LipSDP (the longest) beside the other
+    // three.
+    let (sdp, ((vertex, lower), est)) = rayon::join(
         || lipschitz::lipsdp_bound(&model.mlp),
         || {
-            (
-                lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
-                lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
+            rayon::join(
+                || {
+                    (
+                        lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
+                        lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
+                    )
+                },
+                mpc_est,
             )
         },
     );
@@ -409,15 +427,14 @@ pub fn certify(
     if let Some(v) = vertex.filter(|v| *v < l_nn) {
         (l_nn, method) = (v, LnnMethod::SlopeVertices);
     }
-    let (nx, nu) = (set.nx, set.nu);
-    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match opts.l_mpc {
-        Some(v) => (v, false, "user-supplied proven value".to_string()),
-        None => {
-            let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
-            let (mut s2, mut q2) = (0.0f64, 0.0f64);
-            if let Some(e) = &opts.extra {
-                (s2, q2) = lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu);
-            }
+    // `est` is `None` exactly when a proven L_MPC is given (∞, the safe side, otherwise).
+    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match est {
+        None => (
+            opts.l_mpc.unwrap_or(f64::INFINITY),
+            false,
+            "user-supplied proven value".to_string(),
+        ),
+        Some(((s, q), (s2, q2))) => {
             let method = if opts.extra.is_some() {
                 format!(
                     "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \

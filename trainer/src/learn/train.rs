@@ -110,30 +110,34 @@ fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorSta
         with_jac.then_some(&mut j_all[..]),
         &mut ws,
     );
-    error_stats(set, &u_all, &j_all, with_jac)
+    error_stats(set, &u_all, &j_all, with_jac, true)
 }
 
-/// [`errors_impl`] with the passes in f32 ([`Lanes`]): the training curve's figures under
-/// `precision = "f32"` (an early stop on `target_eps_d` is confirmed in f64; the final
-/// statistics are always [`errors`], in f64).
-fn errors_lanes(
-    lanes: &mut Lanes,
-    mlp: &Mlp,
-    set: &TrainSet,
-    with_jac: bool,
-) -> (Vec<f64>, ErrorStats) {
-    let (nx, nu) = (set.nx, set.nu);
-    let (mut u_all, mut j_all) = (vec![0.0; set.len() * nu], vec![0.0; set.len() * nu * nx]);
-    lanes.eval_batch(mlp, &set.x, &mut u_all, with_jac.then_some(&mut j_all[..]));
-    error_stats(set, &u_all, &j_all, with_jac)
+/// The outputs of the network on a set in f32 ([`Lanes`]) and their [`curve_stats`]: the
+/// training curve's validation figure under `precision = "f32"`.
+fn curve_stats_lanes(lanes: &mut Lanes, mlp: &Mlp, set: &TrainSet) -> ErrorStats {
+    let mut u_all = vec![0.0; set.len() * set.nu];
+    lanes.eval_batch(mlp, &set.x, &mut u_all, None);
+    curve_stats(set, &u_all)
 }
 
-/// Error statistics of the outputs `u_all` (n × nu) and Jacobians `j_all` against `set`.
+/// The figures of the training curve from the outputs `u_all` (n × nu) on `set`: the
+/// [`error_stats`] without Jacobians and without sorting the errors, so that only `n`,
+/// `max` and `r2` are filled (the bits of those fields of [`error_stats`]); the quantiles
+/// and the mean are NaN.
+fn curve_stats(set: &TrainSet, u_all: &[f64]) -> ErrorStats {
+    error_stats(set, u_all, &[], false, false).1
+}
+
+/// Error statistics of the outputs `u_all` (n × nu) and, `with_jac`, the Jacobians `j_all`
+/// (n × nu·nx) against `set`. Without `sorted` the errors are returned in the set's order
+/// and only `n`, `max`, `r2` and `max_jac_err` are computed (the rest NaN).
 fn error_stats(
     set: &TrainSet,
     u_all: &[f64],
     j_all: &[f64],
     with_jac: bool,
+    sorted: bool,
 ) -> (Vec<f64>, ErrorStats) {
     let (nx, nu) = (set.nx, set.nu);
     let mut errs = Vec::with_capacity(set.len());
@@ -147,7 +151,6 @@ fn error_stats(
     let mut ss_tot = 0.0;
     for i in 0..set.len() {
         let u = &u_all[i * nu..(i + 1) * nu];
-        let j = &j_all[i * nu * nx..(i + 1) * nu * nx];
         let mut e2 = 0.0;
         for r in 0..nu {
             let e = u[r] - set.u[i * nu + r];
@@ -157,27 +160,36 @@ fn error_stats(
         ss_res += e2;
         errs.push(e2.sqrt());
         if with_jac && set.use_jac[i] {
+            let j = &j_all[i * nu * nx..(i + 1) * nu * nx];
             let je: f64 = (0..nu * nx)
                 .map(|k| (j[k] - set.du[i * nu * nx + k]).powi(2))
                 .sum();
             max_jac = max_jac.max(je.sqrt());
         }
     }
-    errs.sort_by(f64::total_cmp);
+    if sorted {
+        errs.sort_by(f64::total_cmp);
+    }
     let q = |p: f64| -> f64 {
-        if errs.is_empty() {
+        if errs.is_empty() || !sorted {
             return f64::NAN;
         }
         let k = ((errs.len() - 1) as f64 * p).round() as usize;
         errs[k]
     };
+    // The last of the sorted errors: the greatest in `total_cmp`'s order.
+    let max = errs.iter().copied().max_by(f64::total_cmp);
     let stats = ErrorStats {
         n: errs.len(),
-        max: errs.last().copied().unwrap_or(f64::NAN),
+        max: max.unwrap_or(f64::NAN),
         median: q(0.5),
         p90: q(0.9),
         p99: q(0.99),
-        mean: errs.iter().sum::<f64>() / errs.len().max(1) as f64,
+        mean: if sorted {
+            errs.iter().sum::<f64>() / errs.len().max(1) as f64
+        } else {
+            f64::NAN
+        },
         r2: if ss_tot > 0.0 {
             1.0 - ss_res / ss_tot
         } else {
@@ -372,6 +384,7 @@ pub fn train_from<C>(
     let mut order: Vec<usize> = (0..n).collect();
     let mut history = Vec::new();
     let mut epochs_run = 0;
+    let mut u_curve = vec![0.0; n * nu];
     let set = Batch {
         x: &train.x,
         u: &train.u,
@@ -427,10 +440,11 @@ pub fn train_from<C>(
         if (epoch + 1) % settings.log_every == 0 || last {
             let (loss, st, r2v) = if f32_passes {
                 (
-                    lanes.loss_grad(&mlp, &set, lam, None),
-                    // The curve records ε_D only: no Jacobians.
-                    errors_lanes(&mut lanes, &mlp, train, false).1,
-                    errors_lanes(&mut lanes, &mlp, validation, false).1.r2,
+                    // The loss pass gives the outputs too; the curve records ε_D and
+                    // the validation R² only: no Jacobians, no sorting.
+                    lanes.loss_outputs(&mlp, &set, lam, &mut u_curve),
+                    curve_stats(train, &u_curve),
+                    curve_stats_lanes(&mut lanes, &mlp, validation).r2,
                 )
             } else {
                 (

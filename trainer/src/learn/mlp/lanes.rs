@@ -25,6 +25,7 @@ use super::loss::{value_error, Batch, Grad, LossParts, LossWeights};
 use super::{Activation, Mlp};
 use kernels::{dot_chunk, outer_chunk};
 
+mod eval;
 mod kernels;
 
 /// Samples per group (lanes of one vector).
@@ -234,6 +235,27 @@ fn act_back_q<const Q: usize>(g: &mut [V], d: &[V], dd: &[V], zt: &[V]) {
     }
 }
 
+/// What one call of the engine computes besides the passes: the minibatch as rows of the
+/// batch given (`None`: the whole batch in order), the gradient, the loss terms, and the
+/// outputs κ_NN of the samples (B × nu).
+struct Job<'a> {
+    rows: Option<&'a [usize]>,
+    grad: Option<&'a mut Grad>,
+    with_loss: bool,
+    outputs: Option<&'a mut [f64]>,
+}
+
+impl Default for Job<'_> {
+    fn default() -> Self {
+        Job {
+            rows: None,
+            grad: None,
+            with_loss: true,
+            outputs: None,
+        }
+    }
+}
+
 impl Lanes {
     /// Sizes the buffers for `mlp` (once per shape) and rounds its weights to f32.
     fn load(&mut self, mlp: &Mlp) {
@@ -361,7 +383,28 @@ impl Lanes {
         lam: LossWeights,
         grad: Option<&mut Grad>,
     ) -> LossParts {
-        self.dispatch(mlp, batch, None, lam, grad, true)
+        let job = Job {
+            grad,
+            ..Job::default()
+        };
+        self.dispatch(mlp, batch, lam, job)
+    }
+
+    /// The loss of `batch` (no gradient) and the network's outputs κ_NN at its states into
+    /// `u` (B × nu, row-major): the bits of [`Lanes::loss_grad`]'s loss and of
+    /// [`Lanes::eval_batch`]'s outputs, in one pass.
+    pub fn loss_outputs(
+        &mut self,
+        mlp: &Mlp,
+        batch: &Batch,
+        lam: LossWeights,
+        u: &mut [f64],
+    ) -> LossParts {
+        let job = Job {
+            outputs: Some(u),
+            ..Job::default()
+        };
+        self.dispatch(mlp, batch, lam, job)
     }
 
     /// The gradient into `grad` (overwritten) of the loss of the minibatch made of the rows
@@ -376,32 +419,30 @@ impl Lanes {
         lam: LossWeights,
         grad: &mut Grad,
     ) {
-        self.dispatch(mlp, set, Some(rows), lam, Some(grad), false);
+        let job = Job {
+            rows: Some(rows),
+            grad: Some(grad),
+            with_loss: false,
+            outputs: None,
+        };
+        self.dispatch(mlp, set, lam, job);
     }
 
-    fn dispatch(
-        &mut self,
-        mlp: &Mlp,
-        batch: &Batch,
-        rows: Option<&[usize]>,
-        lam: LossWeights,
-        grad: Option<&mut Grad>,
-        with_loss: bool,
-    ) -> LossParts {
+    fn dispatch(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, job: Job) -> LossParts {
         self.load(mlp);
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX and AVX2 (checked just above), the one requirement of
             // calling a `#[target_feature(enable = "avx,avx2")]` function.
-            return unsafe { self.loss_grad_avx2(mlp, batch, rows, lam, grad, with_loss) };
+            return unsafe { self.loss_grad_avx2(mlp, batch, lam, job) };
         }
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX (checked just above), the one requirement of calling
             // a `#[target_feature(enable = "avx")]` function.
-            return unsafe { self.loss_grad_avx(mlp, batch, rows, lam, grad, with_loss) };
+            return unsafe { self.loss_grad_avx(mlp, batch, lam, job) };
         }
-        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
+        self.loss_grad_impl(mlp, batch, lam, job)
     }
 
     /// [`Lanes::loss_grad_impl`] compiled with AVX: 8 f32 lanes per instruction instead of
@@ -409,16 +450,8 @@ impl Lanes {
     /// so the same bits as the SSE2 build.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn loss_grad_avx(
-        &mut self,
-        mlp: &Mlp,
-        batch: &Batch,
-        rows: Option<&[usize]>,
-        lam: LossWeights,
-        grad: Option<&mut Grad>,
-        with_loss: bool,
-    ) -> LossParts {
-        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
+    fn loss_grad_avx(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, job: Job) -> LossParts {
+        self.loss_grad_impl(mlp, batch, lam, job)
     }
 
     /// [`Lanes::loss_grad_impl`] compiled with AVX2 as well: the tanh's exponent arithmetic
@@ -430,12 +463,10 @@ impl Lanes {
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
-        rows: Option<&[usize]>,
         lam: LossWeights,
-        grad: Option<&mut Grad>,
-        with_loss: bool,
+        job: Job,
     ) -> LossParts {
-        self.loss_grad_impl(mlp, batch, rows, lam, grad, with_loss)
+        self.loss_grad_impl(mlp, batch, lam, job)
     }
 
     #[inline(always)]
@@ -443,11 +474,15 @@ impl Lanes {
         &mut self,
         mlp: &Mlp,
         batch: &Batch,
-        rows: Option<&[usize]>,
         lam: LossWeights,
-        mut grad: Option<&mut Grad>,
-        with_loss: bool,
+        job: Job,
     ) -> LossParts {
+        let Job {
+            rows,
+            mut grad,
+            with_loss,
+            mut outputs,
+        } = job;
         let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
         let bsz = rows.map_or(batch.use_jac.len(), <[usize]>::len);
         let inv_b = 1.0 / bsz.max(1) as f64;
@@ -479,6 +514,9 @@ impl Lanes {
                 for r in 0..nu {
                     let sc = mlp.out_half[r];
                     let pred = mlp.out_center[r] + sc * f64::from(y[o + r * q][i]);
+                    if let Some(u) = outputs.as_deref_mut() {
+                        u[(i0 + s) * nu + r] = pred;
+                    }
                     let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
                     if with_loss {
                         parts.value += lam.value * inv_b * e * e;
@@ -611,71 +649,6 @@ impl Lanes {
                     dot_chunk(wc, g, so, ng, q, 0.0, &mut self.acc, g2, si, c);
                 }
                 std::mem::swap(&mut self.g, &mut self.g2);
-            }
-        }
-    }
-
-    /// κ_NN at the states `x` (row-major n × nx) into `u` (n × nu) and, if given, the
-    /// Jacobians into `jac` (n × nu·nx), computed in f32 (the outputs of
-    /// [`Mlp::eval_batch`] up to f32 rounding).
-    pub fn eval_batch(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
-        self.load(mlp);
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX and AVX2 (checked just above), see `loss_grad`.
-            return unsafe { self.eval_batch_avx2(mlp, x, u, jac) };
-        }
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the CPU has AVX (checked just above), see `loss_grad`.
-            return unsafe { self.eval_batch_avx(mlp, x, u, jac) };
-        }
-        self.eval_batch_impl(mlp, x, u, jac)
-    }
-
-    /// [`Lanes::eval_batch_impl`] compiled with AVX (the same bits, see `loss_grad_avx`).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    fn eval_batch_avx(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
-        self.eval_batch_impl(mlp, x, u, jac)
-    }
-
-    /// [`Lanes::eval_batch_impl`] compiled with AVX2 (the same bits, see `loss_grad_avx2`).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,avx2")]
-    fn eval_batch_avx2(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
-        self.eval_batch_impl(mlp, x, u, jac)
-    }
-
-    #[inline(always)]
-    fn eval_batch_impl(
-        &mut self,
-        mlp: &Mlp,
-        x: &[f64],
-        u: &mut [f64],
-        mut jac: Option<&mut [f64]>,
-    ) {
-        let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
-        let n = x.len() / nx.max(1);
-        let q = if jac.is_some() { 1 + nx } else { 1 };
-        let maxw = self.widths.iter().copied().max().unwrap_or(0);
-        let span = chunk_groups(maxw, q) * L;
-        for i0 in (0..n).step_by(span) {
-            let nb = span.min(n - i0);
-            self.pass(mlp, x, None, i0, nb, q, nb.div_ceil(L));
-            let y = &self.h[m];
-            for s in 0..nb {
-                let (o, i) = ((s / L) * nu * q, s % L);
-                for r in 0..nu {
-                    let sc = mlp.out_half[r];
-                    u[(i0 + s) * nu + r] = mlp.out_center[r] + sc * f64::from(y[o + r * q][i]);
-                    if let Some(jac) = jac.as_deref_mut() {
-                        for k in 0..nx {
-                            jac[(i0 + s) * nu * nx + r * nx + k] =
-                                sc * f64::from(y[o + r * q + 1 + k][i]);
-                        }
-                    }
-                }
             }
         }
     }

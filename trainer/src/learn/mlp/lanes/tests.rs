@@ -190,7 +190,15 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
         let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
         let la = lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
         lanes.load(&m);
-        let lb = lanes.loss_grad_impl(&m, &batch, None, lam, Some(&mut gb), true);
+        let lb = lanes.loss_grad_impl(
+            &m,
+            &batch,
+            lam,
+            Job {
+                grad: Some(&mut gb),
+                ..Job::default()
+            },
+        );
         assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -198,7 +206,17 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
             let mut gc = m.zero_grad();
             lanes.load(&m);
             // SAFETY: AVX2 implies AVX, checked just above.
-            let lc = unsafe { lanes.loss_grad_avx(&m, &batch, None, lam, Some(&mut gc), true) };
+            let lc = unsafe {
+                lanes.loss_grad_avx(
+                    &m,
+                    &batch,
+                    lam,
+                    Job {
+                        grad: Some(&mut gc),
+                        ..Job::default()
+                    },
+                )
+            };
             assert_eq!((la, &ga), (lc, &gc), "{widths:?}");
         }
         let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
