@@ -27,7 +27,13 @@ impl Lanes {
     /// [`Lanes::eval_batch_impl`] compiled with AVX (the same bits, see `loss_grad_avx`).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn eval_batch_avx(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
+    pub(super) fn eval_batch_avx(
+        &mut self,
+        mlp: &Mlp,
+        x: &[f64],
+        u: &mut [f64],
+        jac: Option<&mut [f64]>,
+    ) {
         self.eval_batch_impl(mlp, x, u, jac)
     }
 
@@ -39,7 +45,7 @@ impl Lanes {
     }
 
     #[inline(always)]
-    fn eval_batch_impl(
+    pub(super) fn eval_batch_impl(
         &mut self,
         mlp: &Mlp,
         x: &[f64],
