@@ -434,4 +434,53 @@ mod tests {
             assert!(agree as u64 >= n / 2, "{name}: only {agree} labelled");
         }
     }
+
+    /// The soft problem's QPs of hard-infeasible stress-file states (curved constraints,
+    /// slack weights ~1e4) are solved by the structured interior point without clarabel,
+    /// and the SQP reaches clarabel's solution. Before the residuals counted as progress
+    /// (`ipm`, stall test), 45, 2 and 2 of these soft solves' QPs stalled after 5–8
+    /// iterations — their primal residual falling while μ rose from an off-centre start —
+    /// and went to clarabel.
+    #[test]
+    fn soft_stress_qps_are_solved_without_clarabel() {
+        use crate::mpc::sqp::{SqpSolver, SqpStatus};
+        let path = std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/reference/cartpole_public_nl.toml"
+        ));
+        let mut cfg = ProblemConfig::load(&path).unwrap();
+        for x in [
+            [
+                -0.39778782066805407,
+                -1.2542083494672087,
+                -0.09624336122738181,
+                -0.5302274608852291,
+            ],
+            [
+                -1.0299626425385253,
+                -1.4028416297387776,
+                0.10556006450513908,
+                -0.8243394793082861,
+            ],
+            [
+                1.2159811130448137,
+                -1.0730791213057325,
+                0.08668678254922627,
+                -0.5369451329466639,
+            ],
+        ] {
+            cfg.solver.qp = QpSolverKind::Structured;
+            let mut fast = SqpSolver::new(&cfg, true);
+            let a = fast.solve(&x, fast.cold_start(&x));
+            cfg.solver.qp = QpSolverKind::Clarabel;
+            let mut reference = SqpSolver::new(&cfg, true);
+            let b = reference.solve(&x, reference.cold_start(&x));
+            assert_eq!(a.status, SqpStatus::Converged, "{x:?}");
+            assert_eq!(b.status, SqpStatus::Converged, "{x:?}");
+            assert_eq!(fast.qp_fallbacks(), 0, "{x:?}");
+            for (p, q) in a.point.z.iter().zip(&b.point.z) {
+                assert!((p - q).abs() <= 1e-6 * (1.0 + q.abs()), "{x:?}: {p} vs {q}");
+            }
+        }
+    }
 }

@@ -296,6 +296,12 @@ impl SqpSolver {
         self.qp.without_riccati();
     }
 
+    /// How many QPs of this solver's solves the structured QP solver handed to clarabel.
+    #[cfg(test)]
+    pub(crate) fn qp_fallbacks(&self) -> usize {
+        self.qp.fallbacks
+    }
+
     /// Workspace for the hard (`soft = false`) or exact-penalty (`soft = true`) problem.
     pub fn new(cfg: &ProblemConfig, soft: bool) -> Self {
         let ocp = Ocp::new(cfg, soft);
