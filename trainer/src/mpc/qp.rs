@@ -443,13 +443,7 @@ mod tests {
     /// and went to clarabel.
     #[test]
     fn soft_stress_qps_are_solved_without_clarabel() {
-        use crate::mpc::sqp::{SqpSolver, SqpStatus};
-        let path = std::path::PathBuf::from(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../tests/reference/cartpole_public_nl.toml"
-        ));
-        let mut cfg = ProblemConfig::load(&path).unwrap();
-        for x in [
+        soft_solves_without_clarabel(&[
             [
                 -0.39778782066805407,
                 -1.2542083494672087,
@@ -468,13 +462,46 @@ mod tests {
                 0.08668678254922627,
                 -0.5369451329466639,
             ],
-        ] {
+        ]);
+    }
+
+    /// As above, for states where 5 QPs each of the soft solve went to clarabel before the
+    /// interior point kept its most accurate iterate within `1e-7`: their residuals reach
+    /// ~1e-8, then grow as the band LU's pivots fall to ~1e-20 of its largest (μ → 0).
+    #[test]
+    fn soft_stress_qps_keep_their_most_accurate_iterate() {
+        soft_solves_without_clarabel(&[
+            [
+                0.5805364170306877,
+                0.9336647474584518,
+                -0.01805341768820007,
+                0.5912517191470479,
+            ],
+            [
+                0.9970828503805875,
+                1.2687550871126718,
+                0.0575560290918912,
+                -0.6281335072301921,
+            ],
+        ]);
+    }
+
+    /// The soft problem of cartpole_public_nl from each state: solved with the structured
+    /// QP solver without a clarabel fallback, to clarabel's solution (1e-6 relative).
+    fn soft_solves_without_clarabel(states: &[[f64; 4]]) {
+        use crate::mpc::sqp::{SqpSolver, SqpStatus};
+        let path = std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/reference/cartpole_public_nl.toml"
+        ));
+        let mut cfg = ProblemConfig::load(&path).unwrap();
+        for x in states {
             cfg.solver.qp = QpSolverKind::Structured;
             let mut fast = SqpSolver::new(&cfg, true);
-            let a = fast.solve(&x, fast.cold_start(&x));
+            let a = fast.solve(x, fast.cold_start(x));
             cfg.solver.qp = QpSolverKind::Clarabel;
             let mut reference = SqpSolver::new(&cfg, true);
-            let b = reference.solve(&x, reference.cold_start(&x));
+            let b = reference.solve(x, reference.cold_start(x));
             assert_eq!(a.status, SqpStatus::Converged, "{x:?}");
             assert_eq!(b.status, SqpStatus::Converged, "{x:?}");
             assert_eq!(fast.qp_fallbacks(), 0, "{x:?}");

@@ -29,8 +29,11 @@
 //! interior (as in CVXOPT). Termination: relative residuals and the gap `tᵀν` below `1e-10`
 //! (as for the clarabel reference); at the iteration limit, after five iterations in which
 //! neither that error, nor the residuals alone, nor μ fell by 10 %, or when the iterates
-//! diverge (an infeasible QP), the solve reports failure (unless the error is below `1e-7`)
-//! and the caller may fall back.
+//! diverge (an infeasible QP), the solve reports failure and the caller may fall back —
+//! unless the error is below `1e-7` (clarabel's "almost solved"), at that iterate or at an
+//! earlier one, which is then the answer: on the soft problem's QPs the band LU's pivots
+//! fall to ~1e-20 of its largest as μ → 0, and the residuals may grow again after reaching
+//! ~1e-8.
 
 use super::riccati::RiccatiKkt;
 use super::{QpData, QpStatus};
@@ -191,6 +194,17 @@ fn max_step(v: &[f64], dv: &[f64]) -> f64 {
     a[0].min(a[1]).min(a[2].min(a[3]))
 }
 
+/// The status of a solve that ends without reaching `TOL` at an iterate of error above
+/// `TOL_REDUCED`: solved (with reduced accuracy) if an earlier iterate within `TOL_REDUCED`,
+/// of error `kept`, is in the outputs, else failed.
+fn kept_or_failed(kept: f64) -> QpStatus {
+    if kept <= TOL_REDUCED {
+        QpStatus::Solved
+    } else {
+        QpStatus::Failed
+    }
+}
+
 impl IpmQp {
     /// Workspace for `ocp` (layout and bandwidth computed once).
     pub fn new(ocp: &Ocp) -> Self {
@@ -334,7 +348,8 @@ impl IpmQp {
 
     /// Solves the subproblem (same arguments and outputs as the clarabel solver). Returns
     /// [`QpStatus::Failed`] at the iteration limit, on divergence (e.g. an infeasible QP)
-    /// or on a singular Newton system.
+    /// or on a singular Newton system — unless an iterate reached the reduced accuracy
+    /// `1e-7`: then the most accurate such iterate, as solved.
     pub fn solve(
         &mut self,
         ocp: &Ocp,
@@ -416,6 +431,9 @@ impl IpmQp {
         let (mut best, mut best_mu, mut best_res) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         let mut stall = 0;
         let mut it = 0;
+        // The error of the iterate kept in the outputs (d, λ, ν): the most accurate one within
+        // `TOL_REDUCED` so far (∞: none). A solve that reaches `TOL` overwrites it.
+        let mut kept = f64::INFINITY;
         loop {
             self.last_iterations = it;
             let pobj = self.residuals::<NX>(ocp, hess, grad, c, jac_x, jac_u);
@@ -427,10 +445,16 @@ impl IpmQp {
             let rel_gap = gap / (1.0 + pobj.abs());
             let err = residual.max(rel_gap);
             if !err.is_finite() {
-                return QpStatus::Failed;
+                return kept_or_failed(kept);
             }
             if err <= TOL {
                 break;
+            }
+            if err <= TOL_REDUCED && err < kept {
+                d.copy_from_slice(&self.d);
+                lam.copy_from_slice(&self.lam);
+                nu.copy_from_slice(&self.nu);
+                kept = err;
             }
             // Progress: the error measure fell by 10 % below its best, or — while the relative
             // gap is the error's largest part — μ did. The relative gap
@@ -460,7 +484,7 @@ impl IpmQp {
                 if err <= TOL_REDUCED {
                     break;
                 }
-                return QpStatus::Failed;
+                return kept_or_failed(kept);
             }
             for i in 0..m {
                 self.w[i] = self.nu[i] / self.t[i];
@@ -469,14 +493,14 @@ impl IpmQp {
                 if err <= TOL_REDUCED {
                     break;
                 }
-                return QpStatus::Failed;
+                return kept_or_failed(kept);
             }
             // Predictor (affine scaling) step: r_c = −t∘ν.
             for i in 0..m {
                 self.tmp[i] = -self.t[i] * self.nu[i];
             }
             if !self.newton::<NX>(ocp, jac_x, jac_u, true) {
-                return QpStatus::Failed;
+                return kept_or_failed(kept);
             }
             let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
             let mut gap_aff = 0.0;
@@ -491,7 +515,7 @@ impl IpmQp {
                     sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
             }
             if !self.newton::<NX>(ocp, jac_x, jac_u, false) {
-                return QpStatus::Failed;
+                return kept_or_failed(kept);
             }
             let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));
             let alpha = (TAU * amax).min(1.0);
