@@ -486,6 +486,30 @@ mod tests {
         ]);
     }
 
+    /// State 86 of the IPOPT script (seed 7) on cartpole_public_nl: a soft label (the base's
+    /// 347075.14028180), which the structured QP's iterates lost to the iteration limit
+    /// until the soft problem tried the polish after every full step (`sqp`, step 4): the
+    /// blockwise-convexified steps near its optimum crawl without a full step.
+    #[test]
+    fn soft_state_86_is_labelled() {
+        use crate::mpc::sqp::SqpStatus;
+        let path = std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/reference/cartpole_public_nl.toml"
+        ));
+        let mut cfg = ProblemConfig::load(&path).unwrap();
+        cfg.solver.qp = QpSolverKind::Structured;
+        let x = [
+            -1.3296769128212498,
+            1.486084978286991,
+            0.1166097920124998,
+            0.8326478699468061,
+        ];
+        let (l, _) = MpcLaw::new(&cfg).solve(&x, None);
+        assert_eq!(l.status, SqpStatus::Soft);
+        assert!(l.cost <= 347075.1402818004 * (1.0 + 1e-9), "{}", l.cost);
+    }
+
     /// The soft problem of cartpole_public_nl from each state: solved with the structured
     /// QP solver without a clarabel fallback, to clarabel's solution (1e-6 relative).
     fn soft_solves_without_clarabel(states: &[[f64; 4]]) {

@@ -35,6 +35,12 @@
 //!    (`kkt` module, exact Hessian): quadratic convergence to machine precision, independent
 //!    of the interior-point QP's tolerance. The polish is accepted only if the full KKT
 //!    residual (including ν ≥ 0 and the inactive rows' feasibility) falls below `tol`.
+//!    The soft problem tries it after every full step below 0.1, repeated active set or
+//!    not: near its optimum the exact Hessian often fails the convexity test (the dynamics'
+//!    multipliers are of the slack weight's size), and the blockwise rule's steps then crawl
+//!    (step lengths 2⁻⁷–2⁻⁹, no full step for dozens of iterations, so no polish) — one
+//!    more iteration waiting for the active set to repeat can leave the full step's
+//!    neighbourhood for good (cartpole_public_nl, BENCHMARKS "state 86").
 //!
 //! Convergence is declared on the scaled KKT residual ([`KktResidual::max`]) ≤ `tol`.
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
@@ -431,6 +437,9 @@ impl SqpSolver {
                 .map(|v| v.abs())
                 .sum::<f64>();
         let mut full_step = false;
+        // The soft problem tries the polish after every full step below 0.1 (step 4 of the
+        // module doc: the repeated active set is not waited for).
+        let soft = self.ocp.n_slack > 0;
         let mut stable_active = false;
         let mut prev_active: Vec<usize> = Vec::new();
         let status = loop {
@@ -444,7 +453,7 @@ impl SqpSolver {
             if res.max() <= tol {
                 break SqpStatus::Converged;
             }
-            if full_step && (res.max() < 1e-3 || (stable_active && res.max() < 1e-1)) {
+            if full_step && (res.max() < 1e-3 || ((stable_active || soft) && res.max() < 1e-1)) {
                 if let Some(q) = self.polish(xs, &p, &mut info) {
                     p = q;
                     break SqpStatus::Converged;
