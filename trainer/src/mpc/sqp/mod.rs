@@ -35,12 +35,12 @@
 //!    (`kkt` module, exact Hessian): quadratic convergence to machine precision, independent
 //!    of the interior-point QP's tolerance. The polish is accepted only if the full KKT
 //!    residual (including ν ≥ 0 and the inactive rows' feasibility) falls below `tol`.
-//!    The soft problem tries it after every full step below 0.1, repeated active set or
-//!    not: near its optimum the exact Hessian often fails the convexity test (the dynamics'
-//!    multipliers are of the slack weight's size), and the blockwise rule's steps then crawl
-//!    (step lengths 2⁻⁷–2⁻⁹, no full step for dozens of iterations, so no polish) — one
-//!    more iteration waiting for the active set to repeat can leave the full step's
-//!    neighbourhood for good (cartpole_public_nl, BENCHMARKS "state 86").
+//!    The soft problem also tries it after a full step below 0.1 whose active set did not
+//!    repeat when the exact Hessian fails the convexity test there: near the soft optimum
+//!    (the dynamics' multipliers of the slack weight's size) the blockwise rule's steps then
+//!    crawl (step lengths 2⁻⁵–2⁻¹⁰, no full step for dozens of iterations, so no polish),
+//!    and the iteration spent waiting for the active set to repeat can leave the full
+//!    step's neighbourhood for good (cartpole_public_nl, BENCHMARKS "state 86").
 //!
 //! Convergence is declared on the scaled KKT residual ([`KktResidual::max`]) ≤ `tol`.
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
@@ -437,8 +437,7 @@ impl SqpSolver {
                 .map(|v| v.abs())
                 .sum::<f64>();
         let mut full_step = false;
-        // The soft problem tries the polish after every full step below 0.1 (step 4 of the
-        // module doc: the repeated active set is not waited for).
+        // The soft problem's polish rule (step 4 of the module doc).
         let soft = self.ocp.n_slack > 0;
         let mut stable_active = false;
         let mut prev_active: Vec<usize> = Vec::new();
@@ -453,7 +452,21 @@ impl SqpSolver {
             if res.max() <= tol {
                 break SqpStatus::Converged;
             }
-            if full_step && (res.max() < 1e-3 || ((stable_active || soft) && res.max() < 1e-1)) {
+            // The exact Hessian's test, if taken here (the soft rule of step 4).
+            let mut tested = None;
+            let soft_try =
+                soft && full_step && !stable_active && (1e-3..1e-1).contains(&res.max()) && {
+                    self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
+                    let ok = !conservative
+                        && ev.hess.iter().all(|v| v.is_finite())
+                        && self
+                            .convexity
+                            .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
+                    tested = Some(ok);
+                    !ok
+                };
+            if soft_try || (full_step && (res.max() < 1e-3 || (stable_active && res.max() < 1e-1)))
+            {
                 if let Some(q) = self.polish(xs, &p, &mut info) {
                     p = q;
                     break SqpStatus::Converged;
@@ -462,7 +475,9 @@ impl SqpSolver {
             if info.iterations >= max_iter {
                 break SqpStatus::MaxIterations;
             }
-            self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
+            if tested.is_none() {
+                self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
+            }
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
@@ -472,10 +487,12 @@ impl SqpSolver {
             // iteration limit on infeasible ball-beam states (BENCHMARKS, "Soft problems").
             // A QP with the exact Hessian that the QP solver fails on (or calls infeasible) is
             // re-solved with the blockwise rule.
-            let mut exact = !conservative
-                && self
-                    .convexity
-                    .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
+            let mut exact = tested.unwrap_or_else(|| {
+                !conservative
+                    && self
+                        .convexity
+                        .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u)
+            });
             let st = loop {
                 if exact {
                     hreg.copy_from_slice(&ev.hess);
