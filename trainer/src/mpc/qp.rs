@@ -488,8 +488,9 @@ mod tests {
 
     /// State 86 of the IPOPT script (seed 7) on cartpole_public_nl: a soft label (the base's
     /// 347075.14028180), which the structured QP's iterates lost to the iteration limit
-    /// until the soft problem tried the polish after every full step (`sqp`, step 4): the
-    /// blockwise-convexified steps near its optimum crawl without a full step.
+    /// until the soft problem tried the polish after a full step where the exact Hessian
+    /// fails the convexity test (`sqp`, step 4): the blockwise-convexified steps near its
+    /// optimum crawl without a full step.
     #[test]
     fn soft_state_86_is_labelled() {
         use crate::mpc::sqp::SqpStatus;
