@@ -393,48 +393,14 @@ pub fn certify(
     let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
     let naive = lipschitz::naive_bound(&model.mlp);
     let (nx, nu) = (set.nx, set.nu);
-    // The L_MPC estimates from the data (unless a proven value is given): (s, q) of the
-    // data and of the extra states.
-    let mpc_est = || {
-        opts.l_mpc.is_none().then(|| {
-            let data = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
-            let extra = opts.extra.as_ref().map_or((0.0f64, 0.0f64), |e| {
+    // L_MPC: the proven value given, or the estimates from the data and the extra states.
+    let l_mpc_term = || match opts.l_mpc {
+        Some(v) => (v, false, "user-supplied proven value".to_string()),
+        None => {
+            let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
+            let (s2, q2) = opts.extra.as_ref().map_or((0.0f64, 0.0f64), |e| {
                 lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu)
             });
-            (data, extra)
-        })
-    };
-    // The four are independent and deterministic: LipSDP (the longest) beside the other
-    // three.
-    let (sdp, ((vertex, lower), est)) = rayon::join(
-        || lipschitz::lipsdp_bound(&model.mlp),
-        || {
-            rayon::join(
-                || {
-                    (
-                        lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
-                        lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
-                    )
-                },
-                mpc_est,
-            )
-        },
-    );
-    let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
-    if sdp < l_nn {
-        (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);
-    }
-    if let Some(v) = vertex.filter(|v| *v < l_nn) {
-        (l_nn, method) = (v, LnnMethod::SlopeVertices);
-    }
-    // `est` is `None` exactly when a proven L_MPC is given (∞, the safe side, otherwise).
-    let (l_mpc, l_mpc_is_estimate, l_mpc_method) = match est {
-        None => (
-            opts.l_mpc.unwrap_or(f64::INFINITY),
-            false,
-            "user-supplied proven value".to_string(),
-        ),
-        Some(((s, q), (s2, q2))) => {
             let method = if opts.extra.is_some() {
                 format!(
                     "estimate: max of max‖∂κ/∂x‖₂ over the data ({s:.4}) and the extra states ({s2:.4}), \
@@ -449,6 +415,29 @@ pub fn certify(
             (s.max(q).max(s2).max(q2), true, method)
         }
     };
+    // The four are independent and deterministic: LipSDP (the longest) beside the other
+    // three.
+    let (sdp, ((vertex, lower), (l_mpc, l_mpc_is_estimate, l_mpc_method))) = rayon::join(
+        || lipschitz::lipsdp_bound(&model.mlp),
+        || {
+            rayon::join(
+                || {
+                    (
+                        lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
+                        lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
+                    )
+                },
+                l_mpc_term,
+            )
+        },
+    );
+    let (mut l_nn, mut method) = (naive, LnnMethod::Naive);
+    if sdp < l_nn {
+        (l_nn, method) = (sdp, LnnMethod::LipSdpNeuron);
+    }
+    if let Some(v) = vertex.filter(|v| *v < l_nn) {
+        (l_nn, method) = (v, LnnMethod::SlopeVertices);
+    }
     let all_labelled = set.len() == data.records.len();
     let (covering_radius, covering_method) = if data.header.sampling.sampler
         == crate::problem::SamplerKind::Grid

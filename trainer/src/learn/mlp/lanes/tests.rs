@@ -283,3 +283,36 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
         }
     }
 }
+
+/// `Lanes::loss_outputs` gives `loss_grad`'s loss and `eval_batch`'s outputs bit for bit,
+/// with the tangent pass (λ₂ ≠ 0) and without it.
+#[test]
+fn loss_outputs_are_the_loss_and_the_outputs_of_eval_batch() {
+    let mut lanes = Lanes::default();
+    for widths in [vec![2, 10, 10, 1], vec![6, 16, 16, 2]] {
+        let m = net(3, Activation::Tanh, &widths);
+        let (nx, nu) = (m.nx(), m.nu());
+        let (x, u, du, uj) = data(4, nx, nu, 83);
+        let batch = Batch {
+            x: &x,
+            u: &u,
+            du: &du,
+            use_jac: &uj,
+            band: None,
+        };
+        for jacobian in [3.0, 0.0] {
+            let lam = LossWeights {
+                value: 1.0,
+                jacobian,
+                weights: 0.05,
+            };
+            let (mut ua, mut ub) = (vec![0.0; 83 * nu], vec![f64::NAN; 83 * nu]);
+            lanes.eval_batch(&m, &x, &mut ua, None);
+            let la = lanes.loss_grad(&m, &batch, lam, None);
+            let lb = lanes.loss_outputs(&m, &batch, lam, &mut ub);
+            assert_eq!(la, lb, "{widths:?}, λ₂ = {jacobian}");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&ua), bits(&ub), "{widths:?}, λ₂ = {jacobian}");
+        }
+    }
+}
