@@ -1,7 +1,8 @@
 //! Files: atomic writes, checked postcard envelopes and content hashes — the one copy.
 //!
 //! - `write_atomic(path, bytes)`: a temporary file in the same directory, fsync, rename, so
-//!   a reader (or a resumed run) sees either the old file or the whole new one.
+//!   a reader (or a resumed run) sees either the old file or the whole new one. A device or
+//!   FIFO (`--out /dev/null`) is written in place, never replaced; a symlink is followed.
 //! - `seal` / `decode_checked`: `magic (8 bytes) ‖ postcard(T) ‖ SHA-256(everything before)`
 //!   with a format version inside `T`; a wrong magic, a checksum that does not match (one
 //!   flipped byte anywhere), a decode error or another version is a [`FileError::Format`]
@@ -107,16 +108,83 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
 /// beside it (fsync); only when all are written are they renamed into place, in order. A
 /// failure while writing (disk full, a read-only directory) leaves every previous file as it
 /// was — never the new dataset beside the old CSV.
+///
+/// A destination that is not a regular file — `/dev/null`, a FIFO, a terminal — is written
+/// in place after the set's regular files (a rename would replace the device node by a regular
+/// file); a symbolic link is followed, so the file it names is replaced and the link kept.
 pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<(), FileError> {
+    let resolved: Vec<(std::path::PathBuf, bool)> = files
+        .iter()
+        .map(|(p, _)| destination(p))
+        .collect::<Result<_, _>>()?;
+    let (special, regular): (Vec<_>, Vec<_>) = files
+        .iter()
+        .zip(&resolved)
+        .map(|((shown, bytes), (real, special))| (*shown, real.as_path(), *bytes, *special))
+        .partition(|f| f.3);
+    let regular: Vec<_> = regular.into_iter().map(|f| (f.0, f.1, f.2)).collect();
+    write_regular(&regular)?;
+    for (shown, real, bytes, _) in special {
+        let res = std::fs::OpenOptions::new()
+            .write(true)
+            .open(real)
+            .and_then(|mut f| f.write_all(bytes));
+        res.map_err(|source| FileError::Io {
+            path: shown.display().to_string(),
+            source,
+        })?;
+    }
+    Ok(())
+}
+
+/// Whether `path` names a device, a FIFO or a socket (followed through symbolic links): a
+/// destination [`write_atomic`] writes in place, with no room for files beside it.
+pub fn is_special(path: &Path) -> bool {
+    destination(path).is_ok_and(|(_, special)| special)
+}
+
+/// Where `path` is really written, and whether that is a special file (not a regular file, not
+/// a directory: a device, a FIFO, a socket) to be written in place. A symbolic link resolves
+/// to the file it names; a missing file is a new regular file.
+fn destination(path: &Path) -> Result<(std::path::PathBuf, bool), FileError> {
+    let io = |source| FileError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    let real = if is_link {
+        match std::fs::canonicalize(path) {
+            Ok(r) => r,
+            // A dangling link: the file it names does not exist yet.
+            Err(_) => {
+                let target = std::fs::read_link(path).map_err(io)?;
+                match path.parent() {
+                    Some(d) if target.is_relative() => d.join(target),
+                    _ => target,
+                }
+            }
+        }
+    } else {
+        path.to_path_buf()
+    };
+    let special = match std::fs::metadata(&real) {
+        Ok(m) => !m.is_file() && !m.is_dir(),
+        Err(_) => false,
+    };
+    Ok((real, special))
+}
+
+/// The regular files of [`write_atomic_all`]: `(name shown in errors, path, bytes)`.
+fn write_regular(files: &[(&Path, &Path, &[u8])]) -> Result<(), FileError> {
     let mut tmps = Vec::with_capacity(files.len());
     let cleanup = |tmps: &[std::path::PathBuf]| {
         for t in tmps {
             let _ = std::fs::remove_file(t);
         }
     };
-    for (path, bytes) in files {
+    for (shown, path, bytes) in files {
         let io = |source| FileError::Io {
-            path: path.display().to_string(),
+            path: shown.display().to_string(),
             source,
         };
         let dir = path
@@ -143,11 +211,11 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<(), FileError> {
             return Err(io(e));
         }
     }
-    for (k, ((path, _), tmp)) in files.iter().zip(&tmps).enumerate() {
+    for (k, ((shown, path, _), tmp)) in files.iter().zip(&tmps).enumerate() {
         if let Err(e) = std::fs::rename(tmp, path) {
             cleanup(&tmps[k..]);
             return Err(FileError::Io {
-                path: path.display().to_string(),
+                path: shown.display().to_string(),
                 source: e,
             });
         }
@@ -237,6 +305,48 @@ mod tests {
         assert_eq!(left.len(), 2, "no temporary file is left behind");
         write_atomic_all(&[(&a, b"new bin"), (&b, b"new csv")]).unwrap();
         assert_eq!(std::fs::read(&b).unwrap(), b"new csv");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_is_written_in_place_and_a_symlink_is_followed() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = std::env::temp_dir().join(format!("ampc_io_special_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // A FIFO (as /dev/null is a device): written in place, not replaced by a file.
+        let fifo = dir.join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let f2 = fifo.clone();
+            let reader = std::thread::spawn(move || std::fs::read(&f2).unwrap());
+            write_atomic(&fifo, b"through the pipe").unwrap();
+            // (checked before the join: a replaced FIFO would leave the reader waiting)
+            let t = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+            assert!(t.is_fifo(), "the FIFO was replaced: {t:?}");
+            assert_eq!(reader.join().unwrap(), b"through the pipe");
+        }
+        // A symlink: the file it names gets the bytes, the link stays a link.
+        let real = dir.join("real.bin");
+        let link = dir.join("link.bin");
+        std::fs::write(&real, b"old").unwrap();
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
+        // A dangling relative link: the file it names is created beside it.
+        let dangling = dir.join("dangling.bin");
+        std::os::unix::fs::symlink("made.bin", &dangling).unwrap();
+        write_atomic(&dangling, b"made").unwrap();
+        assert_eq!(std::fs::read(dir.join("made.bin")).unwrap(), b"made");
+        assert!(std::fs::symlink_metadata(&dangling)
+            .unwrap()
+            .file_type()
+            .is_symlink());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -403,10 +403,12 @@ pub fn generate(
                 .is_none_or(|s| c % s.count as usize == s.index as usize)
         })
         .collect();
-    // Resume from a checkpoint of the same plan.
+    // Resume from a checkpoint of the same plan. A device or FIFO (`--out /dev/null`) has
+    // no folder of its own to hold a checkpoint or a CSV beside it: neither is written.
+    let special = crate::io::is_special(out);
     let partial = partial_path(out);
     let mut records: Vec<Record> = Vec::new();
-    if let Ok(bytes) = std::fs::read(&partial) {
+    if let Some(bytes) = (!special).then(|| std::fs::read(&partial).ok()).flatten() {
         // A checkpoint of another plan or of another format: start afresh; a damaged tail
         // costs its batches only.
         if let Some((h, r)) = checkpoint::read(&bytes) {
@@ -455,7 +457,9 @@ pub fn generate(
             )
             .collect();
         let new: Vec<Record> = new.into_iter().flatten().collect();
-        if fresh {
+        if special {
+            records.extend(new);
+        } else if fresh {
             records.extend(new);
             checkpoint::create(&partial, &header, &records)?;
             fresh = false;
@@ -474,6 +478,10 @@ pub fn generate(
         labels: None,
     };
     // The dataset and its CSV as one set: a failure leaves the previous pair.
+    if special {
+        crate::io::write_atomic(out, &d.to_bytes())?;
+        return Ok(d);
+    }
     let csv = csv_path(out);
     crate::io::write_atomic_all(&[(&csv, d.to_csv().as_bytes()), (out, &d.to_bytes())])?;
     let _ = std::fs::remove_file(&partial);

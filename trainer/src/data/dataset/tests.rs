@@ -43,6 +43,29 @@ fn file_round_trip_and_csv() {
     assert!(!partial_path(&out).exists());
 }
 
+/// A FIFO as `out` (as `--out /dev/null` names a device): the dataset goes through it, the
+/// FIFO stays a FIFO, and no CSV or checkpoint appears beside it.
+#[cfg(unix)]
+#[test]
+fn a_dataset_written_to_a_fifo_leaves_nothing_beside_it() {
+    use std::os::unix::fs::FileTypeExt;
+    let out = tmp("fifo");
+    let made = std::process::Command::new("mkfifo").arg(&out).status();
+    if !made.is_ok_and(|s| s.success()) {
+        return; // no mkfifo here: nothing to check
+    }
+    let o2 = out.clone();
+    let reader = std::thread::spawn(move || std::fs::read(&o2).unwrap());
+    let d = generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+    assert!(std::fs::symlink_metadata(&out)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    assert_eq!(reader.join().unwrap(), d.to_bytes());
+    let beside: Vec<_> = std::fs::read_dir(out.parent().unwrap()).unwrap().collect();
+    assert_eq!(beside.len(), 1, "only the FIFO: {beside:?}");
+}
+
 #[test]
 fn corrupt_files_are_errors_naming_the_file() {
     let out = tmp("corrupt");
