@@ -5,6 +5,8 @@
 //! ```
 //! - [`mlp`]: the multilayer perceptron, its forward, tangent and backward passes, the loss.
 //! - `adam`: the Adam optimiser's moments and update.
+//! - `metrics`: the training set's layout, the error statistics (ε_D, R²) and the points of
+//!   the training curve.
 //! - [`train`]: Adam over the loss, learning-rate schedules, early stopping, the model file.
 //! - [`setpoint`]: the setpoint hold κ_NN(x) − κ_NN(x_ref) + κ(x_ref), folded into the
 //!   last bias after training.
@@ -14,6 +16,7 @@
 //! Imports `problem`, `mpc` and `data`.
 
 mod adam;
+mod metrics;
 pub mod mlp;
 pub mod model_file;
 pub mod setpoint;

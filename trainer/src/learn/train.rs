@@ -14,9 +14,10 @@
 //! the Jacobian term. Metrics: ε_D = max_i ‖κ(x_i) − κ_NN(x_i)‖ over the training set
 //! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
 
-use crate::data::dataset::Dataset;
 use crate::learn::adam::Adam;
-use crate::learn::mlp::{Batch, Grad, Lanes, LossParts, LossWeights, Mlp, Workspace};
+use crate::learn::metrics::CurvePoint;
+pub use crate::learn::metrics::{errors, EpochLog, ErrorStats, TrainSet};
+use crate::learn::mlp::{Batch, Grad, Lanes, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Precision, Schedule, TrainSettings};
 use crate::rng::splitmix64;
@@ -26,192 +27,6 @@ use serde::{Deserialize, Serialize};
 pub const MODEL_VERSION: u32 = 3;
 /// Magic bytes of a model file.
 pub const MODEL_MAGIC: [u8; 8] = *b"AMPCMODL";
-
-/// Labelled points in training layout.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct TrainSet {
-    /// State dimension.
-    pub nx: usize,
-    /// Input dimension.
-    pub nu: usize,
-    /// States, row-major.
-    pub x: Vec<f64>,
-    /// Labels κ, row-major.
-    pub u: Vec<f64>,
-    /// Label Jacobians, row-major (nu × nx each).
-    pub du: Vec<f64>,
-    /// Whether the Jacobian label is usable (not degenerate).
-    pub use_jac: Vec<bool>,
-}
-
-impl TrainSet {
-    /// The labelled records of a dataset (hard and soft labels; unlabelled ones dropped).
-    pub fn from_dataset(d: &Dataset) -> Self {
-        let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
-        let mut s = TrainSet {
-            nx,
-            nu,
-            ..Default::default()
-        };
-        for r in d.records.iter().filter(|r| r.is_labelled()) {
-            s.x.extend(&r.x);
-            s.u.extend(&r.u);
-            s.du.extend(&r.du_dx);
-            s.use_jac
-                .push(r.degeneracy.is_none() && r.du_dx.iter().all(|v| v.is_finite()));
-        }
-        s
-    }
-    /// Number of points.
-    pub fn len(&self) -> usize {
-        self.use_jac.len()
-    }
-    /// Whether there are no points.
-    pub fn is_empty(&self) -> bool {
-        self.use_jac.is_empty()
-    }
-}
-
-/// Error statistics of κ_NN against labels.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct ErrorStats {
-    /// Number of points.
-    pub n: usize,
-    /// max ‖κ − κ_NN‖ (ε_D on the training set).
-    pub max: f64,
-    /// Median.
-    pub median: f64,
-    /// 90th percentile.
-    pub p90: f64,
-    /// 99th percentile.
-    pub p99: f64,
-    /// Mean.
-    pub mean: f64,
-    /// R² = 1 − SS_res/SS_tot over all outputs.
-    pub r2: f64,
-    /// Max ‖∂κ/∂x − ∂κ_NN/∂x‖_F over points with a usable Jacobian label.
-    pub max_jac_err: f64,
-}
-
-/// Errors of the network on a set, sorted ascending (for box plots), and statistics.
-pub fn errors(mlp: &Mlp, set: &TrainSet) -> (Vec<f64>, ErrorStats) {
-    errors_impl(mlp, set, true)
-}
-
-/// [`errors`]; without `with_jac` the Jacobians are not computed (`max_jac_err` = 0).
-fn errors_impl(mlp: &Mlp, set: &TrainSet, with_jac: bool) -> (Vec<f64>, ErrorStats) {
-    let (nx, nu) = (set.nx, set.nu);
-    let mut ws = Workspace::default();
-    // All outputs and Jacobians at once (batched; the same values as point by point).
-    let (mut u_all, mut j_all) = (vec![0.0; set.len() * nu], vec![0.0; set.len() * nu * nx]);
-    mlp.eval_batch(
-        &set.x,
-        &mut u_all,
-        with_jac.then_some(&mut j_all[..]),
-        &mut ws,
-    );
-    error_stats(set, &u_all, &j_all, with_jac, true)
-}
-
-/// The outputs of the network on a set in f32 ([`Lanes`]) and their [`curve_stats`]: the
-/// training curve's validation figure under `precision = "f32"`.
-fn curve_stats_lanes(lanes: &mut Lanes, mlp: &Mlp, set: &TrainSet) -> ErrorStats {
-    let mut u_all = vec![0.0; set.len() * set.nu];
-    lanes.eval_batch(mlp, &set.x, &mut u_all, None);
-    curve_stats(set, &u_all)
-}
-
-/// The figures of the training curve from the outputs `u_all` (n × nu) on `set`: the
-/// [`error_stats`] without Jacobians and without sorting the errors, so that only `n`,
-/// `max` and `r2` are filled (the bits of those fields of [`error_stats`]); the quantiles
-/// and the mean are NaN.
-fn curve_stats(set: &TrainSet, u_all: &[f64]) -> ErrorStats {
-    error_stats(set, u_all, &[], false, false).1
-}
-
-/// Error statistics of the outputs `u_all` (n × nu) and, `with_jac`, the Jacobians `j_all`
-/// (n × nu·nx) against `set`. Without `sorted` the errors are returned in the set's order
-/// and only `n`, `max`, `r2` and `max_jac_err` are computed (the rest NaN).
-fn error_stats(
-    set: &TrainSet,
-    u_all: &[f64],
-    j_all: &[f64],
-    with_jac: bool,
-    sorted: bool,
-) -> (Vec<f64>, ErrorStats) {
-    let (nx, nu) = (set.nx, set.nu);
-    let mut errs = Vec::with_capacity(set.len());
-    let (mut ss_res, mut max_jac) = (0.0, 0.0f64);
-    let mut mean_u = vec![0.0; nu];
-    for i in 0..set.len() {
-        for r in 0..nu {
-            mean_u[r] += set.u[i * nu + r] / set.len().max(1) as f64;
-        }
-    }
-    let mut ss_tot = 0.0;
-    for i in 0..set.len() {
-        let u = &u_all[i * nu..(i + 1) * nu];
-        let mut e2 = 0.0;
-        for r in 0..nu {
-            let e = u[r] - set.u[i * nu + r];
-            e2 += e * e;
-            ss_tot += (set.u[i * nu + r] - mean_u[r]).powi(2);
-        }
-        ss_res += e2;
-        errs.push(e2.sqrt());
-        if with_jac && set.use_jac[i] {
-            let j = &j_all[i * nu * nx..(i + 1) * nu * nx];
-            let je: f64 = (0..nu * nx)
-                .map(|k| (j[k] - set.du[i * nu * nx + k]).powi(2))
-                .sum();
-            max_jac = max_jac.max(je.sqrt());
-        }
-    }
-    if sorted {
-        errs.sort_by(f64::total_cmp);
-    }
-    let q = |p: f64| -> f64 {
-        if errs.is_empty() || !sorted {
-            return f64::NAN;
-        }
-        let k = ((errs.len() - 1) as f64 * p).round() as usize;
-        errs[k]
-    };
-    // The last of the sorted errors: the greatest in `total_cmp`'s order.
-    let max = errs.iter().copied().max_by(f64::total_cmp);
-    let stats = ErrorStats {
-        n: errs.len(),
-        max: max.unwrap_or(f64::NAN),
-        median: q(0.5),
-        p90: q(0.9),
-        p99: q(0.99),
-        mean: if sorted {
-            errs.iter().sum::<f64>() / errs.len().max(1) as f64
-        } else {
-            f64::NAN
-        },
-        r2: if ss_tot > 0.0 {
-            1.0 - ss_res / ss_tot
-        } else {
-            f64::NAN
-        },
-        max_jac_err: max_jac,
-    };
-    (errs, stats)
-}
-
-/// One point of the training curve.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct EpochLog {
-    /// Epoch (1-based, after the epoch's updates).
-    pub epoch: usize,
-    /// Loss terms on the whole training set.
-    pub loss: LossParts,
-    /// ε_D on the training set.
-    pub eps_d: f64,
-    /// R² on the validation set (NaN without one).
-    pub r2_validation: f64,
-}
 
 /// Which loss a model was trained with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -384,7 +199,6 @@ pub fn train_from<C>(
     let mut order: Vec<usize> = (0..n).collect();
     let mut history = Vec::new();
     let mut epochs_run = 0;
-    let mut u_curve = vec![0.0; n * nu];
     let set = Batch {
         x: &train.x,
         u: &train.u,
@@ -392,86 +206,106 @@ pub fn train_from<C>(
         use_jac: &train.use_jac,
         band,
     };
-    for epoch in 0..settings.epochs {
-        let lr = match settings.schedule {
-            Schedule::Constant => settings.learning_rate,
-            Schedule::Cosine => {
-                let f = epoch as f64 / settings.epochs as f64;
-                settings.learning_rate
-                    * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * f).cos()))
+    let mut curve = CurvePoint::default();
+    // Without an early stop nothing in the loop reads the curve: its points are computed on
+    // a second thread from snapshots of the weights (the same bits), beside the next epochs.
+    // With one (or when no thread can be started) they are computed in place.
+    std::thread::scope(|scope| {
+        let (snapshots, worker) = if settings.target_eps_d.is_none() {
+            let (tx, rx) = std::sync::mpsc::channel::<(usize, Mlp)>();
+            let (set, lam) = (&set, lam);
+            let spawned = std::thread::Builder::new()
+                .name("training curve".into())
+                .spawn_scoped(scope, move || {
+                    let mut c = CurvePoint::default();
+                    rx.iter()
+                        .map(|(e, m)| c.compute(&m, e, set, train, validation, lam, f32_passes).0)
+                        .collect::<Vec<EpochLog>>()
+                });
+            match spawned {
+                Ok(h) => (Some(tx), Some(h)),
+                Err(_) => (None, None),
             }
+        } else {
+            (None, None)
         };
-        // Seeded Fisher–Yates shuffle.
-        for i in (1..n).rev() {
-            let r =
-                splitmix64(splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64);
-            order.swap(i, (r % (i as u64 + 1)) as usize);
-        }
-        for chunk in order.chunks(bs) {
-            if f32_passes {
-                // The lanes read the minibatch's rows in place.
-                lanes.grad(&mlp, &set, chunk, lam, &mut grad);
+        for epoch in 0..settings.epochs {
+            let lr = match settings.schedule {
+                Schedule::Constant => settings.learning_rate,
+                Schedule::Cosine => {
+                    let f = epoch as f64 / settings.epochs as f64;
+                    settings.learning_rate
+                        * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * f).cos()))
+                }
+            };
+            // Seeded Fisher–Yates shuffle.
+            for i in (1..n).rev() {
+                let r = splitmix64(
+                    splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64,
+                );
+                order.swap(i, (r % (i as u64 + 1)) as usize);
+            }
+            for chunk in order.chunks(bs) {
+                if f32_passes {
+                    // The lanes read the minibatch's rows in place.
+                    lanes.grad(&mlp, &set, chunk, lam, &mut grad);
+                    adam_step(&mut adam, &mut mlp, &grad, lr);
+                    continue;
+                }
+                bx.clear();
+                bu.clear();
+                bdu.clear();
+                bj.clear();
+                // Element by element: rows this short cost more as `memcpy` calls.
+                for &i in chunk {
+                    bx.extend(train.x[i * nx..(i + 1) * nx].iter());
+                    bu.extend(train.u[i * nu..(i + 1) * nu].iter());
+                    bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
+                    bj.push(train.use_jac[i]);
+                }
+                let batch = Batch {
+                    x: &bx,
+                    u: &bu,
+                    du: &bdu,
+                    use_jac: &bj,
+                    band,
+                };
+                mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
                 adam_step(&mut adam, &mut mlp, &grad, lr);
-                continue;
             }
-            bx.clear();
-            bu.clear();
-            bdu.clear();
-            bj.clear();
-            // Element by element: rows this short cost more as `memcpy` calls.
-            for &i in chunk {
-                bx.extend(train.x[i * nx..(i + 1) * nx].iter());
-                bu.extend(train.u[i * nu..(i + 1) * nu].iter());
-                bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
-                bj.push(train.use_jac[i]);
-            }
-            let batch = Batch {
-                x: &bx,
-                u: &bu,
-                du: &bdu,
-                use_jac: &bj,
-                band,
-            };
-            mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
-            adam_step(&mut adam, &mut mlp, &grad, lr);
-        }
-        epochs_run = epoch + 1;
-        let last = epoch + 1 == settings.epochs;
-        if (epoch + 1) % settings.log_every == 0 || last {
-            let (loss, st, r2v) = if f32_passes {
-                (
-                    // The loss pass gives the outputs too; the curve records ε_D and
-                    // the validation R² only: no Jacobians, no sorting.
-                    lanes.loss_outputs(&mlp, &set, lam, &mut u_curve),
-                    curve_stats(train, &u_curve),
-                    curve_stats_lanes(&mut lanes, &mlp, validation).r2,
-                )
-            } else {
-                (
-                    mlp.loss(&set, lam, &mut ws),
-                    errors(&mlp, train).1,
-                    errors_impl(&mlp, validation, false).1.r2,
-                )
-            };
-            let r2v = if validation.is_empty() { f64::NAN } else { r2v };
-            history.push(EpochLog {
-                epoch: epoch + 1,
-                loss,
-                eps_d: st.max,
-                r2_validation: r2v,
-            });
-            if let Some(p) = opts.progress {
-                p(epoch + 1, settings.epochs);
-            }
-            // Under f32 the stop is confirmed by the f64 ε_D the model reports.
-            if settings
-                .target_eps_d
-                .is_some_and(|t| st.max <= t && (!f32_passes || errors(&mlp, train).1.max <= t))
-            {
-                break;
+            epochs_run = epoch + 1;
+            let last = epoch + 1 == settings.epochs;
+            if (epoch + 1) % settings.log_every == 0 || last {
+                if let Some(tx) = &snapshots {
+                    // (a failed send means the worker is gone: its join below reports it)
+                    let _ = tx.send((epoch + 1, mlp.clone()));
+                } else {
+                    let (log, st) =
+                        curve.compute(&mlp, epoch + 1, &set, train, validation, lam, f32_passes);
+                    history.push(log);
+                    // Under f32 the stop is confirmed by the f64 ε_D the model reports.
+                    if settings.target_eps_d.is_some_and(|t| {
+                        st.max <= t && (!f32_passes || errors(&mlp, train).1.max <= t)
+                    }) {
+                        if let Some(p) = opts.progress {
+                            p(epoch + 1, settings.epochs);
+                        }
+                        break;
+                    }
+                }
+                if let Some(p) = opts.progress {
+                    p(epoch + 1, settings.epochs);
+                }
             }
         }
-    }
+        drop(snapshots);
+        if let Some(h) = worker {
+            match h.join() {
+                Ok(points) => history = points,
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+    });
     if let Some(h) = &opts.hold {
         h.apply(&mut mlp);
     }
@@ -540,6 +374,7 @@ pub fn label_random_states(cfg: &crate::problem::ProblemConfig, n: usize, seed: 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::dataset::Dataset;
     use crate::problem::ProblemConfig;
     use proptest::prelude::*;
     use std::path::Path;
