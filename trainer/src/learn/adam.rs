@@ -32,7 +32,8 @@ impl Adam {
     /// Starts step t + 1: returns its bias corrections (1 − β₁ᵗ, 1 − β₂ᵗ).
     pub(super) fn begin_step(&mut self) -> (f64, f64) {
         self.t += 1;
-        (1.0 - B1.powi(self.t as i32), 1.0 - B2.powi(self.t as i32))
+        let (p1, p2) = powi2(B1, B2, self.t as i32);
+        (1.0 - p1, 1.0 - p2)
     }
 
     /// Updates the parameter blocks `params` (each with its gradient), which hold the
@@ -54,8 +55,37 @@ impl Adam {
     }
 }
 
+/// (aᵏ, bᵏ) for k ≥ 1 by binary powering, the two chains side by side: the multiplications
+/// of `f64::powi` (the runtime's `__powidf2`: y = a if k is odd else 1, then while k ≫= 1:
+/// a ← a·a and, if k is odd, y ← y·a), so the same bits, without two calls per step.
+#[inline]
+fn powi2(a: f64, b: f64, k: i32) -> (f64, f64) {
+    debug_assert!(k >= 1);
+    let mut n = k as u32;
+    let (mut a, mut b) = (a, b);
+    let (mut ya, mut yb) = if n & 1 == 1 { (a, b) } else { (1.0, 1.0) };
+    loop {
+        n >>= 1;
+        if n == 0 {
+            return (ya, yb);
+        }
+        a *= a;
+        b *= b;
+        if n & 1 == 1 {
+            ya *= a;
+            yb *= b;
+        }
+    }
+}
+
 /// The update of one block (dispatch to the AVX build where the CPU has it).
 fn update_block(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, c: (f64, f64)) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F (checked just above), which implies AVX and AVX2:
+        // the requirements of calling this `#[target_feature]` function.
+        return unsafe { update_avx512(p, g, m, v, lr, c) };
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         // SAFETY: the CPU has AVX (checked just above), the one requirement of calling a
@@ -72,6 +102,13 @@ fn update_avx(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, c
     update_impl(p, g, m, v, lr, c)
 }
 
+/// [`update_impl`] compiled with AVX-512F (8 f64 lanes; the same operations, the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,avx512f")]
+fn update_avx512(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, c: (f64, f64)) {
+    update_impl(p, g, m, v, lr, c)
+}
+
 #[inline(always)]
 fn update_impl(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, c: (f64, f64)) {
     let (c1, c2) = c;
@@ -85,6 +122,25 @@ fn update_impl(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The bias corrections' powers are `f64::powi`'s bits at every step count a training
+    /// reaches (and beyond), for Adam's β and for arbitrary bases.
+    #[test]
+    fn powi2_gives_the_bits_of_powi() {
+        for k in 1..=300_000 {
+            assert_eq!(powi2(B1, B2, k), (B1.powi(k), B2.powi(k)), "k = {k}");
+        }
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..20_000 {
+            s = crate::rng::splitmix64(s);
+            let a = (s >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0;
+            let b = (s % 100_003) as f64 / 7.0 - 7_000.0;
+            let k = 1 + (s >> 40) as i32 % 4_000;
+            let (pa, pb) = powi2(a, b, k);
+            assert_eq!(pa.to_bits(), a.powi(k).to_bits(), "{a:e}^{k}");
+            assert_eq!(pb.to_bits(), b.powi(k).to_bits(), "{b:e}^{k}");
+        }
+    }
 
     /// The AVX build and the portable loop give the same bits, and the update is Adam's
     /// formula evaluated element by element.
@@ -109,12 +165,37 @@ mod tests {
             }
         }
         assert_eq!(pa, pb);
-        let (mut pc, mut cstate) = (p0, Adam::new(n));
+        let (mut pc, mut cstate) = (p0.clone(), Adam::new(n));
         for _ in 0..5 {
             let c = cstate.begin_step();
             let (m, v) = (&mut cstate.m[..], &mut cstate.v[..]);
             update_impl(&mut pc, &g, m, v, 1e-2, c);
         }
         assert_eq!(pa, pc);
+        // Each x86 build that the CPU can run, called directly (the dispatch picks one).
+        #[cfg(target_arch = "x86_64")]
+        for (has, f) in [
+            (
+                std::arch::is_x86_feature_detected!("avx"),
+                update_avx
+                    as unsafe fn(&mut [f64], &[f64], &mut [f64], &mut [f64], f64, (f64, f64)),
+            ),
+            (
+                std::arch::is_x86_feature_detected!("avx512f"),
+                update_avx512,
+            ),
+        ] {
+            if !has {
+                continue;
+            }
+            let (mut pd, mut dstate) = (p0.clone(), Adam::new(n));
+            for _ in 0..5 {
+                let c = dstate.begin_step();
+                let (m, v) = (&mut dstate.m[..], &mut dstate.v[..]);
+                // SAFETY: the CPU has the build's features (checked just above).
+                unsafe { f(&mut pd, &g, m, v, 1e-2, c) };
+            }
+            assert_eq!(pa, pd);
+        }
     }
 }

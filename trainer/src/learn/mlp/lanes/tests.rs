@@ -167,7 +167,8 @@ fn lane_results_are_reproducible_bit_for_bit() {
 }
 
 /// The AVX build (taken by `loss_grad` and `eval_batch` where the CPU has AVX) and the
-/// portable build of the same code give the same bits.
+/// portable build of the same code give the same bits (and the AVX-512 build, which the
+/// dispatch picks where the CPU has it).
 #[test]
 fn avx2_avx_and_portable_code_give_the_same_bits() {
     let lam = LossWeights {
@@ -218,6 +219,22 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
                 )
             };
             assert_eq!((la, &ga), (lc, &gc), "{widths:?}");
+            // And the AVX2 build when the dispatch picks AVX-512.
+            let mut gd = m.zero_grad();
+            lanes.load(&m);
+            // SAFETY: AVX2 and AVX, checked just above.
+            let ld = unsafe {
+                lanes.loss_grad_avx2(
+                    &m,
+                    &batch,
+                    lam,
+                    Job {
+                        grad: Some(&mut gd),
+                        ..Job::default()
+                    },
+                )
+            };
+            assert_eq!((la, &ga), (ld, &gd), "{widths:?}");
         }
         let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
         let (mut ub, mut jb) = (ua.clone(), ja.clone());
