@@ -212,7 +212,9 @@ pub fn train_from<C>(
     // With one (or when no thread can be started) they are computed in place.
     std::thread::scope(|scope| {
         let (snapshots, worker) = if settings.target_eps_d.is_none() {
-            let (tx, rx) = std::sync::mpsc::channel::<(usize, Mlp)>();
+            // At most a few snapshots wait: if the curve falls behind (a large validation
+            // set, a short `log_every`), the loop waits for it instead of piling up copies.
+            let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, Mlp)>(4);
             let (set, lam) = (&set, lam);
             let spawned = std::thread::Builder::new()
                 .name("training curve".into())
@@ -474,6 +476,42 @@ mod tests {
         let m = run(&cfg, &set, &val, false);
         assert_eq!(m.epochs_run, cfg.training.log_every);
         assert_eq!(m.history.len(), 1);
+    }
+
+    /// The curve computed on its own thread (no early stop) is the curve computed in place
+    /// (an early stop that never fires), point for point, in both precisions, with a
+    /// snapshot every epoch (more than the channel holds: the loop waits for the curve).
+    #[test]
+    fn the_curve_on_its_thread_is_the_curve_in_place() {
+        for precision in [Precision::F32, Precision::F64] {
+            let (mut cfg, set, val) = setup(40);
+            cfg.training.precision = precision;
+            cfg.training.log_every = 1;
+            let a = run(&cfg, &set, &val, false);
+            cfg.training.target_eps_d = Some(0.0);
+            let b = run(&cfg, &set, &val, false);
+            assert_eq!(b.epochs_run, 40, "{precision:?}");
+            assert_eq!(a.history.len(), 40, "{precision:?}");
+            let bits = |m: &TrainedModel<()>| -> Vec<u64> {
+                m.history
+                    .iter()
+                    .flat_map(|h| {
+                        let l = h.loss;
+                        [
+                            h.epoch as f64,
+                            l.value,
+                            l.jacobian,
+                            l.weights,
+                            h.eps_d,
+                            h.r2_validation,
+                        ]
+                    })
+                    .map(f64::to_bits)
+                    .collect()
+            };
+            assert_eq!(bits(&a), bits(&b), "{precision:?}");
+            assert_eq!(a.mlp, b.mlp, "{precision:?}");
+        }
     }
 
     #[test]
