@@ -1,4 +1,4 @@
-//! Training is single-threaded and fully determined by (data, settings, seed): the same
+//! Training is fully determined by (data, settings, seed), whatever the threads: the same
 //! inputs give bit-identical model files, run twice and inside rayon pools of 1 and 2
 //! threads (with the setpoint hold, which is part of training).
 use trainer::certify::Model;

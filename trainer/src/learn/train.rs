@@ -1,12 +1,14 @@
 //! Training: Adam on minibatches of the sensitivity-regularized loss (the paper's
-//! eq. (fullloss)), validation metrics, the training curve and the model file.
+//! eq. (fullloss)), the epoch loop with its training curve, and the model file (the
+//! figures themselves: module `metrics`).
 //!
 //! ```text
 //! loss(Θ) = λ₁·MSE + λ₂·mean‖∂κ/∂x − ∂κ_NN/∂x‖²_F + λ₃·Σ_j‖W̃_j‖²_F          (mlp module)
 //! Adam:  m ← β₁m + (1−β₁)g,  v ← β₂v + (1−β₂)g²,  Θ ← Θ − η_t·m̂/(√v̂ + 1e-8)
 //! ```
-//! The nominal net is the same procedure with (λ₁, 0, 0). Training is single-threaded and
-//! fully determined by (dataset, settings, seed): same inputs → bit-identical weights. The
+//! The nominal net is the same procedure with (λ₁, 0, 0). The updates run on one thread
+//! (the training curve may be computed on a second one from snapshots of the weights) and
+//! are fully determined by (dataset, settings, seed): same inputs → bit-identical weights. The
 //! passes run in f32 over 8-sample lanes (`training.precision = "f32"`, the default,
 //! [`Lanes`]) or in f64 ([`Mlp::loss_grad`]); Adam and the master weights are f64 in both,
 //! and the final statistics are f64 evaluations of the f64 net.
@@ -279,8 +281,11 @@ pub fn train_from<C>(
             let last = epoch + 1 == settings.epochs;
             if (epoch + 1) % settings.log_every == 0 || last {
                 if let Some(tx) = &snapshots {
-                    // (a failed send means the worker is gone: its join below reports it)
-                    let _ = tx.send((epoch + 1, mlp.clone()));
+                    // A failed send means the worker is gone (it panicked): stop training
+                    // now; its join below reports the panic.
+                    if tx.send((epoch + 1, mlp.clone())).is_err() {
+                        break;
+                    }
                 } else {
                     let (log, st) =
                         curve.compute(&mlp, epoch + 1, &set, train, validation, lam, f32_passes);

@@ -440,15 +440,18 @@ impl Lanes {
     fn dispatch(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, job: Job) -> LossParts {
         self.load(mlp);
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f")
+        if std::arch::is_x86_feature_detected!("avx")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512vl")
         {
-            // SAFETY: the CPU has AVX-512F and AVX-512VL (checked just above), which imply
-            // AVX and AVX2: the requirements of calling this `#[target_feature]` function.
+            // SAFETY: the CPU has AVX, AVX2, AVX-512F and AVX-512VL (each checked just
+            // above), the features this `#[target_feature]` function enables.
             return unsafe { self.loss_grad_avx512(mlp, batch, lam, job) };
         }
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
+        {
             // SAFETY: the CPU has AVX and AVX2 (checked just above), the one requirement of
             // calling a `#[target_feature(enable = "avx,avx2")]` function.
             return unsafe { self.loss_grad_avx2(mlp, batch, lam, job) };

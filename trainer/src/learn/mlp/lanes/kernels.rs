@@ -76,6 +76,11 @@ pub(super) fn dot_rows(
     dst: &mut [V],
     so: usize,
 ) {
+    debug_assert!(
+        n > 0 && w.len().is_multiple_of(n),
+        "rows of length {n} in {}",
+        w.len()
+    );
     let rows = w.len() / n.max(1);
     let init = |r: usize| bias.map_or(0.0, |b| b[r]);
     let mut r = 0;

@@ -166,9 +166,8 @@ fn lane_results_are_reproducible_bit_for_bit() {
     assert_eq!(run(&mut Lanes::default()), first);
 }
 
-/// The AVX build (taken by `loss_grad` and `eval_batch` where the CPU has AVX) and the
-/// portable build of the same code give the same bits (and the AVX-512 build, which the
-/// dispatch picks where the CPU has it).
+/// Every x86 build the CPU can run (AVX-512, AVX2, AVX: `loss_grad` dispatches to the
+/// first of them the CPU has) and the portable build of the same code give the same bits.
 #[test]
 fn avx2_avx_and_portable_code_give_the_same_bits() {
     let lam = LossWeights {
@@ -202,7 +201,8 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
         );
         assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
+        {
             // The AVX build as well when the dispatch picks AVX2.
             let mut gc = m.zero_grad();
             lanes.load(&m);
@@ -243,7 +243,8 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
         lanes.eval_batch_impl(&m, &x, &mut ub, Some(&mut jb));
         assert_eq!((&ua, &ja), (&ub, &jb), "{widths:?}");
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
+        {
             let (mut uc, mut jc) = (ua.clone(), ja.clone());
             lanes.load(&m);
             // SAFETY: AVX2 implies AVX, checked just above.
