@@ -200,41 +200,30 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
             },
         );
         assert_eq!((la, &ga), (lb, &gb), "{widths:?}");
+        // Each x86 build the CPU can run, called directly (the dispatch picks one).
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
         {
-            // The AVX build as well when the dispatch picks AVX2.
-            let mut gc = m.zero_grad();
-            lanes.load(&m);
-            // SAFETY: AVX2 implies AVX, checked just above.
-            let lc = unsafe {
-                lanes.loss_grad_avx(
-                    &m,
-                    &batch,
-                    lam,
-                    Job {
-                        grad: Some(&mut gc),
-                        ..Job::default()
-                    },
-                )
-            };
-            assert_eq!((la, &ga), (lc, &gc), "{widths:?}");
-            // And the AVX2 build when the dispatch picks AVX-512.
-            let mut gd = m.zero_grad();
-            lanes.load(&m);
-            // SAFETY: AVX2 and AVX, checked just above.
-            let ld = unsafe {
-                lanes.loss_grad_avx2(
-                    &m,
-                    &batch,
-                    lam,
-                    Job {
-                        grad: Some(&mut gd),
-                        ..Job::default()
-                    },
-                )
-            };
-            assert_eq!((la, &ga), (ld, &gd), "{widths:?}");
+            use std::arch::is_x86_feature_detected as has;
+            type Build = unsafe fn(&mut Lanes, &Mlp, &Batch<'_>, LossWeights, Job<'_>) -> LossParts;
+            let builds: [(bool, Build); 3] = [
+                (has!("avx"), Lanes::loss_grad_avx),
+                (has!("avx") && has!("avx2"), Lanes::loss_grad_avx2),
+                (
+                    has!("avx") && has!("avx2") && has!("avx512f") && has!("avx512vl"),
+                    Lanes::loss_grad_avx512,
+                ),
+            ];
+            for (k, &(_, build)) in builds.iter().enumerate().filter(|(_, b)| b.0) {
+                let mut gc = m.zero_grad();
+                lanes.load(&m);
+                let job = Job {
+                    grad: Some(&mut gc),
+                    ..Job::default()
+                };
+                // SAFETY: the CPU has every feature the build enables (checked above).
+                let lc = unsafe { build(&mut lanes, &m, &batch, lam, job) };
+                assert_eq!((la, &ga), (lc, &gc), "{widths:?}, build {k}");
+            }
         }
         let (mut ua, mut ja) = (vec![0.0; 45 * nu], vec![0.0; 45 * nu * nx]);
         let (mut ub, mut jb) = (ua.clone(), ja.clone());
