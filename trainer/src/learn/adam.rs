@@ -81,12 +81,9 @@ fn powi2(a: f64, b: f64, k: i32) -> (f64, f64) {
 /// The update of one block (dispatch to the AVX build where the CPU has it).
 fn update_block(p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64], lr: f64, c: (f64, f64)) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx")
-        && std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("avx512f")
-    {
-        // SAFETY: the CPU has AVX, AVX2 and AVX-512F (each checked just above), the
-        // features this `#[target_feature]` function enables.
+    if crate::learn::mlp::cpu_has_avx512() {
+        // SAFETY: the CPU has AVX, AVX2 and AVX-512F (`cpu_has_avx512`, which checks
+        // AVX-512VL too), the features this `#[target_feature]` function enables.
         return unsafe { update_avx512(p, g, m, v, lr, c) };
     }
     #[cfg(target_arch = "x86_64")]
@@ -184,12 +181,7 @@ mod tests {
                 update_avx
                     as unsafe fn(&mut [f64], &[f64], &mut [f64], &mut [f64], f64, (f64, f64)),
             ),
-            (
-                std::arch::is_x86_feature_detected!("avx")
-                    && std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("avx512f"),
-                update_avx512,
-            ),
+            (crate::learn::mlp::cpu_has_avx512(), update_avx512),
         ] {
             if !has {
                 continue;

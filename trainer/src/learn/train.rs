@@ -280,6 +280,7 @@ pub fn train_from<C>(
             epochs_run = epoch + 1;
             let last = epoch + 1 == settings.epochs;
             if (epoch + 1) % settings.log_every == 0 || last {
+                let mut stop = false;
                 if let Some(tx) = &snapshots {
                     // A failed send means the worker is gone (it panicked): stop training
                     // now; its join below reports the panic.
@@ -291,17 +292,15 @@ pub fn train_from<C>(
                         curve.compute(&mlp, epoch + 1, &set, train, validation, lam, f32_passes);
                     history.push(log);
                     // Under f32 the stop is confirmed by the f64 ε_D the model reports.
-                    if settings.target_eps_d.is_some_and(|t| {
+                    stop = settings.target_eps_d.is_some_and(|t| {
                         st.max <= t && (!f32_passes || errors(&mlp, train).1.max <= t)
-                    }) {
-                        if let Some(p) = opts.progress {
-                            p(epoch + 1, settings.epochs);
-                        }
-                        break;
-                    }
+                    });
                 }
                 if let Some(p) = opts.progress {
                     p(epoch + 1, settings.epochs);
+                }
+                if stop {
+                    break;
                 }
             }
         }

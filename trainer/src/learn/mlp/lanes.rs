@@ -28,6 +28,21 @@ use kernels::{dot_rows, outer_chunk};
 mod eval;
 mod kernels;
 
+/// Whether the CPU has AVX and AVX2 (each checked: one detected feature is not taken to
+/// imply another).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn cpu_has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
+}
+
+/// Whether the CPU has AVX, AVX2, AVX-512F and AVX-512VL (each checked).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn cpu_has_avx512() -> bool {
+    cpu_has_avx2()
+        && std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+}
+
 /// Samples per group (lanes of one vector).
 pub const L: usize = 8;
 /// Groups between flushes of the f32 gradient accumulators into the f64 gradient.
@@ -440,19 +455,14 @@ impl Lanes {
     fn dispatch(&mut self, mlp: &Mlp, batch: &Batch, lam: LossWeights, job: Job) -> LossParts {
         self.load(mlp);
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx")
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-        {
-            // SAFETY: the CPU has AVX, AVX2, AVX-512F and AVX-512VL (each checked just
-            // above), the features this `#[target_feature]` function enables.
+        if cpu_has_avx512() {
+            // SAFETY: the CPU has AVX, AVX2, AVX-512F and AVX-512VL (`cpu_has_avx512`), the
+            // features this `#[target_feature]` function enables.
             return unsafe { self.loss_grad_avx512(mlp, batch, lam, job) };
         }
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
-        {
-            // SAFETY: the CPU has AVX and AVX2 (checked just above), the one requirement of
+        if cpu_has_avx2() {
+            // SAFETY: the CPU has AVX and AVX2 (`cpu_has_avx2`), the one requirement of
             // calling a `#[target_feature(enable = "avx,avx2")]` function.
             return unsafe { self.loss_grad_avx2(mlp, batch, lam, job) };
         }

@@ -40,6 +40,8 @@ mod tests;
 
 pub use crate::problem::Activation;
 use kernels::dot_block;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use lanes::cpu_has_avx512;
 pub use lanes::Lanes;
 pub use loss::{clamped_exact, Batch, Grad, LossParts, LossWeights, SAT_TOL};
 use serde::{Deserialize, Serialize};

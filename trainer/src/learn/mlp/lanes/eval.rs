@@ -12,9 +12,8 @@ impl Lanes {
     pub fn eval_batch(&mut self, mlp: &Mlp, x: &[f64], u: &mut [f64], jac: Option<&mut [f64]>) {
         self.load(mlp);
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
-        {
-            // SAFETY: the CPU has AVX and AVX2 (checked just above), see `loss_grad`.
+        if super::cpu_has_avx2() {
+            // SAFETY: the CPU has AVX and AVX2 (`cpu_has_avx2`), see `loss_grad`.
             return unsafe { self.eval_batch_avx2(mlp, x, u, jac) };
         }
         #[cfg(target_arch = "x86_64")]

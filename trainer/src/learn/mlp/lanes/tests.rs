@@ -207,11 +207,8 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
             type Build = unsafe fn(&mut Lanes, &Mlp, &Batch<'_>, LossWeights, Job<'_>) -> LossParts;
             let builds: [(bool, Build); 3] = [
                 (has!("avx"), Lanes::loss_grad_avx),
-                (has!("avx") && has!("avx2"), Lanes::loss_grad_avx2),
-                (
-                    has!("avx") && has!("avx2") && has!("avx512f") && has!("avx512vl"),
-                    Lanes::loss_grad_avx512,
-                ),
+                (cpu_has_avx2(), Lanes::loss_grad_avx2),
+                (cpu_has_avx512(), Lanes::loss_grad_avx512),
             ];
             for (k, &(_, build)) in builds.iter().enumerate().filter(|(_, b)| b.0) {
                 let mut gc = m.zero_grad();
@@ -232,8 +229,7 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
         lanes.eval_batch_impl(&m, &x, &mut ub, Some(&mut jb));
         assert_eq!((&ua, &ja), (&ub, &jb), "{widths:?}");
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
-        {
+        if cpu_has_avx2() {
             let (mut uc, mut jc) = (ua.clone(), ja.clone());
             lanes.load(&m);
             // SAFETY: AVX2 implies AVX, checked just above.
