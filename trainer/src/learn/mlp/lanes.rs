@@ -22,26 +22,13 @@
 //! its position in the batch.
 
 use super::loss::{value_error, Batch, Grad, LossParts, LossWeights};
+#[cfg(target_arch = "x86_64")]
+use super::{cpu_has_avx2, cpu_has_avx512};
 use super::{Activation, Mlp};
 use kernels::{dot_rows, outer_chunk};
 
 mod eval;
 mod kernels;
-
-/// Whether the CPU has AVX and AVX2 (each checked: one detected feature is not taken to
-/// imply another).
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn cpu_has_avx2() -> bool {
-    std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
-}
-
-/// Whether the CPU has AVX, AVX2, AVX-512F and AVX-512VL (each checked).
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn cpu_has_avx512() -> bool {
-    cpu_has_avx2()
-        && std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512vl")
-}
 
 /// Samples per group (lanes of one vector).
 pub const L: usize = 8;

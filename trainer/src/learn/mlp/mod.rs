@@ -40,8 +40,21 @@ mod tests;
 
 pub use crate::problem::Activation;
 use kernels::dot_block;
+/// Whether the CPU has AVX and AVX2 (each checked: one detected feature is not taken to
+/// imply another).
 #[cfg(target_arch = "x86_64")]
-pub(crate) use lanes::cpu_has_avx512;
+pub(crate) fn cpu_has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("avx2")
+}
+
+/// Whether the CPU has AVX, AVX2, AVX-512F and AVX-512VL (each checked).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn cpu_has_avx512() -> bool {
+    cpu_has_avx2()
+        && std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+}
+
 pub use lanes::Lanes;
 pub use loss::{clamped_exact, Batch, Grad, LossParts, LossWeights, SAT_TOL};
 use serde::{Deserialize, Serialize};
