@@ -22,7 +22,7 @@ pub use crate::learn::metrics::{errors, EpochLog, ErrorStats, TrainSet};
 use crate::learn::mlp::{Batch, Grad, Lanes, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Precision, Schedule, TrainSettings};
-use crate::rng::splitmix64;
+use crate::rng::{splitmix64, FastMod};
 use serde::{Deserialize, Serialize};
 
 /// Model file format version.
@@ -199,6 +199,8 @@ pub fn train_from<C>(
     let f32_passes = settings.precision == Precision::F32;
     let (mut bx, mut bu, mut bdu, mut bj) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut order: Vec<usize> = (0..n).collect();
+    // The shuffle's divisors 1…n (the remainders of `%`, without its divisions).
+    let divisors: Vec<FastMod> = (1..=n as u64).map(FastMod::new).collect();
     let mut history = Vec::new();
     let mut epochs_run = 0;
     let set = Batch {
@@ -247,7 +249,7 @@ pub fn train_from<C>(
                 let r = splitmix64(
                     splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64,
                 );
-                order.swap(i, (r % (i as u64 + 1)) as usize);
+                order.swap(i, divisors[i].rem(r) as usize);
             }
             for chunk in order.chunks(bs) {
                 if f32_passes {
