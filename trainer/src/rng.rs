@@ -44,7 +44,7 @@ impl FastMod {
 
     /// `a mod d`, exactly.
     #[inline(always)]
-    pub fn rem(self, a: u64) -> u64 {
+    pub fn of(self, a: u64) -> u64 {
         let low = self.c.wrapping_mul(u128::from(a));
         let d = u128::from(self.d);
         // The top 64 bits of the 192-bit product low·d.
@@ -83,19 +83,19 @@ mod tests {
                 .iter()
                 .chain(&[d - 1, d, d.wrapping_add(1), d.wrapping_mul(2)])
             {
-                assert_eq!(f.rem(a), a % d, "{a} mod {d}");
+                assert_eq!(f.of(a), a % d, "{a} mod {d}");
             }
         }
-        assert_eq!(FastMod::new(0).rem(12345), 0);
+        assert_eq!(FastMod::new(0).of(12345), 0);
     }
 
     proptest! {
         #[test]
         fn fast_remainders_are_remainders(a in any::<u64>(), d in 1u64.., small in 1u64..100_000) {
-            prop_assert_eq!(FastMod::new(d).rem(a), a % d);
-            prop_assert_eq!(FastMod::new(small).rem(a), a % small);
+            prop_assert_eq!(FastMod::new(d).of(a), a % d);
+            prop_assert_eq!(FastMod::new(small).of(a), a % small);
             let mixed = splitmix64(a);
-            prop_assert_eq!(FastMod::new(small).rem(mixed), mixed % small);
+            prop_assert_eq!(FastMod::new(small).of(mixed), mixed % small);
         }
     }
 }

@@ -249,7 +249,7 @@ pub fn train_from<C>(
                 let r = splitmix64(
                     splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64,
                 );
-                order.swap(i, divisors[i].rem(r) as usize);
+                order.swap(i, divisors[i].of(r) as usize);
             }
             for chunk in order.chunks(bs) {
                 if f32_passes {
