@@ -6,6 +6,7 @@
 //! Cholesky (left-looking):  L_{j:,j} ← K_{j:,j} + Σ_{k<j} (−L_{j,k})·L_{j:,k};  L_{jj} ← √L_{jj};  L_{j+1:,j} ← L_{j+1:,j} / L_{jj}
 //! forward:  b_i ← b_i / L_ii,  b_{i+1:} ← (−b_i)·L_{i+1:,i} + b_{i+1:}   (each entry's terms in this order, rows four at a time)
 //! backward: b_i ← (b_i − L_{i+1:,i}·b_{i+1:}) / L_ii   (dot: 8 partial sums, then the tail)
+//!           (both substitutions on two columns at a time: independent chains, interleaved)
 //! A·x:      y ← A_{:,0}·x_0,  y ← A_{:,c}·x_c + y  (c = 1, 2, …)
 //! ```
 //! (each row's leading zeros L_{j,k} skipped in the factorisation: the structural zeros of
@@ -117,42 +118,110 @@ fn solve_avx(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
 
 #[inline(always)]
 fn solve_impl(l: &[f64], n: usize, b: &mut [f64], cols: usize) {
-    for bc in b.chunks_exact_mut(n).take(cols) {
-        // L y = b: entry r gets `b_r + (−y_0)·L_{r,0} + (−y_1)·L_{r,1} + …` in order, then
-        // y_r = b_r / L_rr (the column-by-column updates, reordered by rows): four rows at
-        // a time, the terms of the rows above in registers, then the 4 × 4 triangle.
-        let mut r = 0;
-        while r + 4 <= n {
-            let mut acc: [f64; 4] = bc[r..r + 4].try_into().expect("4 rows");
-            for i in 0..r {
-                let f = -bc[i];
-                let x: &[f64; 4] = l[i * n + r..i * n + r + 4].try_into().expect("4 rows");
-                for q in 0..4 {
-                    acc[q] += f * x[q];
-                }
-            }
+    // Two columns at a time: their substitutions are independent chains of dependent
+    // divisions, which interleaved overlap; each column's operations are unchanged.
+    if n == 0 {
+        return;
+    }
+    let cols = cols.min(b.len() / n);
+    let b = &mut b[..n * cols];
+    let mut pairs = b.chunks_exact_mut(2 * n);
+    for pair in &mut pairs {
+        let (b0, b1) = pair.split_at_mut(n);
+        solve_two(l, n, b0, b1);
+    }
+    for bc in pairs.into_remainder().chunks_exact_mut(n) {
+        solve_one(l, n, bc);
+    }
+}
+
+/// [`solve_one`] on two columns at once (the same operations on each).
+#[inline(always)]
+fn solve_two(l: &[f64], n: usize, b0: &mut [f64], b1: &mut [f64]) {
+    let mut r = 0;
+    while r + 4 <= n {
+        let mut a0: [f64; 4] = b0[r..r + 4].try_into().expect("4 rows");
+        let mut a1: [f64; 4] = b1[r..r + 4].try_into().expect("4 rows");
+        for i in 0..r {
+            let (f0, f1) = (-b0[i], -b1[i]);
+            let x: &[f64; 4] = l[i * n + r..i * n + r + 4].try_into().expect("4 rows");
             for q in 0..4 {
-                let coeff = acc[q] / l[(r + q) * n + r + q];
-                bc[r + q] = coeff;
-                for q2 in q + 1..4 {
-                    acc[q2] += -coeff * l[(r + q) * n + r + q2];
-                }
+                a0[q] += f0 * x[q];
+                a1[q] += f1 * x[q];
             }
-            r += 4;
         }
-        for r in r..n {
-            let mut y = bc[r];
-            for i in 0..r {
-                y += -bc[i] * l[i * n + r];
+        for q in 0..4 {
+            let d = l[(r + q) * n + r + q];
+            let (c0, c1) = (a0[q] / d, a1[q] / d);
+            b0[r + q] = c0;
+            b1[r + q] = c1;
+            for q2 in q + 1..4 {
+                let lq = l[(r + q) * n + r + q2];
+                a0[q2] += -c0 * lq;
+                a1[q2] += -c1 * lq;
             }
-            bc[r] = y / l[r * n + r];
         }
-        // Lᵀ x = y.
-        for i in (0..n).rev() {
-            let li = &l[i * n..(i + 1) * n];
-            let dot = dot8(&li[i + 1..], &bc[i + 1..]);
-            bc[i] = (bc[i] - dot) / li[i];
+        r += 4;
+    }
+    for r in r..n {
+        let (mut y0, mut y1) = (b0[r], b1[r]);
+        for i in 0..r {
+            let lv = l[i * n + r];
+            y0 += -b0[i] * lv;
+            y1 += -b1[i] * lv;
         }
+        let d = l[r * n + r];
+        b0[r] = y0 / d;
+        b1[r] = y1 / d;
+    }
+    for i in (0..n).rev() {
+        let li = &l[i * n..(i + 1) * n];
+        let (d0, d1) = (
+            dot8(&li[i + 1..], &b0[i + 1..]),
+            dot8(&li[i + 1..], &b1[i + 1..]),
+        );
+        b0[i] = (b0[i] - d0) / li[i];
+        b1[i] = (b1[i] - d1) / li[i];
+    }
+}
+
+/// L Lᵀ x = b for one column in place.
+#[inline(always)]
+fn solve_one(l: &[f64], n: usize, bc: &mut [f64]) {
+    // L y = b: entry r gets `b_r + (−y_0)·L_{r,0} + (−y_1)·L_{r,1} + …` in order, then
+    // y_r = b_r / L_rr (the column-by-column updates, reordered by rows): four rows at
+    // a time, the terms of the rows above in registers, then the 4 × 4 triangle.
+    let mut r = 0;
+    while r + 4 <= n {
+        let mut acc: [f64; 4] = bc[r..r + 4].try_into().expect("4 rows");
+        for i in 0..r {
+            let f = -bc[i];
+            let x: &[f64; 4] = l[i * n + r..i * n + r + 4].try_into().expect("4 rows");
+            for q in 0..4 {
+                acc[q] += f * x[q];
+            }
+        }
+        for q in 0..4 {
+            let coeff = acc[q] / l[(r + q) * n + r + q];
+            bc[r + q] = coeff;
+            for q2 in q + 1..4 {
+                acc[q2] += -coeff * l[(r + q) * n + r + q2];
+            }
+        }
+        r += 4;
+    }
+    for r in r..n {
+        let mut y = bc[r];
+        for i in 0..r {
+            y += -bc[i] * l[i * n + r];
+        }
+        bc[r] = y / l[r * n + r];
+    }
+    // Lᵀ x = y.
+    for i in (0..n).rev() {
+        let li = &l[i * n..(i + 1) * n];
+        let dot = dot8(&li[i + 1..], &bc[i + 1..]);
+        bc[i] = (bc[i] - dot) / li[i];
     }
 }
 
@@ -236,14 +305,19 @@ mod tests {
                         );
                     }
                 }
+                // Pairs of columns and a single one (1, 2, 3 and 4 columns).
+                for cols in 1..=4 {
+                    let b = DMatrix::from_fn(n, cols, |r, c| ((r * 7 + c * 3) as f64).sin());
+                    let x = chol.solve(&b);
+                    let mut bb = b.as_slice().to_vec();
+                    solve_cols(&m, n, &mut bb, cols);
+                    for (a, e) in bb.iter().zip(x.as_slice()) {
+                        assert_eq!(a.to_bits(), e.to_bits(), "n {n} solve, {cols} columns");
+                    }
+                }
                 let cols = 3;
                 let b = DMatrix::from_fn(n, cols, |r, c| ((r * 7 + c * 3) as f64).sin());
                 let x = chol.solve(&b);
-                let mut bb = b.as_slice().to_vec();
-                solve_cols(&m, n, &mut bb, cols);
-                for (a, e) in bb.iter().zip(x.as_slice()) {
-                    assert_eq!(a.to_bits(), e.to_bits(), "n {n} solve");
-                }
                 let v = DVector::from_fn(cols, |i, _| 0.3 - i as f64);
                 let y = &x * &v;
                 let mut yy = vec![0.0; n];
