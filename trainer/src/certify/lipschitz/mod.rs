@@ -563,9 +563,9 @@ fn squared_spectral_norm(j: &[f64], r: usize, c: usize) -> f64 {
 /// ‖J(x)‖₂ at a point of X, so the result is a true lower bound).
 ///
 /// The points are evaluated in blocks ([`Mlp::eval_batch`]: each point's Jacobian bit for bit
-/// that of a single evaluation) and the blocks and the 10 searches run in parallel; each
-/// value depends only on its point and the maximum on no order, so the result is the same
-/// for any number of threads.
+/// that of a single evaluation), the blocks in parallel, and the 10 searches side by side
+/// (their candidates in one block per step); each value depends only on its point and the
+/// maximum on no order, so the result is the same for any number of threads.
 pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u64) -> f64 {
     use rayon::prelude::*;
     /// Points per parallel task.
@@ -594,31 +594,47 @@ pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u6
     let mut order: Vec<usize> = (0..norms.len()).collect();
     order.sort_by(|&a, &b| norms[b].total_cmp(&norms[a]));
     let first = order.first().map_or(0.0, |&i| norms[i]);
-    let starts: Vec<(usize, usize)> = order.into_iter().take(10).enumerate().collect();
-    let searched = starts.par_iter().map(|&(k, i)| {
-        let mut ws = Workspace::default();
-        let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
-        let (mut v, mut x) = (norms[i], xs[i * nx..(i + 1) * nx].to_vec());
-        let mut radius: Vec<f64> = (0..nx).map(|d| 0.05 * (hi[d] - lo[d])).collect();
-        let mut cand = vec![0.0; nx];
-        for it in 0..400 {
-            for (d, c) in cand.iter_mut().enumerate() {
+    let starts: Vec<usize> = order.into_iter().take(10).collect();
+    if nx == 0 {
+        return first;
+    }
+    // The searches side by side: each iteration evaluates the candidates of all of them in
+    // one block (each point's Jacobian bit for bit that of a single evaluation, so each
+    // search takes the path it takes alone); search k draws its steps from key k.
+    let ns = starts.len();
+    let mut ws = Workspace::default();
+    let (mut u, mut j) = (vec![0.0; ns * nu], vec![0.0; ns * nu * nx]);
+    let mut v: Vec<f64> = starts.iter().map(|&i| norms[i]).collect();
+    let mut x: Vec<f64> = starts
+        .iter()
+        .flat_map(|&i| xs[i * nx..(i + 1) * nx].iter().copied())
+        .collect();
+    let mut radius: Vec<f64> = (0..ns * nx)
+        .map(|e| 0.05 * (hi[e % nx] - lo[e % nx]))
+        .collect();
+    let mut cand = vec![0.0; ns * nx];
+    for it in 0..400 {
+        for (k, ck) in cand.chunks_exact_mut(nx).enumerate() {
+            for (d, c) in ck.iter_mut().enumerate() {
                 let r = 2.0 * crate::rng::uniform(seed ^ 0x5151, (k * 1000 + it) as u64, d as u64)
                     - 1.0;
-                *c = (x[d] + r * radius[d]).clamp(lo[d], hi[d]);
-            }
-            mlp.eval(&cand, &mut u, &mut j, &mut ws);
-            let c = norm_of(&j);
-            if c > v {
-                v = c;
-                x.copy_from_slice(&cand);
-            } else if it % 20 == 19 {
-                radius.iter_mut().for_each(|r| *r *= 0.5);
+                *c = (x[k * nx + d] + r * radius[k * nx + d]).clamp(lo[d], hi[d]);
             }
         }
-        v
-    });
-    searched.reduce(|| first, f64::max)
+        mlp.eval_batch(&cand, &mut u, Some(&mut j), &mut ws);
+        for k in 0..ns {
+            let c = norm_of(&j[k * nu * nx..(k + 1) * nu * nx]);
+            if c > v[k] {
+                v[k] = c;
+                x[k * nx..(k + 1) * nx].copy_from_slice(&cand[k * nx..(k + 1) * nx]);
+            } else if it % 20 == 19 {
+                radius[k * nx..(k + 1) * nx]
+                    .iter_mut()
+                    .for_each(|r| *r *= 0.5);
+            }
+        }
+    }
+    v.into_iter().fold(first, f64::max)
 }
 
 /// L_MPC estimates from labelled points: (max ‖∂κ/∂x‖₂ over the points, max difference
