@@ -117,6 +117,40 @@ fn vertex_enumeration_matches_brute_force() {
     }
 }
 
+/// The vertex loop's lane-wise maximum of squared sums is the sequential one bit for bit:
+/// pattern counts around the lane width, 1–3 entries, NaN and ±0 entries included.
+#[test]
+fn max_sq_sum_is_the_sequential_maximum() {
+    let mut st = 0x5EED_u64;
+    let mut next = || {
+        st = crate::rng::splitmix64(st);
+        ((st >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 8.0
+    };
+    for n in [1usize, 2, 7, 8, 9, 16, 31, 32, 33] {
+        for dim in 1..=3 {
+            for special in [None, Some(f64::NAN), Some(-0.0), Some(0.0)] {
+                let mut lo: Vec<f64> = (0..n * dim).map(|_| next()).collect();
+                let h: Vec<f64> = (0..dim).map(|_| next()).collect();
+                if let Some(v) = special {
+                    lo[(n * dim) / 2] = v;
+                }
+                let mut expect = 0.0f64;
+                for s in 0..n {
+                    let v = (0..dim)
+                        .map(|e| (lo[e * n + s] + h[e]) * (lo[e * n + s] + h[e]))
+                        .sum::<f64>();
+                    expect = expect.max(v);
+                }
+                assert_eq!(
+                    max_sq_sum(&lo, n, &h).to_bits(),
+                    expect.to_bits(),
+                    "n {n} dim {dim} {special:?}"
+                );
+            }
+        }
+    }
+}
+
 /// Diagonal (unit-wise decoupled) nets: x_i ↦ w₃ᵢ σ(w₂ᵢ σ(w₁ᵢ xᵢ)), whose Lipschitz
 /// constant, LipSDP-Neuron optimum included, is maxᵢ |w₁ᵢ w₂ᵢ w₃ᵢ| (scaling removed).
 #[test]
