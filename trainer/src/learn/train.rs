@@ -201,6 +201,7 @@ pub fn train_from<C>(
     let mut order: Vec<usize> = (0..n).collect();
     // The shuffle's divisors 1…n (the remainders of `%`, without its divisions).
     let divisors: Vec<FastMod> = (1..=n as u64).map(FastMod::new).collect();
+    let shuffle_key = splitmix64(settings.seed ^ 0xA5A5);
     let mut history = Vec::new();
     let mut epochs_run = 0;
     let set = Batch {
@@ -246,9 +247,7 @@ pub fn train_from<C>(
             };
             // Seeded Fisher–Yates shuffle.
             for i in (1..n).rev() {
-                let r = splitmix64(
-                    splitmix64(settings.seed ^ 0xA5A5) ^ ((epoch as u64) << 32) ^ i as u64,
-                );
+                let r = splitmix64(shuffle_key ^ ((epoch as u64) << 32) ^ i as u64);
                 order.swap(i, divisors[i].of(r) as usize);
             }
             for chunk in order.chunks(bs) {
