@@ -34,8 +34,8 @@ use nalgebra::{DMatrix, DVector};
 mod dense;
 mod norm;
 
-use norm::jacobian_norm;
 pub use norm::spectral_norm;
+use norm::{jacobian_norm, max_sq_sum, squared_spectral_norm};
 
 fn mat(l: &Layer) -> DMatrix<f64> {
     DMatrix::from_row_slice(l.out, l.inp, &l.w)
@@ -536,67 +536,6 @@ pub fn vertex_bound(mlp: &Mlp, max_hidden: usize) -> Option<f64> {
         }
     }
     Some(best.sqrt())
-}
-
-/// `max(+0, max_s Σ_e (lo[e·n + s] + h_e)²)` over the `n` patterns s of the column-major
-/// table `lo` (one column per entry e of `h`), each sum `(−0 + t₀²) + t₁² + …` in entry order
-/// as the vertex loop forms it; the maximum in eight independent lanes (the sums are
-/// ≥ +0, so `f64::max` gives the same maximum in any order, NaNs ignored as before).
-fn max_sq_sum(lo: &[f64], n: usize, h: &[f64]) -> f64 {
-    const W: usize = 8;
-    let mut best = [0.0f64; W];
-    let full = n / W * W;
-    let mut s = 0;
-    while s < full {
-        let mut acc = [-0.0f64; W];
-        for (col, &he) in lo.chunks_exact(n).zip(h) {
-            let x: &[f64; W] = col[s..s + W].try_into().expect("W patterns");
-            for i in 0..W {
-                let t = x[i] + he;
-                acc[i] += t * t;
-            }
-        }
-        for i in 0..W {
-            best[i] = best[i].max(acc[i]);
-        }
-        s += W;
-    }
-    let mut m = best.iter().fold(0.0f64, |m, &b| m.max(b));
-    for s in full..n {
-        let mut acc = -0.0f64;
-        for (col, &he) in lo.chunks_exact(n).zip(h) {
-            let t = col[s] + he;
-            acc += t * t;
-        }
-        m = m.max(acc);
-    }
-    m
-}
-
-/// ‖J‖₂² of a row-major r × c matrix: closed form for a 2 × 2 Gram matrix, SVD otherwise.
-fn squared_spectral_norm(j: &[f64], r: usize, c: usize) -> f64 {
-    if r == 2 || c == 2 {
-        // G = J Jᵀ (r = 2) or JᵀJ (c = 2); λ_max = (tr + √((g₁₁ − g₂₂)² + 4g₁₂²)) / 2.
-        let (mut g11, mut g22, mut g12) = (0.0, 0.0, 0.0);
-        if r == 2 {
-            for k in 0..c {
-                let (x, y) = (j[k], j[c + k]);
-                g11 += x * x;
-                g22 += y * y;
-                g12 += x * y;
-            }
-        } else {
-            for k in 0..r {
-                let (x, y) = (j[k * 2], j[k * 2 + 1]);
-                g11 += x * x;
-                g22 += y * y;
-                g12 += x * y;
-            }
-        }
-        let disc = ((g11 - g22) * (g11 - g22) + 4.0 * g12 * g12).sqrt();
-        return 0.5 * (g11 + g22 + disc);
-    }
-    spectral_norm(&DMatrix::from_row_slice(r, c, j)).powi(2)
 }
 
 /// Sampled lower bound on L_NN: max ‖∂κ_NN/∂x‖₂ over `n` seeded uniform points of the box,

@@ -1,6 +1,8 @@
 //! The spectral norm ‖A‖₂ (largest singular value) of the bounds' matrices and of the
 //! Jacobians of the sampled bounds, `‖A‖₂ = σ_max(A)`: `nalgebra`'s SVD, and for a row
-//! (one output's Jacobian) the operations that SVD performs on it, without its allocations.
+//! (one output's Jacobian) the operations that SVD performs on it, without its allocations;
+//! the squared norms of the vertex enumeration (`‖J‖₂²`, closed form for two rows or
+//! columns, and the largest `Σ_e (l_e + h_e)²` over a table of vectors).
 
 use super::dense;
 use nalgebra::DMatrix;
@@ -59,4 +61,65 @@ pub(super) fn jacobian_norm(j: &[f64], nu: usize, nx: usize) -> f64 {
         }
     }
     spectral_norm(&DMatrix::from_row_slice(nu, nx, j))
+}
+
+/// `max(+0, max_s Σ_e (lo[e·n + s] + h_e)²)` over the `n` patterns s of the column-major
+/// table `lo` (one column per entry e of `h`), each sum `(−0 + t₀²) + t₁² + …` in entry order
+/// as the vertex loop forms it; the maximum in eight independent lanes (the sums are
+/// ≥ +0, so `f64::max` gives the same maximum in any order, NaNs ignored as before).
+pub(super) fn max_sq_sum(lo: &[f64], n: usize, h: &[f64]) -> f64 {
+    const W: usize = 8;
+    let mut best = [0.0f64; W];
+    let full = n / W * W;
+    let mut s = 0;
+    while s < full {
+        let mut acc = [-0.0f64; W];
+        for (col, &he) in lo.chunks_exact(n).zip(h) {
+            let x: &[f64; W] = col[s..s + W].try_into().expect("W patterns");
+            for i in 0..W {
+                let t = x[i] + he;
+                acc[i] += t * t;
+            }
+        }
+        for i in 0..W {
+            best[i] = best[i].max(acc[i]);
+        }
+        s += W;
+    }
+    let mut m = best.iter().fold(0.0f64, |m, &b| m.max(b));
+    for s in full..n {
+        let mut acc = -0.0f64;
+        for (col, &he) in lo.chunks_exact(n).zip(h) {
+            let t = col[s] + he;
+            acc += t * t;
+        }
+        m = m.max(acc);
+    }
+    m
+}
+
+/// ‖J‖₂² of a row-major r × c matrix: closed form for a 2 × 2 Gram matrix, SVD otherwise.
+pub(super) fn squared_spectral_norm(j: &[f64], r: usize, c: usize) -> f64 {
+    if r == 2 || c == 2 {
+        // G = J Jᵀ (r = 2) or JᵀJ (c = 2); λ_max = (tr + √((g₁₁ − g₂₂)² + 4g₁₂²)) / 2.
+        let (mut g11, mut g22, mut g12) = (0.0, 0.0, 0.0);
+        if r == 2 {
+            for k in 0..c {
+                let (x, y) = (j[k], j[c + k]);
+                g11 += x * x;
+                g22 += y * y;
+                g12 += x * y;
+            }
+        } else {
+            for k in 0..r {
+                let (x, y) = (j[k * 2], j[k * 2 + 1]);
+                g11 += x * x;
+                g22 += y * y;
+                g12 += x * y;
+            }
+        }
+        let disc = ((g11 - g22) * (g11 - g22) + 4.0 * g12 * g12).sqrt();
+        return 0.5 * (g11 + g22 + disc);
+    }
+    spectral_norm(&DMatrix::from_row_slice(r, c, j)).powi(2)
 }
