@@ -129,6 +129,7 @@ fn learning(c: &mut Criterion) {
         nominal: false,
         progress: None,
         hold: None,
+        keep_best: None,
     };
     g.bench_function("pendulum_350_2000ep", |b| {
         b.iter(|| {

@@ -13,6 +13,7 @@ fn run(cfg: &ProblemConfig, set: &TrainSet, val: &TrainSet, nominal: bool) -> Mo
             nominal,
             progress: None,
             hold: Some(Hold::solve(cfg).expect("κ at the origin")),
+            keep_best: None,
         },
         set,
         val,

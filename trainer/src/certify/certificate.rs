@@ -588,6 +588,7 @@ pub(crate) mod tests {
                     nominal: false,
                     progress: None,
                     hold: None,
+                    keep_best: None,
                 },
                 &set,
                 &set,

@@ -114,6 +114,7 @@ fn train_seed(
             nominal,
             progress: None,
             hold: hold.cloned(),
+            keep_best: None,
         },
         set,
         val,

@@ -56,6 +56,7 @@ pub(super) fn execute(
         nominal,
         progress: None,
         hold: Hold::if_enabled(&cfg, cfg.training.hold_setpoint)?,
+        keep_best: None,
     };
     let mut model = train(
         &cfg.training,

@@ -1,8 +1,10 @@
 //! The sets a network is measured on and what is measured: [`TrainSet`] (labelled points
-//! in training layout), [`ErrorStats`] and the training curve's [`EpochLog`].
+//! in training layout), [`ErrorStats`], the training curve's [`EpochLog`] and the score
+//! by which a training run keeps its best checkpoint ([`KeepBest`]).
 //!
 //! ```text
 //! e_i = ‖κ(x_i) − κ_NN(x_i)‖,   ε_D = max_i e_i   (eq. (explespd)),   R² = 1 − SS_res/SS_tot
+//! keep-best score = Σ_i max(0, ‖clamp(κ_NN(x_i)) − κ(x_i)‖ − θ)
 //! ```
 //! [`errors`] is the f64 evaluation every reported figure comes from; the training curve
 //! ([`CurvePoint`]) takes ε_D and the validation R² from the pass the precision selects,
@@ -184,6 +186,59 @@ fn error_stats(
         max_jac_err: max_jac,
     };
     (errs, stats)
+}
+
+/// Which weights a training run returns when it keeps its best checkpoint: among the
+/// starting weights and the weights after every `every` epochs (and after the last), the
+/// ones with the smallest total excess Σᵢ max(0, eᵢ − θ) of the errors eᵢ = ‖clamp(κ_NN(xᵢ))
+/// − κᵢ‖ over the threshold θ (`threshold`) on the first `points` training points — each
+/// output clamped to `[lo, hi]` first, as the controller clamps. With θ the level of
+/// corner error at which a refinement retrains, the score counts how far the fit misses
+/// where splitting cells cannot help. The errors are measured by the f32 lanes (a
+/// selection, not a reported figure); ties keep the earlier checkpoint, so a warm start
+/// never returns a net with a larger excess on the data than the net it started from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeepBest {
+    /// Checkpoint period in epochs (at least 1).
+    pub every: usize,
+    /// Lower output bounds.
+    pub lo: Vec<f64>,
+    /// Upper output bounds.
+    pub hi: Vec<f64>,
+    /// Leading points of the training set measured (later ones may repeat them).
+    pub points: usize,
+    /// Error threshold θ (≥ 0).
+    pub threshold: f64,
+}
+
+impl KeepBest {
+    /// The total excess of `mlp`'s clamped errors over the threshold on the first
+    /// `self.points` points of `set` (NaN errors count as infinite).
+    pub(super) fn score(
+        &self,
+        lanes: &mut Lanes,
+        u: &mut Vec<f64>,
+        mlp: &Mlp,
+        set: &TrainSet,
+    ) -> f64 {
+        let (nx, nu) = (set.nx, set.nu);
+        let n = self.points.min(set.len());
+        u.resize(n * nu, 0.0);
+        lanes.eval_batch(mlp, &set.x[..n * nx], u, None);
+        let mut excess = 0.0;
+        for (i, ui) in u.chunks_exact(nu.max(1)).enumerate().take(n) {
+            let e2: f64 = (0..nu)
+                .map(|r| (ui[r].clamp(self.lo[r], self.hi[r]) - set.u[i * nu + r]).powi(2))
+                .sum();
+            let e = e2.sqrt();
+            excess += if e.is_nan() {
+                f64::INFINITY
+            } else {
+                (e - self.threshold).max(0.0)
+            };
+        }
+        excess
+    }
 }
 
 /// One point of the training curve.

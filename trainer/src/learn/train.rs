@@ -18,7 +18,7 @@
 
 use crate::learn::adam::Adam;
 use crate::learn::metrics::CurvePoint;
-pub use crate::learn::metrics::{errors, EpochLog, ErrorStats, TrainSet};
+pub use crate::learn::metrics::{errors, EpochLog, ErrorStats, KeepBest, TrainSet};
 use crate::learn::mlp::{Batch, Grad, Lanes, LossWeights, Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::problem::{Precision, Schedule, TrainSettings};
@@ -106,6 +106,9 @@ pub struct TrainOptions {
     /// `training.hold_setpoint` is on: applied to the trained net before its final
     /// statistics. The model records `settings.hold_setpoint` = whether it was applied.
     pub hold: Option<Hold>,
+    /// Return the checkpoint with the smallest clamped ε_D instead of the last weights
+    /// ([`KeepBest`]; the warm-started retrainings of a refinement). `None`: the last.
+    pub keep_best: Option<KeepBest>,
 }
 
 /// Trains a network on `train` from its seeded initial weights; `validation` gives R².
@@ -212,6 +215,12 @@ pub fn train_from<C>(
         band,
     };
     let mut curve = CurvePoint::default();
+    // The best checkpoint so far (`opts.keep_best`): its score, weights and epoch.
+    let (mut kb_lanes, mut kb_u) = (Lanes::default(), Vec::new());
+    let mut best = opts.keep_best.as_ref().map(|kb| {
+        let s = kb.score(&mut kb_lanes, &mut kb_u, &mlp, train);
+        (s, mlp.clone())
+    });
     // Without an early stop nothing in the loop reads the curve: its points are computed on
     // a second thread from snapshots of the weights (the same bits), beside the next epochs.
     // With one (or when no thread can be started) they are computed in place.
@@ -280,6 +289,15 @@ pub fn train_from<C>(
             }
             epochs_run = epoch + 1;
             let last = epoch + 1 == settings.epochs;
+            if let (Some(kb), Some((s, m))) = (&opts.keep_best, &mut best) {
+                if (epoch + 1) % kb.every.max(1) == 0 || last {
+                    let now = kb.score(&mut kb_lanes, &mut kb_u, &mlp, train);
+                    if now.total_cmp(s).is_lt() {
+                        *s = now;
+                        m.clone_from(&mlp);
+                    }
+                }
+            }
             if (epoch + 1) % settings.log_every == 0 || last {
                 let mut stop = false;
                 if let Some(tx) = &snapshots {
@@ -313,6 +331,9 @@ pub fn train_from<C>(
             }
         }
     });
+    if let Some((_, m)) = best {
+        mlp = m;
+    }
     if let Some(h) = &opts.hold {
         h.apply(&mut mlp);
     }
@@ -428,6 +449,7 @@ mod tests {
                 nominal,
                 progress: None,
                 hold: None,
+                keep_best: None,
             },
             set,
             val,
@@ -481,6 +503,81 @@ mod tests {
         let m = run(&cfg, &set, &val, false);
         assert_eq!(m.epochs_run, cfg.training.log_every);
         assert_eq!(m.history.len(), 1);
+    }
+
+    /// A warm start that keeps its best checkpoint never returns a net whose clamped errors
+    /// exceed the threshold by more than its starting net's (a learning rate large enough
+    /// to wreck the fit: the last weights are worse, the kept ones are not), and the score
+    /// is the f64 excess of the clamped errors to f32 accuracy.
+    #[test]
+    fn keep_best_never_returns_a_worse_fit_than_its_start() {
+        let (mut cfg, set, val) = setup(300);
+        let start = run(&cfg, &set, &val, false).mlp;
+        let (lo, hi) = (cfg.ocp.u_lo.clone(), cfg.ocp.u_hi.clone());
+        let excess = |m: &Mlp, th: f64| -> f64 {
+            let mut ws = Workspace::default();
+            let mut u = vec![0.0; set.len() * set.nu];
+            m.eval_batch(&set.x, &mut u, None, &mut ws);
+            (0..set.len())
+                .map(|i| {
+                    let e: f64 = (0..set.nu)
+                        .map(|r| {
+                            (u[i * set.nu + r].clamp(lo[r], hi[r]) - set.u[i * set.nu + r]).powi(2)
+                        })
+                        .sum();
+                    (e.sqrt() - th).max(0.0)
+                })
+                .sum()
+        };
+        cfg.training.epochs = 20;
+        cfg.training.learning_rate = 0.5;
+        let warm = |keep: Option<KeepBest>| -> Mlp {
+            train_from::<()>(
+                Some(start.clone()),
+                &cfg.training,
+                &TrainOptions {
+                    nominal: false,
+                    progress: None,
+                    hold: None,
+                    keep_best: keep,
+                },
+                &set,
+                &val,
+                (&cfg.domain.lo, &cfg.domain.hi),
+                (&lo, &hi),
+                "h",
+                "d",
+            )
+            .mlp
+        };
+        for th in [0.0, 0.05] {
+            let kb = KeepBest {
+                every: 3,
+                lo: lo.clone(),
+                hi: hi.clone(),
+                points: set.len(),
+                threshold: th,
+            };
+            let (mut lanes, mut u) = (Lanes::default(), Vec::new());
+            let (f32_score, f64_score) = (
+                kb.score(&mut lanes, &mut u, &start, &set),
+                excess(&start, th),
+            );
+            assert!(
+                (f32_score - f64_score).abs() <= 1e-4 * (1.0 + f64_score) * set.len() as f64,
+                "{f32_score} vs {f64_score}"
+            );
+            let last = warm(None);
+            let kept = warm(Some(kb));
+            assert!(
+                excess(&last, th) > excess(&start, th),
+                "the wrecked run is not worse: the test tests nothing"
+            );
+            assert!(
+                excess(&kept, th) <= excess(&start, th) * (1.0 + 1e-4) + 1e-6,
+                "θ {th}"
+            );
+        }
     }
 
     /// The curve computed on its own thread (no early stop) is the curve computed in place

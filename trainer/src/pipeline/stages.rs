@@ -217,6 +217,7 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
                 nominal,
                 progress: None,
                 hold: hold.clone(),
+                keep_best: None,
             },
             &set,
             &vset,

@@ -87,6 +87,7 @@ pub fn seed_study(
                         nominal,
                         progress: None,
                         hold: hold.cloned(),
+                        keep_best: None,
                     },
                     &set,
                     &vset,

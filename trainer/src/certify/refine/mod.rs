@@ -6,7 +6,11 @@
 //! solve becomes a corner and splits reuse the existing points. A round:
 //! 1. label the new points (in parallel, cold starts: independent of the thread count);
 //! 2. train the network (the first round from its seeded weights, later rounds warm-started
-//!    for `round_epochs`), with the points of large error repeated (`emphasis`);
+//!    for `round_epochs`), with the points of large error repeated (`emphasis`); a
+//!    warm-started retraining returns, of its starting weights and its weights every 10
+//!    epochs, those with the smallest excess Σᵢ max(0, eᵢ − retrain_at·target) of the
+//!    clamped corner errors ([`crate::learn::train::KeepBest`]): a retraining never
+//!    leaves the data fitted worse than it found it;
 //! 3. bound every leaf cell ([`crate::certify::local::cell_bound`]); the certified ε is max_C ε_C;
 //! 4. split each cell with ε_C > target (worst first, until the budget of solves is spent)
 //!    along the axis with the largest remainder term (the axis whose halving shrinks the

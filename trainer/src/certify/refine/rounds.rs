@@ -12,7 +12,7 @@ use crate::data::dataset::DatasetError;
 use crate::io::write_atomic;
 use crate::learn::mlp::{Mlp, Workspace};
 use crate::learn::setpoint::Hold;
-use crate::learn::train::{train_from, TrainOptions, TrainSet};
+use crate::learn::train::{train_from, KeepBest, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, RefineSettings, TrainSettings};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -451,6 +451,11 @@ pub fn refine(
                 }
             }
             let set = train_set(&st, nx, nu, &hard, rs.emphasis, rs.exclude_infeasible);
+            // The points before the repeated ones (those the checkpoints are measured on).
+            let keep = kept_points(&st, rs.exclude_infeasible);
+            let unique = (st.points.iter().zip(&keep))
+                .filter(|(p, &k)| k && p.labelled())
+                .count();
             // The input scaling of a new net (a warm start keeps its own): X, or with
             // exclusions the bounding box of the certified domain (the net then resolves
             // the part of X it is certified on).
@@ -471,6 +476,15 @@ pub fn refine(
                     nominal: false,
                     progress: None,
                     hold: hold.clone(),
+                    // A warm start returns its best checkpoint by the clamped errors
+                    // above the retraining level on the data (the starting net included).
+                    keep_best: st.model.as_ref().map(|_| KeepBest {
+                        every: 10,
+                        lo: band.0.to_vec(),
+                        hi: band.1.to_vec(),
+                        points: unique,
+                        threshold: rs.retrain_at * rs.target_eps,
+                    }),
                 },
                 &set,
                 &TrainSet::default(),
