@@ -55,8 +55,39 @@ pub struct RefineSettings {
     /// enforced terminal region turns it on (`robust.terminal_constraint`).
     pub exclude_infeasible: bool,
     /// The network and its first training (defaults: 2-32-32-1 tanh, 600 epochs, batch 64,
-    /// learning rate 3e-3 with cosine decay, λ = (1, 0.1, 0), saturation-aware loss).
+    /// learning rate 3e-3 with cosine decay, λ = (1, 0.1, 0), saturation-aware loss). A
+    /// `[refine.training]` table changes only the keys it names: the others keep these
+    /// refine defaults (not those of `[training]`).
+    #[serde(deserialize_with = "over_refine_defaults")]
     pub training: TrainSettings,
+}
+
+/// `[refine.training]` read over the refine defaults: the keys given replace those of
+/// [`RefineSettings::default`]'s training settings, the rest keep them. (A plain
+/// `#[serde(default)]` would fill a missing key from [`TrainSettings::default`], the
+/// `[training]` defaults: `[refine.training] seed = 7` alone then meant a 2-10-10-1 net
+/// without the saturation-aware loss.) Unknown keys and wrong types are still errors.
+fn over_refine_defaults<'de, D: serde::Deserializer<'de>>(d: D) -> Result<TrainSettings, D::Error> {
+    use serde::de::Error;
+    let given = toml::Table::deserialize(d)?;
+    let base =
+        toml::Table::try_from(RefineSettings::default().training).map_err(D::Error::custom)?;
+    let over = |keys: &mut dyn Iterator<Item = (&String, &toml::Value)>| {
+        let mut t = base.clone();
+        t.extend(keys.map(|(k, v)| (k.clone(), v.clone())));
+        toml::Value::Table(t).try_into::<TrainSettings>()
+    };
+    over(&mut given.iter()).map_err(|e| {
+        // Name the key at fault: the first one that fails on its own.
+        let key = given
+            .iter()
+            .find(|kv| over(&mut std::iter::once(*kv)).is_err())
+            .map(|(k, _)| k.as_str());
+        match key {
+            Some(k) => D::Error::custom(format!("refine.training.{k}: {}", e.message())),
+            None => D::Error::custom(format!("refine.training: {}", e.message())),
+        }
+    })
 }
 
 impl Default for RefineSettings {

@@ -324,3 +324,37 @@ fn precision_is_stored_only_when_f32() {
         .to_string();
     assert!(e.contains("bad.toml") && e.contains("precision"), "{e}");
 }
+
+/// `[refine.training]` changes only the keys it names; the rest keep the refine defaults
+/// (2-32-32-1, saturation-aware, …), not the `[training]` ones. Unknown keys and wrong
+/// types are still errors that name the key and the file; stored copies round-trip.
+#[test]
+fn refine_training_keys_replace_only_themselves() {
+    let defaults = crate::problem::RefineSettings::default().training;
+    let seeded = format!("{PENDULUM_TOML}\n[refine.training]\nseed = 7\n");
+    let cfg = ProblemConfig::from_toml_str(&seeded, "f.toml").unwrap();
+    let t = &cfg.refine.training;
+    assert_eq!(t.seed, 7);
+    assert_eq!(
+        crate::problem::TrainSettings {
+            seed: defaults.seed,
+            ..t.clone()
+        },
+        defaults
+    );
+    assert_eq!(t.hidden, vec![32, 32]);
+    assert!(t.saturation_aware);
+    // The `[training]` table is untouched by it.
+    assert_eq!(cfg.training, ProblemConfig::default().training);
+    assert_eq!(
+        ProblemConfig::from_stored_toml(&toml::to_string(&cfg).unwrap(), "s").unwrap(),
+        cfg
+    );
+    for (bad, key) in [("sed = 7", "sed"), ("epochs = \"many\"", "epochs")] {
+        let text = format!("{PENDULUM_TOML}\n[refine.training]\n{bad}\n");
+        let e = ProblemConfig::from_toml_str(&text, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key) && e.contains("f.toml"), "{e}");
+    }
+}
