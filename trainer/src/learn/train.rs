@@ -106,8 +106,9 @@ pub struct TrainOptions {
     /// `training.hold_setpoint` is on: applied to the trained net before its final
     /// statistics. The model records `settings.hold_setpoint` = whether it was applied.
     pub hold: Option<Hold>,
-    /// Return the checkpoint with the smallest clamped ε_D instead of the last weights
-    /// ([`KeepBest`]; the warm-started retrainings of a refinement). `None`: the last.
+    /// Return the checkpoint (the start included) with the smallest excess of clamped
+    /// errors over a threshold instead of the last weights ([`KeepBest`]; the warm-started
+    /// retrainings of a refinement). `None`: the last weights.
     pub keep_best: Option<KeepBest>,
 }
 
@@ -215,7 +216,7 @@ pub fn train_from<C>(
         band,
     };
     let mut curve = CurvePoint::default();
-    // The best checkpoint so far (`opts.keep_best`): its score, weights and epoch.
+    // The best checkpoint so far (`opts.keep_best`): its score and weights.
     let (mut kb_lanes, mut kb_u) = (Lanes::default(), Vec::new());
     let mut best = opts.keep_best.as_ref().map(|kb| {
         let s = kb.score(&mut kb_lanes, &mut kb_u, &mlp, train);
