@@ -30,6 +30,13 @@ pub(super) struct DenseWork {
     pub w: Vec<f64>,
     /// `W̃_j w_{j−1}` (sized for the widest hidden layer).
     pub wp: Vec<f64>,
+    /// The eigendecomposition of A = N₁K⁻¹N₁ᵀ at the last T whose value was computed
+    /// (`None` after a T where K(T) is not positive definite).
+    pub eig: Option<nalgebra::SymmetricEigen<f64, nalgebra::Dyn>>,
+    /// Its softmax weights exp((λᵢ − λ_max)/μ).
+    pub wts: Vec<f64>,
+    /// Their sum.
+    pub z: f64,
 }
 
 /// Cholesky factorisation of the n × n column-major `m` in place (lower triangle; the upper

@@ -184,7 +184,16 @@ impl LipSdp {
     /// Computed on the buffers of `ws` by the kernels of [`dense`], the operations of the
     /// `nalgebra` version ([`LipSdp::rho_nalgebra`], kept for the tests) in the same order.
     fn rho(&self, t: &[f64], mu: f64, ws: &mut DenseWork) -> Option<(f64, f64, Vec<f64>)> {
+        let (lmax, f) = self.rho_value(t, mu, ws)?;
+        Some((lmax, f, self.rho_grad(ws)))
+    }
+
+    /// The value part of [`LipSdp::rho`]: (λ_max, f_μ), `None` if K(T) is not positive
+    /// definite; leaves K⁻¹N₁ᵀ and the eigendecomposition of A in `ws` for
+    /// [`LipSdp::rho_grad`] (a line search's rejected trials need no gradient).
+    fn rho_value(&self, t: &[f64], mu: f64, ws: &mut DenseWork) -> Option<(f64, f64)> {
         let (n, n0) = (self.nh, self.w[0].ncols());
+        ws.eig = None;
         self.k_into(t, &mut ws.k, &mut ws.k_shape);
         if !dense::cholesky_in_place(&mut ws.k, n) {
             return None;
@@ -214,11 +223,22 @@ impl LipSdp {
         let a = 0.5 * (&a + a.transpose());
         let eig = a.symmetric_eigen();
         let (lmax, f, wts, z) = smoothed_max(eig.eigenvalues.as_slice(), mu);
+        (ws.eig, ws.wts, ws.z) = (Some(eig), wts, z);
+        Some((lmax, f))
+    }
+
+    /// The gradient ∇f_μ of [`LipSdp::rho`] at the T of the last [`LipSdp::rho_value`],
+    /// from what it left in `ws` (zeros if that call returned `None`).
+    fn rho_grad(&self, ws: &mut DenseWork) -> Vec<f64> {
+        let (n, z) = (self.nh, ws.z);
         let mut g = vec![0.0; self.nh];
+        let Some(eig) = ws.eig.take() else {
+            return g;
+        };
         ws.w.resize(n, 0.0);
         ws.wp
             .resize(self.sizes.iter().copied().max().unwrap_or(0), 0.0);
-        for (i, &wt) in wts.iter().enumerate() {
+        for (i, &wt) in ws.wts.iter().enumerate() {
             let p = wt / z;
             if p < 1e-300 {
                 continue;
@@ -240,7 +260,8 @@ impl LipSdp {
                 }
             }
         }
-        Some((lmax, f, g))
+        ws.eig = Some(eig);
+        g
     }
 
     /// [`LipSdp::rho`] with `nalgebra`'s allocating routines (the reference of its tests).
@@ -369,8 +390,9 @@ pub fn lipsdp_multipliers(mlp: &Mlp) -> Option<(f64, Vec<f64>)> {
             for _ in 0..40 {
                 let th2: Vec<f64> = theta.iter().zip(&gt).map(|(th, g)| th - step * g).collect();
                 let t2: Vec<f64> = th2.iter().map(|v| v.exp()).collect();
-                if let Some((l2, f2, g2)) = sdp.rho(&t2, mu, &mut ws) {
+                if let Some((l2, f2)) = sdp.rho_value(&t2, mu, &mut ws) {
                     if f2 <= f - 1e-4 * step * gn * gn {
+                        let g2 = sdp.rho_grad(&mut ws);
                         let gt2: Vec<f64> = g2.iter().zip(&t2).map(|(g, t)| g * t).collect();
                         // Barzilai–Borwein step for the next iteration.
                         let s: Vec<f64> = th2.iter().zip(&theta).map(|(a, b)| a - b).collect();

@@ -573,3 +573,27 @@ fn row_norm_is_the_svd_norm_bit_for_bit() {
         assert_eq!(spectral_norm(&a).to_bits(), svd.to_bits(), "{row:?}");
     }
 }
+
+/// The split evaluation of the line search: value then gradient gives `rho`'s bits, and a
+/// gradient after a T where K(T) is not positive definite is zero, never the previous T's.
+#[test]
+fn rho_value_then_grad_is_rho_and_never_stale() {
+    let m = net(1, &[2, 10, 10, 1]);
+    let sdp = LipSdp::new(&m);
+    let (_, t) = lipsdp_multipliers(&m).expect("a certificate");
+    let mut ws = DenseWork::default();
+    let (l, f, g) = sdp
+        .rho(&t, 1e-3, &mut ws)
+        .expect("K ≻ 0 at the certified T");
+    let mut ws2 = DenseWork::default();
+    let (l2, f2) = sdp.rho_value(&t, 1e-3, &mut ws2).expect("the same T");
+    let g2 = sdp.rho_grad(&mut ws2);
+    assert_eq!((l.to_bits(), f.to_bits()), (l2.to_bits(), f2.to_bits()));
+    let bits = |g: &[f64]| g.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&g), bits(&g2));
+    assert!(g.iter().any(|v| *v != 0.0));
+    // Tiny multipliers: the last block 2T − W̃ᵀW̃ is indefinite.
+    let tiny = vec![1e-12; t.len()];
+    assert!(sdp.rho_value(&tiny, 1e-3, &mut ws2).is_none());
+    assert!(sdp.rho_grad(&mut ws2).iter().all(|v| *v == 0.0));
+}
