@@ -23,19 +23,22 @@
 //!    and the norm is convex in each D_j separately, so the maximum over the box is at a
 //!    vertex: a sound bound, the tightest of the three, exact over all slope patterns.
 //!
-//! A lower bound: `max ‖∂κ_NN/∂x‖₂` over dense samples of X refined by local ascent.
-//! For κ itself only estimates exist (`L_MPC`): the largest ‖∂κ/∂x‖₂ over labelled
-//! points and the largest difference quotient between neighbouring points.
+//! Sampled estimates (module `sampled`): a lower bound `max ‖∂κ_NN/∂x‖₂` over dense samples
+//! of X refined by local ascent; for κ itself only estimates exist (`L_MPC`): the largest
+//! ‖∂κ/∂x‖₂ over labelled points and the largest difference quotient between neighbouring
+//! points.
 
-use crate::learn::mlp::{Layer, Mlp, Workspace};
+use crate::learn::mlp::{Layer, Mlp};
 use dense::DenseWork;
 use nalgebra::{DMatrix, DVector};
 
 mod dense;
 mod norm;
+mod sampled;
 
 pub use norm::spectral_norm;
-use norm::{jacobian_norm, max_sq_sum, squared_spectral_norm};
+use norm::{max_sq_sum, squared_spectral_norm};
+pub use sampled::{mpc_estimates, sampled_lower_bound};
 
 fn mat(l: &Layer) -> DMatrix<f64> {
     DMatrix::from_row_slice(l.out, l.inp, &l.w)
@@ -558,133 +561,6 @@ pub fn vertex_bound(mlp: &Mlp, max_hidden: usize) -> Option<f64> {
         }
     }
     Some(best.sqrt())
-}
-
-/// Sampled lower bound on L_NN: max ‖∂κ_NN/∂x‖₂ over `n` seeded uniform points of the box,
-/// the best 10 refined by a shrinking random local search (every value is an attained
-/// ‖J(x)‖₂ at a point of X, so the result is a true lower bound).
-///
-/// The points are evaluated in blocks ([`Mlp::eval_batch`]: each point's Jacobian bit for bit
-/// that of a single evaluation), the blocks in parallel, and the 10 searches side by side
-/// (their candidates in one block per step); each value depends only on its point and the
-/// maximum on no order, so the result is the same for any number of threads.
-pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u64) -> f64 {
-    use rayon::prelude::*;
-    /// Points per parallel task.
-    const CHUNK: usize = 1024;
-    let (nx, nu) = (mlp.nx(), mlp.nu());
-    let norm_of = |j: &[f64]| jacobian_norm(j, nu, nx);
-    let xs: Vec<f64> = (0..n)
-        .flat_map(|i| {
-            (0..nx).map(move |k| {
-                lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(seed, i as u64, k as u64)
-            })
-        })
-        .collect();
-    let norms: Vec<f64> = xs
-        .par_chunks(CHUNK * nx.max(1))
-        .flat_map_iter(|x| {
-            let m = x.len() / nx.max(1);
-            let (mut u, mut j) = (vec![0.0; m * nu], vec![0.0; m * nu * nx]);
-            mlp.eval_batch(x, &mut u, Some(&mut j), &mut Workspace::default());
-            j.chunks_exact((nu * nx).max(1))
-                .map(&norm_of)
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    // The 10 largest, ties in index order (a stable sort, as before the blocks).
-    let mut order: Vec<usize> = (0..norms.len()).collect();
-    order.sort_by(|&a, &b| norms[b].total_cmp(&norms[a]));
-    let first = order.first().map_or(0.0, |&i| norms[i]);
-    let starts: Vec<usize> = order.into_iter().take(10).collect();
-    if nx == 0 {
-        return first;
-    }
-    // The searches side by side: each iteration evaluates the candidates of all of them in
-    // one block (each point's Jacobian bit for bit that of a single evaluation, so each
-    // search takes the path it takes alone); search k draws its steps from key k.
-    let ns = starts.len();
-    let mut ws = Workspace::default();
-    let (mut u, mut j) = (vec![0.0; ns * nu], vec![0.0; ns * nu * nx]);
-    let mut v: Vec<f64> = starts.iter().map(|&i| norms[i]).collect();
-    let mut x: Vec<f64> = starts
-        .iter()
-        .flat_map(|&i| xs[i * nx..(i + 1) * nx].iter().copied())
-        .collect();
-    let mut radius: Vec<f64> = (0..ns * nx)
-        .map(|e| 0.05 * (hi[e % nx] - lo[e % nx]))
-        .collect();
-    let mut cand = vec![0.0; ns * nx];
-    for it in 0..400 {
-        for (k, ck) in cand.chunks_exact_mut(nx).enumerate() {
-            for (d, c) in ck.iter_mut().enumerate() {
-                let r = 2.0 * crate::rng::uniform(seed ^ 0x5151, (k * 1000 + it) as u64, d as u64)
-                    - 1.0;
-                *c = (x[k * nx + d] + r * radius[k * nx + d]).clamp(lo[d], hi[d]);
-            }
-        }
-        mlp.eval_batch(&cand, &mut u, Some(&mut j), &mut ws);
-        for k in 0..ns {
-            let c = norm_of(&j[k * nu * nx..(k + 1) * nu * nx]);
-            if c > v[k] {
-                v[k] = c;
-                x[k * nx..(k + 1) * nx].copy_from_slice(&cand[k * nx..(k + 1) * nx]);
-            } else if it % 20 == 19 {
-                radius[k * nx..(k + 1) * nx]
-                    .iter_mut()
-                    .for_each(|r| *r *= 0.5);
-            }
-        }
-    }
-    v.into_iter().fold(first, f64::max)
-}
-
-/// L_MPC estimates from labelled points: (max ‖∂κ/∂x‖₂ over the points, max difference
-/// quotient ‖κ(x_i) − κ(x_j)‖/‖x_i − x_j‖ over each point's 2·nx nearest neighbours).
-pub fn mpc_estimates(
-    x: &[f64],
-    u: &[f64],
-    du: &[f64],
-    use_jac: &[bool],
-    nx: usize,
-    nu: usize,
-) -> (f64, f64) {
-    let n = use_jac.len();
-    let mut max_sens = 0.0f64;
-    for i in 0..n {
-        if use_jac[i] {
-            max_sens = max_sens.max(jacobian_norm(&du[i * nu * nx..(i + 1) * nu * nx], nu, nx));
-        }
-    }
-    let mut max_q = 0.0f64;
-    let k = (2 * nx).min(n.saturating_sub(1));
-    let stride = if n > 20_000 { n / 20_000 } else { 1 };
-    let dist = |i: usize, j: usize| -> f64 {
-        (0..nx)
-            .map(|c| (x[i * nx + c] - x[j * nx + c]).powi(2))
-            .sum::<f64>()
-            .sqrt()
-    };
-    for i in (0..n).step_by(stride) {
-        let mut near: Vec<(f64, usize)> = (0..n)
-            .filter(|&j| j != i)
-            .map(|j| (dist(i, j), j))
-            .collect();
-        if near.len() > k {
-            near.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
-            near.truncate(k);
-        }
-        for (d, j) in near {
-            if d > 0.0 {
-                let du: f64 = (0..nu)
-                    .map(|r| (u[i * nu + r] - u[j * nu + r]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                max_q = max_q.max(du / d);
-            }
-        }
-    }
-    (max_sens, max_q)
 }
 
 #[cfg(test)]

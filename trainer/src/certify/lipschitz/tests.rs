@@ -5,7 +5,7 @@
 //! estimates of a linear law.
 
 use super::*;
-use crate::learn::mlp::Activation;
+use crate::learn::mlp::{Activation, Workspace};
 
 fn net(seed: u64, widths: &[usize]) -> Mlp {
     let nx = widths[0];
@@ -402,9 +402,10 @@ fn mpc_estimates_of_a_linear_law() {
     assert!(q <= 5.0 + 1e-9 && q > 3.0);
 }
 
-/// The blocked, parallel sampled lower bound is the serial point-by-point search bit for
-/// bit (the algorithm before the blocks, written out here), for 1 and 2 threads, on
-/// several shapes (n not a multiple of the block size).
+/// The blocked, parallel sampled lower bound is the serial point-by-point f64 search bit
+/// for bit (the algorithm before the blocks and the f32 screen, written out here), for 1
+/// and 2 threads, on several shapes (n not a multiple of the block size): the screen ranks
+/// these points' 10 largest as f64 does, and every value taken is an f64 evaluation.
 #[test]
 fn sampled_lower_bound_is_the_serial_search_for_any_thread_count() {
     fn serial(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u64) -> f64 {
