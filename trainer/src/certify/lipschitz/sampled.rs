@@ -68,7 +68,6 @@ pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u6
         mlp.eval_batch(&x, &mut u, Some(&mut j), &mut Workspace::default());
         j.chunks_exact((nu * nx).max(1)).map(&norm_of).collect()
     };
-    let first = norms.iter().copied().fold(0.0, f64::max);
     // The searches side by side: each iteration evaluates the candidates of all of them in
     // one block (each point's Jacobian bit for bit that of a single evaluation, so each
     // search takes the path it takes alone); search k draws its steps from key k.
@@ -105,7 +104,8 @@ pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u6
             }
         }
     }
-    v.into_iter().fold(first, f64::max)
+    // Each search only raises its start's value: the largest is the bound.
+    v.into_iter().fold(0.0, f64::max)
 }
 
 /// L_MPC estimates from labelled points: (max ‖∂κ/∂x‖₂ over the points, max difference
