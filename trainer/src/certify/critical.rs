@@ -60,7 +60,6 @@
 
 use crate::certify::local::ExactPiece;
 use crate::mpc::ocp::{LinRow, Ocp};
-use crate::problem::model::System;
 use crate::problem::ProblemConfig;
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashMap;
@@ -172,14 +171,7 @@ fn dominant(m: &DMatrix<f64>, strict: bool) -> bool {
 impl QpCertifier {
     /// The QP of `cfg` if its MPC is one (see the module doc), else why not.
     pub fn detect(cfg: &ProblemConfig) -> Result<Self, NotQp> {
-        let affine = match &cfg.system {
-            System::DoubleIntegrator(_) => true,
-            System::Ode(_) | System::Discrete(_) => {
-                cfg.system.expr_model().is_some_and(|m| m.is_affine())
-            }
-            _ => false,
-        };
-        if !affine {
+        if !cfg.system.is_affine() {
             return Err(NotQp(format!(
                 "the plant ({}) is not affine in (x, u)",
                 cfg.system.name()

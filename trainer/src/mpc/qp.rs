@@ -57,6 +57,10 @@ pub struct QpData<'a> {
     pub jac_x: &'a [f64],
     /// ∂F/∂u per stage.
     pub jac_u: &'a [f64],
+    /// The accuracy (relative residuals and gap) at which the structured solver stops,
+    /// at least its own `1e-10` ([`ipm::TOL`]); the SQP asks for less while it is far from
+    /// a solution. Clarabel ignores it (always `1e-10`-class).
+    pub tol: f64,
 }
 
 /// Outcome of one QP solve.
@@ -265,6 +269,7 @@ impl ClarabelQp {
             c,
             jac_x,
             jac_u,
+            tol: _,
         } = *data;
         let (nx, nu_dim, n) = (ocp.nx, ocp.nu, ocp.horizon);
         let nz = nx + nu_dim;

@@ -40,8 +40,9 @@ use super::{QpData, QpStatus};
 use crate::mpc::kkt::{BandedKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
 
-/// Target accuracy (relative residuals and gap).
-const TOL: f64 = 1e-10;
+/// Target accuracy (relative residuals and gap) unless the caller asks for less
+/// ([`QpData::tol`]).
+pub const TOL: f64 = 1e-10;
 /// Accepted accuracy if progress stalls before `TOL` (clarabel's "almost solved").
 const TOL_REDUCED: f64 = 1e-7;
 /// Iteration limit.
@@ -377,7 +378,9 @@ impl IpmQp {
             c,
             jac_x,
             jac_u,
+            tol,
         } = *data;
+        let tol = tol.max(TOL);
         let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
         self.last_iterations = 0;
         for (i, row) in ocp.rows.iter().enumerate() {
@@ -447,7 +450,7 @@ impl IpmQp {
             if !err.is_finite() {
                 return kept_or_failed(kept);
             }
-            if err <= TOL {
+            if err <= tol {
                 break;
             }
             if err <= TOL_REDUCED && err < kept {

@@ -12,6 +12,15 @@
 //!    and multipliers (λ⁺, ν⁺). The exact Hessian gives Newton steps where the blockwise test
 //!    would discard curvature the constraints make harmless (the cart-pole's blocks are
 //!    indefinite at most iterates).
+//!    The QP is solved only as accurately as the iterate deserves: to `(0.01·r)²` (r the
+//!    KKT residual of the iterate), between the interior point's own `1e-10` and `1e-4`
+//!    (an inexact Newton method's forcing sequence; squared because the QP's
+//!    complementarity enters r as √gap on weakly active rows — with `0.01·r` the SQP
+//!    stalled at r ≈ 1e-3 on such rows). Near a solution (r < 1e-3) the QPs are exact as
+//!    before; an OCP that is itself a QP (affine plant, linear rows) always solves its QP
+//!    exactly, its first QP being its solution. Measured (BENCHMARKS, 2026-12-05):
+//!    planar_quadrotor_nl 0.82 → 0.61 ms per solve + sensitivity, together with the polish
+//!    rule of step 4.
 //! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ(‖c(z)‖₁ + Σ_r max(0, g_r(z)))`
 //!    (inequality rows enter by their violation), with the penalty raised only as far as the
 //!    step needs to be a descent direction (Nocedal & Wright, eq. 18.36, with the total
@@ -29,18 +38,16 @@
 //!    effect): the QP again with the constant terms of the constraints taken at z + d
 //!    (`c(z + d) − ∇c d`, nonlinear rows shifted by their linearisation remainder), its
 //!    step d̂ accepted as a full step if z + d̂ passes the same Armijo test.
-//! 4. Once steps are full and either the KKT residual is below 1e-3 or the QP's active set
-//!    repeated (and the residual is below 0.1), guess the active set
+//! 4. Once a step is full and the KKT residual is below 0.1, guess the active set
 //!    `A = {r : ν_r > slack_r}` and run Newton's method on the KKT conditions restricted to A
 //!    (`kkt` module, exact Hessian): quadratic convergence to machine precision, independent
 //!    of the interior-point QP's tolerance. The polish is accepted only if the full KKT
 //!    residual (including ν ≥ 0 and the inactive rows' feasibility) falls below `tol`.
-//!    The soft problem also tries it after a full step below 0.1 whose active set did not
-//!    repeat when the exact Hessian fails the convexity test there: near the soft optimum
-//!    (the dynamics' multipliers of the slack weight's size) the blockwise rule's steps then
-//!    crawl (step lengths 2⁻⁵–2⁻¹⁰, no full step for dozens of iterations, so no polish),
-//!    and the iteration spent waiting for the active set to repeat can leave the full
-//!    step's neighbourhood for good (cartpole_public_nl, BENCHMARKS "state 86").
+//!    A wrong guess costs two or three Newton iterations (its residual stops falling) and
+//!    the SQP goes on; waiting for the QP's active set to repeat before guessing (the rule
+//!    until 2026-12-04) cost a whole QP in most solves, and on the soft problem the wait
+//!    could leave the full step's neighbourhood for good (cartpole_public_nl, BENCHMARKS
+//!    "state 86"). Measured with the inexact QPs of step 2 (BENCHMARKS, 2026-12-05).
 //!
 //! Convergence is declared on the scaled KKT residual ([`KktResidual::max`]) ≤ `tol`.
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
@@ -48,7 +55,7 @@
 use crate::mpc::convexity::ReducedHessian;
 use crate::mpc::kkt::{ActiveSetKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
-use crate::mpc::qp::ipm::mul_e;
+use crate::mpc::qp::ipm::{self, mul_e};
 use crate::mpc::qp::{QpData, QpSolver, QpStatus};
 use crate::problem::{ProblemConfig, SolverSettings};
 use nalgebra::DMatrix;
@@ -254,6 +261,11 @@ fn convexify(ocp: &Ocp, exact: &[f64], gauss_newton: &[f64], out: &mut [f64]) {
 
 /// ρ of the penalty rule (step 3 of the module doc).
 const PENALTY_RHO: f64 = 0.1;
+/// The QP accuracy far from a solution (step 2 of the module doc): `(0.1·r)²`, r the KKT
+/// residual of the iterate, between the QP solver's own `1e-10` and `1e-4`.
+const QP_TOL_FACTOR: f64 = 0.01;
+/// The largest QP tolerance asked for.
+const QP_TOL_MAX: f64 = 1e-4;
 
 /// `dᵀ H d` for stage blocks `hess` ([`Ocp::hessian_blocks`] layout) plus the slack diagonal.
 fn quadratic_form(ocp: &Ocp, hess: &[f64], d: &[f64]) -> f64 {
@@ -288,6 +300,10 @@ pub struct SqpSolver {
     globalisation: Globalisation,
     /// The KKT ordering of the last successful polish (reused by [`Self::active_set_kkt`]).
     polish_layout: Option<KktLayout>,
+    /// Whether the QPs may be solved inexactly far from a solution (step 2 of the module
+    /// doc): not for an OCP that is itself a QP (affine plant, linear rows), whose first QP
+    /// is its solution, nor for the soft problem.
+    inexact_qp: bool,
 }
 
 impl SqpSolver {
@@ -311,6 +327,8 @@ impl SqpSolver {
     /// Workspace for the hard (`soft = false`) or exact-penalty (`soft = true`) problem.
     pub fn new(cfg: &ProblemConfig, soft: bool) -> Self {
         let ocp = Ocp::new(cfg, soft);
+        // The OCP is itself a QP: affine plant, linear rows.
+        let is_qp = cfg.system.is_affine() && !ocp.has_nonlinear_rows();
         let qp = QpSolver::new(&ocp, cfg.solver.qp);
         let convexity = ReducedHessian::new(&ocp);
         SqpSolver {
@@ -324,6 +342,7 @@ impl SqpSolver {
             u_hi: cfg.ocp.u_hi.clone(),
             globalisation: Globalisation::Default,
             polish_layout: None,
+            inexact_qp: !(soft || is_qp),
         }
     }
 
@@ -437,11 +456,7 @@ impl SqpSolver {
                 .map(|v| v.abs())
                 .sum::<f64>();
         let mut full_step = false;
-        // The soft problem's polish rule (step 4 of the module doc).
-        let soft = self.ocp.n_slack > 0;
-        let mut stable_active = false;
-        let mut prev_active: Vec<usize> = Vec::new();
-        let status = loop {
+        let status = 'sqp: loop {
             self.ocp.relinearize(&p.z);
             ev.first_order(&self.ocp, &p.z, xs);
             let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
@@ -452,21 +467,7 @@ impl SqpSolver {
             if res.max() <= tol {
                 break SqpStatus::Converged;
             }
-            // The exact Hessian's test, if taken here (the soft rule of step 4).
-            let mut tested = None;
-            let soft_try =
-                soft && full_step && !stable_active && (1e-3..1e-1).contains(&res.max()) && {
-                    self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
-                    let ok = !conservative
-                        && ev.hess.iter().all(|v| v.is_finite())
-                        && self
-                            .convexity
-                            .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
-                    tested = Some(ok);
-                    !ok
-                };
-            if soft_try || (full_step && (res.max() < 1e-3 || (stable_active && res.max() < 1e-1)))
-            {
+            if full_step && res.max() < 1e-1 {
                 if let Some(q) = self.polish(xs, &p, &mut info) {
                     p = q;
                     break SqpStatus::Converged;
@@ -475,9 +476,7 @@ impl SqpSolver {
             if info.iterations >= max_iter {
                 break SqpStatus::MaxIterations;
             }
-            if tested.is_none() {
-                self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
-            }
+            self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             if ev.hess.iter().any(|v| !v.is_finite()) {
                 break SqpStatus::NumericalFailure;
             }
@@ -487,133 +486,165 @@ impl SqpSolver {
             // iteration limit on infeasible ball-beam states (BENCHMARKS, "Soft problems").
             // A QP with the exact Hessian that the QP solver fails on (or calls infeasible) is
             // re-solved with the blockwise rule.
-            let mut exact = tested.unwrap_or_else(|| {
-                !conservative
-                    && self
-                        .convexity
-                        .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u)
-            });
-            let st = loop {
-                if exact {
-                    hreg.copy_from_slice(&ev.hess);
-                } else {
-                    if !gn_ready {
-                        // With zero multipliers only the objective's (constant) Hessian remains.
-                        self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
-                        gn_ready = true;
-                    }
-                    convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
-                }
-                let data = QpData {
-                    z: &p.z,
-                    hess: &hreg,
-                    grad: &ev.grad,
-                    c: &ev.c,
-                    jac_x: &ev.jac_x,
-                    jac_u: &ev.jac_u,
-                };
-                let st = self
-                    .qp
-                    .solve(&self.ocp, &data, &mut d, &mut lam_qp, &mut nu_qp);
-                info.qp_iterations += self.qp.last_iterations as usize;
-                // (Also on `Infeasible`: the soft problem's QP is feasible whenever its hard
-                // input rows are, and an indefinite full H may mislead the QP solver.)
-                if st != QpStatus::Solved && exact {
-                    exact = false;
-                    continue;
-                }
-                break st;
+            // (Inexact only after a full step or at the start: while the line search cuts
+            // steps, an inexact QP would mostly be solved twice.)
+            let mut qp_tol = if self.inexact_qp && (full_step || info.iterations == 0) {
+                (QP_TOL_FACTOR * res.max())
+                    .powi(2)
+                    .clamp(ipm::TOL, QP_TOL_MAX)
+            } else {
+                ipm::TOL
             };
-            info.iterations += 1;
-            match st {
-                QpStatus::Solved => {}
-                QpStatus::Infeasible => break SqpStatus::Infeasible,
-                QpStatus::Failed => break SqpStatus::NumericalFailure,
-            }
-            // ℓ1 merit line search.
-            // Inequalities enter the merit by their violation Σ max(0, g). A QP step satisfies
-            // the linearised rows, so the merit's directional derivative is at most
-            // ∇fᵀd − μ(‖c‖₁ + Σ max(0, g)) (N&W Thm 18.2 with inequalities): the N&W 18.36
-            // rule applies with the total violation in place of ‖c‖₁.
-            let c1: f64 =
-                ev.c.iter().map(|v| v.abs()).sum::<f64>() + self.ocp.inequality_violation(&p.z);
-            let gd: f64 = ev.grad.iter().zip(&d).map(|(g, d)| g * d).sum();
-            if c1 > 0.0 {
-                let dhd = quadratic_form(&self.ocp, &hreg, &d);
-                let needed = (gd + 0.5 * dhd.max(0.0)) / ((1.0 - PENALTY_RHO) * c1);
-                if mu < needed {
-                    mu = needed + 1.0;
-                }
-            }
-            if conservative {
-                let lam_max = (lam_qp.iter().chain(&nu_qp)).fold(0.0f64, |m, v| m.max(v.abs()));
-                mu = mu.max(1.1 * lam_max);
-            }
-            let f0 = self.ocp.objective(&p.z);
-            let phi0 = f0 + mu * c1;
-            let dd = gd - mu * c1;
-            let armijo = |phi: f64, alpha: f64| {
-                phi.is_finite()
-                    && phi
-                        <= phi0 + 1e-4 * alpha * dd.min(0.0) + 1e-12 * phi0.abs() + mu * floor_scale
-            };
-            let mut alpha = 1.0;
-            let accepted = loop {
-                let phi = self.trial_merit(&p.z, &d, alpha, xs, mu, &mut z_trial, &mut c_trial);
-                if armijo(phi, alpha) {
-                    break true;
-                }
-                // (Not from a non-finite trial point: its data would only fail the QP.)
-                if alpha == 1.0
-                    && soc_enabled
-                    && phi.is_finite()
-                    && c_trial.iter().all(|v| v.is_finite())
-                {
-                    // Second-order correction (Nocedal & Wright §18.3): the QP again with the
-                    // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
-                    // nonlinear rows shifted alike), tried as a full step before backtracking.
-                    mul_e(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
-                    for (cs, ct) in c_soc.iter_mut().zip(&c_trial) {
-                        *cs = ct - *cs;
+            let convex = !conservative
+                && self
+                    .convexity
+                    .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
+            // One pass per QP accuracy: the inexact one, then (if its full step is rejected)
+            // the exact one with the penalty as it was.
+            let alpha = loop {
+                let mu_before = mu;
+                let mut exact = convex;
+                let st = loop {
+                    if exact {
+                        hreg.copy_from_slice(&ev.hess);
+                    } else {
+                        if !gn_ready {
+                            // With zero multipliers only the objective's (constant) Hessian remains.
+                            self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
+                            gn_ready = true;
+                        }
+                        convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
                     }
-                    let saved = self.ocp.shift_for_correction(&p.z, &d);
                     let data = QpData {
                         z: &p.z,
                         hess: &hreg,
                         grad: &ev.grad,
-                        c: &c_soc,
+                        c: &ev.c,
                         jac_x: &ev.jac_x,
                         jac_u: &ev.jac_u,
+                        tol: qp_tol,
                     };
                     let st = self
                         .qp
-                        .solve(&self.ocp, &data, &mut d_soc, &mut lam_soc, &mut nu_soc);
+                        .solve(&self.ocp, &data, &mut d, &mut lam_qp, &mut nu_qp);
                     info.qp_iterations += self.qp.last_iterations as usize;
-                    self.ocp.restore_rhs(&saved);
-                    if st == QpStatus::Solved {
-                        let phi =
-                            self.trial_merit(&p.z, &d_soc, 1.0, xs, mu, &mut z_trial, &mut c_trial);
-                        if armijo(phi, 1.0) {
-                            lam_qp.copy_from_slice(&lam_soc);
-                            nu_qp.copy_from_slice(&nu_soc);
-                            break true;
-                        }
+                    // (Also on `Infeasible`: the soft problem's QP is feasible whenever its hard
+                    // input rows are, and an indefinite full H may mislead the QP solver.)
+                    if st != QpStatus::Solved && exact {
+                        exact = false;
+                        continue;
+                    }
+                    break st;
+                };
+                info.iterations += 1;
+                match st {
+                    QpStatus::Solved => {}
+                    QpStatus::Infeasible => break 'sqp SqpStatus::Infeasible,
+                    QpStatus::Failed => break 'sqp SqpStatus::NumericalFailure,
+                }
+                // ℓ1 merit line search.
+                // Inequalities enter the merit by their violation Σ max(0, g). A QP step satisfies
+                // the linearised rows, so the merit's directional derivative is at most
+                // ∇fᵀd − μ(‖c‖₁ + Σ max(0, g)) (N&W Thm 18.2 with inequalities): the N&W 18.36
+                // rule applies with the total violation in place of ‖c‖₁.
+                let c1: f64 =
+                    ev.c.iter().map(|v| v.abs()).sum::<f64>() + self.ocp.inequality_violation(&p.z);
+                let gd: f64 = ev.grad.iter().zip(&d).map(|(g, d)| g * d).sum();
+                if c1 > 0.0 {
+                    let dhd = quadratic_form(&self.ocp, &hreg, &d);
+                    let needed = (gd + 0.5 * dhd.max(0.0)) / ((1.0 - PENALTY_RHO) * c1);
+                    if mu < needed {
+                        mu = needed + 1.0;
                     }
                 }
-                alpha *= 0.5;
-                if alpha < 1e-10 {
-                    break false;
+                if conservative {
+                    let lam_max = (lam_qp.iter().chain(&nu_qp)).fold(0.0f64, |m, v| m.max(v.abs()));
+                    mu = mu.max(1.1 * lam_max);
                 }
+                let f0 = self.ocp.objective(&p.z);
+                let phi0 = f0 + mu * c1;
+                let dd = gd - mu * c1;
+                let armijo = |phi: f64, alpha: f64| {
+                    phi.is_finite()
+                        && phi
+                            <= phi0
+                                + 1e-4 * alpha * dd.min(0.0)
+                                + 1e-12 * phi0.abs()
+                                + mu * floor_scale
+                };
+                let mut alpha = 1.0;
+                let accepted = loop {
+                    let phi = self.trial_merit(&p.z, &d, alpha, xs, mu, &mut z_trial, &mut c_trial);
+                    if armijo(phi, alpha) {
+                        break true;
+                    }
+                    // An inexact QP's step is taken only in full (module doc, step 2).
+                    if alpha == 1.0 && qp_tol > ipm::TOL {
+                        break false;
+                    }
+                    // (Not from a non-finite trial point: its data would only fail the QP.)
+                    if alpha == 1.0
+                        && soc_enabled
+                        && phi.is_finite()
+                        && c_trial.iter().all(|v| v.is_finite())
+                    {
+                        // Second-order correction (Nocedal & Wright §18.3): the QP again with the
+                        // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
+                        // nonlinear rows shifted alike), tried as a full step before backtracking.
+                        mul_e(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
+                        for (cs, ct) in c_soc.iter_mut().zip(&c_trial) {
+                            *cs = ct - *cs;
+                        }
+                        let saved = self.ocp.shift_for_correction(&p.z, &d);
+                        let data = QpData {
+                            z: &p.z,
+                            hess: &hreg,
+                            grad: &ev.grad,
+                            c: &c_soc,
+                            jac_x: &ev.jac_x,
+                            jac_u: &ev.jac_u,
+                            tol: qp_tol,
+                        };
+                        let st =
+                            self.qp
+                                .solve(&self.ocp, &data, &mut d_soc, &mut lam_soc, &mut nu_soc);
+                        info.qp_iterations += self.qp.last_iterations as usize;
+                        self.ocp.restore_rhs(&saved);
+                        if st == QpStatus::Solved {
+                            let phi = self.trial_merit(
+                                &p.z,
+                                &d_soc,
+                                1.0,
+                                xs,
+                                mu,
+                                &mut z_trial,
+                                &mut c_trial,
+                            );
+                            if armijo(phi, 1.0) {
+                                lam_qp.copy_from_slice(&lam_soc);
+                                nu_qp.copy_from_slice(&nu_soc);
+                                break true;
+                            }
+                        }
+                    }
+                    alpha *= 0.5;
+                    if alpha < 1e-10 {
+                        break false;
+                    }
+                };
+                if !accepted && qp_tol > ipm::TOL {
+                    // (Its IPM iterations count; the discarded QP is no SQP iteration.)
+                    info.iterations -= 1;
+                    qp_tol = ipm::TOL;
+                    mu = mu_before;
+                    continue;
+                }
+                if !accepted {
+                    break 'sqp SqpStatus::NumericalFailure;
+                }
+                break alpha;
             };
-            if !accepted {
-                break SqpStatus::NumericalFailure;
-            }
             full_step = alpha == 1.0;
-            let active: Vec<usize> = (0..nu_qp.len())
-                .filter(|&r| nu_qp[r] > self.ocp.rows[r].slack(&z_trial).max(0.0))
-                .collect();
-            stable_active = active == prev_active;
-            prev_active = active;
             p.z.copy_from_slice(&z_trial);
             for (l, q) in p.lam.iter_mut().zip(&lam_qp) {
                 *l += alpha * (q - *l);

@@ -142,6 +142,18 @@ impl System {
             _ => None,
         }
     }
+    /// Whether x⁺ = F(x, u) is known to be affine in (x, u): the double integrator, and an
+    /// expression plant whose tape is affine ([`expr::ExprModel::is_affine`]; RK4 of an affine
+    /// ODE is affine). A custom plant, the pendulum and the cart-pole are not.
+    pub fn is_affine(&self) -> bool {
+        match self {
+            System::DoubleIntegrator(_) => true,
+            System::Ode(_) | System::Discrete(_) => {
+                self.expr_model().is_some_and(|m| m.is_affine())
+            }
+            _ => false,
+        }
+    }
     /// The names expressions about this plant may use (the `[ocp]` constraints): an
     /// expression plant's own table (states, inputs, parameters, definitions; no
     /// equations), a custom plant's declared state and input names, a built-in's fixed names — pendulum `theta`, `omega`, `u`; cart-pole `p`,
