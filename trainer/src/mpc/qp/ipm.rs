@@ -27,7 +27,8 @@
 //! Both steps use one step length (a QP's dual residual couples d and ν), 99% of the way to
 //! the boundary. The starting point is the solution of the `W = I` system shifted into the
 //! interior (as in CVXOPT). Termination: relative residuals and the gap `tᵀν` below `1e-10`
-//! (as for the clarabel reference); at the iteration limit, after five iterations in which
+//! (as for the clarabel reference), or below the larger tolerance the SQP asks for far from
+//! a solution ([`QpData::tol`]); at the iteration limit, after five iterations in which
 //! neither that error, nor the residuals alone, nor μ fell by 10 %, or when the iterates
 //! diverge (an infeasible QP), the solve reports failure and the caller may fall back —
 //! unless the error is below `1e-7` (clarabel's "almost solved"), at that iterate or at an

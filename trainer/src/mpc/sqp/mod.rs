@@ -17,10 +17,14 @@
 //!    (an inexact Newton method's forcing sequence; squared because the QP's
 //!    complementarity enters r as √gap on weakly active rows — with `0.01·r` the SQP
 //!    stalled at r ≈ 1e-3 on such rows). Near a solution (r < 1e-3) the QPs are exact as
-//!    before; an OCP that is itself a QP (affine plant, linear rows) always solves its QP
-//!    exactly, its first QP being its solution. Measured (BENCHMARKS, 2026-12-05):
-//!    planar_quadrotor_nl 0.82 → 0.61 ms per solve + sensitivity, together with the polish
-//!    rule of step 4.
+//!    before. Exact always: an OCP that is itself a QP (affine plant, linear rows), whose
+//!    first QP is its solution, and the soft problem (inexact, one stress state left its
+//!    plain solve for the retry ladder, 20× slower). Inexact only at the first iteration or
+//!    after a full step; an inexact step whose full step the line search rejects is
+//!    discarded and the QP solved exactly, with the penalty as before (an inexact step from
+//!    a nearly feasible point can raise the penalty ~1e7-fold). Measured (BENCHMARKS,
+//!    2026-12-05): planar_quadrotor_nl 0.82 → 0.61 ms per solve + sensitivity, together
+//!    with the polish rule of step 4.
 //! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ(‖c(z)‖₁ + Σ_r max(0, g_r(z)))`
 //!    (inequality rows enter by their violation), with the penalty raised only as far as the
 //!    step needs to be a descent direction (Nocedal & Wright, eq. 18.36, with the total
@@ -261,7 +265,7 @@ fn convexify(ocp: &Ocp, exact: &[f64], gauss_newton: &[f64], out: &mut [f64]) {
 
 /// ρ of the penalty rule (step 3 of the module doc).
 const PENALTY_RHO: f64 = 0.1;
-/// The QP accuracy far from a solution (step 2 of the module doc): `(0.1·r)²`, r the KKT
+/// The QP accuracy far from a solution (step 2 of the module doc): `(0.01·r)²`, r the KKT
 /// residual of the iterate, between the QP solver's own `1e-10` and `1e-4`.
 const QP_TOL_FACTOR: f64 = 0.01;
 /// The largest QP tolerance asked for.
@@ -509,7 +513,8 @@ impl SqpSolver {
                         hreg.copy_from_slice(&ev.hess);
                     } else {
                         if !gn_ready {
-                            // With zero multipliers only the objective's (constant) Hessian remains.
+                            // With zero multipliers only the objective's (constant)
+                            // Hessian remains.
                             self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
                             gn_ready = true;
                         }
