@@ -571,7 +571,7 @@ mod tests {
         ocp.gradient(&p.z, &mut grad);
         ocp.constraints(&p.z, &xs, &mut c, &mut jx, &mut ju);
         ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut hess);
-        let mut solve = |tol: f64| {
+        let solve = |tol: f64| {
             let data = QpData {
                 z: &p.z,
                 hess: &hess,
