@@ -55,30 +55,18 @@ pub fn sampled_lower_bound(mlp: &Mlp, lo: &[f64], hi: &[f64], n: usize, seed: u6
     }
     order.truncate(top);
     order.sort_by(|&a, &b| screen[b].total_cmp(&screen[a]).then(a.cmp(&b)));
-    let starts = order;
-    let norms: Vec<f64> = {
-        let x: Vec<f64> = starts
-            .iter()
-            .flat_map(|&i| xs[i * nx..(i + 1) * nx].iter().copied())
-            .collect();
-        let (mut u, mut j) = (
-            vec![0.0; starts.len() * nu],
-            vec![0.0; starts.len() * nu * nx],
-        );
-        mlp.eval_batch(&x, &mut u, Some(&mut j), &mut Workspace::default());
-        j.chunks_exact((nu * nx).max(1)).map(&norm_of).collect()
-    };
     // The searches side by side: each iteration evaluates the candidates of all of them in
     // one block (each point's Jacobian bit for bit that of a single evaluation, so each
     // search takes the path it takes alone); search k draws its steps from key k.
-    let ns = starts.len();
-    let mut ws = Workspace::default();
-    let (mut u, mut j) = (vec![0.0; ns * nu], vec![0.0; ns * nu * nx]);
-    let mut v: Vec<f64> = norms;
-    let mut x: Vec<f64> = starts
+    let ns = order.len();
+    let mut x: Vec<f64> = order
         .iter()
         .flat_map(|&i| xs[i * nx..(i + 1) * nx].iter().copied())
         .collect();
+    let mut ws = Workspace::default();
+    let (mut u, mut j) = (vec![0.0; ns * nu], vec![0.0; ns * nu * nx]);
+    mlp.eval_batch(&x, &mut u, Some(&mut j), &mut ws);
+    let mut v: Vec<f64> = j.chunks_exact((nu * nx).max(1)).map(&norm_of).collect();
     let mut radius: Vec<f64> = (0..ns * nx)
         .map(|e| 0.05 * (hi[e % nx] - lo[e % nx]))
         .collect();
