@@ -24,7 +24,7 @@ fn main() {
         Some(p) if !p.is_empty() => PathBuf::from(p),
         _ => {
             println!("cargo:rustc-cfg=ampc_pendulum");
-            PathBuf::from("../controller-core/src/generated/weights.rs")
+            PathBuf::from("../controller-core/src/demo/weights.rs")
         }
     };
     // Cargo runs build scripts in the package's directory: name the file as it was looked up.

@@ -4,7 +4,7 @@
 //! 1. Host: `libampc_capi.a` built for the host, `ampc_stdin.c` compiled with the host `cc`
 //!    (`-std=c99 -Wall -Wextra -Werror -pedantic`) and linked against it; 10⁴ states (inside,
 //!    near and outside X, NaN, ±inf, −0, subnormals, random bit patterns) through it: flags
-//!    and the bits of u equal `controller_core::evaluate`; the header's certificate equals
+//!    and the bits of u equal `controller_core::demo::evaluate`; the header's certificate equals
 //!    the library's (`ampc_linked_certificate`) and the core's.
 //! 2. QEMU: the library built for thumbv7em-none-eabihf, the C firmware
 //!    (`capi/c/firmware`, arm-none-eabi-gcc, newlib + semihosting) runs the upswing in
@@ -20,7 +20,10 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use controller_core::{Flags, CERTIFICATE, FAST_TANH, NX};
+use controller_core::{
+    demo::{CERTIFICATE, NX},
+    Flags, FAST_TANH,
+};
 
 fn root() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
@@ -198,7 +201,7 @@ fn host_c_program_is_bit_identical_to_the_core_on_ten_thousand_states() {
             .split(' ')
             .map(|b| u32::from_str_radix(b, 16).unwrap())
             .collect();
-        let want = controller_core::evaluate(x);
+        let want = controller_core::demo::evaluate(x);
         assert_eq!(
             (flags, u.as_slice()),
             (want.flags.0, want.u.map(f32::to_bits).as_slice()),

@@ -1,4 +1,4 @@
-//! Export round trip: the committed `controller-core/src/generated/weights.{rs,bin}` are
+//! Export round trip: the committed `controller-core/src/demo/weights.{rs,bin}` are
 //! exactly what `trainer::export` produces (byte for byte), and the core computes exactly
 //! what the exporter's f32 model of the device computes (bit for bit).
 //!
@@ -6,7 +6,7 @@
 //! `trainer run` produces it from the embedded `configs/pendulum.toml`: this test reruns
 //! that pipeline (sample → train → certify → export) and compares the files byte for byte.
 //! Regenerate them (and the C API's header `controller-core/capi/include/ampc.h`) with
-//! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/generated/`
+//! `cargo run --release -p trainer -- run && cp runs/pendulum/weights.{rs,bin} controller-core/src/demo/`
 //! and `trainer export … --c-header` (README, "The embedded side"), or with
 //! `AMPC_BLESS=1 cargo test -p ampc-tests --test export_roundtrip` (writes the three files
 //! from this test's own pipeline run).
@@ -17,7 +17,7 @@ use trainer::deploy::export::{self, Tanh};
 
 fn committed(name: &str) -> Vec<u8> {
     let p = format!(
-        "{}/../controller-core/src/generated/{name}",
+        "{}/../controller-core/src/demo/{name}",
         env!("CARGO_MANIFEST_DIR")
     );
     std::fs::read(&p).unwrap_or_else(|e| panic!("{p}: {e}"))
@@ -33,10 +33,7 @@ fn committed_files_are_what_the_exporter_writes() {
         dir.path().join("weights.bin"),
     );
     let report = export::export_files(model, &rs, &bin).unwrap();
-    let generated = format!(
-        "{}/../controller-core/src/generated",
-        env!("CARGO_MANIFEST_DIR")
-    );
+    let generated = format!("{}/../controller-core/src/demo", env!("CARGO_MANIFEST_DIR"));
     let header_path = format!(
         "{}/../controller-core/capi/include/ampc.h",
         env!("CARGO_MANIFEST_DIR")
@@ -60,7 +57,7 @@ fn committed_files_are_what_the_exporter_writes() {
     let fresh = std::fs::read(&rs).unwrap();
     assert!(
         fresh == committed("weights.rs"),
-        "controller-core/src/generated/weights.rs is stale: regenerate it with trainer export"
+        "controller-core/src/demo/weights.rs is stale: regenerate it with trainer export"
     );
     assert_eq!(std::fs::read(&bin).unwrap(), committed("weights.bin"));
     // The C API's header is the exporter's for the same model and allowances.
@@ -70,7 +67,7 @@ fn committed_files_are_what_the_exporter_writes() {
         std::fs::read_to_string(&p).unwrap_or_default() == header,
         "{p} is stale: regenerate it with trainer export --c-header"
     );
-    assert_eq!(controller_core::CERTIFICATE.hash, model.hash);
+    assert_eq!(controller_core::demo::CERTIFICATE.hash, model.hash);
 }
 
 #[test]
@@ -137,9 +134,9 @@ fn core_matches_the_exporters_f32_model_bit_for_bit() {
     for _ in 0..200_000 {
         let x = [-8.0 + 16.0 * rnd(), -1.5 + 3.0 * rnd()];
         let y = export::eval_f32(&folded, &lo, &hi, &x, tanh)[0];
-        let c = &controller_core::CERTIFICATE;
+        let c = &controller_core::demo::CERTIFICATE;
         let expect = y.clamp(c.clamp_lo[0], c.clamp_hi[0]);
-        let got = controller_core::evaluate(&x).u[0];
+        let got = controller_core::demo::evaluate(&x).u[0];
         assert_eq!(got.to_bits(), expect.to_bits(), "x = {x:?}");
     }
 }
@@ -210,7 +207,7 @@ fn eval_gives_the_cores_output_and_flags() {
         let f: Vec<&str> = l.split(',').collect();
         let u: f64 = f[2].parse().unwrap();
         let flags: u8 = f[3].parse().unwrap();
-        let core = controller_core::evaluate(x);
+        let core = controller_core::demo::evaluate(x);
         if fast {
             assert!((u - f64::from(core.u[0])).abs() <= both, "x = {x:?}");
             assert_eq!(flags & !4, core.flags.0 & !4, "x = {x:?}");

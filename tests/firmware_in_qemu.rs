@@ -14,7 +14,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::process::Command;
 
-use controller_core::{Flags, CERTIFICATE};
+use controller_core::{demo::CERTIFICATE, Flags};
 use firmware_example::{probe_state, run, Row, HEADER, PROBES, STEPS};
 
 /// A QEMU machine and the Rust target built for it.
@@ -182,7 +182,7 @@ fn probe_states_match_host(board: &Board) {
     let mut flagged = 0;
     for (i, row) in rows.iter().enumerate() {
         let x = probe_state(i as u32);
-        let h = controller_core::evaluate(&x);
+        let h = controller_core::demo::evaluate(&x);
         assert_eq!(
             row.as_slice(),
             [
@@ -201,7 +201,11 @@ fn probe_states_match_host(board: &Board) {
     }
     // The probe set reaches the projection and the non-finite path, and plain states.
     for f in [Flags::OUT_OF_DOMAIN, Flags::NON_FINITE] {
-        assert!((0..PROBES).any(|i| controller_core::evaluate(&probe_state(i)).flags.contains(f)));
+        assert!(
+            (0..PROBES).any(|i| controller_core::demo::evaluate(&probe_state(i))
+                .flags
+                .contains(f))
+        );
     }
     assert!(flagged > 0 && flagged < PROBES as usize / 2, "{flagged}");
 

@@ -156,10 +156,7 @@ fn main_job_and_tour() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // The stage's export and the command's are the same files, and they are the weights
     // compiled into controller-core.
-    let gen = format!(
-        "{}/../controller-core/src/generated",
-        env!("CARGO_MANIFEST_DIR")
-    );
+    let gen = format!("{}/../controller-core/src/demo", env!("CARGO_MANIFEST_DIR"));
     for (mine, stage, committed) in [
         (&rs, "weights.rs", "weights.rs"),
         (&bin, "weights.bin", "weights.bin"),

@@ -18,7 +18,7 @@
 //! κ(0) within its certificate's f32 allowance.
 
 use ampc_tests::{config, tempdir, trainer};
-use controller_core::generated::weights::Net;
+use controller_core::demo::weights::Net;
 use std::path::Path;
 
 /// Reads the first data row of a CSV written by `trainer solve` / `trainer eval`.
@@ -200,8 +200,8 @@ fn run_holds_a_nonzero_setpoint_exactly() {
 fn compiled_in_pendulum_controller_holds_the_origin() {
     let cfg = trainer::problem::ProblemConfig::default();
     let (l, _) = trainer::mpc::law::MpcLaw::new(&cfg).solve(&[0.0, 0.0], None);
-    let c = &controller_core::CERTIFICATE;
-    let got = controller_core::evaluate(&[0.0, 0.0]);
+    let c = &controller_core::demo::CERTIFICATE;
+    let got = controller_core::demo::evaluate(&[0.0, 0.0]);
     // |u_f32 − κ_NN,f64| ≤ the certified f32 allowance, and κ_NN,f64(0) = κ(0) to f64
     // rounding (far below it).
     assert!(

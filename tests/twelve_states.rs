@@ -34,7 +34,7 @@ fn check_controller_core_with(run: &Path) {
     let dir = tempdir();
     let krate = dir.path().join("controller-core");
     let src = krate.join("src");
-    std::fs::create_dir_all(src.join("generated")).unwrap();
+    std::fs::create_dir_all(src.join("demo")).unwrap();
     for f in [
         "lib.rs",
         "activation.rs",
@@ -43,19 +43,19 @@ fn check_controller_core_with(run: &Path) {
         "controller.rs",
         "layer.rs",
         "mlp.rs",
-        "generated/mod.rs",
+        "demo/mod.rs",
     ] {
         std::fs::copy(root.join("controller-core/src").join(f), src.join(f))
             .unwrap_or_else(|e| panic!("controller-core/src/{f}: {e}"));
     }
     for f in ["weights.rs", "weights.bin"] {
-        std::fs::copy(run.join(f), src.join("generated").join(f)).unwrap();
+        std::fs::copy(run.join(f), src.join("demo").join(f)).unwrap();
     }
     // The workspace manifest's dependencies, without the workspace.
     std::fs::write(
         krate.join("Cargo.toml"),
         "[package]\nname = \"controller-core\"\nversion = \"0.1.0\"\nedition = \"2021\"\n\n\
-         [dependencies]\nlibm = \"0.2\"\npostcard = { version = \"1.2\", default-features = false }\n\
+         [dependencies]\npostcard = { version = \"1.2\", default-features = false }\n\
          serde = { version = \"1\", default-features = false }\n\n[workspace]\n",
     )
     .unwrap();
@@ -157,8 +157,7 @@ fn twelve_state_plant_runs_end_to_end_and_exports_to_the_core() {
     let blob = std::fs::read(run.join("weights.bin")).unwrap();
     let dec = controller_core::blob::decode::<12, 4, Net>(&blob).expect("decode the blob");
     assert!(
-        controller_core::blob::decode::<2, 1, controller_core::generated::weights::Net>(&blob)
-            .is_err()
+        controller_core::blob::decode::<2, 1, controller_core::demo::weights::Net>(&blob).is_err()
     );
     let m = trainer::certify::Model::load(&run.join("model_regularized.bin")).unwrap();
     let c: trainer::certify::certificate::Certificate = serde_json::from_value(cert).unwrap();

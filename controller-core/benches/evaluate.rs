@@ -10,7 +10,7 @@ fn evaluate(c: &mut Criterion) {
     c.bench_function(&name, |b| {
         b.iter(|| {
             let x = cycle.next().unwrap_or(&[0.0, 0.0]);
-            controller_core::evaluate(black_box(x))
+            controller_core::demo::evaluate(black_box(x))
         })
     });
 }

@@ -142,9 +142,9 @@ pub struct Decoded<'a, const NX: usize, const NU: usize, N> {
 /// [`decode_for`] to run it under its certificate, boxes included.
 ///
 /// ```
-/// use controller_core::{blob, generated::weights};
-/// let d = blob::decode::<2, 1, weights::Net>(controller_core::WEIGHTS_BLOB).unwrap();
-/// assert_eq!(d.controller, controller_core::CONTROLLER);
+/// use controller_core::{blob, demo::weights};
+/// let d = blob::decode::<2, 1, weights::Net>(controller_core::demo::WEIGHTS_BLOB).unwrap();
+/// assert_eq!(d.controller, controller_core::demo::CONTROLLER);
 /// assert_eq!(blob::decode::<2, 1, weights::Net>(&[0; 3]), Err(blob::DecodeError::Truncated));
 /// ```
 #[cfg_attr(feature = "no-panic", no_panic::no_panic)]
@@ -203,13 +203,13 @@ where
 /// not carry them).
 ///
 /// ```
-/// use controller_core::{blob, generated::weights, CERTIFICATE};
-/// let d = blob::decode_for::<2, 1, weights::Net>(controller_core::WEIGHTS_BLOB, &CERTIFICATE);
+/// use controller_core::{blob, demo::{weights, CERTIFICATE}};
+/// let d = blob::decode_for::<2, 1, weights::Net>(controller_core::demo::WEIGHTS_BLOB, &CERTIFICATE);
 /// assert!(d.is_ok());
 /// let mut other = CERTIFICATE;
 /// other.hash = "another model";
 /// assert_eq!(
-///     blob::decode_for::<2, 1, weights::Net>(controller_core::WEIGHTS_BLOB, &other).err(),
+///     blob::decode_for::<2, 1, weights::Net>(controller_core::demo::WEIGHTS_BLOB, &other).err(),
 ///     Some(blob::DecodeError::CertificateMismatch)
 /// );
 /// ```
@@ -233,7 +233,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::generated::weights::Net;
+    use crate::demo::weights::Net;
     use proptest::prelude::*;
 
     fn dec(b: &[u8]) -> Result<Decoded<'_, 2, 1, Net>, DecodeError> {
@@ -253,22 +253,24 @@ mod tests {
 
     #[test]
     fn committed_blob_equals_compiled_weights_bit_for_bit() {
-        let d = dec(crate::WEIGHTS_BLOB).unwrap();
-        assert_eq!(d.hash, crate::CERTIFICATE.hash);
+        let d = dec(crate::demo::WEIGHTS_BLOB).unwrap();
+        assert_eq!(d.hash, crate::demo::CERTIFICATE.hash);
         let (mut a, mut b) = (Vec::new(), Vec::new());
         d.controller.net.for_each_layer(&mut |_, _, w, bias| {
             a.extend(w.iter().chain(bias).map(|v| v.to_bits()))
         });
-        crate::CONTROLLER.net.for_each_layer(&mut |_, _, w, bias| {
-            b.extend(w.iter().chain(bias).map(|v| v.to_bits()))
-        });
+        crate::demo::CONTROLLER
+            .net
+            .for_each_layer(&mut |_, _, w, bias| {
+                b.extend(w.iter().chain(bias).map(|v| v.to_bits()))
+            });
         assert_eq!(a, b);
-        assert_eq!(d.controller, crate::CONTROLLER);
+        assert_eq!(d.controller, crate::demo::CONTROLLER);
     }
 
     #[test]
     fn each_error_is_reported() {
-        let good = crate::WEIGHTS_BLOB;
+        let good = crate::demo::WEIGHTS_BLOB;
         let body = &good[..good.len() - 4];
         assert_eq!(dec(&good[..3]).unwrap_err(), DecodeError::Truncated);
         let mut b = good.to_vec();
@@ -328,7 +330,7 @@ mod tests {
             fix_crc in any::<bool>(),
             x in any::<[u32; 2]>(),
         ) {
-            let good = crate::WEIGHTS_BLOB;
+            let good = crate::demo::WEIGHTS_BLOB;
             let mut body = good[..good.len() - 4].to_vec();
             for (i, v) in edits {
                 let n = body.len();

@@ -5,7 +5,7 @@
 //! `f32_allowance` bounds |κ_NN,f32 − κ_NN,f64| on X for the code that runs (weight
 //! rounding, every operation's rounding, the device tanh; computed by the exporter by
 //! interval forward error analysis). There is one certificate per tanh implementation;
-//! [`crate::CERTIFICATE`] is the one of this build.
+//! [`crate::demo::CERTIFICATE`] is the one of the compiled-in example.
 //!
 //! [`Guarantee`] is the tier of the claim: what the arithmetic behind ε proves. The exporter
 //! takes it from the learning side's certificate (its `guarantee`, when it states one) and

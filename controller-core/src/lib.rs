@@ -11,12 +11,13 @@
 //! - [`controller`]: `evaluate`: domain projection, forward pass, clamp, flags.
 //! - [`certificate`]: the certificate's numbers.
 //! - [`blob`]: the postcard weight format and its validating decoder.
-//! - [`generated::weights`]: the compiled-in weights and certificates (`trainer export`).
+//! - [`demo`]: the paper's pendulum, compiled in as an example controller (`trainer export`);
+//!   not re-exported at the root: a firmware names the controller it runs.
 //! - [`include_controller!`]: the same for a crate's own exported controller (no fork of
-//!   this crate); [`generated`] includes the compiled-in pendulum with it.
+//!   this crate); [`demo`] includes the paper's pendulum with it.
 //!
 //! ```
-//! use controller_core::{CONTROLLER, Flags};
+//! use controller_core::{demo::CONTROLLER, Flags};
 //! let out = CONTROLLER.evaluate(&[-3.0, 0.0]);
 //! assert!(out.u[0].is_finite());
 //! assert!(!out.flags.contains(Flags::NON_FINITE));
@@ -28,7 +29,7 @@ pub mod activation;
 pub mod blob;
 pub mod certificate;
 pub mod controller;
-pub mod generated;
+pub mod demo;
 pub mod layer;
 pub mod mlp;
 
@@ -123,11 +124,3 @@ macro_rules! include_controller {
         }
     };
 }
-
-pub use generated::{evaluate, CERTIFICATE, CONTROLLER, NU, NX};
-
-/// The same weights as a postcard blob (`generated/weights.bin`, written by `trainer export`
-/// next to `weights.rs`); [`blob::decode_for`] with [`CERTIFICATE`] turns it into a controller
-/// equal to [`CONTROLLER`] ([`blob::decode`] alone carries no excluded boxes: the blob does not
-/// hold them, the certificate does).
-pub const WEIGHTS_BLOB: &[u8] = include_bytes!("generated/weights.bin");

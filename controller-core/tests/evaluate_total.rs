@@ -3,7 +3,10 @@
 //! the ignored test runs 10⁶ (release, from `.ci/run`).
 #![allow(clippy::indexing_slicing, clippy::unwrap_used)] // test code
 
-use controller_core::{Flags, CERTIFICATE, CONTROLLER};
+use controller_core::{
+    demo::{CERTIFICATE, CONTROLLER},
+    Flags,
+};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
 

@@ -21,7 +21,7 @@
 pub mod decimal;
 pub mod plant;
 
-/// The controller of this build: `AMPC_WEIGHTS`'s file, else controller-core's generated one.
+/// The controller of this build: `AMPC_WEIGHTS`'s file, else controller-core's demo (the pendulum).
 pub mod controller {
     controller_core::include_controller!(concat!(env!("OUT_DIR"), "/weights.rs"));
 }

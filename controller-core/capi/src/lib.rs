@@ -4,7 +4,7 @@
 //! uint8_t ampc_evaluate(const float x[AMPC_NX], float u[AMPC_NU]);   // flags
 //! extern const struct ampc_certificate ampc_linked_certificate;
 //! ```
-//! `ampc_evaluate` is [`controller_core::evaluate`] behind raw pointers: `u = κ_NN(Π_X(x))`
+//! `ampc_evaluate` is [`controller_core::demo::evaluate`] behind raw pointers: `u = κ_NN(Π_X(x))`
 //! clamped to the band, the return value is [`Flags`]' bits, plus
 //! [`FLAG_NULL_ARGUMENT`] for a null pointer (x null: u = fallback, flags NON_FINITE |
 //! NULL_ARGUMENT; u null: nothing read or written, flags NULL_ARGUMENT). No allocation;
@@ -19,7 +19,10 @@
 #![deny(missing_docs)]
 #![deny(unsafe_op_in_unsafe_fn)]
 
-use controller_core::{Certificate, Flags, Guarantee, CERTIFICATE, NU, NX};
+use controller_core::{
+    demo::{CERTIFICATE, NU, NX},
+    Certificate, Flags, Guarantee,
+};
 
 /// Flag bit (C: `AMPC_FLAG_NULL_ARGUMENT`): `x` or `u` was a null pointer.
 pub const FLAG_NULL_ARGUMENT: u8 = 0x80;
@@ -125,7 +128,7 @@ pub unsafe extern "C" fn ampc_evaluate(x: *const f32, u: *mut f32) -> u8 {
         // SAFETY: x is non-null and, by the caller's contract, points to NX readable,
         // initialised, aligned f32 — exactly one `[f32; NX]` (same size and alignment).
         let state = unsafe { x.cast::<[f32; NX]>().read() };
-        controller_core::evaluate(&state)
+        controller_core::demo::evaluate(&state)
     };
     // SAFETY: u is non-null and, by the caller's contract, points to NU writable, aligned
     // f32 — one `[f32; NU]`; x has been read completely above.
@@ -178,7 +181,7 @@ mod tests {
             let mut u = [7.0f32; NU];
             // SAFETY: both arrays are live, aligned and of the right length.
             let flags = unsafe { ampc_evaluate(x.as_ptr(), u.as_mut_ptr()) };
-            let want = controller_core::evaluate(&x);
+            let want = controller_core::demo::evaluate(&x);
             assert_eq!(u.map(f32::to_bits), want.u.map(f32::to_bits));
             assert_eq!(flags, want.flags.0);
         }
@@ -205,7 +208,7 @@ mod tests {
     #[test]
     fn overlapping_x_and_u_read_x_first() {
         let mut buf = [0.3f32, -0.1];
-        let want = controller_core::evaluate(&[0.3, -0.1]);
+        let want = controller_core::demo::evaluate(&[0.3, -0.1]);
         let p = buf.as_mut_ptr();
         // SAFETY: buf holds NX = 2 ≥ NU floats; x is read before u is written.
         let f = unsafe { ampc_evaluate(p, p) };

@@ -4,7 +4,7 @@
 //! TIM2 interrupts every Ts = `firmware_example::plant::TS` (0.05 s, the sampling time of
 //! the pendulum problem the compiled-in weights were trained and certified for). Each
 //! interrupt is one control step: read the sensors ([`plant::Plant::read`]), evaluate
-//! `controller_core::evaluate` (the compiled-in certified net, clamped, with flags), write
+//! `controller_core::demo::evaluate` (the compiled-in certified net, clamped, with flags), write
 //! the actuator ([`plant::Plant::write`]) and log `k, x, u, flags` and the evaluation's
 //! cycle count with defmt over RTT (shown by `probe-rs run`). The plant here is simulated
 //! on the chip ([`plant::SimulatedPendulum`]): replace it by the rig's sensor and driver
@@ -50,7 +50,7 @@ fn main() -> ! {
     // The cycle counter times each evaluation.
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
-    let c = &controller_core::CERTIFICATE;
+    let c = &controller_core::demo::CERTIFICATE;
     defmt::info!(
         "ampc controller {}: eps {} (tanh {}), Ts {} us, sysclk {} Hz",
         c.hash,
@@ -87,7 +87,7 @@ fn TIM2() {
         let _ = l.timer.wait();
         let x = l.plant.read();
         let t0 = DWT::cycle_count();
-        let out = controller_core::evaluate(&x);
+        let out = controller_core::demo::evaluate(&x);
         let cycles = DWT::cycle_count().wrapping_sub(t0);
         l.plant.write(out.u);
         defmt::info!(

@@ -5,7 +5,7 @@
 //! controller's physical units, x1 = θ − π [rad], x2 = ω [rad/s]) and its motor-driver write
 //! (`write` ← u [N·m], already clamped by the controller to its certified band).
 
-use controller_core::{NU, NX};
+use controller_core::demo::{NU, NX};
 use firmware_example::plant::rk4_step;
 
 /// Sensor read and actuator write of one control step.

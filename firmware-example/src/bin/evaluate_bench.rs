@@ -1,4 +1,4 @@
-//! Measurement firmware for `controller_core::evaluate` on the Cortex-M4 or the Cortex-M0 (QEMU;
+//! Measurement firmware for `controller_core::demo::evaluate` on the Cortex-M4 or the Cortex-M0 (QEMU;
 //! `tools/measure.sh`).
 //!
 //! Reads the number of calls N from the semihosting command line

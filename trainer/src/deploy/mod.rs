@@ -4,7 +4,7 @@
 //! u = clamp(κ_NN,f32(proj_X(x)), U ⊕ [−ε, ε]),   |κ_NN,f32 − κ_NN,f64| ≤ f32 allowance
 //! ```
 //! - [`export`]: folding of the scaling, the f32 error analysis, the generated Rust source
-//!   (`controller-core/src/generated/weights.rs`) and the postcard blob for `controller-core`;
+//!   (`controller-core/src/demo/weights.rs`) and the postcard blob for `controller-core`;
 //! - [`onnx`]: the same net as an ONNX model with the certificate in its metadata, and the
 //!   import of a dense MLP from an ONNX file trained elsewhere.
 //!

@@ -1,4 +1,4 @@
-//! The generated Rust file `controller-core/src/generated/weights.rs` ([`render_rust`]):
+//! The generated Rust file `controller-core/src/demo/weights.rs` ([`render_rust`]):
 //! the folded f32 layers, the network type and constant, the f32 domain and one
 //! `Certificate` per device tanh, laid out the way rustfmt formats it (width [`WIDTH`]).
 //!
@@ -130,7 +130,7 @@ fn arr_excluded(model: &ExportModel) -> (String, String) {
     ("excluded".into(), s)
 }
 
-/// The generated Rust file `controller-core/src/generated/weights.rs`.
+/// The generated Rust file `controller-core/src/demo/weights.rs`.
 pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
     let folded = model.folded();
     let (nx, nu) = (model.nx(), model.nu());
