@@ -82,16 +82,14 @@ pub fn check_model(model: &ExportModel) -> Result<(), ExportError> {
 
 /// Checks the report's allowances and observed differences, and ε plus each allowance.
 pub fn check_report(model: &ExportModel, report: &ExportReport) -> Result<(), ExportError> {
-    for k in 0..2 {
-        check(&format!("f32_allowance[{k}]"), report.f32_allowance[k])?;
+    let pairs = report.f32_allowance.iter().zip(&report.f32_observed);
+    for (k, (&allowance, &observed)) in pairs.enumerate() {
+        check(&format!("f32_allowance[{k}]"), allowance)?;
         check(
             &format!("f32_observed[{k}] (the f32 network overflowed on a sampled state)"),
-            report.f32_observed[k],
+            observed,
         )?;
-        check(
-            &format!("eps + f32_allowance[{k}]"),
-            model.eps + report.f32_allowance[k],
-        )?;
+        check(&format!("eps + f32_allowance[{k}]"), model.eps + allowance)?;
     }
     Ok(())
 }

@@ -209,7 +209,8 @@ fn numbers_beyond_the_f32_range_are_refused_naming_the_value() {
     // before anything is written, the message naming the field and the value.
     let dir = std::env::temp_dir().join(format!("ampc_range_{}", std::process::id()));
     let (rs, bin) = (dir.join("w.rs"), dir.join("w.bin"));
-    let cases: Vec<(&str, Box<dyn Fn(&mut ExportModel)>)> = vec![
+    type Edit = Box<dyn Fn(&mut ExportModel)>;
+    let cases: Vec<(&str, Edit)> = vec![
         (
             "layers[1].w[0][2] = 1e39",
             Box::new(|m| m.layers[1].w[0][2] = 1e39),

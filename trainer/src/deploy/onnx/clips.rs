@@ -7,6 +7,8 @@
 //! clamp       Clip(y_j, lo_j, hi_j)  dropped ⇔ lo_j = ampc.clamp_lo[j], hi_j = ampc.clamp_hi[j],
 //!                                              and [lo_j, hi_j] ⊇ [ampc.u_lo[j], ampc.u_hi[j]]
 //! ```
+//! (the band's containment of U up to the exporter's own f32 rounding of a bound of U that
+//! has no f32: one f32 step.)
 //! (`rnd₃₂`: the f32 next to the value, below or above, as the exporter rounds the domain.)
 //! Dropping is exact then: the projection is the identity on X, and a clamp to a band
 //! containing U_d ∋ κ_MPC(x) never moves κ_NN(x) away from κ_MPC(x). Any other Clip changes
@@ -192,18 +194,19 @@ pub fn check(m: &OnnxModel, clips: &[Clip], steps: usize, nx: usize, nu: usize) 
             meta_list(m, "ampc.u_lo", nu)?,
             meta_list(m, "ampc.u_hi", nu)?,
         );
-        for j in 0..nu {
+        let parts = lo.iter().zip(&hi).zip(ulo.iter().zip(&uhi));
+        for (j, ((&l, &h), (&ul, &uh))) in parts.enumerate() {
+            // The exporter keeps the band inside the actuator limits, rounding a limit that
+            // has no f32 inward: a bound one f32 step inside U is the exporter's own.
             // (NaN compares false: a NaN bound is refused here too.)
-            if !(lo[j] <= ulo[j] && uhi[j] <= hi[j]) {
+            let below = l <= ul || f32_rounding_of(l, ul);
+            let above = uh <= h || f32_rounding_of(h, uh);
+            if !(below && above) {
                 return Err(format!(
-                    "metadata: clamp band u{} ∈ [{}, {}] does not contain U = [{}, {}] \
+                    "metadata: clamp band u{} ∈ [{l}, {h}] does not contain U = [{ul}, {uh}] \
                      (ampc.clamp_lo/hi, ampc.u_lo/hi): the clamp would change the certified \
                      controller",
-                    j + 1,
-                    lo[j],
-                    hi[j],
-                    ulo[j],
-                    uhi[j]
+                    j + 1
                 ));
             }
         }
