@@ -193,7 +193,7 @@ fn write_regular(files: &[(&Path, &Path, &[u8])]) -> Result<(), FileError> {
             .unwrap_or(Path::new("."));
         if let Err(e) = std::fs::create_dir_all(dir) {
             cleanup(&tmps);
-            return Err(io(e));
+            return Err(io(not_a_directory(dir).unwrap_or(e)));
         }
         let name = path
             .file_name()
@@ -221,6 +221,58 @@ fn write_regular(files: &[(&Path, &Path, &[u8])]) -> Result<(), FileError> {
         }
     }
     Ok(())
+}
+
+/// Why the directory `dir` cannot be made when one of its ancestors (or itself) exists and
+/// is not a directory (`--out afile/x.bin` with `afile` a regular file): an error naming
+/// that path, instead of "File exists (os error 17)". `None` when no such path exists.
+fn not_a_directory(dir: &Path) -> Option<std::io::Error> {
+    let bad = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| std::fs::metadata(a).is_ok_and(|m| !m.is_dir()))?;
+    Some(std::io::Error::new(
+        std::io::ErrorKind::NotADirectory,
+        format!(
+            "cannot create the directory {}: {} is a file, not a directory",
+            dir.display(),
+            bad.display()
+        ),
+    ))
+}
+
+/// Checks that `name` is one normal path component — a run's directory or a file's stem
+/// under an output directory: not empty, not `.` or `..`, no `/`, `\\` or NUL (so
+/// `name = ".."` cannot write a run's files into the current directory). The message says
+/// what is wrong, quoting the name.
+pub fn check_path_component(name: &str) -> Result<(), String> {
+    let why = if name.is_empty() {
+        "is empty"
+    } else if name == "." || name == ".." {
+        "is `.` or `..`, which names a directory above or at the output root"
+    } else if name.contains(['/', '\\']) {
+        "contains a path separator (`/` or `\\`)"
+    } else if name.contains('\0') {
+        "contains a NUL character"
+    } else {
+        return Ok(());
+    };
+    Err(format!(
+        "{} {why}: it must be one normal path component (e.g. `pendulum_2`)",
+        quote(name)
+    ))
+}
+
+/// At most ~80 characters of `s` for an error message, in backquotes: the whole of a short
+/// text, else its first 80 characters, `…` and its length (a 10 MB CSV field is not echoed).
+pub fn quote(s: &str) -> String {
+    const SHOWN: usize = 80;
+    let n = s.chars().count();
+    if n <= SHOWN {
+        return format!("`{s}`");
+    }
+    let head: String = s.chars().take(SHOWN).collect();
+    format!("`{head}…` ({n} characters)")
 }
 
 /// Lower-case hex of a byte string.
@@ -298,7 +350,14 @@ mod tests {
         write_atomic_all(&[(&a, b"old bin"), (&b, b"old csv")]).unwrap();
         // The second file cannot be written (its "directory" is a file): nothing changes.
         let bad = dir.join("d.bin").join("x.csv");
-        assert!(write_atomic_all(&[(&a, b"new bin"), (&bad, b"new csv")]).is_err());
+        let e = write_atomic_all(&[(&a, b"new bin"), (&bad, b"new csv")]).unwrap_err();
+        // The error names the path and why (issue 38 §4: not "File exists (os error 17)").
+        let e = e.to_string();
+        assert!(
+            e.contains(&bad.display().to_string())
+                && e.contains(&format!("{} is a file, not a directory", a.display())),
+            "{e}"
+        );
         assert_eq!(std::fs::read(&a).unwrap(), b"old bin");
         assert_eq!(std::fs::read(&b).unwrap(), b"old csv");
         let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
@@ -348,6 +407,24 @@ mod tests {
             .file_type()
             .is_symlink());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_name_is_one_normal_path_component() {
+        for ok in ["pendulum", "a.b", "run-2", "...", ".hidden"] {
+            assert!(check_path_component(ok).is_ok(), "{ok}");
+        }
+        for bad in ["", ".", "..", "a/b", "/", "a\\b", "a\0b"] {
+            assert!(check_path_component(bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn quote_keeps_at_most_80_characters() {
+        assert_eq!(quote("abc"), "`abc`");
+        let long = "é".repeat(10_000);
+        let q = quote(&long);
+        assert_eq!(q, format!("`{}…` (10000 characters)", "é".repeat(80)));
     }
 
     #[test]

@@ -167,15 +167,21 @@ pub(super) fn refuse_overwrite(outputs: &[&Path], inputs: &[&Path]) -> Result<()
     Ok(())
 }
 
-/// Reads a states CSV: header `x1,…,xn`, one finite state per row
-/// (`trainer::data::states::parse_states`).
-pub(super) fn read_states(path: &Path, nx: usize) -> Result<Vec<Vec<f64>>> {
+/// Reads a states CSV: header `x1,…,xn` or the problem's state names (when a problem is
+/// known), one finite state per row (`trainer::data::states::parse_states_named`).
+pub(super) fn read_states(
+    path: &Path,
+    nx: usize,
+    problem: Option<&ProblemConfig>,
+) -> Result<Vec<Vec<f64>>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read states file {}", path.display()))?;
-    Ok(trainer::data::states::parse_states(
+    let names = problem.map_or_else(Vec::new, |c| c.system.names().states);
+    Ok(trainer::data::states::parse_states_named(
         &text,
         &path.display().to_string(),
         nx,
+        &names,
     )?)
 }
 

@@ -38,7 +38,7 @@ pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> 
     if raw && certificate.is_some() {
         bail!("--raw evaluates the bare network: a certificate plays no part (drop --certificate)");
     }
-    let xs = read_states(states, nx)?;
+    let xs = read_states(states, nx, problem.as_ref())?;
     let s = if raw {
         let mut s = jacobian_header(nx, nu).join(",");
         s.push('\n');

@@ -24,7 +24,8 @@ use trainer::certify::certificate::Certificate;
 use trainer::certify::statistical::Statistical;
 use trainer::certify::Model;
 use trainer::deploy::export::{
-    certify_f32, export_files, render_c_header, ExportModel, Guarantee, StatisticalClaim,
+    certify_f32, render_c_header, render_files, write_files, ExportModel, Guarantee, PendingFiles,
+    StatisticalClaim,
 };
 use trainer::learn::mlp::Activation;
 
@@ -84,6 +85,10 @@ pub(super) fn execute(
     let name = name.as_str();
     let tanh = m.mlp.activation == Activation::Tanh;
     let mut allowance = None;
+    // Every output is rendered first and written at the end as one set (issue 38 §4: a
+    // failed write leaves no Rust file without its blob); the messages follow the write.
+    let mut files: PendingFiles = Vec::new();
+    let mut said: Vec<String> = Vec::new();
     if let (Some(rust), Some(postcard)) = (out.rust, out.postcard) {
         let em = ExportModel::from_trained(name, &m, &cert).with_context(|| {
             format!(
@@ -93,11 +98,12 @@ pub(super) fn execute(
             )
         })?;
         let em = prepare(em)?;
-        let r = export_files(&em, rust, postcard)?;
+        let (r, rendered) = render_files(&em, rust, postcard)?;
+        files.extend(rendered);
         if let Some(h) = out.c_header {
-            trainer::io::write_atomic(h, render_c_header(&em, &r)?.as_bytes())?;
+            files.push((h.to_path_buf(), render_c_header(&em, &r)?.into_bytes()));
         }
-        eprintln!(
+        said.push(format!(
             "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | {} ε {:.4} + {:.3e} ({}{})",
             model.display(),
             rust.display(),
@@ -110,13 +116,13 @@ pub(super) fn execute(
             r.f32_allowance[0],
             em.guarantee.name(),
             em.statistical.as_ref().map_or(String::new(), |s| format!(": {}", s.words()))
-        );
+        ));
         if !em.excluded.is_empty() {
-            eprintln!(
+            said.push(format!(
                 "the certificate excludes {} boxes of X (outside the MPC's feasible set): the \
                  controller flags states in them (EXCLUDED)",
                 em.excluded.len()
-            );
+            ));
         }
         allowance = Some(r.f32_allowance[0]);
     }
@@ -134,8 +140,8 @@ pub(super) fn execute(
             allowance = Some(certify_f32(&em)?.f32_allowance[0]);
         }
         let bytes = trainer::deploy::onnx::render_onnx(&em, m.mlp.activation, allowance);
-        trainer::io::write_atomic(onnx, &bytes)?;
-        eprintln!(
+        files.push((onnx.to_path_buf(), bytes));
+        said.push(format!(
             "exported {} -> {} (ONNX opset {}, {:?} MLP {:?}) | certified ε {:.4}{} ({})",
             model.display(),
             onnx.display(),
@@ -148,7 +154,11 @@ pub(super) fn execute(
                 None => " (f32 allowance not analysed for this activation)".into(),
             },
             em.guarantee.name()
-        );
+        ));
+    }
+    write_files(&files)?;
+    for s in said {
+        eprintln!("{s}");
     }
     Ok(())
 }

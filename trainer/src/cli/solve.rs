@@ -11,7 +11,7 @@ use trainer::mpc::law::MpcLaw;
 pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Result<()> {
     let cfg = load_config(config)?;
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
-    let xs = read_states(states, nx)?;
+    let xs = read_states(states, nx, Some(&cfg))?;
     // Each state is solved from a cold start: the answer does not depend on the order.
     let labels: Vec<_> = xs
         .par_iter()

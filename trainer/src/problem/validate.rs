@@ -133,12 +133,7 @@ fn check_setpoint(
 impl ProblemConfig {
     /// Checks every setting once; the error names the key at fault.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.name.is_empty() || self.name.contains(['/', '\\']) {
-            return Err(invalid(
-                "name",
-                "must be a non-empty name without path separators",
-            ));
-        }
+        crate::io::check_path_component(&self.name).map_err(|r| invalid("name", r))?;
         self.system.validate().map_err(|(k, r)| invalid(k, r))?;
         let (nx, nu) = (self.system.nx(), self.system.nu());
         let o = &self.ocp;

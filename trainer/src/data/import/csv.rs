@@ -62,6 +62,19 @@ pub struct Table {
     pub jacobian: bool,
 }
 
+/// A value in an error message: at most 80 characters, in backquotes ([`crate::io::quote`]).
+fn quote(v: &str) -> String {
+    crate::io::quote(v)
+}
+
+/// A column name in an error message: at most 80 characters (then `…`).
+fn short(c: &str) -> String {
+    match c.char_indices().nth(80) {
+        Some((at, _)) => format!("{}…", &c[..at]),
+        None => c.to_string(),
+    }
+}
+
 fn unquote(s: &str) -> &str {
     let t = s.trim();
     t.strip_prefix('"')
@@ -178,9 +191,11 @@ pub fn parse(
     let err_at = |line: usize, col: Option<&str>, reason: String| CsvError {
         file: file.to_string(),
         line,
-        column: col.map(str::to_string),
+        column: col.map(short),
         reason,
     };
+    // A UTF-8 byte-order mark (as Excel writes it) is not part of the first column's name.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
         .enumerate()
@@ -226,8 +241,9 @@ pub fn parse(
                 if v.is_empty() {
                     return Ok(f64::NAN);
                 }
-                v.parse::<f64>()
-                    .map_err(|_| err_at(ln, Some(&name(k)), format!("`{v}` is not a number")))
+                v.parse::<f64>().map_err(|_| {
+                    err_at(ln, Some(&name(k)), format!("{} is not a number", quote(v)))
+                })
             };
             match *col {
                 Col::Index => {}
@@ -242,7 +258,7 @@ pub fn parse(
                         0
                     } else {
                         v.parse().map_err(|_| {
-                            err_at(ln, Some(&name(k)), format!("`{v}` is not a count"))
+                            err_at(ln, Some(&name(k)), format!("{} is not a count", quote(v)))
                         })?
                     }
                 }
@@ -252,8 +268,9 @@ pub fn parse(
                             ln,
                             Some(&name(k)),
                             format!(
-                                "unknown status `{v}` (converged, soft, infeasible, \
-                                 max_iterations, numerical_failure)"
+                                "unknown status {} (converged, soft, infeasible, \
+                                 max_iterations, numerical_failure)",
+                                quote(v)
                             ),
                         )
                     })?
@@ -268,7 +285,7 @@ pub fn parse(
                             return Err(err_at(
                                 ln,
                                 Some(&name(k)),
-                                format!("`{v}` is not empty, weakly_active or singular"),
+                                format!("{} is not empty, weakly_active or singular", quote(v)),
                             ))
                         }
                     }
@@ -340,4 +357,38 @@ pub fn parse(
         lines: at,
         jacobian,
     })
+}
+
+/// Relative tolerance of the input-bound check of labels: a label u_j is accepted when
+/// `u_lo_j − tol_j ≤ u_j ≤ u_hi_j + tol_j`, `tol_j = U_RTOL·max(1, |bound|)` (another solver
+/// may meet a bound up to its own constraint tolerance, e.g. IPOPT's relaxation 1e-8).
+pub const U_RTOL: f64 = 1e-6;
+
+/// Checks every labelled row's inputs against U = [u_lo, u_hi] (the OCP's bounds on u₀;
+/// infinite entries: no bound) with the tolerance [`U_RTOL`]; the error names the file, the
+/// line and the value.
+pub fn check_inputs(t: &Table, file: &str, u_lo: &[f64], u_hi: &[f64]) -> Result<(), CsvError> {
+    let tol = |b: f64| U_RTOL * b.abs().max(1.0);
+    for (r, &line) in t.records.iter().zip(&t.lines) {
+        if !r.status.is_labelled() {
+            continue;
+        }
+        for (j, &u) in r.u.iter().enumerate() {
+            let (lo, hi) = (u_lo[j], u_hi[j]);
+            if u < lo - tol(lo) || u > hi + tol(hi) {
+                return Err(CsvError {
+                    file: file.to_string(),
+                    line,
+                    column: None,
+                    reason: format!(
+                        "label u{} = {u} is outside the problem's input bounds U: [{lo}, {hi}] \
+                         (tolerance {U_RTOL:e}·max(1, |bound|)); a label must be an input the \
+                         MPC can apply",
+                        j + 1
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
 }

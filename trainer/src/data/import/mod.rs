@@ -1,7 +1,8 @@
 //! `trainer import`: a labelled dataset D̂ = {(x_i, u_i, ∂u/∂x_i)} from another solver's CSV,
 //! stored as an ampc dataset with its provenance, and the re-solve check of its labels.
 //!
-//! - [`csv`]: the column rule and the row checks (dimensions, domain X, finite values).
+//! - [`csv`]: the column rule and the row checks (dimensions, domain X, finite values,
+//!   labels inside the input bounds U).
 //! - The dataset: one record per row (index = row number), header sampler `imported` (so
 //!   the certificate's covering radius is the scattered-point bound, never a grid formula),
 //!   and [`ImportedLabels`] — file name, SHA-256 of its bytes, and the re-solve check.
@@ -179,6 +180,8 @@ pub fn import(
         &cfg.domain.hi,
         cfg.system.nu(),
     )?;
+    let (u_lo, u_hi) = cfg.ocp.u_bounds(0);
+    csv::check_inputs(&t, &file, u_lo, u_hi)?;
     let labelled: Vec<usize> = (0..t.records.len())
         .filter(|&i| t.records[i].is_labelled())
         .collect();

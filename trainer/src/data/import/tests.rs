@@ -253,3 +253,63 @@ fn a_column_numbered_zero_is_an_unknown_column_not_a_panic() {
         );
     }
 }
+
+#[test]
+fn a_bom_is_skipped_and_a_long_field_is_quoted_short() {
+    // Excel's CSV: a UTF-8 byte-order mark before the header (issue 38 §4).
+    let cfg = small_cfg();
+    let d = dir("bom");
+    let csv = write(&d, "bom.csv", "\u{feff}x1,x2,u1\n0.5,0.25,0.1\n");
+    let opts = ImportOptions {
+        resolve: 0,
+        ..Default::default()
+    };
+    let imp = import(&cfg, &csv, &opts).unwrap();
+    assert_eq!(imp.records[0].x, vec![0.5, 0.25]);
+    // A 1 MB field is echoed with 80 characters and its length, not in full.
+    let long = "q".repeat(1 << 20);
+    let csv = write(&d, "long.csv", &format!("x1,x2,u1\n0.5,{long},0.1\n"));
+    let e = import(&cfg, &csv, &opts).unwrap_err().to_string();
+    assert!(e.len() < 400, "{} characters: {}", e.len(), &e[..400]);
+    assert!(
+        e.contains("long.csv:2") && e.contains("(1048576 characters)"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn labels_outside_u_are_refused_naming_the_row_and_value() {
+    // `import --resolve 0` re-solves nothing: the input bounds are still checked.
+    let cfg = small_cfg();
+    let (lo, hi) = cfg.ocp.u_bounds(0);
+    let (lo, hi) = (lo[0], hi[0]);
+    let d = dir("u");
+    let opts = ImportOptions {
+        resolve: 0,
+        ..Default::default()
+    };
+    let bad = hi + 0.5;
+    let csv = write(
+        &d,
+        "u.csv",
+        &format!("x1,x2,u1\n0.5,0.25,{hi}\n0.5,0.25,{bad}\n"),
+    );
+    let e = import(&cfg, &csv, &opts).unwrap_err().to_string();
+    assert!(
+        e.contains("u.csv:3") && e.contains(&format!("label u1 = {bad}")),
+        "{e}"
+    );
+    // Within the stated tolerance (another solver's bound relaxation): accepted.
+    let near = lo - 1e-9;
+    let csv = write(&d, "near.csv", &format!("x1,x2,u1\n0.5,0.25,{near}\n"));
+    assert!(import(&cfg, &csv, &opts).is_ok());
+    // Unlabelled rows carry no input to check.
+    let csv = write(
+        &d,
+        "unl.csv",
+        &format!("x1,x2,u1,status\n0.5,0.25,{bad},infeasible\n"),
+    );
+    assert!(import(&cfg, &csv, &opts).is_ok());
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -297,5 +297,6 @@ pub fn certify_f32(model: &ExportModel) -> Result<ExportReport, ExportError> {
         report.boxes = boxes;
         report.f32_observed[k] = sampled_max_diff(model, *t, SAMPLES, 1 + k as u64);
     }
+    super::range::check_report(model, &report)?;
     Ok(report)
 }

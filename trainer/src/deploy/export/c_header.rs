@@ -32,6 +32,7 @@ fn list(items: impl Iterator<Item = String>) -> String {
 /// ASCII hex/`-`/alphanumeric, which the C string could not hold verbatim).
 pub fn render_c_header(model: &ExportModel, report: &ExportReport) -> Result<String, ExportError> {
     model.validate()?;
+    super::range::check_report(model, report)?;
     if model.hash.len() > HASH_CAPACITY
         || !model
             .hash

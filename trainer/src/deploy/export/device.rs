@@ -130,6 +130,28 @@ mod tests {
     }
 
     #[test]
+    fn the_corners_of_x_are_in_the_domain() {
+        // The pendulum's X = [−2π, 2π] × [−1, 1]: 2π has no f32, and the f32 nearest it lies
+        // outside X. `eval` reads a state as that nearest f32: no corner may be flagged.
+        let m = placeholder_pendulum();
+        let d = Device::new(&m, Tanh::Libm).unwrap();
+        for c in 0..4 {
+            let x: Vec<f32> = (0..2)
+                .map(|i| {
+                    let v = if c >> i & 1 == 0 {
+                        m.domain_lo[i]
+                    } else {
+                        m.domain_hi[i]
+                    };
+                    v as f32
+                })
+                .collect();
+            let (_, f) = d.evaluate(&x);
+            assert_eq!(f & OUT_OF_DOMAIN, 0, "corner {x:?} flagged out of domain");
+        }
+    }
+
+    #[test]
     fn states_in_excluded_boxes_are_flagged_with_the_same_input() {
         let plain = placeholder_pendulum();
         let mut m = plain.clone();

@@ -33,6 +33,7 @@ mod blob;
 mod c_header;
 pub mod device;
 mod guarantee;
+pub mod range;
 mod rust;
 mod tanh;
 #[cfg(test)]
@@ -331,7 +332,7 @@ impl ExportModel {
                 return inv(format!("{w} must be finite and ≥ 0"));
             }
         }
-        Ok(())
+        range::check_model(self)
     }
 
     /// κ_NN,f64(x): the reference network, scalings applied explicitly.
@@ -404,11 +405,13 @@ impl ExportModel {
             .collect()
     }
 
-    /// The certified box rounded inward to f32.
+    /// The certified box rounded outward to f32: the smallest f32 box containing X, so the
+    /// f32 state nearest any state of X (its corners included) is inside and not flagged
+    /// out of domain. States of this box outside X lie within one f32 step of X's bounds.
     pub fn domain_f32(&self) -> (Vec<f32>, Vec<f32>) {
         (
-            self.domain_lo.iter().map(|v| f32_up(*v)).collect(),
-            self.domain_hi.iter().map(|v| f32_down(*v)).collect(),
+            self.domain_lo.iter().map(|v| f32_down(*v)).collect(),
+            self.domain_hi.iter().map(|v| f32_up(*v)).collect(),
         )
     }
 
@@ -445,18 +448,50 @@ impl ExportModel {
             .collect()
     }
 }
-/// Validates `model`, computes the f32 allowances, writes the Rust file and the blob
-/// (each atomically with [`crate::io::write_atomic`]: temporary file, fsync, rename) and
-/// returns the report.
+/// Validates `model`, computes the f32 allowances, writes the Rust file and the blob as
+/// one set ([`write_files`]: both or neither) and returns the report.
 pub fn export_files(
     model: &ExportModel,
     rust_out: &Path,
     postcard_out: &Path,
 ) -> Result<ExportReport, ExportError> {
-    let report = certify_f32(model)?;
-    crate::io::write_atomic(rust_out, render_rust(model, &report).as_bytes())?;
-    crate::io::write_atomic(postcard_out, &render_postcard(model, &report))?;
+    let (report, files) = render_files(model, rust_out, postcard_out)?;
+    write_files(&files)?;
     Ok(report)
+}
+
+/// The files of an export, rendered and not yet written: `(path, bytes)`.
+pub type PendingFiles = Vec<(PathBuf, Vec<u8>)>;
+
+/// Validates `model`, computes the f32 allowances and renders the Rust file and the blob
+/// for `rust_out` and `postcard_out` (written by [`write_files`], with any other file of
+/// the same export).
+pub fn render_files(
+    model: &ExportModel,
+    rust_out: &Path,
+    postcard_out: &Path,
+) -> Result<(ExportReport, PendingFiles), ExportError> {
+    let report = certify_f32(model)?;
+    let files = vec![
+        (
+            rust_out.to_path_buf(),
+            render_rust(model, &report).into_bytes(),
+        ),
+        (postcard_out.to_path_buf(), render_postcard(model, &report)),
+    ];
+    Ok((report, files))
+}
+
+/// Writes an export's files as one transaction ([`crate::io::write_atomic_all`]): each is
+/// written in full beside its destination first, and only then are all renamed into place,
+/// so a failure (a full disk, a missing directory) leaves every previous file as it was.
+pub fn write_files(files: &[(PathBuf, Vec<u8>)]) -> Result<(), ExportError> {
+    let set: Vec<(&Path, &[u8])> = files
+        .iter()
+        .map(|(p, b)| (p.as_path(), b.as_slice()))
+        .collect();
+    crate::io::write_atomic_all(&set)?;
+    Ok(())
 }
 
 /// PLACEHOLDER pendulum network (2-10-10-1) until the trained one exists: deterministic

@@ -69,8 +69,13 @@ fn band_contains_u_d_and_stays_in_actuator_limits() {
     m.u_lo = vec![-0.1];
     let (lo, _) = m.clamp_band(1e-9);
     assert!(f64::from(lo[0]) <= -0.1 - 1e-9);
+    // The f32 domain contains X, and the f32 state nearest each corner of X (issue 38 §4).
     let (dlo, dhi) = m.domain_f32();
-    assert!(f64::from(dlo[0]) >= m.domain_lo[0] && f64::from(dhi[0]) <= m.domain_hi[0]);
+    for i in 0..2 {
+        let (lo, hi) = (m.domain_lo[i], m.domain_hi[i]);
+        assert!(f64::from(dlo[i]) <= lo && f64::from(dhi[i]) >= hi);
+        assert!(dlo[i] <= lo as f32 && dhi[i] >= hi as f32, "corner {i}");
+    }
 }
 
 #[test]
@@ -196,4 +201,39 @@ fn a_statistical_eps_is_statistical_and_narrows_the_band() {
         "rust file"
     );
     assert!(text.contains("Guarantee::Statistical"));
+}
+
+#[test]
+fn numbers_beyond_the_f32_range_are_refused_naming_the_value() {
+    // A weight, ε and a scaling whose folding overflows f32 (issue 38 §3): each refused
+    // before anything is written, the message naming the field and the value.
+    let dir = std::env::temp_dir().join(format!("ampc_range_{}", std::process::id()));
+    let (rs, bin) = (dir.join("w.rs"), dir.join("w.bin"));
+    type Edit = Box<dyn Fn(&mut ExportModel)>;
+    let cases: Vec<(&str, Edit)> = vec![
+        (
+            "layers[1].w[0][2] = 1e39",
+            Box::new(|m| m.layers[1].w[0][2] = 1e39),
+        ),
+        ("eps = 5e40", Box::new(|m| m.eps = 5e40)),
+        ("l_mpc = 1e300", Box::new(|m| m.l_mpc = 1e300)),
+        (
+            "folded layers[0].w[0]",
+            Box::new(|m| {
+                m.input.scale[0] = 1e-38;
+                m.layers[0].w[0][0] = 1e4;
+            }),
+        ),
+    ];
+    for (what, edit) in cases {
+        let mut m = placeholder_pendulum();
+        edit(&mut m);
+        let e = export_files(&m, &rs, &bin).unwrap_err().to_string();
+        assert!(
+            e.contains(what) && e.contains("beyond the f32 range"),
+            "{what}: {e}"
+        );
+        assert!(!rs.exists() && !bin.exists(), "{what}: a file was written");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

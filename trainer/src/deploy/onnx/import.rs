@@ -14,10 +14,14 @@
 //! map exactly, other orders are composed in f64). Gemm: `alpha·A·op(B) + beta·C`,
 //! `transA = 0`. All hidden activations must be the same. Files written by
 //! `trainer export --onnx` (metadata `ampc.hash`) may also hold the domain projection and
-//! the output clamp (`Clip`, with `Split`/`Concat` per component): they are recognised and
-//! dropped — the projection is the identity on X, and the clamp band contains U_d ⊇ κ(X),
-//! so the certificate of the unclamped net bounds the clamped one too.
+//! the output clamp (`Clip`, with `Split`/`Concat` per component): they are dropped only
+//! when their bounds are exactly the metadata's domain and clamp band (`clips`) — then the
+//! projection is the identity on X, and the clamp band contains U_d ⊇ κ(X), so the
+//! certificate of the unclamped net bounds the clamped one too; any other Clip is refused.
+//! The default-domain opset must be in [`super::clips::SUPPORTED_OPSETS`], and tensor names
+//! unique.
 
+use super::clips::{clip_bounds, Clip, Side};
 use super::graph::{Node, OnnxModel, Tensor};
 use crate::learn::mlp::{Activation, Layer, Mlp};
 use std::collections::HashMap;
@@ -109,21 +113,13 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
     let ampc = m.meta("ampc.hash").is_some();
     let mut notes = ImportNotes {
         producer: m.producer.clone(),
-        opset: m
-            .opsets
-            .iter()
-            .filter(|(d, _)| d.is_empty() || d == "ai.onnx")
-            .map(|o| o.1)
-            .max()
-            .unwrap_or(0),
+        opset: super::clips::default_opset(m)?,
         ampc_export: ampc,
         clips_dropped: 0,
     };
-    let mut consts: HashMap<String, Tensor> = m
-        .initializers
-        .iter()
-        .map(|t| (t.name.clone(), t.clone()))
-        .collect();
+    let mut consts: HashMap<String, Tensor> = super::clips::initializers(m)?;
+    // The Clip nodes of an ampc export, checked against its metadata once the chain is known.
+    let mut clips: Vec<Clip> = Vec::new();
     let inputs: Vec<_> = m
         .inputs
         .iter()
@@ -155,7 +151,12 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
         }
         if n.op == "Constant" {
             let t = constant_value(n, &label)?;
-            consts.insert(n.outputs.first().cloned().unwrap_or_default(), t);
+            let name = n.outputs.first().cloned().unwrap_or_default();
+            if consts.insert(name.clone(), t).is_some() {
+                return Err(format!(
+                    "{label}: output '{name}' is already defined (tensor names must be unique)"
+                ));
+            }
             continue;
         }
         let out = n.outputs.first().cloned().unwrap_or_default();
@@ -169,23 +170,49 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             // The ampc export's per-component Clip: Split → Clip each → Concat.
             match n.op.as_str() {
                 "Split" if n.inputs.first() == Some(&current) && parts.is_none() => {
+                    unit_split(n, &label, &consts)?;
                     parts = Some(n.outputs.clone());
                     continue;
                 }
-                "Clip" => {
-                    if let Some(p) = parts.as_mut() {
-                        if let Some(slot) = p.iter_mut().find(|s| **s == n.inputs[0]) {
-                            *slot = out;
-                            notes.clips_dropped += 1;
-                            continue;
+                "Clip" if !n.inputs.is_empty() => {
+                    let (component, slot) = match parts.as_mut() {
+                        Some(p) => match p.iter_mut().position(|s| *s == n.inputs[0]) {
+                            Some(k) => (Some(k), Some(&mut p[k])),
+                            None => (None, None),
+                        },
+                        None if n.inputs[0] == current => (None, Some(&mut current)),
+                        None => (None, None),
+                    };
+                    if let Some(slot) = slot {
+                        *slot = out;
+                        let (lo, hi) = clip_bounds(n, &label, |name| consts.get(name).cloned())?;
+                        let linear = steps.iter().any(|s| matches!(s, Step::Linear(..)));
+                        if !linear && !steps.is_empty() {
+                            return Err(format!(
+                                "{label}: a Clip after the input scaling (only the projection \
+                                 onto X before the first layer and the output clamp after the \
+                                 last are supported)"
+                            ));
                         }
-                    } else if n.inputs[0] == current {
-                        current = out;
+                        clips.push(Clip {
+                            label: label.clone(),
+                            side: if linear {
+                                Side::Clamp
+                            } else {
+                                Side::Projection
+                            },
+                            component,
+                            lo,
+                            hi,
+                            at_step: steps.len(),
+                        });
                         notes.clips_dropped += 1;
                         continue;
                     }
                 }
-                "Concat" if parts.as_deref() == Some(&n.inputs[..]) => {
+                "Concat"
+                    if parts.as_deref() == Some(&n.inputs[..]) && int_attr(n, "axis", 1) == 1 =>
+                {
                     parts = None;
                     current = out;
                     continue;
@@ -312,7 +339,30 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             output.name
         ));
     }
-    assemble(steps, notes, input.dims.last().copied().flatten())
+    let n_steps = steps.len();
+    let (mlp, notes) = assemble(steps, notes, input.dims.last().copied().flatten())?;
+    super::clips::check(m, &clips, n_steps, mlp.nx(), mlp.nu())?;
+    Ok((mlp, notes))
+}
+
+/// An ampc export's `Split` along axis 1 into parts of width 1 (input 2 or attribute `split`
+/// all ones, or absent: equal parts); anything else is refused naming the node.
+fn unit_split(n: &Node, label: &str, consts: &HashMap<String, Tensor>) -> R<()> {
+    let sizes = match n.inputs.get(1).filter(|s| !s.is_empty()) {
+        Some(name) => consts
+            .get(name)
+            .map(|t| t.ints.clone())
+            .ok_or_else(|| format!("{label}: split sizes '{name}' are not a constant"))?,
+        None => n.attr("split").map(|a| a.ints.clone()).unwrap_or_default(),
+    };
+    let axis = int_attr(n, "axis", 0);
+    if axis != 1 || !(sizes.is_empty() || sizes.iter().all(|s| *s == 1)) {
+        return Err(format!(
+            "{label}: Split on axis {axis} into sizes {sizes:?} (an ampc export splits axis 1 \
+             into components of width 1)"
+        ));
+    }
+    Ok(())
 }
 
 /// Input `i` of node `n`, which must be a constant.

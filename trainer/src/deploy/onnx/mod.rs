@@ -17,12 +17,17 @@
 //! independent ONNX runtime (`tract-onnx`, in `tests/`), so reader and writer do not only
 //! agree with each other.
 //!
-//! Files: `proto` (wire encoding), `graph` (ModelProto → [`graph::OnnxModel`]), `import`
-//! (graph → [`crate::learn::mlp::Mlp`], unsupported nodes named), `write` (the export).
+//! Files: `proto` (wire encoding), `graph` (ModelProto → [`graph::OnnxModel`]), `clips`
+//! (opset, unique names, and the Clip nodes of an ampc export checked against its metadata),
+//! `import` (graph → [`crate::learn::mlp::Mlp`], unsupported nodes named), `write` (the
+//! export).
 
+pub mod clips;
 pub mod graph;
 pub mod import;
 pub mod proto;
+#[cfg(test)]
+mod tamper_tests;
 #[cfg(test)]
 mod tests;
 pub mod write;
