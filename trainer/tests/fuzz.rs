@@ -14,6 +14,9 @@
 //! that is the original or round-trips (re-encoding the decoded value decodes to the same
 //! bytes), and every `Err` names the file (or the setting) at fault.
 //!
+//! Beside the readers, [`nan_plants`]: expression plants whose arithmetic gives NaN or ±∞ —
+//! never a label there, never a certificate from them.
+//!
 //! `cargo test -p trainer --test fuzz` runs [`SMOKE`] cases per target; the full counts
 //! (`fuzz_*`, ignored) run with `cargo test -p trainer --test fuzz -- --ignored`
 //! (see BENCHMARKS.md for the counts and times). Fixed RNG seed: the same inputs every run.
@@ -29,6 +32,11 @@ use trainer::certify::refine::RefineState;
 use trainer::certify::Model;
 use trainer::data::dataset::{checkpoint, Dataset};
 use trainer::problem::ProblemConfig;
+
+/// Expression plants with NaN/∞-producing terms: no label and no certificate from them.
+#[path = "fuzz/nan_plants.rs"]
+mod nan_plants;
+use nan_plants::nan_plants;
 
 /// Cases per target in the default (debug) test run.
 const SMOKE: u32 = 48;
@@ -798,6 +806,17 @@ targets! {
     fuzz_problem_tables, smoke_problem_tables, problem_tables, 20_000;
     fuzz_expressions, smoke_expressions, expressions, 20_000;
     fuzz_problem_arbitrary, smoke_problem_arbitrary, problem_arbitrary, 100_000;
+}
+
+// A plant costs a dataset's solves, not a decode: fewer cases (60: ~18 s in the campaign).
+#[test]
+#[ignore = "fuzz campaign: cargo test -p trainer --test fuzz -- --ignored"]
+fn fuzz_nan_plants() {
+    nan_plants(60);
+}
+#[test]
+fn smoke_nan_plants() {
+    nan_plants(3);
 }
 
 #[test]

@@ -231,6 +231,13 @@ mod json_only {
 /// Inputs that do not belong together: certifying them would bound the wrong thing.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MismatchError {
+    /// The dataset's labels cannot carry a certificate (none, numerical failures, or a
+    /// non-finite label).
+    #[error(transparent)]
+    Labels(#[from] crate::data::dataset::LabelsError),
+    /// The network is beyond the documented size limits for certification.
+    #[error(transparent)]
+    NetTooLarge(#[from] crate::problem::limits::NetTooLarge),
     /// The model and the data have different state or input dimensions.
     #[error("the model maps {model_nx} states to {model_nu} inputs but the dataset has {data_nx} states and {data_nu} inputs")]
     Dimensions {
@@ -283,6 +290,10 @@ pub fn check_inputs(
     data: &crate::data::dataset::Dataset,
     cfg: &crate::problem::ProblemConfig,
 ) -> Result<(), MismatchError> {
+    // No certificate from labels that do not exist or are not finite (data::dataset::gate),
+    // nor for a net beyond the documented size limits (problem::limits).
+    data.check_labels()?;
+    crate::problem::limits::check_net(&model.mlp.widths())?;
     let (mx, mu) = (model.mlp.widths()[0], model.mlp.nu());
     let (dx, du) = (data.header.nx as usize, data.header.nu as usize);
     if (mx, mu) != (dx, du) || (dx, du) != (cfg.system.nx(), cfg.system.nu()) {

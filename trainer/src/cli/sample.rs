@@ -37,6 +37,15 @@ pub(super) fn execute(
             out.display(),
             dataset::csv_path(out).display()
         );
+        // Why the first numerical failure has no label (re-solved once: the record does
+        // not store it).
+        if let Some((index, x, failure)) = d.first_failure(&cfg) {
+            let why = failure.map_or_else(
+                || "the solver broke down (QP or line search)".to_string(),
+                |f| f.to_string(),
+            );
+            eprintln!("first numerical_failure: state {index}, x = {x:?}: {why}");
+        }
     }
     Ok(())
 }

@@ -34,6 +34,17 @@ pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Resul
         *retried.entry(r.as_str()).or_default() += 1;
     }
     let retried: Vec<String> = retried.iter().map(|(k, n)| format!("{k} {n}")).collect();
+    // Why states have no label (the label gate names the first non-finite quantity).
+    let mut why = std::collections::BTreeMap::<String, usize>::new();
+    let failed = labels
+        .iter()
+        .filter(|l| l.status == trainer::mpc::sqp::SqpStatus::NumericalFailure);
+    for f in failed.filter_map(|l| l.failure()) {
+        *why.entry(f.to_string()).or_default() += 1;
+    }
+    for (reason, n) in &why {
+        eprintln!("{n} state(s) numerical_failure: {reason}");
+    }
     eprintln!(
         "solved {} states ({} without a label{}) -> {}",
         labels.len(),

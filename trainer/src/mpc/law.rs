@@ -22,6 +22,7 @@
 //! The ladder runs only where the plain solve found no label, so every state labelled without
 //! it keeps its label bit for bit.
 
+use crate::mpc::finite::{check_label, nan_max, Failure, LabelParts, Quantity};
 use crate::mpc::sensitivity::{sensitivity, Degeneracy};
 use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
 use crate::problem::ProblemConfig;
@@ -88,6 +89,14 @@ pub struct Label {
     pub retry: Option<Retry>,
 }
 
+impl Label {
+    /// Why the state has no label, when a number it rests on is not finite or the KKT
+    /// conditions re-checked after the solve fail ([`crate::mpc::finite`]).
+    pub fn failure(&self) -> Option<Failure> {
+        self.info.failure
+    }
+}
+
 /// A reusable MPC law evaluator: one hard and (lazily) one soft SQP workspace.
 pub struct MpcLaw {
     cfg: ProblemConfig,
@@ -117,22 +126,58 @@ impl MpcLaw {
         &self.hard
     }
 
+    /// The label of a converged solve `r` of `solver` (its last solve), through the gate of
+    /// [`crate::mpc::finite`]: the solution, the cost, the KKT residual re-computed at the
+    /// returned point and the sensitivity finite, the residual ≤ tol. Otherwise the state is
+    /// unlabelled, `numerical_failure`, with the failure in `info.failure`.
     fn finish(&self, solver: &SqpSolver, xs: &[f64], r: &SqpResult, status: SqpStatus) -> Label {
         let ocp = &solver.ocp;
         let sens = sensitivity(solver, xs, &r.point, self.cfg.solver.degeneracy_tol);
         let iu = ocp.iu(0);
+        let cost = ocp.objective(&r.point.z);
+        let res = solver.residual_at_solution(xs, &r.point);
+        let gate = check_label(&LabelParts {
+            z: &r.point.z,
+            cost,
+            residual: [res.stationarity, res.primal, res.dual, res.complementarity],
+            sensitivity: &sens.du0_dx,
+            tol: self.cfg.solver.tol,
+        });
+        if let Err(f) = gate {
+            let info = SqpInfo {
+                kkt: res,
+                failure: Some(f),
+                ..r.info
+            };
+            return self.unlabelled(xs, SqpStatus::NumericalFailure, info);
+        }
         Label {
             x: xs.to_vec(),
             u: r.point.z[iu..iu + ocp.nu].to_vec(),
             du_dx: sens.du0_dx,
-            cost: ocp.objective(&r.point.z),
+            cost,
             status,
             info: r.info,
             degeneracy: sens.degeneracy,
-            max_slack: r.point.z[ocp.is()..].iter().fold(0.0f64, |m, v| m.max(*v)),
+            max_slack: r.point.z[ocp.is()..]
+                .iter()
+                .fold(0.0, |m, v| nan_max(m, *v)),
             active: sens.active,
             retry: None,
         }
+    }
+
+    /// [`finish`](Self::finish) with the solution for warm starts, only if it is a label.
+    fn finish_with_point(
+        &self,
+        solver: &SqpSolver,
+        xs: &[f64],
+        r: SqpResult,
+        status: SqpStatus,
+    ) -> (Label, Option<PrimalDual>) {
+        let label = self.finish(solver, xs, &r, status);
+        let point = label.status.is_labelled().then_some(r.point);
+        (label, point)
     }
 
     fn unlabelled(&self, xs: &[f64], status: SqpStatus, info: SqpInfo) -> Label {
@@ -168,7 +213,10 @@ impl MpcLaw {
         match self.retry(xs) {
             Some((mut l, sol, retry)) => {
                 l.info.iterations += spent;
-                l.retry = Some(retry);
+                // (A rung whose solve the gate refused labelled nothing.)
+                if l.status != SqpStatus::NumericalFailure {
+                    l.retry = Some(retry);
+                }
                 (l, sol)
             }
             None => (label, sol),
@@ -181,10 +229,14 @@ impl MpcLaw {
         warm: Option<&PrimalDual>,
     ) -> (Label, Option<PrimalDual>) {
         if xs.iter().any(|v| !v.is_finite()) || xs.len() != self.hard.ocp.nx {
-            return (
-                self.unlabelled(xs, SqpStatus::NumericalFailure, SqpInfo::default()),
-                None,
-            );
+            let info = SqpInfo {
+                failure: xs
+                    .iter()
+                    .any(|v| !v.is_finite())
+                    .then_some(Failure::NonFinite(Quantity::State)),
+                ..SqpInfo::default()
+            };
+            return (self.unlabelled(xs, SqpStatus::NumericalFailure, info), None);
         }
         let mut r = match warm {
             Some(w) => {
@@ -201,8 +253,9 @@ impl MpcLaw {
             r.info.iterations += iters;
         }
         if r.status == SqpStatus::Converged {
-            let label = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
-            return (label, Some(r.point));
+            // (Converged to numbers that are no label — the gate — gives no point: no soft
+            // problem can repair the plant's arithmetic; the retry ladder may still try.)
+            return self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
         }
         // Hard solve failed: let the exact-penalty problem decide feasibility.
         let cfg = &self.cfg;
@@ -216,12 +269,18 @@ impl MpcLaw {
             } else {
                 r.status
             };
-            return (self.unlabelled(xs, status, s.info), None);
+            // (The hard solve's failure, e.g. the non-finite quantity, if the soft one
+            // names none.)
+            let info = SqpInfo {
+                failure: s.info.failure.or(r.info.failure),
+                ..s.info
+            };
+            return (self.unlabelled(xs, status, info), None);
         }
         let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
         let max_slack = s.point.z[soft.ocp.is()..]
             .iter()
-            .fold(0.0f64, |m, v| m.max(*v));
+            .fold(0.0, |m, v| nan_max(m, *v));
         if max_slack <= SLACK_TOL {
             // Feasible after all: re-solve the hard problem from the soft optimum.
             let nw = self.hard.ocp.n_var;
@@ -233,8 +292,7 @@ impl MpcLaw {
             let mut h = self.hard.solve(xs, start);
             h.info.iterations += s.info.iterations;
             if h.status == SqpStatus::Converged {
-                let label = self.finish(&self.hard, xs, &h, SqpStatus::Converged);
-                return (label, Some(h.point));
+                return self.finish_with_point(&self.hard, xs, h, SqpStatus::Converged);
             }
             // Feasible, yet the hard solve fails: report the failure, not a soft label.
             return (self.unlabelled(xs, r.status, h.info), None);
@@ -257,9 +315,9 @@ impl MpcLaw {
         self.hard.set_globalisation(Globalisation::Default);
         spent += r.info.iterations;
         if r.status == SqpStatus::Converged {
-            let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+            let (mut l, point) = self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
             l.info.iterations = spent;
-            return Some((l, Some(r.point), Retry::Conservative));
+            return Some((l, point, Retry::Conservative));
         }
         // 2. Continuation from the setpoint.
         for (g, rung) in [
@@ -270,9 +328,10 @@ impl MpcLaw {
             let c = self.continuation(xs, &mut spent);
             self.hard.set_globalisation(Globalisation::Default);
             if let Some(r) = c {
-                let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+                let (mut l, point) =
+                    self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
                 l.info.iterations = spent;
-                return Some((l, Some(r.point), rung));
+                return Some((l, point, rung));
             }
         }
         // 3. The soft problem, conservative globalisation.
@@ -288,7 +347,7 @@ impl MpcLaw {
         let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
         let max_slack = s.point.z[soft.ocp.is()..]
             .iter()
-            .fold(0.0f64, |m, v| m.max(*v));
+            .fold(0.0, |m, v| nan_max(m, *v));
         if max_slack <= SLACK_TOL {
             let nw = self.hard.ocp.n_var;
             let start = PrimalDual {
@@ -303,9 +362,9 @@ impl MpcLaw {
             if h.status != SqpStatus::Converged {
                 return None;
             }
-            let mut l = self.finish(&self.hard, xs, &h, SqpStatus::Converged);
+            let (mut l, point) = self.finish_with_point(&self.hard, xs, h, SqpStatus::Converged);
             l.info.iterations = spent;
-            return Some((l, Some(h.point), Retry::Soft));
+            return Some((l, point, Retry::Soft));
         }
         let status = if self.cfg.solver.soft_fallback {
             SqpStatus::Soft
@@ -348,6 +407,10 @@ impl MpcLaw {
             spent += r.info.iterations;
             if r.status == SqpStatus::Converged {
                 let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+                if !l.status.is_labelled() {
+                    // The gate refused the numbers (crate::mpc::finite).
+                    return None;
+                }
                 l.info.iterations = spent;
                 l.retry = Some(Retry::Neighbour);
                 return Some(l);

@@ -11,10 +11,13 @@
 //! - [`kkt`]: banded KKT layouts and factorisations shared by the QP and the sensitivity.
 //! - [`sensitivity`]: ∂u₀*/∂x_s from the converged KKT system, with degeneracy flags.
 //! - [`law`]: one labelled state: hard OCP, soft fallback, warm starts.
+//! - [`finite`]: the label gate — a solve is a label only if every number it rests on is
+//!   finite and the KKT conditions hold when re-checked; NaN-keeping folds.
 //!
 //! Imports only `problem` (and the leaf modules `io`, `rng`).
 
 pub mod convexity;
+pub mod finite;
 pub mod kkt;
 pub mod law;
 pub mod ocp;
@@ -29,6 +32,8 @@ pub mod sqp;
 mod constraint_checks;
 #[cfg(test)]
 mod cross_checks;
+#[cfg(test)]
+pub(crate) mod finite_checks;
 #[cfg(test)]
 mod ipopt_labels;
 #[cfg(test)]

@@ -5,7 +5,9 @@
 //! the key at fault. Everything downstream trusts a validated config.
 //!
 //! Matrices (`q`, `r`, `p`) are written either as a diagonal (`q = [10.0, 1.0]`) or as a
-//! full row-major matrix (`q = [[10.0, 0.0], [0.0, 1.0]]`). Bounds may be `inf`/`-inf`.
+//! full row-major matrix (`q = [[10.0, 0.0], [0.0, 1.0]]`). State bounds may be
+//! `inf`/`-inf` (no bound); every other number — input bounds, weights, parameters, the
+//! domain, tolerances — must be finite. Sizes have documented upper limits ([`limits`]).
 
 //!
 //! The files of this folder each own one part of the file's settings — plain structs with
@@ -16,6 +18,7 @@
 //! Every later stage reads its settings from here; `problem` imports nothing of the crate
 //! but `io`.
 
+pub mod limits;
 pub mod model;
 pub mod ocp;
 pub mod refine;
@@ -107,6 +110,22 @@ impl ConfigError {
     }
 }
 
+/// A TOML error's message with the problem first: the parser's own text (for a `[system]`
+/// expression: the key, the column and what is wrong, e.g. ``system.rhs[1], column 5 of
+/// `u + thetaa`: unknown name `thetaa` …``), then where it is in the file (toml's "TOML
+/// parse error at line …" and the line quoted), which toml's `Display` puts first.
+fn problem_first(e: &toml::de::Error) -> String {
+    let message = e.message().trim_end();
+    let full = e.to_string();
+    let place = full.replacen(message, "", 1);
+    let place = place.trim();
+    if place.is_empty() {
+        message.to_string()
+    } else {
+        format!("{message}\n{place}")
+    }
+}
+
 /// A whole problem file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -173,7 +192,7 @@ impl ProblemConfig {
         let cfg: ProblemConfig = model::custom::reading_with(plants, || toml::from_str(text))
             .map_err(|e| ConfigError::Parse {
                 path: origin.to_string(),
-                message: e.to_string(),
+                message: problem_first(&e),
             })?;
         cfg.validate().map_err(|e| e.in_file(origin))?;
         Ok(cfg)
@@ -277,6 +296,8 @@ impl ProblemConfig {
     }
 }
 
+#[cfg(test)]
+mod finite_tests;
 #[cfg(test)]
 mod plant_tests;
 #[cfg(test)]

@@ -235,8 +235,18 @@ impl RefineSettings {
                 "hidden widths, epochs and batch_size must be positive",
             ));
         }
+        super::limits::check_hidden("refine.training.hidden", &t.hidden)?;
         if !(t.learning_rate.is_finite() && t.learning_rate > 0.0) {
-            return Err(invalid("refine.training.learning_rate", "must be positive"));
+            return Err(invalid(
+                "refine.training.learning_rate",
+                format!("must be positive and finite, got {}", t.learning_rate),
+            ));
+        }
+        if let Some(i) = t.lambda.iter().position(|l| !(l.is_finite() && *l >= 0.0)) {
+            return Err(invalid(
+                format!("refine.training.lambda[{i}]"),
+                format!("must be finite and ≥ 0, got {}", t.lambda[i]),
+            ));
         }
         Ok(())
     }

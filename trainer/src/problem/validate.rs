@@ -21,6 +21,23 @@ fn check_vec(key: &str, v: &[f64], n: usize, allow_inf: bool) -> Result<(), Conf
     Ok(())
 }
 
+/// Input bounds: one finite number per input (module doc of `validate`: why not ±inf).
+fn check_input_bounds(key: &str, v: &[f64], n: usize) -> Result<(), ConfigError> {
+    check_vec(key, v, n, true)?;
+    if let Some(i) = v.iter().position(|x| x.is_infinite()) {
+        return Err(invalid(
+            format!("{key}[{i}]"),
+            format!(
+                "input bounds must be finite numbers, got {} (U scales the network's outputs \
+                 and sets its clamp band and the actuator saturation; unbounded inputs mean \
+                 nothing there)",
+                v[i]
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn check_bounds(
     key_lo: &str,
     key_hi: &str,
@@ -149,13 +166,17 @@ impl ProblemConfig {
         if o.rk4_substeps == 0 {
             return Err(invalid("ocp.rk4_substeps", "must be at least 1"));
         }
+        super::limits::check_ocp_sizes(o.horizon, o.rk4_substeps)?;
         check_matrix("ocp.q", &o.q, nx, false)?;
         check_matrix("ocp.r", &o.r, nu, true)?;
         check_matrix("ocp.p", &o.p, nx, false)?;
         check_vec("ocp.x_lo", &o.x_lo, nx, true)?;
         check_vec("ocp.x_hi", &o.x_hi, nx, true)?;
-        check_vec("ocp.u_lo", &o.u_lo, nu, true)?;
-        check_vec("ocp.u_hi", &o.u_hi, nu, true)?;
+        // State bounds may be ±inf (no bound on that state: its row is left out of the OCP);
+        // input bounds may not: U scales the network's outputs, sets the clamp band
+        // U ⊕ [−ε, ε] and the actuator saturation, none of which means anything unbounded.
+        check_input_bounds("ocp.u_lo", &o.u_lo, nu)?;
+        check_input_bounds("ocp.u_hi", &o.u_hi, nu)?;
         check_bounds("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi, false)?;
         check_bounds("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi, false)?;
         if let Some(st) = &o.stages {
@@ -172,7 +193,12 @@ impl ProblemConfig {
                     ));
                 }
                 for (k, r) in rows.iter().enumerate() {
-                    check_vec(&format!("{key}[{k}]"), r, dim, true)?;
+                    let at = format!("{key}[{k}]");
+                    if key.contains(".u_") {
+                        check_input_bounds(&at, r, dim)?;
+                    } else {
+                        check_vec(&at, r, dim, true)?;
+                    }
                 }
             }
             for (c, m) in st.margins.iter().enumerate() {
@@ -270,6 +296,7 @@ impl ProblemConfig {
                 "needs at least one hidden layer, all widths ≥ 1",
             ));
         }
+        super::limits::check_hidden("training.hidden", &t.hidden)?;
         if t.epochs == 0 {
             return Err(invalid("training.epochs", "must be at least 1"));
         }

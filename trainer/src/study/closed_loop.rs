@@ -181,6 +181,21 @@ pub struct Run {
     /// and, through the MPC solved for the divergence, for networks).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub mpc_soft_steps: usize,
+    /// Set when the run ended early because the plant's next state (or the cost) was not
+    /// finite: the run stops at that step with a defined status instead of carrying NaN
+    /// along (and into JSON). Not written for a run that completed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopped: Option<Stopped>,
+}
+
+/// Why a closed-loop run ended before its last step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stopped {
+    /// The step k whose successor x_{k+1} (or whose cost) was not finite; the run holds
+    /// x_0..x_k and u_0..u_{k−1}, and step k counts as a violating step.
+    pub step: usize,
+    /// What was not finite, in words.
+    pub reason: String,
 }
 
 fn is_zero(v: &usize) -> bool {
@@ -206,7 +221,8 @@ fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
 /// x_{k+1} and the `[ocp]` path constraints as the OCP places them — one in states only at
 /// x_{k+1}, one in inputs only at u_k, one in both at (x_k, u_k) for k ≥ 1 (the measured
 /// x₀ is never constrained). Terminal constraints shape the prediction only and are not
-/// checked along the closed loop. A non-finite constraint value counts as infinite.
+/// checked along the closed loop. A non-finite constraint value, and a non-finite entry of
+/// x_{k+1} (which `f64::max` would read as no violation), count as infinite.
 pub fn step_violation(
     cfg: &ProblemConfig,
     constraints: Option<&ConstraintSet>,
@@ -215,6 +231,9 @@ pub fn step_violation(
     u: &[f64],
     next: &[f64],
 ) -> f64 {
+    if next.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
     let mut viol = (0..next.len())
         .map(|i| {
             (next[i] - cfg.ocp.x_hi[i])
@@ -278,6 +297,7 @@ pub fn simulate(
         left_band: false,
         mpc_failures: 0,
         mpc_soft_steps: 0,
+        stopped: None,
     };
     let constraints = cfg.constraint_set().ok().flatten();
     let mut warm: Option<PrimalDual> = None;
@@ -355,6 +375,7 @@ pub fn simulate(
             };
         }
         last_u = u.clone();
+        let cost_before = run.cost;
         for i in 0..nx {
             for j in 0..nx {
                 run.cost += (x[i] - x_ref[i]) * q[(i, j)] * (x[j] - x_ref[j]);
@@ -366,6 +387,26 @@ pub fn simulate(
             }
         }
         model.step(&x, &u, &mut next);
+        let reason = if next.iter().any(|v| !v.is_finite()) {
+            Some(format!(
+                "the plant's next state from x = {x:?}, u = {u:?} is not finite (NaN or ±∞)"
+            ))
+        } else if !run.cost.is_finite() {
+            Some(format!(
+                "the closed-loop cost overflowed at x = {x:?}, u = {u:?}"
+            ))
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            // A NaN or ±∞ state ends the run: the step counts as violating (a state that
+            // is not a number satisfies no bound), the recorded values stay finite.
+            run.cost = cost_before;
+            run.violation_steps += 1;
+            run.steps = k;
+            run.stopped = Some(Stopped { step: k, reason });
+            break;
+        }
         let viol = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
         x.copy_from_slice(&next);
         if viol > VIOLATION_TOL {
@@ -377,7 +418,9 @@ pub fn simulate(
     }
     run.violation_percent = 100.0 * run.violation_steps as f64 / s.steps.max(1) as f64;
     let settled = |v: &Vec<f64>| v.iter().zip(&x_ref).all(|(c, r)| (c - r).abs() <= 0.05);
-    run.settling_step = (0..run.x.len()).find(|&k| run.x[k..].iter().all(settled));
+    run.settling_step = (0..run.x.len())
+        .find(|&k| run.x[k..].iter().all(settled))
+        .filter(|_| run.stopped.is_none());
     run.final_offset = x.iter().zip(&x_ref).map(|(v, r)| (v - r).abs()).collect();
     run
 }
@@ -415,6 +458,46 @@ mod tests {
         // the terminal region is not a closed-loop constraint; boxes still are.
         assert_eq!(v(5, ok, 0.0, [0.5, 0.0]), 0.0);
         assert!((v(5, ok, 0.0, [7.0, 0.0]) - (7.0 - 2.0 * std::f64::consts::PI)).abs() < 1e-12);
+    }
+
+    /// A plant that turns NaN along the trajectory (`0·sqrt(θ − 1)`, the state falling below
+    /// θ = 1) ends the run at that step with a defined status: every recorded number finite,
+    /// no NaN (or `null`) in the JSON, the step counted as violating, never settled. Before,
+    /// the run carried NaN to its end and `step_violation` read a NaN state as no violation.
+    #[test]
+    fn a_non_finite_state_ends_the_run_with_a_status() {
+        let cfg = crate::mpc::finite_checks::pendulum_with(
+            "u/(m*l^2) - g/l*sin(theta + pi) + 0*sqrt(theta - 1)",
+            "m = 1.0, l = 1.0, g = 9.81",
+        );
+        let nan = [f64::NAN, 0.0];
+        assert_eq!(
+            step_violation(&cfg, None, 3, &[0.0, 0.0], &[0.0], &nan),
+            f64::INFINITY
+        );
+        let mut law = MpcLaw::new(&cfg);
+        let s = SimSettings {
+            steps: 30,
+            noise: vec![],
+            seed: 0,
+            mass_mismatch: 0.0,
+            disturbance: Disturbance::None,
+        };
+        let r = simulate(&cfg, &mut law, &Controller::Mpc, &[1.2, -1.0], &s);
+        let stop = r.stopped.clone().expect("the run stops at the NaN state");
+        assert!(stop.step < 30 && r.steps == stop.step, "{stop:?}");
+        assert_eq!(r.x.len(), stop.step + 1);
+        assert_eq!(r.u.len(), stop.step);
+        assert!(r.violation_steps >= 1);
+        assert_eq!(r.settling_step, None);
+        let nums = r.x.iter().flatten().chain(r.u.iter().flatten());
+        assert!(nums.chain(&r.final_offset).all(|v| v.is_finite()), "{r:?}");
+        assert!(r.cost.is_finite() && r.max_violation.is_finite());
+        // (serde_json writes a NaN or ∞ as `null`; `settling_step` is the only optional.)
+        let mut v = serde_json::to_value(&r).unwrap();
+        v.as_object_mut().unwrap().remove("settling_step");
+        let json = v.to_string();
+        assert!(!json.contains("null") && !json.contains("NaN,"), "{json}");
     }
 
     #[test]

@@ -23,6 +23,8 @@
 
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
+pub mod gate;
+pub use gate::LabelsError;
 
 use crate::data::import::ImportedLabels;
 use crate::io::{decode_checked, write_atomic};

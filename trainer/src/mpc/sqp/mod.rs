@@ -57,6 +57,7 @@
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
 
 use crate::mpc::convexity::ReducedHessian;
+use crate::mpc::finite::{abs_max, first_non_finite, nan_max, Failure, Quantity};
 use crate::mpc::kkt::{ActiveSetKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
 use crate::mpc::qp::ipm::{self, mul_e};
@@ -128,13 +129,12 @@ pub struct KktResidual {
 }
 
 impl KktResidual {
-    /// The largest part: what `tol` is compared with.
+    /// The largest part: what `tol` is compared with (∞ if a part is NaN).
     pub fn max(&self) -> f64 {
-        let m = self
-            .stationarity
-            .max(self.primal)
-            .max(self.dual)
-            .max(self.complementarity);
+        let m = nan_max(
+            nan_max(self.stationarity, self.primal),
+            nan_max(self.dual, self.complementarity),
+        );
         if m.is_nan() {
             f64::INFINITY
         } else {
@@ -154,6 +154,10 @@ pub struct SqpInfo {
     pub kkt: KktResidual,
     /// Whether the final point came from the active-set Newton polish.
     pub polished: bool,
+    /// Why the solve is no label when a number it rests on is not finite, or (set by the
+    /// law's gate, [`crate::mpc::finite`]) its re-checked KKT residual is above `tol`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failure: Option<Failure>,
 }
 
 /// A primal-dual point of the OCP.
@@ -229,25 +233,66 @@ fn residual(ocp: &Ocp, z: &[f64], ev: &Evals, lam: &[f64], nu: &[f64]) -> KktRes
             r[ocp.iu(k) + j] += s;
         }
     }
-    let mut primal = ev.c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let nu_scale = nu.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    // Every fold keeps a NaN (`f64::max` would drop it and read a NaN residual as 0).
+    let mut primal = abs_max(&ev.c);
+    let nu_scale = nan_max(1.0, abs_max(nu));
     let (mut dual, mut compl) = (0.0f64, 0.0f64);
     for (row, &v) in ocp.rows.iter().zip(nu) {
         for j in 0..row.len {
             r[row.idx[j]] += row.coef[j] * v;
         }
         let s = row.slack(z);
-        primal = primal.max(-s);
-        dual = dual.max(-v);
-        compl = compl.max(v.min(s).abs());
+        primal = nan_max(primal, -s);
+        dual = nan_max(dual, -v);
+        // (min(ν, s) with s = +∞ on a row without a bound is ν: `f64::min` is fine here
+        // for s; a NaN ν or s is kept by the check below.)
+        let c = if v.is_nan() || s.is_nan() {
+            f64::NAN
+        } else {
+            v.min(s).abs()
+        };
+        compl = nan_max(compl, c);
     }
-    let gscale = ev.grad.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    let gscale = nan_max(1.0, abs_max(&ev.grad));
     KktResidual {
-        stationarity: r.iter().fold(0.0f64, |m, v| m.max(v.abs())) / gscale,
+        stationarity: abs_max(&r) / gscale,
         primal,
         dual: dual / nu_scale,
         complementarity: compl / nu_scale,
     }
+}
+
+/// The first non-finite quantity behind a non-finite KKT residual `res` at `p`.
+fn non_finite_part(ocp: &Ocp, p: &PrimalDual, ev: &Evals, res: &KktResidual) -> Quantity {
+    let rows: Vec<f64> = ocp.rows.iter().map(|row| row.slack(&p.z)).collect();
+    // (An infinite slack is a row without a bound; only a NaN one is at fault.)
+    let rows_nan = if rows.iter().any(|s| s.is_nan()) {
+        &[f64::NAN][..]
+    } else {
+        &[][..]
+    };
+    // (The equations first: a cold start's states are simulated by F, so a NaN there shows
+    // in z too.)
+    first_non_finite([
+        (Quantity::Equations, &ev.c[..]),
+        (Quantity::Equations, &ev.jac_x[..]),
+        (Quantity::Equations, &ev.jac_u[..]),
+        (Quantity::Cost, &ev.grad[..]),
+        (Quantity::Constraints, rows_nan),
+        (Quantity::Solution, &p.z[..]),
+        (Quantity::Multipliers, &p.lam[..]),
+        (Quantity::Multipliers, &p.nu[..]),
+        (
+            Quantity::Stationarity,
+            std::slice::from_ref(&res.stationarity),
+        ),
+        (
+            Quantity::PrimalFeasibility,
+            std::slice::from_ref(&res.primal),
+        ),
+        (Quantity::DualFeasibility, std::slice::from_ref(&res.dual)),
+    ])
+    .unwrap_or(Quantity::Complementarity)
 }
 
 /// The QP's Hessian, block by block: the exact block `∇²L_k` where it is positive
@@ -377,6 +422,15 @@ impl SqpSolver {
         residual(ocp, &p.z, &ev, &p.lam, &p.nu)
     }
 
+    /// The KKT residual at `p`, the result of this solver's last [`solve`](Self::solve)
+    /// (nonlinear rows are linearised there, so no copy of the OCP is needed): the solve's
+    /// own final residual, re-computed for the label gate ([`crate::mpc::finite`]).
+    pub fn residual_at_solution(&self, xs: &[f64], p: &PrimalDual) -> KktResidual {
+        let mut ev = Evals::new(&self.ocp);
+        ev.first_order(&self.ocp, &p.z, xs);
+        residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu)
+    }
+
     /// The factorised active-set KKT matrix at a point (exact Hessian), for sensitivities.
     /// `p` is the result of the last [`solve`](Self::solve): nonlinear rows are linearised
     /// there.
@@ -465,7 +519,13 @@ impl SqpSolver {
             ev.first_order(&self.ocp, &p.z, xs);
             let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
             info.kkt = res;
-            if !res.max().is_finite() && info.iterations > 0 {
+            // A non-finite residual (NaN or ±∞ in the plant's equations, the cost, a row,
+            // the multipliers) ends the solve at once, also at the first iterate: no QP is
+            // built on such data and nothing after it can be a label.
+            if !res.max().is_finite() {
+                info.failure = Some(Failure::NonFinite(non_finite_part(
+                    &self.ocp, &p, &ev, &res,
+                )));
                 break SqpStatus::NumericalFailure;
             }
             if res.max() <= tol {
@@ -482,6 +542,7 @@ impl SqpSolver {
             }
             self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
             if ev.hess.iter().any(|v| !v.is_finite()) {
+                info.failure = Some(Failure::NonFinite(Quantity::Hessian));
                 break SqpStatus::NumericalFailure;
             }
             // The exact Hessian wherever the test passes, the soft problem and nonlinear

@@ -304,6 +304,17 @@ fn declare(
     Ok(())
 }
 
+/// The graph's operation of a binary operator of the syntax.
+fn bin_op(op: BinOp) -> Bin {
+    match op {
+        BinOp::Add => Bin::Add,
+        BinOp::Sub => Bin::Sub,
+        BinOp::Mul => Bin::Mul,
+        BinOp::Div => Bin::Div,
+        BinOp::Pow => Bin::Pow,
+    }
+}
+
 /// The lowering of syntax trees into the graph.
 pub(super) struct Lower<'a> {
     table: &'a HashMap<String, Entry>,
@@ -327,14 +338,18 @@ impl Lower<'_> {
             }
             AstKind::Bin(op, a, b) => {
                 let (a, b) = (self.lower(a, visible)?, self.lower(b, visible)?);
-                let op = match op {
-                    BinOp::Add => Bin::Add,
-                    BinOp::Sub => Bin::Sub,
-                    BinOp::Mul => Bin::Mul,
-                    BinOp::Div => Bin::Div,
-                    BinOp::Pow => Bin::Pow,
-                };
-                self.dag.bin(op, a, b)
+                self.dag.bin(bin_op(*op), a, b)
+            }
+            AstKind::Chain(first, rest) => {
+                // Left to right, as the binary tree `((a ± b) ± c) …` was: the same graph;
+                // each partial result checked like a `Bin` node.
+                let mut acc = self.lower(first, visible)?;
+                for (op, b) in rest {
+                    let b = self.lower(b, visible)?;
+                    acc = self.dag.bin(bin_op(*op), acc, b);
+                    self.finite_constant(acc, ast.col)?;
+                }
+                acc
             }
             AstKind::Call(f, args) => {
                 let mut ids = Vec::with_capacity(args.len());
@@ -355,9 +370,14 @@ impl Lower<'_> {
                 }
             }
         };
+        self.finite_constant(id, ast.col)
+    }
+
+    /// `id`, unless it is a constant that is not finite (an error at column `col`).
+    fn finite_constant(&self, id: NodeId, col: usize) -> Result<NodeId, parse::ParseError> {
         match self.dag.node(id) {
             Node::Const(b) if !f64::from_bits(b).is_finite() => Err((
-                ast.col,
+                col,
                 ErrorKind::NonFiniteConstant {
                     value: f64::from_bits(b),
                 },

@@ -20,11 +20,16 @@
 //! carry a sign (`x^-2`); `log` is the natural logarithm; `atan2`, `min`, `max` take two
 //! arguments, the other functions one. Nesting is limited ([`MAX_NESTING`] levels of
 //! parentheses, calls, signs and exponents; trees of height [`MAX_DEPTH`]) so that no input
-//! can overflow the stack. Errors are `(column, kind)`; the caller adds the key.
+//! can overflow the stack. A run of `+`/`-` (or `*`/`/`) of any length is one node
+//! ([`AstKind::Chain`], its operands in a list, evaluated left to right as
+//! `((a ± b) ± c) ± …`): its length is no nesting, so a flat sum of thousands of terms is
+//! one level deep and nothing walks it recursively. Errors are `(column, kind)`; the caller
+//! adds the key.
 
 use super::error::ErrorKind;
 
-/// Largest height of an expression's tree (e.g. a sum of at most this many terms).
+/// Largest height of an expression's tree: its nesting (a flat sum or product of any length
+/// is one level, [`AstKind::Chain`]).
 pub const MAX_DEPTH: usize = 1000;
 
 /// Largest nesting of parentheses, calls, unary minus and exponents.
@@ -166,6 +171,10 @@ pub enum AstKind {
     Neg(Box<Ast>),
     /// `a op b`
     Bin(BinOp, Box<Ast>, Box<Ast>),
+    /// `a op₁ b op₂ c …` with two or more operators of one precedence level (`+`/`-` or
+    /// `*`/`/`), left-associative: `((a op₁ b) op₂ c) …`. One node however long, so that
+    /// the tree's height is its nesting.
+    Chain(Box<Ast>, Vec<(BinOp, Ast)>),
     /// `f(a, …)` with the right number of arguments.
     Call(Func, Vec<Ast>),
 }
@@ -236,6 +245,10 @@ pub fn visit(ast: &Ast, f: &mut impl FnMut(&Ast)) {
             visit(b, f);
         }
         AstKind::Call(_, args) => args.iter().for_each(|a| visit(a, f)),
+        AstKind::Chain(first, rest) => {
+            visit(first, f);
+            rest.iter().for_each(|(_, a)| visit(a, f));
+        }
     }
     f(ast)
 }
@@ -398,6 +411,10 @@ impl Parser {
             AstKind::Neg(a) => a.depth,
             AstKind::Bin(_, a, b) => a.depth.max(b.depth),
             AstKind::Call(_, args) => args.iter().map(|a| a.depth).max().unwrap_or(0),
+            AstKind::Chain(first, rest) => rest
+                .iter()
+                .map(|(_, a)| a.depth)
+                .fold(first.depth, usize::max),
         };
         if depth > MAX_DEPTH {
             return Err((col, too_deep(MAX_DEPTH)));
@@ -405,31 +422,41 @@ impl Parser {
         Ok(Ast { kind, col, depth })
     }
     fn expr(&mut self) -> Result<Ast, ParseError> {
-        let mut lhs = self.term()?;
+        let first = self.term()?;
+        let mut rest = Vec::new();
         loop {
             let op = match self.peek() {
                 Tok::Plus => BinOp::Add,
                 Tok::Minus => BinOp::Sub,
-                _ => return Ok(lhs),
+                _ => return self.chain(first, rest),
             };
             self.next();
-            let rhs = self.term()?;
-            let col = lhs.col;
-            lhs = self.node(AstKind::Bin(op, Box::new(lhs), Box::new(rhs)), col)?;
+            rest.push((op, self.term()?));
         }
     }
     fn term(&mut self) -> Result<Ast, ParseError> {
-        let mut lhs = self.unary()?;
+        let first = self.unary()?;
+        let mut rest = Vec::new();
         loop {
             let op = match self.peek() {
                 Tok::Star => BinOp::Mul,
                 Tok::Slash => BinOp::Div,
-                _ => return Ok(lhs),
+                _ => return self.chain(first, rest),
             };
             self.next();
-            let rhs = self.unary()?;
-            let col = lhs.col;
-            lhs = self.node(AstKind::Bin(op, Box::new(lhs), Box::new(rhs)), col)?;
+            rest.push((op, self.unary()?));
+        }
+    }
+    /// `first` alone, `Bin` for one operator, a [`AstKind::Chain`] for more (iteratively:
+    /// the length of a sum is no nesting).
+    fn chain(&self, first: Ast, mut rest: Vec<(BinOp, Ast)>) -> Result<Ast, ParseError> {
+        let col = first.col;
+        if rest.len() > 1 {
+            return self.node(AstKind::Chain(Box::new(first), rest), col);
+        }
+        match rest.pop() {
+            None => Ok(first),
+            Some((op, b)) => self.node(AstKind::Bin(op, Box::new(first), Box::new(b)), col),
         }
     }
     /// Every recursion of the grammar passes through here: the nesting guard.
