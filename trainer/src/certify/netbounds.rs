@@ -428,7 +428,7 @@ mod tests {
     #[test]
     fn point_enclosures_contain_the_value_and_are_tight() {
         for act in [Activation::Tanh, Activation::Softplus, Activation::Relu] {
-            let m = net(act, 5, &[2, 8, 8, 2]);
+            let m = net(act, 5, &[2, 8, 8, 1]);
             let nb = NetBounder::new(&m);
             for i in 0..50u64 {
                 let x = [uniform(3, i, 0) * 4.0 - 2.0, uniform(3, i, 1) * 2.0 - 1.0];
