@@ -82,6 +82,10 @@ fn train_certify_eval() {
     }
     assert!(v["assumptions"][0].as_str().unwrap().starts_with("l_mpc"));
     let f = |k: &str| v[k].as_f64().unwrap();
+    // The f32 allowance the tier calls sound is computed and stored (not 0), and covers the
+    // f32-vs-f64 difference seen here between two other evaluations: controller-core's
+    // (the exported blob, decoded) and `trainer eval --raw` (the f64 net).
+    f32_allowance_covers_the_device(d, m, &o.stdout, f("f32_allowance"));
     assert!(f("l_nn_lower") <= f("l_nn") && f("l_nn") <= f("l_nn_naive"));
     assert!(
         (f("eps") - (f("eps_d") + (f("l_mpc") + f("l_nn")) * f("covering_radius"))).abs()
@@ -188,6 +192,91 @@ fn train_certify_eval() {
         "{fd2} vs {}",
         rows[0][4]
     );
+}
+
+/// `allowance` (the certificate's f32 allowance, printed as `cert_json`) is positive and at
+/// least the largest |u_device − u_f64| on 2,000 states of X (the device: the blob exported
+/// with that certificate, decoded and evaluated by controller-core; f64: `trainer eval
+/// --raw`), on the states where the device did not clamp.
+fn f32_allowance_covers_the_device(
+    d: &std::path::Path,
+    model: &str,
+    cert_json: &[u8],
+    allowance: f64,
+) {
+    use controller_core::layer::Dense;
+    use controller_core::mlp::Hidden;
+    assert!(
+        allowance > 0.0 && allowance < 1e-3,
+        "stored f32 allowance {allowance}"
+    );
+    let cert = d.join("c.json");
+    std::fs::write(&cert, cert_json).unwrap();
+    let (rs, bin) = (d.join("w.rs"), d.join("w.bin"));
+    let o = trainer(&[
+        "export",
+        "--model",
+        model,
+        "--certificate",
+        cert.to_str().unwrap(),
+        "--rust",
+        rs.to_str().unwrap(),
+        "--postcard",
+        bin.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let blob = std::fs::read(&bin).unwrap();
+    // The default [training] hidden = [10, 10].
+    type Net = Hidden<2, 10, Hidden<10, 10, Dense<10, 1>>>;
+    let dec = controller_core::blob::decode::<2, 1, Net>(&blob).expect("the blob decodes");
+    // States of X = [−4, 4] × [−1, 1], exact in f32 (so both evaluations see the same x).
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let xs: Vec<[f32; 2]> = (0..2000)
+        .map(|_| [-4.0 + 8.0 * next(), -1.0 + 2.0 * next()])
+        .collect();
+    let states = d.join("f32_states.csv");
+    let mut text = String::from("x1,x2\n");
+    for x in &xs {
+        text += &format!("{},{}\n", f64::from(x[0]), f64::from(x[1]));
+    }
+    std::fs::write(&states, text).unwrap();
+    let out = d.join("f32_states_out.csv");
+    let o = trainer(&[
+        "eval",
+        "--raw",
+        "--model",
+        model,
+        "--states",
+        states.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let evals = std::fs::read_to_string(&out).unwrap();
+    let mut worst = 0.0f64;
+    let mut compared = 0;
+    for (x, line) in xs.iter().zip(evals.lines().skip(1)) {
+        let u64: f64 = line.split(',').nth(2).unwrap().parse().unwrap();
+        let out = dec.controller.evaluate(x);
+        if out.flags.0 != 0 {
+            continue;
+        }
+        compared += 1;
+        worst = worst.max((f64::from(out.u[0]) - u64).abs());
+    }
+    assert!(compared > 1000, "{compared} unclamped states");
+    if controller_core::activation::TANH_KIND != "fast" {
+        assert!(
+            worst > 0.0 && worst <= allowance,
+            "observed f32 difference {worst:e} vs stored allowance {allowance:e}"
+        );
+    }
 }
 
 #[test]

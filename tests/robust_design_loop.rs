@@ -1,8 +1,9 @@
 //! The whole Corollary 1 design loop at test size (`configs/pendulum_robust_small.toml`):
 //! `trainer run` designs the tightened MPC for ε = 0.5, the pipeline's net misses it, the
-//! local-certificate refinement certifies ε ≤ 0.5, and the certified net's closed loop
-//! keeps every state constraint, as the corollary promises; `robust.json`'s verdict keys
-//! agree with its own numbers.
+//! local-certificate refinement brings ε + f32 allowance below 0.5, and the net's closed
+//! loop keeps every state constraint; the verdict is the one stated from the configuration
+//! (`conditional`: the nonlinear pendulum's cell bounds are estimated, recursive feasibility
+//! is unknown without a terminal region, no per-cell check runs), never `certified`.
 
 use ampc_tests::{config, tempdir, trainer};
 
@@ -26,8 +27,6 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     let rdir = out.join("pendulum_small").join("robust");
     let rep: serde_json::Value =
         serde_json::from_slice(&std::fs::read(rdir.join("robust.json")).unwrap()).unwrap();
-    // The verdict keys, and the verdict recomputed from the file's own numbers: certified
-    // iff ε + f32 allowance ≤ design ε.
     for k in [
         "design_eps",
         "certified_eps",
@@ -46,33 +45,43 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
         num("f32_allowance"),
     );
     assert_eq!(design, 0.5);
-    assert!(allowance >= 0.0 && allowance.is_finite(), "{allowance}");
-    let holds = eps + allowance <= design;
-    let word = rep["verdict"].as_str().unwrap();
-    assert_eq!(
-        word == "certified",
-        holds,
-        "verdict {word}: {eps} + {allowance} vs {design}"
-    );
-    assert!(matches!(word, "certified" | "not_certified"), "{word}");
-    assert!(
-        matches!(
-            rep["guarantee"].as_str(),
-            Some("sound" | "statistical" | "estimated")
-        ),
-        "{}",
-        rep["guarantee"]
-    );
-    let rf = rep["recursive_feasibility"].as_str().unwrap();
-    assert!(matches!(rf, "proven" | "sampled" | "unknown"), "{rf}");
-    let message = rep["verdict_detail"]["message"].as_str().unwrap();
-    assert_eq!(
-        message.contains("Corollary 1 applies"),
-        holds && rf == "proven",
-        "{message}"
-    );
-    // The refinement reaches the design ε (the f32 allowance is judged above).
-    assert!(eps <= 0.5);
+    assert!(allowance > 0.0 && allowance < 1e-2, "{allowance}");
+    // The refinement reaches the design ε, with room for the f32 allowance.
+    assert!(eps + allowance <= 0.5, "{eps} + {allowance}");
+    // The expected verdict, stated from the configuration: the pendulum is nonlinear, so the
+    // refined certificate's MPC part inside a cell is estimated from its corners (no exact
+    // QP cells) — ε's tier is `estimated`; the file enforces no terminal region, so
+    // recursive feasibility is `unknown`; the loop runs no per-cell check. The numbers meet
+    // the design, nothing else is proven: `conditional`, never `certified`, and the three
+    // unproven premises are named.
+    assert_eq!(rep["verdict"], "conditional", "{}", rep["verdict_detail"]);
+    assert_eq!(rep["guarantee"], "estimated");
+    assert_eq!(rep["recursive_feasibility"], "unknown");
+    let detail = &rep["verdict_detail"];
+    assert_eq!(detail["certified"], false);
+    assert_eq!(detail["status"], "conditional");
+    let rests: Vec<&str> = detail["rests_on"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no rests_on: {detail}"))
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    for (what, prefix) in [
+        ("the MPC's range in a cell", "mpc_range"),
+        ("recursive feasibility", "recursive feasibility"),
+        ("the check", "the per-cell check"),
+    ] {
+        assert!(
+            rests.iter().any(|r| r.starts_with(prefix)),
+            "{what} missing from rests_on: {rests:?}"
+        );
+    }
+    let message = detail["message"].as_str().unwrap();
+    assert!(!message.contains("Corollary 1 applies"), "{message}");
+    assert!(message.contains("mpc_range"), "{message}");
+    let md = std::fs::read_to_string(rdir.join("robust.md")).unwrap();
+    assert!(!md.contains("Corollary 1 applies"), "{md}");
+    assert!(md.contains("Verdict: conditional"), "{md}");
     // The refined net is the one certified and simulated.
     let cert: serde_json::Value = serde_json::from_slice(
         &std::fs::read(rdir.join("refine").join("certificate.json")).unwrap(),
@@ -86,7 +95,6 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     assert!(refinement["rounds"].as_u64().unwrap() >= 1, "{refinement}");
     let figure = refinement["figure"].as_str().unwrap();
     assert!(rdir.join(figure).is_file(), "{figure}");
-    let md = std::fs::read_to_string(rdir.join("robust.md")).unwrap();
     assert!(md.contains(&format!("]({figure})")), "{md}");
     let cl: serde_json::Value =
         serde_json::from_slice(&std::fs::read(rdir.join("closed_loop.json")).unwrap()).unwrap();

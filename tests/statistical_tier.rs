@@ -1,11 +1,56 @@
 //! `trainer certify --statistical N` end to end on a small double-integrator model: the
-//! JSON's `"statistical"` block (the keys) against a recount made here from the
-//! stored states (`trainer eval` of the model at them, the certificate's clamp band) and
-//! the closed form of the Clopper–Pearson bound for k = 0; a second call reuses the
-//! stored states (same answer, file untouched); bad flags are clear errors.
+//! JSON's `"statistical"` block (the keys) against a recount made here with an
+//! independent evaluation of the deployed controller (the blob exported with the
+//! certificate, decoded and evaluated by controller-core) at the stored states, and the
+//! Clopper–Pearson bound against a bisection on the binomial CDF written here; the states
+//! are drawn from the model's hash (another model: other states), none is a training
+//! state; a second call reuses the stored states (same answer, file untouched); bad flags
+//! are clear errors.
 
 use ampc_tests::{config, tempdir, trainer};
+use controller_core::layer::Dense;
+use controller_core::mlp::Hidden;
 use std::path::Path;
+
+/// The default `[training] hidden = [10, 10]` net of the double integrator.
+type Net = Hidden<2, 10, Hidden<10, 10, Dense<10, 1>>>;
+
+/// P(Bin(n, p) ≤ k), by the pmf recursion in log space.
+fn binomial_cdf(n: u64, k: u64, p: f64) -> f64 {
+    let mut ln_pmf = n as f64 * (1.0 - p).ln();
+    let mut sum = ln_pmf.exp();
+    for i in 0..k {
+        ln_pmf += ((n - i) as f64 / (i + 1) as f64).ln() + p.ln() - (1.0 - p).ln();
+        sum += ln_pmf.exp();
+    }
+    sum
+}
+
+/// The one-sided Clopper–Pearson upper bound: the p with P(Bin(n, p) ≤ k) = 1 − confidence,
+/// by bisection (the CDF falls in p).
+fn cp_upper(n: u64, k: u64, confidence: f64) -> f64 {
+    if k >= n {
+        return 1.0;
+    }
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if binomial_cdf(n, k, mid) > 1.0 - confidence {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+#[test]
+fn the_test_bisection_matches_known_values() {
+    // k = 0: 1 − β^{1/n}; and the 95 % one-sided bound for 1 success in 10 trials
+    // (0.3942, a textbook table value).
+    assert!((cp_upper(600, 0, 0.95) - (1.0 - 0.05f64.powf(1.0 / 600.0))).abs() < 1e-12);
+    assert!((cp_upper(10, 1, 0.95) - 0.3942).abs() < 1e-4);
+}
 
 fn csv(p: &Path) -> (Vec<String>, Vec<Vec<String>>) {
     let text = std::fs::read_to_string(p).unwrap();
@@ -64,7 +109,21 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     let eps = v["eps"].as_f64().unwrap();
     assert_eq!(st["eps"].as_f64(), Some(eps));
 
-    // Recount from the stored states with the model's own outputs.
+    // The statement names the function tested and the model it was drawn for.
+    assert_eq!(st["model_hash"], v["hash"]);
+    let function = st["function"].as_str().unwrap();
+    assert!(
+        function.contains("deployed controller") && function.contains("f32"),
+        "{function}"
+    );
+    assert_eq!(st["user_seed"].as_u64(), Some(0x5354_4154));
+    assert_ne!(
+        st["seed"], st["user_seed"],
+        "the seed is derived from the model's hash"
+    );
+
+    // Recount from the stored states with the deployed controller as controller-core
+    // computes it: the blob exported with this very certificate.
     let store = d.join("m.statistical.bin");
     let store_csv = d.join("m.statistical.csv");
     assert!(store.exists() && store_csv.exists());
@@ -72,37 +131,31 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     assert_eq!(rows.len(), n);
     let col = |name: &str| head.iter().position(|h| h == name).unwrap();
     let (ix1, ix2, iu, ist) = (col("x1"), col("x2"), col("u1"), col("status"));
-    let states = d.join("states.csv");
-    let mut s = String::from("x1,x2\n");
-    for r in &rows {
-        s += &format!("{},{}\n", r[ix1], r[ix2]);
-    }
-    std::fs::write(&states, s).unwrap();
-    let evald = d.join("eval.csv");
+    let c0 = d.join("c0.json");
+    std::fs::write(&c0, &first.stdout).unwrap();
+    let (rs0, bin0) = (d.join("w0.rs"), d.join("w0.bin"));
     let o = trainer(&[
-        "eval",
-        "--raw",
+        "export",
         "--model",
         model,
-        "--states",
-        states.to_str().unwrap(),
-        "--out",
-        evald.to_str().unwrap(),
+        "--certificate",
+        c0.to_str().unwrap(),
+        "--rust",
+        rs0.to_str().unwrap(),
+        "--postcard",
+        bin0.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (eh, erows) = csv(&evald);
-    let eu = eh.iter().position(|h| h == "u1").unwrap();
-    let (lo, hi) = (
-        v["clamp_lo"][0].as_f64().unwrap(),
-        v["clamp_hi"][0].as_f64().unwrap(),
-    );
+    let blob = std::fs::read(&bin0).unwrap();
+    let dec = controller_core::blob::decode::<2, 1, Net>(&blob).expect("the blob decodes");
     let mut errors = Vec::new();
-    for (r, e) in rows.iter().zip(&erows) {
+    for r in &rows {
         let labelled = r[ist] == "converged" || r[ist] == "soft";
         let err = if labelled {
             let kappa: f64 = r[iu].parse().unwrap();
-            let net: f64 = e[eu].parse().unwrap();
-            (kappa - net.clamp(lo, hi)).abs()
+            let x: [f64; 2] = [r[ix1].parse().unwrap(), r[ix2].parse().unwrap()];
+            let u = dec.controller.evaluate(&[x[0] as f32, x[1] as f32]).u[0];
+            (kappa - f64::from(u)).abs()
         } else {
             f64::INFINITY
         };
@@ -114,15 +167,58 @@ fn statistical_tier_counts_and_bounds_exceedances() {
         .iter()
         .filter(|e| e.is_finite())
         .fold(0.0f64, |m, e| m.max(*e));
-    assert!((st["max_error"].as_f64().unwrap() - max).abs() <= 1e-9 * (1.0 + max));
+    assert!((st["max_error"].as_f64().unwrap() - max).abs() <= 1e-12 * (1.0 + max));
     let p = st["p_exceed_upper"].as_f64().unwrap();
-    if k == 0 {
-        let closed = 1.0 - 0.05f64.powf(1.0 / n as f64);
-        assert!((p - closed).abs() <= 1e-10 * closed, "{p} vs {closed}");
-    } else {
-        // At least the observed rate.
-        assert!(p >= k as f64 / n as f64, "{p} below the observed rate");
-    }
+    let want = cp_upper(n as u64, k as u64, 0.95);
+    assert!(
+        p >= want * (1.0 - 1e-12) && p <= want * (1.0 + 1e-9),
+        "{p} vs {want} (k = {k})"
+    );
+
+    // None of the states is a training state (the dataset's CSV).
+    let (dhead, drows) = csv(&d.join("di.csv"));
+    let (dx1, dx2) = (
+        dhead.iter().position(|h| h == "x1").unwrap(),
+        dhead.iter().position(|h| h == "x2").unwrap(),
+    );
+    let train: std::collections::HashSet<(String, String)> = drows
+        .iter()
+        .map(|r| (r[dx1].clone(), r[dx2].clone()))
+        .collect();
+    assert!(rows
+        .iter()
+        .all(|r| !train.contains(&(r[ix1].clone(), r[ix2].clone()))));
+
+    // Another model (another training seed) is tested on other states, from the same
+    // user seed.
+    let model2 = d.join("m2.bin");
+    let m2 = model2.to_str().unwrap();
+    let o = trainer(&[
+        "train", "--config", &cfg, "--data", data, "--out", m2, "--seed", "1", "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = trainer(&[
+        "certify",
+        "--config",
+        &cfg,
+        "--model",
+        m2,
+        "--data",
+        data,
+        "--json",
+        "--statistical",
+        "20",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v2: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_ne!(v2["statistical"]["seed"], st["seed"]);
+    let (_, rows2) = csv(&d.join("m2.statistical.csv"));
+    assert_ne!(
+        (&rows2[0][ix1], &rows2[0][ix2]),
+        (&rows[0][ix1], &rows[0][ix2]),
+        "fresh states for another model"
+    );
+
     // The level for P ≤ 1e-2: exceedances of it are few enough that their bound is ≤ 1e-2.
     let o2 = certify(&[
         "--statistical",
@@ -243,10 +339,18 @@ fn statistical_tier_counts_and_bounds_exceedances() {
             b[part]["violating"].as_u64().unwrap(),
         );
         assert!(k <= n && n <= 120, "{b}");
-        let p = trainer::certify::statistical::clopper_pearson_upper(n, k, 0.99);
-        assert_eq!(b[part]["p_violation_upper"].as_f64().unwrap(), p, "{b}");
+        let p = b[part]["p_violation_upper"].as_f64().unwrap();
+        let want = cp_upper(n, k, 0.99);
+        assert!(
+            p >= want * (1.0 - 1e-12) && p <= want * (1.0 + 1e-9),
+            "{part}: {p} vs {want}"
+        );
     }
     assert_eq!(b["all"]["trajectories"], 120);
+    assert!(b["function"]
+        .as_str()
+        .unwrap()
+        .contains("deployed controller"));
     assert_eq!(b["confidence"], 0.99);
     let again = certify(&["--statistical-closed-loop", "120"]);
     assert_eq!(String::from_utf8(again.stdout).unwrap(), text);

@@ -57,6 +57,23 @@
 //!
 //! The QP is the one with the f64 data the code holds (A, B, c from the plant's AD at 0,
 //! H, g, G, h from the OCP's rows), the same data the SQP solves.
+//!
+//! **Why the QP certified is the step the SQP evaluates.** [`QpCertifier::detect`] accepts
+//! only an affine F (a `discrete` tape that is affine, or an ODE ẋ = A_c x + B_c u + c_c
+//! under RK4 with u held: each RK4 stage is an affine map of (x, u), so F is affine for any
+//! number of sub-steps — exact, not a linearisation), affine constraints and a quadratic
+//! cost. Forward-mode AD of an affine tape propagates tangents through operations whose
+//! partials do not depend on the point, so the Jacobians (A, B) the SQP's linearisation
+//! computes at any iterate are the very f64 matrices used here (bit for bit), the cost's
+//! Hessian and gradient are the same rows, and the SQP's first full step from any iterate
+//! solves this QP; only the offset of the dynamics rows is evaluated at the iterate
+//! (F(x_k, u_k) − A x_k − B u_k instead of c = F(0, 0)), which for an affine F differs from
+//! c by the rounding of F's evaluation alone. So κ here is the MPC the code defines — the
+//! QP with the f64 data (A, B, c) — and the certificate is about that MPC; the rounding of
+//! the data themselves (A, B, c as the f64 results of the plant's evaluation, not the
+//! real-number coefficients of the ODE's flow) is the one premise the arithmetic does not
+//! remove, stated as [`QP_DATA_NOTE`]. A plant that is not affine is not detected, and its
+//! cells stay `estimated`.
 
 use crate::certify::local::ExactPiece;
 use crate::mpc::ocp::{LinRow, Ocp};
@@ -64,6 +81,13 @@ use crate::problem::ProblemConfig;
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
+
+/// What an exact (QP) cell bound is about, for the certificate's notes: the MPC is the QP
+/// with the f64 data (A, B, c) of the affine plant (module doc).
+pub const QP_DATA_NOTE: &str = "mpc_range (exact cells): κ is the solution of the MPC's QP with \
+    the f64 plant data (A, B, c) the code computes — exact for an affine plant (RK4 of a linear \
+    ODE is affine), the same Jacobians the SQP uses at every iterate; the data's own rounding \
+    relative to the real-number flow of the ODE is not bounded";
 
 /// Most disputed rows in one cell (2^this laws are checked).
 pub const MAX_DISPUTED: usize = 6;

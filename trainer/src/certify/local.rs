@@ -263,6 +263,7 @@ pub fn cell_bound(
         net_u,
         net,
         band,
+        Labels::Solved,
     )
 }
 
@@ -287,29 +288,49 @@ pub struct ExactPiece {
 /// K_ik (± its rounding bound) and ∂²κ = 0 — so ε_C = max over pieces of the bound of
 /// |κ_piece − sat(κ_NN)| over the whole box (each piece is bounded on the whole cell, a
 /// superset of where it holds). Empty `pieces`: no bound (∞).
+///
+/// Nothing in it is an f64 value taken on trust: the network's corner values `net_u`
+/// (2ⁿ × nu) are outward-rounded enclosures ([`NetBounder::value_at`](crate::certify::netbounds::NetBounder::value_at));
+/// as sat is 1-Lipschitz, |κ(v) − sat(κ_NN(v))| ≤ |κ̂_v − sat(m_v)| + ρ + δ_u with m_v the
+/// enclosure's midpoint, ρ the largest enclosure radius and δ_u the piece's verified corner
+/// error (the QP solve's verified residual bound, [`ExactPiece::u_err`]) — the label
+/// tolerance, in place of the constant [`LABEL_TOL`] of solved labels; and the bound's own
+/// arithmetic (sums, products and the root of non-negative terms, a few dozen operations)
+/// is rounded up by a relative 10⁻¹² (far above its γ_n) plus 10⁻³⁰⁰.
 pub fn exact_cell_bound(
     lo: &[f64],
     hi: &[f64],
     pieces: &[ExactPiece],
-    net_u: &[f64],
+    net_u: &[Iv],
     net: &BoxBounds,
     band: (&[f64], &[f64]),
 ) -> CellBound {
     let nx = lo.len();
+    let mid: Vec<f64> = net_u.iter().map(|v| 0.5 * (v.lo + v.hi)).collect();
+    let mut rad = 0.0f64;
+    for (v, m) in net_u.iter().zip(&mid) {
+        let r = (v.hi - m).max(m - v.lo);
+        rad = if r.is_nan() {
+            f64::INFINITY
+        } else {
+            rad.max(r)
+        };
+    }
+    let rad = rad * (1.0 + 4.0 * f64::EPSILON);
     let mut best: Option<CellBound> = None;
     for p in pieces {
         let finite =
             p.u.iter()
                 .chain(&p.gain)
                 .chain(&p.gain_err)
-                .chain([&p.u_err])
+                .chain([&p.u_err, &rad])
                 .all(|v| v.is_finite());
         let b = bound_with(
             lo,
             hi,
             finite,
             |c, i| p.u[c * (p.gain.len() / nx) + i],
-            p.u_err,
+            p.u_err + rad,
             |i, k| {
                 let g = p.gain[i * nx + k];
                 let d = p.gain_err[k];
@@ -322,9 +343,10 @@ pub fn exact_cell_bound(
                 )
             },
             true,
-            net_u,
+            &mid,
             net,
             band,
+            Labels::Verified,
         );
         best = Some(match best {
             None => b,
@@ -347,6 +369,16 @@ fn infinite(nx: usize) -> CellBound {
     }
 }
 
+/// How the corner values of the MPC are known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Labels {
+    /// Solved labels: known to the solver's tolerance, covered by [`LABEL_TOL`].
+    Solved,
+    /// Values of a proven affine piece with a verified error bound (in `corner_tol`): no
+    /// constant is added, the bound's own rounding is covered instead.
+    Verified,
+}
+
 /// The bound of the module doc with the MPC part given: `corner_u(c, i)` = κ_i at corner
 /// c (known to ± `corner_tol`), `slope(i, k)` = (range of ∂_k κ_i on the cell, bound on
 /// |∂²_kk κ_i| on it), `smooth`: κ is C² on the cell (the second-order form may be used).
@@ -362,6 +394,7 @@ fn bound_with(
     net_u: &[f64],
     net: &BoxBounds,
     band: (&[f64], &[f64]),
+    labels: Labels,
 ) -> CellBound {
     let nx = lo.len();
     let nu = net.value.len();
@@ -451,8 +484,12 @@ fn bound_with(
         rem2 += r * r;
         eps2 += (e0 + r) * (e0 + r);
     }
+    let eps = match labels {
+        Labels::Solved => eps2.sqrt() + LABEL_TOL,
+        Labels::Verified => eps2.sqrt() * (1.0 + 1e-12) + 1e-300,
+    };
     CellBound {
-        eps: eps2.sqrt() + LABEL_TOL,
+        eps,
         corner: corner2.sqrt(),
         remainder: rem2.sqrt(),
         form,

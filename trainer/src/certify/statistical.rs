@@ -1,8 +1,25 @@
 //! [`Statistical`]: the dimension-free, probabilistic tier of a certificate.
 //!
-//! From n i.i.d. uniform states of X with k exceedances of ε (‖κ(x) − sat κ_NN(x)‖₂ > ε,
-//! sat = the deployed clamp band), the Clopper–Pearson upper bound p̄ on
-//! p = P(‖κ − sat κ_NN‖ > ε) at confidence 1 − β is the p̄ solving
+//! **The function tested** is the deployed controller κ̂ — the state rounded to f32 and
+//! projected onto the f32 domain X, the folded f32 network with the device tanh, the clamp
+//! band U ⊕ [−(ε + a), ε + a] (a: the f32 allowance) — exactly as `controller-core`
+//! evaluates it. It is given as a [`TestedController`]: the device model lives in `deploy`
+//! (`deploy::export::Device`), which `certify` may not import, so the caller (the CLI, which
+//! may use every stage) passes `deploy::export::Deployed`; this module owns the statistic,
+//! not the evaluation. The statement names the function ([`Statistical::function`]). A
+//! narrower band (an exported statistical level, `export --statistical-band`) never
+//! increases the error: κ ∈ U and clamping to a box containing κ moves no output away
+//! from it.
+//!
+//! **The states** are n i.i.d. uniform states of X drawn from the seed
+//! [`statistical_seed`]`(model hash, user seed)`: fresh for every model tested (a retrained
+//! or refined net gets new states, never the ones it was selected on), reproducible for the
+//! same model. They are never training states: a drawn state equal to one of the dataset's
+//! states refuses the whole draw ([`StatisticalError::TrainingState`]; with a continuous
+//! uniform draw this means the streams coincide, and another `--statistical-seed` fixes it).
+//!
+//! From n such states with k exceedances of ε (‖κ(x) − κ̂(x)‖₂ > ε), the Clopper–Pearson
+//! upper bound p̄ on p = P(‖κ − κ̂‖ > ε) at confidence 1 − β is the p̄ solving
 //!
 //!   P(Bin(n, p̄) ≤ k) = Σ_{i ≤ k} C(n, i) p̄ⁱ (1 − p̄)^{n−i} = β     (p̄ = 1 for k = n),
 //!
@@ -17,7 +34,6 @@
 //! whose bound is ≤ p).
 
 use crate::data::dataset::{self, Dataset, DatasetError, GenerateOptions};
-use crate::learn::mlp::{Mlp, Workspace};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -31,7 +47,7 @@ pub struct Statistical {
     pub exceedances: u64,
     /// 1 − β.
     pub confidence: f64,
-    /// Clopper–Pearson upper bound on P(‖κ − sat κ_NN‖ > ε) at that confidence.
+    /// Clopper–Pearson upper bound on P(‖κ − κ̂‖₂ > ε) at that confidence (κ̂: `function`).
     pub p_exceed_upper: f64,
     /// The ε the exceedances are counted against.
     pub eps: f64,
@@ -39,8 +55,18 @@ pub struct Statistical {
     pub unlabelled: u64,
     /// Largest observed error over the labelled states.
     pub max_error: f64,
-    /// Seed of the states (`crate::rng::uniform` streams).
+    /// Seed of the states (`crate::rng::uniform` streams): [`statistical_seed`] of
+    /// `model_hash` and `user_seed`.
     pub seed: u64,
+    /// The seed given by the user (`--statistical-seed`), mixed into `seed`.
+    #[serde(default)]
+    pub user_seed: u64,
+    /// Content hash of the model tested (the states are drawn from it).
+    #[serde(default)]
+    pub model_hash: String,
+    /// The function whose errors were counted, in words (module doc).
+    #[serde(default)]
+    pub function: String,
     /// The smallest ε whose bound at this confidence is ≤ `p_target` (None when n is too
     /// small for `p_target`).
     pub eps_at_p_target: Option<f64>,
@@ -160,6 +186,9 @@ pub fn from_errors(
             .filter(|e| !bad(e))
             .fold(0.0f64, |m, e| m.max(*e)),
         seed,
+        user_seed: seed,
+        model_hash: String::new(),
+        function: String::new(),
         eps_at_p_target: eps_for_probability(errors, p_target, confidence),
         p_target,
         rests_on: "i.i.d. uniform states of X labelled by the MPC (an unlabelled state counts \
@@ -179,9 +208,56 @@ pub fn in_any_box(x: &[f64], boxes: &[(Vec<f64>, Vec<f64>)]) -> bool {
     })
 }
 
-/// Default seed of the statistical states: a stream of its own, apart from the data's
-/// (`sampling.seed`, default 0) and the refinement check's.
+/// Default user seed of the statistical states (mixed with the model's hash by
+/// [`statistical_seed`]).
 pub const DEFAULT_SEED: u64 = 0x5354_4154;
+
+/// The seed of the statistical states of the model with content hash `model_hash`: the first
+/// 8 bytes (little-endian) of SHA-256("ampc statistical states\0" ‖ model_hash ‖ "\0" ‖
+/// user_seed as 8 little-endian bytes). A different model gets different states.
+pub fn statistical_seed(model_hash: &str, user_seed: u64) -> u64 {
+    use sha2::{Digest, Sha256};
+    let d = Sha256::new()
+        .chain_update(b"ampc statistical states\0")
+        .chain_update(model_hash.as_bytes())
+        .chain_update(b"\0")
+        .chain_update(user_seed.to_le_bytes())
+        .finalize();
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&d[..8]);
+    u64::from_le_bytes(b)
+}
+
+/// The function the statistical tier tests: the deployed controller (module doc).
+pub trait TestedController: Sync {
+    /// The input the controller applies at the state `x` (physical units; a non-finite
+    /// component counts as an exceedance).
+    fn input(&self, x: &[f64]) -> Vec<f64>;
+    /// What the function is, in words (stored in [`Statistical::function`]).
+    fn describe(&self) -> String;
+}
+
+/// Errors of the statistical tier.
+#[derive(Debug, thiserror::Error)]
+pub enum StatisticalError {
+    /// Labelling or reading the states' dataset.
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    /// A drawn state is one of the training states (module doc).
+    #[error(
+        "statistical state {index} = {state:?} (seed {seed}) is a state of the training \
+         dataset: the bound must be computed on fresh states; pass another \
+         --statistical-seed"
+    )]
+    TrainingState {
+        /// Index of the drawn state.
+        index: usize,
+        /// The state.
+        state: Vec<f64>,
+        /// The seed of the draw.
+        seed: u64,
+    },
+}
 
 /// Settings of a statistical certificate (`--statistical N`, `--confidence`, …).
 #[derive(Debug, Clone, PartialEq)]
@@ -238,31 +314,67 @@ impl StatisticalOptions {
 }
 
 /// The labelling problem of the statistical states: `cfg` with `n` uniform random states
-/// (seeded) and cold starts, so that each label depends on its own state only.
-pub fn sampling_problem(cfg: &ProblemConfig, opts: &StatisticalOptions) -> ProblemConfig {
+/// (from the seed `seed`, [`statistical_seed`]) and cold starts, so that each label depends
+/// on its own state only.
+pub fn sampling_problem(
+    cfg: &ProblemConfig,
+    opts: &StatisticalOptions,
+    seed: u64,
+) -> ProblemConfig {
     let mut c = cfg.clone();
     c.sampling = SamplingSettings {
         sampler: SamplerKind::Random,
         counts: c.sampling.counts.clone(),
         n: opts.samples,
-        seed: opts.seed,
+        seed,
     };
     c.solver.warm_start = false;
     c
 }
 
+/// The model tested and the data it was trained on, for [`certify_statistically`].
+pub struct Tested<'a> {
+    /// The deployed controller (module doc).
+    pub controller: &'a dyn TestedController,
+    /// Content hash of the model (seeds the states).
+    pub model_hash: &'a str,
+    /// The training states (row by row): no statistical state may equal one.
+    pub training: &'a [Vec<f64>],
+}
+
+/// Refuses the draw when a drawn state equals a training state (bit for bit).
+fn check_fresh<'a>(
+    drawn: impl IntoIterator<Item = &'a [f64]>,
+    training: &[Vec<f64>],
+    seed: u64,
+) -> Result<(), StatisticalError> {
+    let key = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
+    let train: std::collections::HashSet<Vec<u64>> = training.iter().map(|x| key(x)).collect();
+    for (index, x) in drawn.into_iter().enumerate() {
+        if train.contains(&key(x)) {
+            return Err(StatisticalError::TrainingState {
+                index,
+                state: x.to_vec(),
+                seed,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Labels (or reuses) the statistical states in `store` (a dataset file: resumable through
-/// its checkpoint, reused when complete and of the same plan and problem) and counts the
-/// exceedances of `eps` by the clamped net `clamp(mlp(x), lo, hi)`.
+/// its checkpoint, reused when complete and of the same plan — hence the same model — and
+/// problem), refuses them if one is a training state, and counts the exceedances of `eps`
+/// by the deployed controller `tested.controller` (module doc).
 pub fn certify_statistically(
     cfg: &ProblemConfig,
-    mlp: &Mlp,
-    clamp: (&[f64], &[f64]),
+    tested: &Tested<'_>,
     eps: f64,
     store: &Path,
     opts: &StatisticalOptions,
-) -> Result<Statistical, DatasetError> {
-    let sc = sampling_problem(cfg, opts);
+) -> Result<Statistical, StatisticalError> {
+    let seed = statistical_seed(tested.model_hash, opts.seed);
+    let sc = sampling_problem(cfg, opts, seed);
     let reusable = |d: &Dataset| {
         d.header.problem_hash == sc.problem_hash()
             && d.header.sampling == sc.sampling
@@ -280,10 +392,11 @@ pub fn certify_statistically(
             },
         )?,
     };
-    let nu = clamp.0.len();
-    let nx = cfg.system.nx();
-    let mut ws = Workspace::default();
-    let (mut u, mut jac) = (vec![0.0; nu], vec![0.0; nu * nx]);
+    check_fresh(
+        data.records.iter().map(|r| r.x.as_slice()),
+        tested.training,
+        seed,
+    )?;
     let inside = |x: &[f64]| in_any_box(x, &opts.excluded);
     let dropped = data.records.iter().filter(|r| inside(&r.x)).count() as u64;
     let errors: Vec<f64> = data
@@ -294,12 +407,17 @@ pub fn certify_statistically(
             if !r.is_labelled() || r.u.iter().any(|v| !v.is_finite()) {
                 return f64::INFINITY;
             }
-            mlp.eval(&r.x, &mut u, &mut jac, &mut ws);
-            let e = (0..nu)
-                .map(|j| (r.u[j] - u[j].clamp(clamp.0[j], clamp.1[j])).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            // A non-finite net output counts as an exceedance.
+            let u = tested.controller.input(&r.x);
+            let e = if u.len() == r.u.len() {
+                r.u.iter()
+                    .zip(&u)
+                    .map(|(k, v)| (k - v).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            } else {
+                f64::INFINITY
+            };
+            // A non-finite output counts as an exceedance.
             if e.is_finite() {
                 e
             } else {
@@ -307,18 +425,28 @@ pub fn certify_statistically(
             }
         })
         .collect();
-    let mut s = from_errors(&errors, eps, opts.confidence, opts.seed, opts.p_target);
-    if dropped > 0 {
+    let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target);
+    s.user_seed = opts.seed;
+    s.model_hash = tested.model_hash.to_string();
+    s.function = tested.controller.describe();
+    let domain = if dropped > 0 {
         s.excluded_states = dropped;
-        s.rests_on = format!(
+        format!(
             "i.i.d. uniform states of X minus the {} excluded boxes ({dropped} of the {} \
              states drawn fell inside them and were dropped; the rest are uniform on the \
-             certified domain), labelled by the MPC (an unlabelled state counts as an \
-             exceedance); Clopper–Pearson bound, no Lipschitz or cell assumption",
+             certified domain)",
             opts.excluded.len(),
             data.records.len()
-        );
-    }
+        )
+    } else {
+        "i.i.d. uniform states of X".to_string()
+    };
+    s.rests_on = format!(
+        "{domain}, drawn from the model's hash (none is a training state), labelled by the MPC \
+         (an unlabelled state counts as an exceedance); the errors are those of {}; \
+         Clopper–Pearson bound, no Lipschitz or cell assumption",
+        s.function
+    );
     Ok(s)
 }
 
@@ -388,6 +516,32 @@ mod tests {
                 "p {p} n {n}: miss rate {rate} > β {beta}"
             );
         }
+    }
+
+    /// The seed is a function of the model's hash and the user seed, different for another
+    /// model or another user seed; a draw containing a training state is refused, naming it.
+    #[test]
+    fn seeds_follow_the_model_and_training_states_are_refused() {
+        let a = statistical_seed("abc", DEFAULT_SEED);
+        assert_eq!(a, statistical_seed("abc", DEFAULT_SEED));
+        assert_ne!(a, statistical_seed("abd", DEFAULT_SEED));
+        assert_ne!(a, statistical_seed("abc", DEFAULT_SEED + 1));
+        let cfg = ProblemConfig::default();
+        let opts = StatisticalOptions {
+            samples: 5,
+            ..Default::default()
+        };
+        let sc = sampling_problem(&cfg, &opts, a);
+        assert_eq!((sc.sampling.seed, sc.sampling.n), (a, 5));
+        let drawn = [vec![0.5, 0.25], vec![0.1, 0.2]];
+        let it = || drawn.iter().map(|x| x.as_slice());
+        assert!(check_fresh(it(), &[vec![0.3, 0.25]], a).is_ok());
+        let e = check_fresh(it(), &[vec![0.3, 0.25], vec![0.1, 0.2]], a).unwrap_err();
+        assert!(matches!(
+            e,
+            StatisticalError::TrainingState { index: 1, .. }
+        ));
+        assert!(e.to_string().contains("[0.1, 0.2]"), "{e}");
     }
 
     #[test]

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOptions};
 use trainer::certify::statistical::{
-    certify_statistically, Statistical, StatisticalOptions, DEFAULT_SEED,
+    certify_statistically, Statistical, StatisticalOptions, Tested, DEFAULT_SEED,
 };
 use trainer::data::dataset::Dataset;
 
@@ -125,7 +125,7 @@ pub(super) fn execute(
             bail!("--target-eps must be a finite number > 0, got {e}");
         }
     }
-    let c = certify(
+    let mut c = certify(
         &m,
         &d,
         &cfg,
@@ -137,32 +137,56 @@ pub(super) fn execute(
     .with_context(|| format!("cannot certify {} on {}", model.display(), data.display()))?;
     let req =
         target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
+    // The deployed controller (f32, projection, clamp band): its f32 allowance is stored in
+    // the certificate (the tier of that term is claimed sound), and it is the function the
+    // statistical tiers test.
+    let deployed = trainer::deploy::export::Deployed::new(&cfg.name, &m, &c);
+    if let Ok(dep) = &deployed {
+        c.f32_allowance = dep.allowance;
+    }
     let statistical = match stat {
         Some((o, store)) => {
             super::common::refuse_overwrite(&[store], &[model, data])?;
+            let dep = deployed.as_ref().map_err(|e| {
+                anyhow::anyhow!(
+                    "--statistical tests the deployed controller, which {} cannot be: {e}",
+                    model.display()
+                )
+            })?;
+            let training: Vec<Vec<f64>> = d.records.iter().map(|r| r.x.clone()).collect();
+            let tested = Tested {
+                controller: dep,
+                model_hash: &c.hash,
+                training: &training,
+            };
             Some(
-                certify_statistically(&cfg, &m.mlp, (&c.clamp_lo, &c.clamp_hi), c.eps, store, o)
+                certify_statistically(&cfg, &tested, c.eps, store, o)
                     .with_context(|| format!("statistical states in {}", store.display()))?,
             )
         }
         None => None,
     };
-    let loop_bound = closed_loop.map(|(n, seed, conf)| {
-        if !json {
-            eprintln!(
-                "closed loop: {n} trajectories of {} steps …",
-                cfg.closed_loop.steps
-            );
+    let loop_bound = match closed_loop {
+        Some((n, seed, conf)) => {
+            let dep = deployed.as_ref().map_err(|e| {
+                anyhow::anyhow!(
+                    "--statistical-closed-loop simulates the deployed controller, which {} \
+                     cannot be: {e}",
+                    model.display()
+                )
+            })?;
+            if !json {
+                eprintln!(
+                    "closed loop: {n} trajectories of {} steps …",
+                    cfg.closed_loop.steps
+                );
+            }
+            Some(trainer::study::statistical_loop::closed_loop_statistical(
+                &cfg, dep, &c.hash, n, seed, conf,
+            ))
         }
-        trainer::study::statistical_loop::closed_loop_statistical(
-            &cfg,
-            &m.mlp,
-            (&c.clamp_lo, &c.clamp_hi),
-            n,
-            seed,
-            conf,
-        )
-    });
+        None => None,
+    };
     if json {
         let mut v = trainer::certify::tier::certificate_json(&c);
         if let (Some(b), Some(o)) = (&loop_bound, v.as_object_mut()) {

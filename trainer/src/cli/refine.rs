@@ -129,10 +129,24 @@ pub(super) fn execute(
     }
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
     if let Some((o, store)) = &stat {
+        // The function tested: the deployed controller of the refined net; the states
+        // drawn from its hash, none a corner the net was trained on.
+        let dep = trainer::deploy::export::Deployed::new(&cfg.name, &r.model, &cert.base).map_err(
+            |e| {
+                anyhow::anyhow!(
+                    "--statistical tests the deployed controller, which the refined net cannot \
+                     be: {e}"
+                )
+            },
+        )?;
+        let training: Vec<Vec<f64>> = r.state.points.iter().map(|p| p.x.clone()).collect();
         let s = trainer::certify::statistical::certify_statistically(
             &cfg,
-            &r.model.mlp,
-            (&cert.base.clamp_lo, &cert.base.clamp_hi),
+            &trainer::certify::statistical::Tested {
+                controller: &dep,
+                model_hash: &cert.base.hash,
+                training: &training,
+            },
             cert.base.eps,
             store,
             &StatisticalOptions {
@@ -162,8 +176,8 @@ pub(super) fn execute(
     if !quiet {
         print_summary(&cfg, &rs, &cert, t0.elapsed().as_secs_f64(), &dir);
     }
-    if let Some(c) = checked {
-        check_certificate(&c, &dir, quiet)?;
+    if let Some(c) = &checked {
+        check_certificate(c, &dir, quiet)?;
     }
     if let Some((design, rf)) = robust_design {
         // The exported controller's f32 allowance counts against the design ε too.
@@ -173,7 +187,27 @@ pub(super) fn execute(
                     trainer::deploy::export::f32_allowance(&em, trainer::deploy::export::Tanh::Libm)
                         .0
                 });
-        let v = trainer::robust::verdict(design, cert.base.eps, allowance, rf);
+        let check = match &checked {
+            None => trainer::robust::Check::NotRun,
+            Some(c) if c.per_cell.passed && c.feasible_in_excluded == 0 => {
+                trainer::robust::Check::Passed
+            }
+            Some(_) => trainer::robust::Check::Failed,
+        };
+        let v = trainer::robust::verdict(&trainer::robust::Evidence {
+            design_eps: design,
+            certified_eps: cert.base.eps,
+            f32_allowance: allowance,
+            recursive_feasibility: rf,
+            eps_sound: cert.guarantee.guarantee == trainer::certify::tier::Tier::Sound,
+            eps_rests_on: cert.guarantee.assumptions.clone(),
+            check,
+            // `refine` holds no design to prove the exclusions with: each box is assumed.
+            excluded_unproven: cert.local.excluded.as_ref().map_or(0, |e| e.boxes.len()),
+            feasible_in_excluded: checked.as_ref().map_or(0, |c| c.feasible_in_excluded),
+            // `refine` does not search beyond X (the robust loop of `trainer run` does).
+            feasible_outside_domain: 0,
+        });
         if !quiet {
             println!("robust design: {}", v.message);
         }

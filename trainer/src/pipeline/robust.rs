@@ -5,8 +5,11 @@
 //!
 //! `robust.json`'s verdict keys: `design_eps`, `certified_eps` (the net simulated and
 //! judged: the refined one when refinement improved ε), `f32_allowance` (the sound f32
-//! allowance of that net's export, libm tanh), `verdict` = `"certified"` iff
-//! `certified_eps + f32_allowance ≤ design_eps`, else `"not_certified"`; `guarantee` (the
+//! allowance of that net's export, libm tanh, in the 2-norm ε is stated in), `verdict`:
+//! `"certified"`, `"conditional"` or `"not_certified"` (`robust::verdict`: certified only
+//! when ε + allowance ≤ design ε and ε is sound, recursive feasibility proven, the per-cell
+//! check passed and no excluded cell is merely estimated infeasible; `verdict_detail.rests_on`
+//! lists what a conditional verdict rests on); `guarantee` (the
 //! certificate's tier: `sound` / `statistical` / `estimated`) and `recursive_feasibility`
 //! (`proven` / `sampled` / `unknown`, from the design's terminal region); `verdict_detail`
 //! the same with the message.
@@ -19,7 +22,10 @@ use crate::io::write_atomic;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::ProblemConfig;
-use crate::robust::{design, robust_config, verdict, Design, Feasibility, RobustError, Verdict};
+use crate::robust::{
+    design, robust_config, verdict, Check, Design, Evidence, Feasibility, RobustError, Verdict,
+    VerdictStatus,
+};
 use crate::study::closed_loop::Run;
 use crate::study::robust::*;
 use crate::study::scenarios::{initial_states, ClosedLoop};
@@ -50,7 +56,7 @@ pub struct RobustReport {
     pub certified_eps: f64,
     /// The f32 allowance of that net's export (libm tanh).
     pub f32_allowance: f64,
-    /// `"certified"` iff certified_eps + f32_allowance ≤ design_eps, else `"not_certified"`.
+    /// `"certified"`, `"conditional"` or `"not_certified"` (module doc).
     pub verdict: String,
     /// The certificate's tier (`sound`, `statistical`, `estimated`).
     pub guarantee: Tier,
@@ -139,15 +145,32 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     let mut cert = cert;
     let rf = d.recursive_feasibility();
     let mut excluded = None;
-    let mut tier = crate::certify::tier::theorem1(&cert).guarantee;
-    let mut v = verdict(
-        cfg.robust.eps,
-        cert.eps,
-        f32_allowance(&cfg.name, &net, &cert),
-        rf,
-    );
+    let mut guarantee = crate::certify::tier::theorem1(&cert);
+    // The evidence of the verdict; the robust loop runs no per-cell check (yet); an
+    // excluded box counts as proven infeasible only by `robust::exclusion`.
+    let evidence = |g: &crate::certify::tier::Guarantee,
+                    eps: f64,
+                    allowance: f64,
+                    excluded: Option<&crate::certify::refine::Excluded>,
+                    feasible_in_excluded: usize,
+                    feasible_outside_domain: usize| Evidence {
+        design_eps: cfg.robust.eps,
+        certified_eps: eps,
+        f32_allowance: allowance,
+        recursive_feasibility: rf,
+        eps_sound: g.guarantee == Tier::Sound,
+        eps_rests_on: g.assumptions.clone(),
+        check: Check::NotRun,
+        excluded_unproven: excluded.map_or(0, |e| {
+            crate::robust::exclusion::unproven_boxes(cfg, &d.stages, &e.boxes)
+        }),
+        feasible_in_excluded,
+        feasible_outside_domain,
+    };
+    let mut allowance = f32_allowance(&cfg.name, &net, &cert);
+    let mut v = verdict(&evidence(&guarantee, cert.eps, allowance, None, 0, 0));
     let mut refinement = None;
-    if !v.certified && cfg.robust.refine {
+    if v.status == VerdictStatus::NotCertified && cfg.robust.refine {
         // The design loop's second step: refine data and network with local certificates
         // until the certified ε meets the design ε (or the refinement budget is spent).
         let mut fcfg = rcfg.clone();
@@ -185,14 +208,17 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             net = r.model;
             net.certificate = Some(lc.base.clone());
             cert = lc.base;
-            tier = lc.guarantee.guarantee;
+            guarantee = lc.guarantee;
             excluded = lc.local.excluded;
-            v = verdict(
-                cfg.robust.eps,
+            allowance = f32_allowance(&cfg.name, &net, &cert);
+            v = verdict(&evidence(
+                &guarantee,
                 cert.eps,
-                f32_allowance(&cfg.name, &net, &cert),
-                rf,
-            );
+                allowance,
+                excluded.as_ref(),
+                0,
+                0,
+            ));
         }
     }
 
@@ -232,19 +258,16 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             .filter(|x| crate::certify::statistical::in_any_box(x, &e.boxes))
             .count()
     });
-    if feasible_in_excluded > 0 && v.certified {
-        v.certified = false;
-        v.message = format!(
-            "NOT certified: {feasible_in_excluded} of the {} feasible Monte Carlo states lie in \
-             cells the certificate excludes (the exclusion, estimated from the cells' corners, \
-             reaches into the feasible set, which ε must cover); ε + f32 allowance = {:.4} + \
-             {:.2e} against the design ε = {:.4}",
-            mc.len(),
-            v.certified_eps,
-            v.f32_allowance,
-            v.design_eps
-        );
-    }
+    // The feasible set beyond X (within the OCP's state bounds): ε must cover it too.
+    let outside = feasible_outside_domain(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
+    let v = verdict(&evidence(
+        &guarantee,
+        cert.eps,
+        allowance,
+        excluded.as_ref(),
+        feasible_in_excluded,
+        outside.len(),
+    ));
     // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
     let load_nominal = || -> Option<(Model, f64)> {
         let m = Model::load(&root.join("model_regularized.bin")).ok()?;
@@ -277,13 +300,8 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         design_eps: v.design_eps,
         certified_eps: v.certified_eps,
         f32_allowance: v.f32_allowance,
-        verdict: if v.certified {
-            "certified"
-        } else {
-            "not_certified"
-        }
-        .into(),
-        guarantee: tier,
+        verdict: v.status.name().into(),
+        guarantee: guarantee.guarantee,
         recursive_feasibility: v.recursive_feasibility,
         design: d,
         verdict_detail: v,

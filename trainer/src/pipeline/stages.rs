@@ -265,7 +265,7 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
         ("model_nominal.bin", "certificate_nominal.json"),
     ] {
         let m = load_model("certify", &d.join(file))?;
-        let c = certify(
+        let mut c = certify(
             &m,
             &data,
             env.cfg,
@@ -275,6 +275,12 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             },
         )
         .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
+        // The deployed controller's f32 allowance (libm tanh, 2-norm), whose tier the
+        // certificate states as sound: computed and stored, not left at 0.
+        if let Ok(em) = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c) {
+            c.f32_allowance =
+                crate::deploy::export::f32_allowance(&em, crate::deploy::export::Tanh::Libm).0;
+        }
         let text = crate::certify::seal::sealed_json(&crate::certify::tier::certificate_json(&c))
             .map_err(|e| fail("certify", e))?;
         write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;

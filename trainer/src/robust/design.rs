@@ -1,12 +1,6 @@
 //! A robust design: the ancillary LQR gain (the input weight that tightens least), its tube,
-//! the tightened problem with its terminal region, and the verdict of a certified ε against
-//! the design ε:
-//!
-//! ```text
-//! certified  ⇔  ε_cert + a_f32 ≤ ε_design      (a_f32: the exported f32 allowance)
-//! ```
-//! Corollary 1 applies when, in addition, recursive feasibility of the tightened OCP is
-//! proven ([`Feasibility::Proven`], `terminal`).
+//! the tightened problem with its terminal region. The verdict of a certified ε against the
+//! design ε is [`verdict`] (`robust/verdict.rs`).
 
 use super::jacobians::*;
 use super::terminal::{terminal_region, Feasibility, TerminalRegion};
@@ -137,72 +131,4 @@ pub fn robust_config(cfg: &ProblemConfig, d: &Design) -> ProblemConfig {
         r.refine.exclude_infeasible = true;
     }
     r
-}
-
-/// Whether a trained net's certified ε (plus the exported f32 allowance) covers the design ε.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Verdict {
-    /// The ε the MPC was made robust against.
-    pub design_eps: f64,
-    /// The certified ε of the net (Theorem 1, or a tighter certificate).
-    pub certified_eps: f64,
-    /// The exported controller's f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64|).
-    #[serde(default)]
-    pub f32_allowance: f64,
-    /// How recursive feasibility of the tightened OCP is established.
-    #[serde(default = "unknown")]
-    pub recursive_feasibility: Feasibility,
-    /// certified_eps + f32_allowance ≤ design_eps.
-    pub certified: bool,
-    /// One line for humans, with the numbers and what is missing.
-    pub message: String,
-}
-
-fn unknown() -> Feasibility {
-    Feasibility::Unknown
-}
-
-/// The verdict of a certificate against a design (module doc): `certified` iff
-/// `certified_eps + f32_allowance ≤ design_eps` (all finite); the message says that
-/// Corollary 1 applies only when recursive feasibility is also proven, otherwise what is
-/// missing.
-pub fn verdict(
-    design_eps: f64,
-    certified_eps: f64,
-    f32_allowance: f64,
-    recursive_feasibility: Feasibility,
-) -> Verdict {
-    let total = certified_eps + f32_allowance;
-    let certified = total.is_finite() && f32_allowance >= 0.0 && total <= design_eps;
-    let rf = recursive_feasibility;
-    let message = if certified && rf == Feasibility::Proven {
-        format!(
-            "certified: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} ≤ design ε = \
-             {design_eps:.4} and recursive feasibility is proven (terminal region); Corollary 1 \
-             applies (the closed loop stays in the robust MPC's feasible set)"
-        )
-    } else if certified {
-        format!(
-            "certified ε: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} ≤ design \
-             ε = {design_eps:.4}, but recursive feasibility is {} (no proven terminal region): \
-             Corollary 1 is not established, only the Monte Carlo evidence below",
-            rf.name()
-        )
-    } else {
-        format!(
-            "NOT certified: ε + f32 allowance = {certified_eps:.4} + {f32_allowance:.2e} exceeds \
-             the design ε = {design_eps:.4} (factor {:.1}); recursive feasibility {}; the \
-             closed-loop guarantee does not hold, only the Monte Carlo evidence below",
-            total / design_eps,
-            rf.name()
-        )
-    };
-    Verdict {
-        design_eps,
-        certified_eps,
-        f32_allowance,
-        recursive_feasibility,
-        certified,
-        message,
-    }
 }

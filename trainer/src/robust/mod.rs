@@ -60,21 +60,26 @@
 //! steps where the soft fallback was needed (`mpc_soft_steps`).
 //!
 //! Files: [`jacobians`] (the family of (A, B) and how its sup is bounded), [`tube`] (ρ, w̄,
-//! the radii s_k and the tightening), [`terminal`] (the terminal region X_f), [`design`](mod@design) (the LQR choice, the tightened problem, the
-//! verdict of a certificate against the design ε). The robust closed-loop study is
+//! the radii s_k and the tightening), [`terminal`] (the terminal region X_f), [`design`](mod@design) (the LQR choice, the tightened problem),
+//! [`exclusion`] (the proof that an excluded box is infeasible for the tightened
+//! OCP), [`verdict`](mod@verdict) (the verdict of a certificate against the design ε: certified,
+//! conditional with what it rests on, or not certified). The robust closed-loop study is
 //! `study::robust`; the design loop that runs the pipeline on the tightened problem is
 //! `pipeline::robust`. Imports `problem`, `mpc` and `certify`.
 
 pub mod design;
+pub mod exclusion;
 pub mod jacobians;
 pub mod terminal;
 pub mod tube;
+pub mod verdict;
 
 pub use crate::problem::{RobustMethod, RobustSettings};
-pub use design::{design, robust_config, verdict, Design, Verdict, REFINE_TARGET_FRACTION};
+pub use design::{design, robust_config, Design, REFINE_TARGET_FRACTION};
 pub use jacobians::{jacobian_set, pendulum_rk4_jacobian, JacobianBound, JacobianSet};
 pub use terminal::{terminal_region, Feasibility, TerminalCheck, TerminalRegion};
 pub use tube::{contraction, dare, AffineConstraint, Tube};
+pub use verdict::{verdict, Check, Evidence, Verdict, VerdictStatus};
 
 /// Errors of the robust design.
 #[derive(Debug, thiserror::Error)]

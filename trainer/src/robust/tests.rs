@@ -294,32 +294,113 @@ fn settings_defaults_serialise_as_before_and_validate_with_keys() {
     assert_eq!(parsed.robust.method, RobustMethod::Lipschitz);
 }
 
+/// Evidence for a design ε of 0.5 where everything is proven (sound ε, proven recursive
+/// feasibility, a passed check, no excluded cell).
+fn proven(eps: f64, allowance: f64) -> super::Evidence {
+    super::Evidence {
+        design_eps: 0.5,
+        certified_eps: eps,
+        f32_allowance: allowance,
+        recursive_feasibility: super::Feasibility::Proven,
+        eps_sound: true,
+        eps_rests_on: vec![],
+        check: super::Check::Passed,
+        excluded_unproven: 0,
+        feasible_in_excluded: 0,
+        feasible_outside_domain: 0,
+    }
+}
+
 #[test]
 fn verdict_compares_certified_plus_allowance_with_design_eps() {
     use super::Feasibility::*;
-    assert!(verdict(0.5, 0.4, 0.0, Proven).certified);
-    assert!(verdict(0.5, 0.5, 0.0, Proven).certified);
+    use super::VerdictStatus::*;
+    let v = |e: super::Evidence| verdict(&e);
+    assert_eq!(v(proven(0.4, 0.0)).status, Certified);
+    assert!(v(proven(0.5, 0.0)).certified);
     // The f32 allowance counts: 0.5 + 1e-6 > 0.5.
-    let v = verdict(0.5, 0.5, 1e-6, Proven);
+    let r = v(proven(0.5, 1e-6));
     assert!(
-        !v.certified && v.message.contains("NOT certified"),
+        !r.certified && r.status == NotCertified && r.message.contains("NOT certified"),
         "{}",
-        v.message
+        r.message
     );
-    let v = verdict(0.5, 31.0, 0.0, Proven);
-    assert!(!v.certified && v.message.contains("NOT certified") && v.message.contains("31"));
-    assert!(!verdict(0.5, f64::NAN, 0.0, Proven).certified);
-    assert!(!verdict(0.5, 0.4, f64::NAN, Proven).certified);
-    // Corollary 1 is claimed only with recursive feasibility proven.
-    assert!(verdict(0.5, 0.4, 1e-6, Proven)
-        .message
-        .contains("Corollary 1 applies"));
+    let r = v(proven(31.0, 0.0));
+    assert!(!r.certified && r.message.contains("NOT certified") && r.message.contains("31"));
+    assert_eq!(v(proven(f64::NAN, 0.0)).status, NotCertified);
+    assert_eq!(v(proven(0.4, f64::NAN)).status, NotCertified);
+    // Corollary 1 is claimed only when everything is proven.
+    let r = v(proven(0.4, 1e-6));
+    assert!(r.message.contains("Corollary 1 applies") && r.rests_on.is_empty());
     for rf in [Sampled, Unknown] {
-        let v = verdict(0.5, 0.4, 1e-6, rf);
-        assert!(v.certified, "the ε inequality holds");
-        assert!(!v.message.contains("Corollary 1 applies"), "{}", v.message);
-        assert!(v.message.contains(rf.name()), "{}", v.message);
+        let r = v(super::Evidence {
+            recursive_feasibility: rf,
+            ..proven(0.4, 1e-6)
+        });
+        assert_eq!(
+            r.status, Conditional,
+            "the ε inequality holds, feasibility is {rf:?}"
+        );
+        assert!(!r.certified);
+        assert!(!r.message.contains("Corollary 1 applies"), "{}", r.message);
+        assert!(r.rests_on[0].contains(rf.name()), "{:?}", r.rests_on);
     }
+}
+
+/// An estimated ε (a sampled L_MPC) is never `certified`, however small: `conditional`, with
+/// the assumption in `rests_on`; the same for a check not run and excluded cells whose
+/// infeasibility is estimated; a failed check or a feasible state in an excluded cell is
+/// `not_certified`.
+#[test]
+fn verdict_is_conditional_on_what_is_not_proven() {
+    use super::VerdictStatus::*;
+    let estimated = super::Evidence {
+        eps_sound: false,
+        eps_rests_on: vec!["l_mpc: sampled from the data's sensitivities (an estimate)".into()],
+        ..proven(0.1, 1e-6)
+    };
+    let r = verdict(&estimated);
+    assert_eq!((r.status, r.certified), (Conditional, false));
+    assert_eq!(r.rests_on.len(), 1);
+    assert!(r.rests_on[0].starts_with("l_mpc"), "{:?}", r.rests_on);
+    assert!(!r.message.contains("Corollary 1 applies"), "{}", r.message);
+    assert!(r.message.contains("l_mpc"), "{}", r.message);
+    let r = verdict(&super::Evidence {
+        check: super::Check::NotRun,
+        ..proven(0.1, 0.0)
+    });
+    assert_eq!(r.status, Conditional);
+    assert!(r.rests_on[0].contains("check"), "{:?}", r.rests_on);
+    let r = verdict(&super::Evidence {
+        excluded_unproven: 3,
+        ..proven(0.1, 0.0)
+    });
+    assert_eq!(r.status, Conditional);
+    assert!(
+        r.rests_on[0].contains("3 excluded boxes"),
+        "{:?}",
+        r.rests_on
+    );
+    let r = verdict(&super::Evidence {
+        check: super::Check::Failed,
+        ..estimated.clone()
+    });
+    assert_eq!(r.status, NotCertified);
+    assert!(r.message.contains("check failed"), "{}", r.message);
+    let r = verdict(&super::Evidence {
+        feasible_in_excluded: 2,
+        ..proven(0.1, 0.0)
+    });
+    assert_eq!(r.status, NotCertified);
+    let r = verdict(&super::Evidence {
+        feasible_outside_domain: 1,
+        ..proven(0.1, 0.0)
+    });
+    assert_eq!(r.status, NotCertified);
+    assert!(r.message.contains("outside X"), "{}", r.message);
+    // A missed design is not_certified whatever else holds.
+    assert_eq!(verdict(&proven(0.6, 0.0)).status, NotCertified);
+    assert_eq!(VerdictStatus::Conditional.name(), "conditional");
 }
 
 /// A nonlinear constraint is refused, naming its key; affine ones are tightened.

@@ -86,6 +86,64 @@ pub fn feasible_states(rcfg: &ProblemConfig, n: usize, seed: u64) -> Vec<Vec<f64
     out
 }
 
+/// The box the feasible set of the tightened MPC is searched in beyond X: per axis the hull
+/// of X and the OCP's state bounds, an unbounded side taking X's width again.
+pub fn search_box(rcfg: &ProblemConfig) -> (Vec<f64>, Vec<f64>) {
+    let (lo, hi) = (&rcfg.domain.lo, &rcfg.domain.hi);
+    let o = &rcfg.ocp;
+    (0..lo.len())
+        .map(|i| {
+            let w = hi[i] - lo[i];
+            let a = o.x_lo.get(i).copied().unwrap_or(f64::NEG_INFINITY);
+            let b = o.x_hi.get(i).copied().unwrap_or(f64::INFINITY);
+            (
+                if a.is_finite() {
+                    a.min(lo[i])
+                } else {
+                    lo[i] - w
+                },
+                if b.is_finite() {
+                    b.max(hi[i])
+                } else {
+                    hi[i] + w
+                },
+            )
+        })
+        .unzip()
+}
+
+/// Seeded uniform states of the [`search_box`] outside X (at most `n` draws) at which the
+/// tightened MPC is feasible: the feasible set reaches beyond the certified domain there,
+/// where ε does not hold (the controller projects onto X). Empty when the box is X.
+pub fn feasible_outside_domain(rcfg: &ProblemConfig, n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let (blo, bhi) = search_box(rcfg);
+    let (lo, hi) = (&rcfg.domain.lo, &rcfg.domain.hi);
+    if blo.iter().zip(lo).all(|(a, b)| a >= b) && bhi.iter().zip(hi).all(|(a, b)| a <= b) {
+        return Vec::new();
+    }
+    let nx = lo.len();
+    let outside: Vec<Vec<f64>> = (0..n as u64)
+        .map(|m| {
+            (0..nx)
+                .map(|i| blo[i] + (bhi[i] - blo[i]) * uniform(seed ^ 0x0b5d, m, i as u64))
+                .collect::<Vec<f64>>()
+        })
+        .filter(|x| (0..nx).any(|i| x[i] < lo[i] || x[i] > hi[i]))
+        .collect();
+    let ok: Vec<bool> = outside
+        .par_iter()
+        .map_init(
+            || MpcLaw::new(rcfg),
+            |law, x| law.solve(x, None).0.status == SqpStatus::Converged,
+        )
+        .collect();
+    outside
+        .into_iter()
+        .zip(ok)
+        .filter_map(|(x, f)| f.then_some(x))
+        .collect()
+}
+
 /// The disturbances of the robust-MPC runs, with their `closed_loop.json` keys.
 pub fn disturbances(eps: f64) -> Vec<(&'static str, Disturbance)> {
     vec![

@@ -1,11 +1,17 @@
 //! [`ClosedLoopStatistical`]: the statistical tier for the closed loop — how likely a
 //! trajectory of the deployed controller from a random initial state violates a constraint.
 //!
-//! n initial states x₀ i.i.d. uniform on X (seeded); each runs `closed_loop.steps` steps of
+//! n initial states x₀ i.i.d. uniform on X, drawn from the seed
+//! [`statistical_seed`]`(model hash ‖ "closed loop", user seed)` (fresh for every model
+//! tested); each runs `closed_loop.steps` steps of
 //!
 //! ```text
-//! x_{k+1} = F(x_k, sat_U(clamp_band(κ_NN(x_k))))          (nominal plant, no noise)
+//! x_{k+1} = F(x_k, sat_U(κ̂(x_k)))          (nominal plant, no noise)
 //! ```
+//!
+//! with κ̂ the deployed controller (f32 state, projection onto X, f32 network, clamp band:
+//! `deploy::export::Deployed`, passed in as a [`TestedController`] because the device model
+//! lives in `deploy`, which the caller may use),
 //!
 //! and counts as violating if any step violates a state bound or a path constraint by more
 //! than [`VIOLATION_TOL`] ([`step_violation`], the closed-loop study's rule). With k
@@ -17,8 +23,7 @@
 //! reasons no controller can remove, so the bound is also given over the feasible starts
 //! alone (the conditional distribution: still i.i.d.).
 
-use crate::certify::statistical::clopper_pearson_upper;
-use crate::learn::mlp::Mlp;
+use crate::certify::statistical::{clopper_pearson_upper, statistical_seed, TestedController};
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::model::Discrete;
@@ -60,8 +65,15 @@ pub struct ClosedLoopStatistical {
     pub confidence: f64,
     /// Steps per trajectory.
     pub steps: usize,
-    /// Seed of the initial states (`crate::rng::uniform` streams).
+    /// Seed of the initial states (`crate::rng::uniform` streams), derived from the model's
+    /// hash and `user_seed`.
     pub seed: u64,
+    /// The seed given by the user (`--closed-loop-seed`).
+    #[serde(default)]
+    pub user_seed: u64,
+    /// The function simulated, in words.
+    #[serde(default)]
+    pub function: String,
     /// Largest violation seen.
     pub max_violation: f64,
     /// What the bound rests on, in words.
@@ -72,8 +84,7 @@ pub struct ClosedLoopStatistical {
 fn trajectory(
     cfg: &ProblemConfig,
     plant: &Discrete,
-    net: &Mlp,
-    band: (&[f64], &[f64]),
+    controller: &dyn TestedController,
     x0: &[f64],
 ) -> f64 {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
@@ -83,12 +94,13 @@ fn trajectory(
     let mut next = vec![0.0; nx];
     let mut worst = 0.0f64;
     for k in 0..cfg.closed_loop.steps {
-        let mut u = net.predict(&x);
+        let mut u = controller.input(&x);
+        u.resize(nu, f64::NAN);
         for j in 0..nu {
-            // The deployed controller: clamp to the band, then the actuator saturates; a
-            // non-finite output is the band's centre (controller-core's fallback rule).
+            // The actuator saturates the deployed controller's output; a non-finite one
+            // (the device never gives one) is the centre of U.
             u[j] = if u[j].is_finite() {
-                u[j].clamp(band.0[j], band.1[j]).clamp(ulo[j], uhi[j])
+                u[j].clamp(ulo[j], uhi[j])
             } else {
                 0.5 * (ulo[j] + uhi[j])
             };
@@ -101,16 +113,18 @@ fn trajectory(
     worst
 }
 
-/// Runs `n` trajectories of the controller `net` clamped to `band` from seeded uniform
-/// initial states and bounds the violation probability at `confidence`.
+/// Runs `n` trajectories of the deployed `controller` (of the model with content hash
+/// `model_hash`) from uniform initial states drawn from the model's hash and `user_seed`,
+/// and bounds the violation probability at `confidence`.
 pub fn closed_loop_statistical(
     cfg: &ProblemConfig,
-    net: &Mlp,
-    band: (&[f64], &[f64]),
+    controller: &dyn TestedController,
+    model_hash: &str,
     n: usize,
-    seed: u64,
+    user_seed: u64,
     confidence: f64,
 ) -> ClosedLoopStatistical {
+    let seed = statistical_seed(&format!("{model_hash}\0closed loop"), user_seed);
     let nx = cfg.system.nx();
     let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
     let results: Vec<(bool, f64)> = (0..n as u64)
@@ -125,7 +139,7 @@ pub fn closed_loop_statistical(
                     })
                     .collect();
                 let feasible = law.solve(&x0, None).0.status == SqpStatus::Converged;
-                (feasible, trajectory(cfg, &plant, net, band, &x0))
+                (feasible, trajectory(cfg, &plant, controller, &x0))
             },
         )
         .collect();
@@ -143,12 +157,16 @@ pub fn closed_loop_statistical(
         confidence,
         steps: cfg.closed_loop.steps,
         seed,
+        user_seed,
+        function: controller.describe(),
+        // A NaN violation is already +∞ (trajectory); the fold cannot drop one.
         max_violation: results.iter().map(|(_, v)| *v).fold(0.0, f64::max),
         rests_on: format!(
-            "initial states i.i.d. uniform on X (seed {seed}); the nominal plant model; the \
-             controller as deployed (clamp band, actuator saturation), f64 arithmetic; \
-             {} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a state bound or \
-             path constraint",
+            "initial states i.i.d. uniform on X (seed {seed}, from the model's hash and the \
+             user seed {user_seed}); the nominal plant model; {}, then the actuator \
+             saturation; {} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a \
+             state bound or path constraint",
+            controller.describe(),
             cfg.closed_loop.steps
         ),
     }
@@ -158,11 +176,16 @@ pub fn closed_loop_statistical(
 mod tests {
     use super::*;
 
-    /// A net of constant output `u` (output half-width 0).
-    fn constant(cfg: &ProblemConfig, u: f64) -> Mlp {
-        let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
-        let act = crate::learn::mlp::Activation::Tanh;
-        Mlp::new(&[cfg.system.nx(), 3, 1], act, 1, lo, hi, &[u], &[u])
+    /// A controller of constant output.
+    struct Constant(f64);
+
+    impl TestedController for Constant {
+        fn input(&self, _: &[f64]) -> Vec<f64> {
+            vec![self.0]
+        }
+        fn describe(&self) -> String {
+            format!("u = {}", self.0)
+        }
     }
 
     /// Counted against an independent count: every trajectory re-simulated here with the
@@ -171,17 +194,17 @@ mod tests {
     fn counts_match_a_direct_simulation() {
         let mut cfg = ProblemConfig::default();
         cfg.closed_loop.steps = 30;
-        let band = (cfg.ocp.u_lo.clone(), cfg.ocp.u_hi.clone());
         for u in [0.0, 15.0] {
-            let net = constant(&cfg, u);
-            let s = closed_loop_statistical(&cfg, &net, (&band.0, &band.1), 40, 7, 0.99);
+            let s = closed_loop_statistical(&cfg, &Constant(u), "model", 40, 7, 0.99);
+            assert_eq!(s.seed, statistical_seed("model\0closed loop", 7));
+            assert_eq!(s.user_seed, 7);
             let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
             let mut k = 0;
             for i in 0..40u64 {
                 let mut x: Vec<f64> = (0..2)
                     .map(|j| {
                         let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-                        lo + (hi - lo) * uniform(7, i, j as u64)
+                        lo + (hi - lo) * uniform(s.seed, i, j as u64)
                     })
                     .collect();
                 let mut bad = false;
@@ -205,8 +228,10 @@ mod tests {
         }
         // A constant full torque drives the pendulum's velocity out of its bound from
         // most states: the two inputs cannot both give no violations.
-        let full =
-            closed_loop_statistical(&cfg, &constant(&cfg, 15.0), (&band.0, &band.1), 40, 7, 0.99);
+        let full = closed_loop_statistical(&cfg, &Constant(15.0), "model", 40, 7, 0.99);
         assert!(full.all.violating > 0, "{full:?}");
+        // Another model: other initial states.
+        let other = closed_loop_statistical(&cfg, &Constant(15.0), "other", 40, 7, 0.99);
+        assert_ne!(other.seed, full.seed);
     }
 }

@@ -34,7 +34,7 @@
 use super::{gamma, AffineLaw, QpCertifier, U};
 use crate::certify::local::{exact_cell_bound, CellBound};
 use crate::certify::netbounds::NetBounder;
-use crate::learn::mlp::{Mlp, Workspace};
+use crate::learn::mlp::Mlp;
 use std::sync::Arc;
 
 /// Levels of bisection of a law's box in [`QpCertifier::restricted_bound`].
@@ -268,15 +268,13 @@ impl Bisect<'_> {
     ) -> Option<CellBound> {
         let nx = lo.len();
         let nu = self.mlp.nu();
-        let mut ws = Workspace::default();
-        let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+        // The network at the corners as outward-rounded enclosures, not plain f64 values.
         let mut net_u = Vec::with_capacity(nu << nx);
         for c in 0..1usize << nx {
             let v: Vec<f64> = (0..nx)
                 .map(|k| if c & (1 << k) != 0 { hi[k] } else { lo[k] })
                 .collect();
-            self.mlp.eval(&v, &mut u, &mut j, &mut ws);
-            net_u.extend_from_slice(&u);
+            net_u.extend(self.nb.value_at(&v));
         }
         let pieces = self.q.pieces(lo, hi, std::slice::from_ref(l));
         let b = exact_cell_bound(lo, hi, &pieces, &net_u, &self.nb.bounds(lo, hi), self.band);

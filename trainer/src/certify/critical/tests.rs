@@ -254,9 +254,9 @@ fn the_exact_cell_bound_holds_at_sampled_points() {
         let Some(laws) = q.prove_from_corners(&lo, &hi, &refs) else {
             continue;
         };
-        let net_u: Vec<f64> = (0..4)
+        let net_u: Vec<_> = (0..4)
             .map(|c| {
-                m.predict(&[
+                nb.value_at(&[
                     if c & 1 == 0 { lo[0] } else { hi[0] },
                     if c & 2 == 0 { lo[1] } else { hi[1] },
                 ])[0]
@@ -375,9 +375,9 @@ fn the_restricted_bound_holds_against_dense_sampling() {
             );
         }
         assert!(split.eps <= whole.eps);
-        let nu_c: Vec<f64> = QpCertifier::vertices(&lo, &hi)
+        let nu_c: Vec<_> = QpCertifier::vertices(&lo, &hi)
             .iter()
-            .map(|v| m.predict(v)[0])
+            .map(|v| nb.value_at(v)[0])
             .collect();
         let unrestricted = exact_cell_bound(
             &lo,

@@ -388,3 +388,73 @@ fn the_second_order_form_needs_a_consistent_centre() {
     );
     assert!(off.eps >= good.eps);
 }
+
+/// The exact cell bound's label tolerance is the piece's verified error plus the radius of
+/// the network's corner enclosures — no constant: a network equal to the piece up to
+/// rounding gets ε_C of the order of those bounds (far below the solved labels'
+/// [`LABEL_TOL`]), and a wide corner enclosure is counted in full.
+#[test]
+fn exact_cell_bound_uses_the_verified_errors_not_a_constant() {
+    let (lo, hi) = ([0.0, 0.0], [0.1, 0.2]);
+    let piece = ExactPiece {
+        u: vec![0.5; 4],
+        u_err: 1e-15,
+        gain: vec![0.0, 0.0],
+        gain_err: vec![0.0, 0.0],
+    };
+    let net = |r: f64| BoxBounds {
+        value: vec![Iv {
+            lo: 0.5 - r,
+            hi: 0.5 + r,
+        }],
+        jac: vec![Iv { lo: 0.0, hi: 0.0 }; 2],
+        hess_diag: None,
+    };
+    let band = ([-1.0], [1.0]);
+    let corners = |r: f64| {
+        vec![
+            Iv {
+                lo: 0.5 - r,
+                hi: 0.5 + r
+            };
+            4
+        ]
+    };
+    let tight = exact_cell_bound(
+        &lo,
+        &hi,
+        std::slice::from_ref(&piece),
+        &corners(1e-14),
+        &net(1e-14),
+        (&band.0, &band.1),
+    );
+    assert!(tight.exact);
+    assert!(
+        // (0.5 ± 1e-14 is stored to within an ulp of 0.5: the radius is ≈ 1e-14)
+        tight.eps >= 0.99 * (1e-14 + 1e-15) && tight.eps < 1e-12,
+        "ε_C {} (LABEL_TOL is {LABEL_TOL})",
+        tight.eps
+    );
+    let wide = exact_cell_bound(
+        &lo,
+        &hi,
+        std::slice::from_ref(&piece),
+        &corners(1e-3),
+        &net(1e-3),
+        (&band.0, &band.1),
+    );
+    assert!(wide.eps >= 1e-3 && wide.eps < 1.1e-3, "ε_C {}", wide.eps);
+    // A NaN enclosure gives no bound.
+    let nan = exact_cell_bound(
+        &lo,
+        &hi,
+        std::slice::from_ref(&piece),
+        &[Iv {
+            lo: f64::NAN,
+            hi: 0.5,
+        }; 4],
+        &net(1e-14),
+        (&band.0, &band.1),
+    );
+    assert!(!nan.exact && nan.eps.is_infinite(), "{nan:?}");
+}

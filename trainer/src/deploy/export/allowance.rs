@@ -16,8 +16,15 @@
 //!   folding and the extra scaling operations) and δ_t = 10⁻¹⁵ is added.
 //!
 //! Interval ends and magnitudes are computed in f64 and widened (relative 10⁻¹²) to cover
-//! their own rounding. The allowance is the maximum over sub-boxes and outputs; the report
-//! puts it next to the largest difference seen on random states ([`sampled_max_diff`]).
+//! their own rounding.
+//!
+//! **The norm.** ε is stated in the 2-norm over the outputs (‖κ − κ_NN‖₂ ≤ ε), so the
+//! allowance added to it is a bound on ‖κ_NN,f32(x) − κ_NN,f64(x)‖₂: on each sub-box the
+//! per-output bounds e_o give ‖·‖₂ ≤ √(Σ_o e_o²) ([`norm2_up`], rounded up), and the
+//! allowance is the maximum of that over sub-boxes. A maximum over outputs (the ∞-norm)
+//! would understate it by up to √nu; for nu = 1 the two are the same number. The
+//! per-axis clamp band `U ⊕ [−(ε + a), ε + a]` stays sound with the 2-norm a (≥ every
+//! output's bound). The observed differences ([`sampled_max_diff`]) are 2-norms too.
 
 use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
 
@@ -169,7 +176,22 @@ fn box_error(
         hi = zhi;
         err = zerr;
     }
-    err.into_iter().fold(0.0, f64::max)
+    norm2_up(&err)
+}
+
+/// ‖v‖₂ rounded up (relative 4·10⁻¹⁶ covers the sum's and the root's rounding for the
+/// short vectors of a network's outputs); for one element exactly |v₀|, so a one-output
+/// network's numbers are those of the maximum over outputs. NaN in, NaN out.
+pub(crate) fn norm2_up(v: &[f64]) -> f64 {
+    match v {
+        [] => 0.0,
+        [a] => a.abs(),
+        _ => {
+            let s: f64 = v.iter().map(|e| e * e).sum();
+            let n = s.sqrt();
+            n + n * (v.len() as f64 + 2.0) * f64::EPSILON
+        }
+    }
 }
 
 /// Per-axis number of sub-boxes: about 2¹⁶ boxes in all, at most 256 per axis.
@@ -229,7 +251,7 @@ pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
                 e32 + e64
             },
         )
-        .reduce(|| 0.0, f64::max);
+        .reduce(|| 0.0, max_or_nan);
     (worst * (1.0 + 1e-9), boxes)
 }
 
@@ -237,7 +259,8 @@ fn model_unfolded_as_exact(folded: &Folded) -> Vec<DenseF64> {
     folded.layers.clone()
 }
 
-/// Largest |κ_NN,f32(x) − κ_NN,f64(x)| (over outputs) on `n` uniform random states in X
+/// Largest ‖κ_NN,f32(x) − κ_NN,f64(x)‖₂ (over outputs; |·| for one output) on `n` uniform
+/// random states in X
 /// (deterministic xorshift stream from `seed`). The states are drawn in order, chunk by
 /// chunk, and each chunk is evaluated in parallel: the maximum is the same for every
 /// thread count.
@@ -270,15 +293,37 @@ pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) ->
                 let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
                 let y32 = eval_f32(&folded, &lo, &hi, &x32, tanh);
                 let y64 = model.eval_f64(x);
-                y32.iter()
+                let d: Vec<f64> = y32
+                    .iter()
                     .zip(&y64)
-                    .fold(0.0f64, |w, (a, b)| w.max((f64::from(*a) - b).abs()))
+                    .map(|(a, b)| f64::from(*a) - b)
+                    .collect();
+                norm2_sampled(&d)
             })
-            .reduce(|| 0.0, f64::max);
-        worst = worst.max(w);
+            .reduce(|| 0.0, max_or_nan);
+        worst = max_or_nan(worst, w);
         done += m;
     }
     worst
+}
+
+/// The larger of two values, NaN when either is (`f64::max` drops a NaN, which would hide a
+/// non-finite bound or output).
+fn max_or_nan(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
+/// ‖d‖₂ of an observed difference (plain f64; |d₀| for one output; NaN propagates so that a
+/// non-finite output is never hidden by a maximum).
+fn norm2_sampled(d: &[f64]) -> f64 {
+    match d {
+        [a] => a.abs(),
+        _ => d.iter().map(|e| e * e).sum::<f64>().sqrt(),
+    }
 }
 
 /// Computes the allowances (sound) and observed differences ([`SAMPLES`] states) for both
@@ -299,4 +344,88 @@ pub fn certify_f32(model: &ExportModel) -> Result<ExportReport, ExportError> {
     }
     super::range::check_report(model, &report)?;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{placeholder_pendulum, Scaling, Tanh};
+    use super::*;
+
+    /// The placeholder pendulum with its output row duplicated: two outputs that are the same
+    /// function, so the f32 error vector is (d, d) with ‖·‖₂ = √2·|d|.
+    fn two_equal_outputs() -> ExportModel {
+        let mut m = placeholder_pendulum();
+        let last = m.layers.last_mut().unwrap();
+        last.w.push(last.w[0].clone());
+        last.b.push(last.b[0]);
+        m.output = Scaling {
+            mean: vec![0.0; 2],
+            scale: vec![15.0; 2],
+        };
+        for v in [
+            &mut m.u_lo,
+            &mut m.u_hi,
+            &mut m.actuator_lo,
+            &mut m.actuator_hi,
+        ] {
+            v.push(v[0]);
+        }
+        m
+    }
+
+    /// ε is a 2-norm over the outputs: the allowance of two equal outputs is √2 times the
+    /// one-output allowance (each output's analysis is the same), not the maximum over outputs
+    /// (which today's code returned: equal to the one-output figure).
+    #[test]
+    fn allowance_of_two_equal_outputs_is_sqrt2_times_one() {
+        let one = placeholder_pendulum();
+        let two = two_equal_outputs();
+        for t in Tanh::ALL {
+            let (a1, _) = f32_allowance(&one, t);
+            let (a2, _) = f32_allowance(&two, t);
+            let want = std::f64::consts::SQRT_2 * a1;
+            assert!(
+                a2 >= want * (1.0 - 1e-12) && a2 <= want * (1.0 + 1e-9),
+                "{}: two outputs {a2:e}, √2 · one output {want:e}",
+                t.name()
+            );
+        }
+    }
+
+    /// The 2-norm allowance covers the 2-norm of the f32-vs-f64 difference on random states,
+    /// computed here from the two evaluations (not by `sampled_max_diff`).
+    #[test]
+    fn allowance_covers_the_observed_two_norm_difference() {
+        let m = two_equal_outputs();
+        let folded = m.folded();
+        let (lo, hi) = m.domain_f32();
+        for t in Tanh::ALL {
+            let (a, _) = f32_allowance(&m, t);
+            let mut worst = 0.0f64;
+            for k in 0..20_000u64 {
+                let x: Vec<f64> = (0..2)
+                    .map(|i| {
+                        let r = crate::rng::uniform(11, k, i as u64);
+                        m.domain_lo[i] + r * (m.domain_hi[i] - m.domain_lo[i])
+                    })
+                    .collect();
+                let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+                let y32 = eval_f32(&folded, &lo, &hi, &x32, t);
+                let y64 = m.eval_f64(&x);
+                let s: f64 = (0..2).map(|o| (f64::from(y32[o]) - y64[o]).powi(2)).sum();
+                worst = worst.max(s.sqrt());
+            }
+            assert!(worst > 0.0 && a >= worst, "{}: {a:e} < {worst:e}", t.name());
+            let seen = sampled_max_diff(&m, t, 20_000, 5);
+            assert!(a >= seen, "{}: {a:e} < {seen:e}", t.name());
+        }
+    }
+
+    #[test]
+    fn norms_keep_nan_and_one_output() {
+        assert_eq!(norm2_up(&[-3.0]), 3.0);
+        assert!(norm2_up(&[3.0, 4.0]) >= 5.0);
+        assert!(max_or_nan(1.0, f64::NAN).is_nan());
+        assert!(norm2_up(&[f64::NAN, 1.0]).is_nan());
+    }
 }

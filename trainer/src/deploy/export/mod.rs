@@ -24,6 +24,7 @@
 //!   [`certify_f32`]);
 //! - `rust`: the generated Rust file ([`render_rust`]);
 //! - `device`: the exported controller evaluated as `controller-core` does ([`device::Device`]);
+//! - `tested`: that controller as the function the statistical tiers test ([`Deployed`]);
 //! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
 //! - `blob`: the postcard blob ([`render_postcard`], [`crc32`]).
@@ -36,6 +37,7 @@ mod guarantee;
 pub mod range;
 mod rust;
 mod tanh;
+mod tested;
 #[cfg(test)]
 mod tests;
 
@@ -51,6 +53,7 @@ pub use c_header::render_c_header;
 pub use guarantee::{Guarantee, StatisticalClaim};
 pub use rust::render_rust;
 pub use tanh::{Tanh, TANH_FAST_ERR_BINS};
+pub use tested::Deployed;
 
 /// One affine layer in f64: `w` is out × in.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
