@@ -127,7 +127,7 @@ pub(super) fn execute(
             r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
         }
     }
-    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref())?;
     if let Some((o, store)) = &stat {
         let s = trainer::certify::statistical::certify_statistically(
             &cfg,
@@ -150,9 +150,9 @@ pub(super) fn execute(
             print_statistical(&s);
         }
         cert.statistical = Some(s);
-        trainer::io::write_atomic(
-            &dir.join("certificate.json"),
-            trainer::certify::seal::sealed_json(&cert)?.as_bytes(),
+        trainer::certify::file::write_certificate(
+            &dir.join(trainer::certify::file::FILE_NAME),
+            &cert.file(),
         )?;
     }
     if cfg.system.nx() >= 2 {
