@@ -82,15 +82,16 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");
         let dir = root.join(&cfg.name);
         let m = trainer::certify::Model::load(&dir.join("model_regularized.bin")).expect("model");
-        let text = std::fs::read_to_string(dir.join("certificate.json")).expect("certificate");
-        let c: trainer::certify::certificate::Certificate =
-            serde_json::from_str(&text).expect("json");
-        let declared = trainer::deploy::export::Guarantee::declared_in(&text, "certificate.json")
-            .expect("guarantee");
+        let (f, _) = trainer::certify::file::read_certificate(
+            &dir.join("certificate.json"),
+            false,
+            &Default::default(),
+        )
+        .expect("certificate");
         (
-            trainer::deploy::export::ExportModel::from_trained(&cfg.name, &m, &c)
+            trainer::deploy::export::ExportModel::from_trained(&cfg.name, &m, &f.base)
                 .expect("export model")
-                .with_declared_guarantee(declared),
+                .with_certificate_tier(f.tier().into()),
             dir,
         )
     })

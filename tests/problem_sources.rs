@@ -187,9 +187,12 @@ fn the_problem_comes_from_the_config_or_the_artifact_never_silently_the_pendulum
     .unwrap();
     let mut alien = cert.clone();
     alien["problem_hash"] = "0123456789abcdef".into();
-    // Without its checksum (as an older certificate), so the problem check itself is reached.
-    alien.as_object_mut().unwrap().remove("checksum");
-    std::fs::write(d.join("alien.json"), alien.to_string()).unwrap();
+    // Resealed (a recomputed checksum), so the problem check itself is reached.
+    std::fs::write(
+        d.join("alien.json"),
+        trainer::certify::seal::sealed_json(&alien).unwrap(),
+    )
+    .unwrap();
     fails(
         &[
             "export",
@@ -307,8 +310,11 @@ fn every_subcommand_refuses_mismatched_dimensions_without_a_panic() {
     .unwrap();
     cert["domain_lo"] = serde_json::json!([-1.0, -1.0, -1.0, -1.0]);
     cert["domain_hi"] = serde_json::json!([1.0, 1.0, 1.0, 1.0]);
-    cert.as_object_mut().unwrap().remove("checksum");
-    std::fs::write(d.join("cert4.json"), cert.to_string()).unwrap();
+    std::fs::write(
+        d.join("cert4.json"),
+        trainer::certify::seal::sealed_json(&cert).unwrap(),
+    )
+    .unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             args(&[

@@ -2,7 +2,9 @@
 //! with a general affine constraint), `trainer refine` proves the MPC part of every cell
 //! (critical regions checked at the vertices) and its certificate says `"guarantee":
 //! "sound"` with no assumption; the deployed (clamped) controller's error at fresh MPC
-//! solves never exceeds that ε.
+//! solves never exceeds that ε. Exported with that certificate, the tier arrives as `sound`
+//! in all three outputs: `weights.rs` (`Guarantee::Sound`), `ampc.h`
+//! (`AMPC_GUARANTEE_SOUND`) and the ONNX metadata (`ampc.tier` = `sound`).
 
 use ampc_tests::{tempdir, trainer};
 
@@ -64,4 +66,54 @@ fn the_dc_motor_certificate_is_sound_and_holds_at_sampled_states() {
         worst = worst.max(e);
     }
     assert!(worst > 0.0);
+    exported_tier_is_sound(&out);
+}
+
+/// `trainer export` with the sound certificate: every output says `sound`.
+fn exported_tier_is_sound(out: &std::path::Path) {
+    let p = |f: &str| out.join(f).to_str().unwrap().to_string();
+    let o = trainer(&[
+        "export",
+        "--model",
+        &p("model.bin"),
+        "--certificate",
+        &p("certificate.json"),
+        "--rust",
+        &p("weights.rs"),
+        "--postcard",
+        &p("weights.bin"),
+        "--c-header",
+        &p("ampc.h"),
+        "--onnx",
+        &p("model.onnx"),
+    ]);
+    assert!(
+        o.status.success(),
+        "export: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let rs = std::fs::read_to_string(out.join("weights.rs")).unwrap();
+    assert!(
+        rs.contains("guarantee: Guarantee::Sound"),
+        "weights.rs:\n{rs}"
+    );
+    assert!(!rs.contains("Guarantee::Estimated"), "weights.rs:\n{rs}");
+    let h = std::fs::read_to_string(out.join("ampc.h")).unwrap();
+    assert!(
+        h.contains("AMPC_GUARANTEE_SOUND, /* guarantee */"),
+        "ampc.h:\n{h}"
+    );
+    let onnx = std::fs::read(out.join("model.onnx")).unwrap();
+    let m = trainer::deploy::onnx::graph::decode(&onnx).expect("the exported ONNX decodes");
+    assert_eq!(
+        m.meta("ampc.tier"),
+        Some("sound"),
+        "ONNX metadata ampc.tier"
+    );
+    assert!(
+        m.meta("ampc.guarantee")
+            .is_some_and(|g| g.contains("sound")),
+        "ONNX metadata ampc.guarantee: {:?}",
+        m.meta("ampc.guarantee")
+    );
 }

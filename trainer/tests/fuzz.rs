@@ -411,7 +411,8 @@ fn certificate(cases: u32) {
         let r = timed("certificate", || {
             (
                 serde_json::from_str::<Certificate>(t),
-                trainer::deploy::export::Guarantee::declared_in(t, "fuzz.json"),
+                trainer::certify::file::CertificateFile::parse(t, "fuzz.json", true)
+                    .and_then(|(f, _)| f.recheck("fuzz.json", &Default::default())),
                 trainer::certify::seal::verify(t, "fuzz.json"),
             )
         })?;

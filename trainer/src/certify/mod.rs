@@ -14,11 +14,13 @@
 //! - [`tier`]: sound / statistical / estimated, per term and for ε as a whole.
 //! - [`statistical`]: the Clopper–Pearson bound on P(‖κ − sat κ_NN‖ > ε) from i.i.d. states.
 //! - [`seal`]: the checksum `certificate.json` carries over its own bytes.
+//! - [`file`]: `certificate.json` as one typed value, its only reader and writer.
 //!
 //! Imports `problem`, `mpc`, `data` and `learn`.
 
 pub mod certificate;
 pub mod critical;
+pub mod file;
 pub mod lipschitz;
 pub mod local;
 pub mod netbounds;

@@ -153,18 +153,6 @@ pub fn local_exact(exact: usize, cells: usize) -> Guarantee {
     ])
 }
 
-/// A Theorem 1 certificate as JSON: its keys plus `"guarantee"`, `"tiers"` and
-/// `"assumptions"`.
-pub fn certificate_json(c: &Certificate) -> serde_json::Value {
-    let mut v = serde_json::to_value(c).unwrap_or(serde_json::Value::Null);
-    if let (Some(o), Ok(serde_json::Value::Object(g))) =
-        (v.as_object_mut(), serde_json::to_value(theorem1(c)))
-    {
-        o.extend(g);
-    }
-    v
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -188,17 +188,11 @@ pub(super) fn execute(
         None => None,
     };
     if json {
-        let mut v = trainer::certify::tier::certificate_json(&c);
-        if let (Some(b), Some(o)) = (&loop_bound, v.as_object_mut()) {
-            o.insert("statistical_closed_loop".into(), serde_json::to_value(b)?);
-        }
-        if let (Some(r), Some(o)) = (req, v.as_object_mut()) {
-            o.insert("requirement".into(), serde_json::to_value(r)?);
-        }
-        if let (Some(st), Some(o)) = (&statistical, v.as_object_mut()) {
-            o.insert("statistical".into(), serde_json::to_value(st)?);
-        }
-        println!("{}", trainer::certify::seal::sealed_json(&v)?);
+        let mut f = trainer::certify::file::CertificateFile::theorem1(c.clone());
+        f.statistical_closed_loop = loop_bound.as_ref().map(serde_json::to_value).transpose()?;
+        f.requirement = req;
+        f.statistical = statistical.clone();
+        println!("{}", f.sealed()?);
         return Ok(());
     }
     println!(

@@ -10,6 +10,8 @@
 //!
 //! With `--config`, the model (and the certificate) must be of that problem; without it the
 //! problem stored in the model is named on stderr and the certificate checked against it.
+//! The certificate is read and re-checked as `export` reads it (`certify::file`: sealed,
+//! ε from its terms, band, tier, X, U_d, hashes; `--accept-unsealed` for an unsealed one).
 
 use super::common::{csv_numbers, jacobian_header, read_states};
 use anyhow::{bail, Context, Result};
@@ -28,6 +30,8 @@ pub(super) struct Inputs<'a> {
     pub states: &'a Path,
     /// `--certificate`.
     pub certificate: Option<&'a Path>,
+    /// `--accept-unsealed`: read a certificate without its checksum (tier `estimated`).
+    pub accept_unsealed: bool,
 }
 
 pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> {
@@ -59,16 +63,21 @@ pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> 
                 m.mlp.activation
             );
         }
-        let (cert, _) = super::export::load_certificate(model, &m, certificate)
-            .context("the controller's output needs the certificate (domain and clamp band); --raw evaluates the bare network")?;
-        if let Some(cfg) = &problem {
-            super::export::check_certificate_problem(&cert, model, certificate, cfg)?;
-        }
-        let mut em = ExportModel::from_trained("eval", &m, &cert)?;
+        let (file, _) = super::export::load_certificate(
+            model,
+            &m,
+            certificate,
+            problem.as_ref(),
+            inputs.accept_unsealed,
+        )
+        .context("the controller's output needs the certificate (domain and clamp band); --raw evaluates the bare network")?;
+        let mut em = ExportModel::from_trained("eval", &m, &file.base)?;
         // The certificate's excluded boxes, as the exported controller flags them.
-        if let Some(p) = certificate {
-            em.excluded = super::export::excluded_boxes(p)?;
-        }
+        em.excluded = file
+            .local
+            .as_ref()
+            .and_then(|l| l.excluded.as_ref())
+            .map_or_else(Vec::new, |e| e.boxes.clone());
         let dev = Device::new(&em, Tanh::Libm)?;
         let mut head: Vec<String> = (1..=nx).map(|i| format!("x{i}")).collect();
         head.extend((1..=nu).map(|j| format!("u{j}")));

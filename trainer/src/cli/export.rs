@@ -5,8 +5,11 @@
 //! an ONNX model (`--onnx`) of the same f32 network with the certificate in its metadata.
 //! controller-core runs tanh networks only; a ReLU/softplus network can be exported to ONNX
 //! alone (its f32 allowance is not analysed). Both paths clamp to (U_d ⊕ ε) ∩ actuator with
-//! the actuator limits = U_d, i.e. to U_d. The certificate's tier is the weaker of its JSON's
-//! `"guarantee"` (if any) and what its numbers rest on (`Guarantee`).
+//! the actuator limits = U_d, i.e. to U_d. The certificate's tier is its `"guarantee"`, copied
+//! (never recomputed); the certificate is read through `certify::file` — refused without its
+//! checksum (unless `--accept-unsealed`, which lowers the tier to `estimated`), without its
+//! `"guarantee"`, after a failed check, or when a value disagrees with what it is recomputed
+//! from (ε from its terms, the band, the tier, X, U_d and the hashes).
 //!
 //! With `--statistical-band` ε is the statistical level of the certificate's `"statistical"`
 //! block (`eps_at_p_target`: P(error > ε) ≤ its `p_target` at its confidence), the tier
@@ -20,8 +23,8 @@
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
-use trainer::certify::certificate::Certificate;
-use trainer::certify::statistical::Statistical;
+use trainer::certify::file::{read_certificate, Against, CertificateFile};
+use trainer::certify::seal::Seal;
 use trainer::certify::Model;
 use trainer::deploy::export::{
     certify_f32, render_c_header, render_files, write_files, ExportModel, Guarantee, PendingFiles,
@@ -47,7 +50,7 @@ pub(super) fn execute(
     certificate: Option<&Path>,
     out: &Outputs<'_>,
     name: Option<&str>,
-    statistical_band: bool,
+    (statistical_band, accept_unsealed): (bool, bool),
 ) -> Result<()> {
     if out.rust.is_some() != out.postcard.is_some() {
         bail!("--rust and --postcard go together (the Rust file and the blob of one export)");
@@ -60,27 +63,31 @@ pub(super) fn execute(
     }
     let m = super::common::load_model(model)?;
     let problem = super::common::problem_for_model(config, model, &m)?;
-    let (cert, declared) = load_certificate(model, &m, certificate)?;
+    let (file, seal) = load_certificate(model, &m, certificate, problem.as_ref(), accept_unsealed)?;
+    let cert = file.base.clone();
     let band = match (statistical_band, certificate) {
-        (true, Some(p)) => Some(statistical_level(p, &cert)?),
+        (true, Some(p)) => Some(statistical_level(p, &file)?),
         _ => None,
     };
-    let excluded = match certificate {
-        Some(p) => excluded_boxes(p)?,
-        None => Vec::new(),
-    };
+    let excluded = file
+        .local
+        .as_ref()
+        .and_then(|l| l.excluded.as_ref())
+        .map_or_else(Vec::new, |e| e.boxes.clone());
     // The model to export: the certificate's ε and tier, or its statistical level.
     let prepare = |em: ExportModel| -> Result<ExportModel> {
-        let mut em = em.with_declared_guarantee(declared);
+        let mut em = em.with_certificate_tier(file.tier().into());
         em.excluded = excluded.clone();
-        Ok(match &band {
+        let mut em = match &band {
             Some((eps_p, claim)) => em.with_statistical_eps(*eps_p, claim.clone())?,
             None => em,
-        })
+        };
+        if seal == Seal::Absent {
+            // An unsealed certificate's numbers are not verified: estimated, whatever ε is.
+            em.guarantee = Guarantee::Estimated;
+        }
+        Ok(em)
     };
-    if let Some(cfg) = &problem {
-        check_certificate_problem(&cert, model, certificate, cfg)?;
-    }
     let name = export_name(name, problem.as_ref().map(|c| c.name.as_str()), model);
     let name = name.as_str();
     let tanh = m.mlp.activation == Activation::Tanh;
@@ -163,39 +170,12 @@ pub(super) fn execute(
     Ok(())
 }
 
-/// The boxes a local certificate excludes from its domain (`"local"."excluded"."boxes"`,
-/// `refine.exclude_infeasible`); none when the key is absent. A malformed entry is an error
-/// naming the file and the key: exporting without the exclusion would claim ε where the
-/// certificate does not.
-pub(super) fn excluded_boxes(path: &Path) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let v: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a certificate", path.display()))?;
-    match v.pointer("/local/excluded") {
-        None | Some(serde_json::Value::Null) => Ok(Vec::new()),
-        Some(e) => {
-            let boxes = e.get("boxes").cloned().unwrap_or(serde_json::Value::Null);
-            serde_json::from_value(boxes).with_context(|| {
-                format!(
-                    "{}: key \"local\".\"excluded\".\"boxes\" is missing or malformed \
-                     (a list of [lower corner, upper corner] pairs)",
-                    path.display()
-                )
-            })
-        }
-    }
-}
-
-/// The statistical level of the certificate JSON at `path` and what it rests on: its
+/// The statistical level of the certificate at `path` and what it rests on: its
 /// `"statistical"` block's `eps_at_p_target` (an error naming the file and the key when the
 /// block is missing, about another ε, or has no level).
-fn statistical_level(path: &Path, cert: &Certificate) -> Result<(f64, StatisticalClaim)> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-    let Some(block) = v.get("statistical") else {
+fn statistical_level(path: &Path, file: &CertificateFile) -> Result<(f64, StatisticalClaim)> {
+    let cert = &file.base;
+    let Some(st) = &file.statistical else {
         bail!(
             "{}: --statistical-band needs a \"statistical\" block: make the certificate with \
              `trainer certify … --statistical N --json {}`",
@@ -203,8 +183,6 @@ fn statistical_level(path: &Path, cert: &Certificate) -> Result<(f64, Statistica
             path.display()
         );
     };
-    let st: Statistical = serde_json::from_value(block.clone())
-        .with_context(|| format!("{}: key \"statistical\" is malformed", path.display()))?;
     if st.eps != cert.eps {
         bail!(
             "{}: the \"statistical\" block counts exceedances of ε = {}, not of this \
@@ -282,77 +260,56 @@ pub(super) fn identifier(s: &str) -> String {
     id
 }
 
-/// Checks that a certificate (`--certificate`, else the one stored in the model at
-/// `model_path`) is about problem `cfg`.
-pub(super) fn check_certificate_problem(
-    cert: &Certificate,
-    model_path: &Path,
-    certificate: Option<&Path>,
-    cfg: &trainer::problem::ProblemConfig,
-) -> Result<()> {
-    if !cert.problem_hash.is_empty() && cert.problem_hash != cfg.problem_hash() {
-        bail!(
-            "{} certifies the network for problem hash {}…, not for its problem `{}` (hash {}…)",
-            certificate.map_or_else(
-                || format!("the certificate stored in {}", model_path.display()),
-                |p| p.display().to_string()
-            ),
-            super::common::short(&cert.problem_hash),
-            cfg.name,
-            super::common::short(&cfg.problem_hash())
-        );
-    }
-    Ok(())
-}
-
-/// The certificate of `--certificate` (with the tier its JSON declares, if any), or the one
-/// stored in the model at `model_path`; either way it must be about this very network.
+/// The certificate of `--certificate` at `certificate`, or the one stored in the model at
+/// `model_path`; either way about this very network (`hash`), of `problem` when known
+/// (`problem_hash`, X, U_d) and consistent in itself ([`CertificateFile::recheck`]: ε from
+/// its terms, the band, the tier, a passed check). A file without its checksum is refused
+/// unless `accept_unsealed`, which lowers its tier to `estimated` (said on stderr). The
+/// certificate stored in a model file (sealed with the model) has no tier of its own: it is
+/// read as Theorem 1's ([`CertificateFile::theorem1`]).
 pub(super) fn load_certificate(
     model_path: &Path,
     m: &Model,
     certificate: Option<&Path>,
-) -> Result<(Certificate, Option<Guarantee>)> {
-    let (cert, declared): (Certificate, _) = match certificate {
+    problem: Option<&trainer::problem::ProblemConfig>,
+    accept_unsealed: bool,
+) -> Result<(CertificateFile, Seal)> {
+    let model_hash = m.content_hash();
+    let against = Against {
+        model_hash: Some(&model_hash),
+        problem,
+        dataset_hash: None,
+        cells_csv: None,
+    };
+    let (file, seal) = match certificate {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            if trainer::certify::seal::verify(&text, &p.display().to_string())?
-                == trainer::certify::seal::Seal::Absent
-            {
+            let (file, seal) = read_certificate(p, accept_unsealed, &against)?;
+            if seal == Seal::Absent {
                 eprintln!(
-                    "warning: {} carries no checksum (written before certificates had one): \
-                     its numbers are not verified",
+                    "warning: {} carries no checksum (--accept-unsealed): its numbers are not \
+                     verified, its tier is lowered to `estimated` in every output",
                     p.display()
                 );
             }
-            let cert = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a certificate", p.display()))?;
-            (
-                cert,
-                Guarantee::declared_in(&text, &p.display().to_string())?,
-            )
+            (file, seal)
         }
-        None => (
-            m.certificate.clone().with_context(|| {
+        None => {
+            let stored = m.certificate.clone().with_context(|| {
                 format!(
                     "{} holds no certificate: pass --certificate",
                     model_path.display()
                 )
-            })?,
-            None,
-        ),
+            })?;
+            let file = CertificateFile::theorem1(stored);
+            file.recheck_against(
+                &format!("the certificate stored in {}", model_path.display()),
+                &against,
+            )?;
+            // Sealed with the model file (its envelope's checksum).
+            (file, Seal::Verified)
+        }
     };
-    if cert.hash != m.content_hash() {
-        bail!(
-            "{}: the certificate is about another network (hash {}), not {}",
-            certificate.map_or_else(
-                || format!("{} (its stored certificate)", model_path.display()),
-                |p| p.display().to_string()
-            ),
-            cert.hash,
-            model_path.display()
-        );
-    }
+    let cert = &file.base;
     let origin = || {
         certificate.map_or_else(
             || format!("the certificate stored in {}", model_path.display()),
@@ -376,7 +333,7 @@ pub(super) fn load_certificate(
             );
         }
     }
-    Ok((cert, declared))
+    Ok((file, seal))
 }
 
 #[cfg(test)]

@@ -166,6 +166,11 @@ enum Cmd {
         /// The bare f64 network and its Jacobian, without projection, clamp or f32.
         #[arg(long)]
         raw: bool,
+        /// Read a certificate without a checksum (written before certificates were sealed):
+        /// its numbers cannot be verified, so its tier is lowered to `estimated` (said on
+        /// stderr and in the outputs). Without this flag such a file is refused.
+        #[arg(long)]
+        accept_unsealed: bool,
     },
     /// The paper's Table I over seeds: nominal and regularized nets from the same initial
     /// weights, median [min, max] of R², ε_D and the Lipschitz bounds.
@@ -219,6 +224,11 @@ enum Cmd {
         /// --statistical N --json`), tier `statistical`, instead of its certified ε.
         #[arg(long, requires = "certificate")]
         statistical_band: bool,
+        /// Read a certificate without a checksum (written before certificates were sealed):
+        /// its numbers cannot be verified, so its tier is lowered to `estimated` (said on
+        /// stderr and in the outputs). Without this flag such a file is refused.
+        #[arg(long)]
+        accept_unsealed: bool,
     },
     /// Adaptive refinement with local certificates: grow the data and the net until every
     /// cell of X has ε_C ≤ target (or the budget is spent); resumes from its checkpoint.
@@ -390,6 +400,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             out,
             certificate,
             raw,
+            accept_unsealed,
         } => {
             common::refuse_overwrite(&[&out], &[&model, &states, opt(&certificate), opt(&config)])?;
             let inputs = eval::Inputs {
@@ -397,6 +408,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 model: &model,
                 states: &states,
                 certificate: certificate.as_deref(),
+                accept_unsealed,
             };
             eval::execute(&inputs, &out, raw)
         }
@@ -419,6 +431,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             name,
             c_header,
             statistical_band,
+            accept_unsealed,
         } => {
             common::refuse_overwrite(
                 &[opt(&rust), opt(&postcard), opt(&onnx), opt(&c_header)],
@@ -436,7 +449,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 certificate.as_deref(),
                 &out,
                 name.as_deref(),
-                statistical_band,
+                (statistical_band, accept_unsealed),
             )
         }
         Cmd::Refine {

@@ -127,7 +127,7 @@ pub(super) fn execute(
             r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
         }
     }
-    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir)?;
+    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref())?;
     if let Some((o, store)) = &stat {
         // The function tested: the deployed controller of the refined net; the states
         // drawn from its hash, none a corner the net was trained on.
@@ -164,9 +164,9 @@ pub(super) fn execute(
             print_statistical(&s);
         }
         cert.statistical = Some(s);
-        trainer::io::write_atomic(
-            &dir.join("certificate.json"),
-            trainer::certify::seal::sealed_json(&cert)?.as_bytes(),
+        trainer::certify::file::write_certificate(
+            &dir.join(trainer::certify::file::FILE_NAME),
+            &cert.file(),
         )?;
     }
     if cfg.system.nx() >= 2 {

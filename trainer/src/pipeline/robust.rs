@@ -116,6 +116,31 @@ fn f32_allowance(name: &str, net: &Model, cert: &Certificate) -> f64 {
         .map_or(f64::NAN, |em| f32_allowance(&em, Tanh::Libm).0)
 }
 
+/// States of the check the design loop runs on a refined certificate (uniform on X, seeded
+/// by `robust.seed`), as `trainer refine --check N` would.
+pub const CHECK_STATES: usize = 200;
+
+/// The robust run's `certificate.json` in `dir`, verified and re-checked against its net,
+/// its problem `rcfg` and its dataset.
+fn read_run_certificate(
+    dir: &Path,
+    net: &Model,
+    rcfg: &ProblemConfig,
+) -> Result<crate::certify::file::CertificateFile, RobustRunError> {
+    let dpath = dir.join("dataset.bin");
+    let data = std::fs::read(&dpath).map_err(|e| io(&dpath, e))?;
+    let (model_hash, dataset_hash) = (net.content_hash(), crate::io::sha256_hex(&data));
+    let against = crate::certify::file::Against {
+        model_hash: Some(&model_hash),
+        problem: Some(rcfg),
+        dataset_hash: Some(&dataset_hash),
+        cells_csv: None,
+    };
+    crate::certify::file::read_certificate(&dir.join("certificate.json"), false, &against)
+        .map(|(f, _)| f)
+        .map_err(|e| RobustRunError::Io(e.to_string()))
+}
+
 fn io(p: &Path, e: impl std::fmt::Display) -> RobustRunError {
     RobustRunError::Io(format!("{}: {e}", p.display()))
 }
@@ -136,21 +161,27 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     crate::pipeline::run(&rcfg, &text, &o)?;
     let model_path = dir.join("model_regularized.bin");
     let mut net = Model::load(&model_path).map_err(|e| io(&model_path, e))?;
-    let cpath = dir.join("certificate.json");
-    let ctext = std::fs::read_to_string(&cpath).map_err(|e| io(&cpath, e))?;
-    crate::certify::seal::verify(&ctext, &cpath.display().to_string())
-        .map_err(|e| RobustRunError::Io(e.to_string()))?;
-    let cert: Certificate = serde_json::from_str(&ctext).map_err(|e| io(&cpath, e))?;
+    let cfile = read_run_certificate(&dir, &net, &rcfg)?;
+    let cert = cfile.base;
     net.certificate = Some(cert.clone());
     let mut cert = cert;
     let rf = d.recursive_feasibility();
     let mut excluded = None;
-    let mut guarantee = crate::certify::tier::theorem1(&cert);
-    // The evidence of the verdict; the robust loop runs no per-cell check (yet); an
-    // excluded box counts as proven infeasible only by `robust::exclusion`.
+    // The tier the certificate file states (never recomputed here).
+    let mut guarantee = cfile.guarantee.clone();
+    // The check at fresh states runs on a refined certificate; the Theorem-1 certificate of
+    // the stages has none (the verdict then rests on it). An excluded box counts as proven
+    // infeasible only by `robust::exclusion`.
+    let mut check: Option<crate::certify::file::CheckSummary> = None;
+    let check_of = |k: &Option<crate::certify::file::CheckSummary>| match k {
+        None => Check::NotRun,
+        Some(k) if k.passed => Check::Passed,
+        Some(_) => Check::Failed,
+    };
     let evidence = |g: &crate::certify::tier::Guarantee,
                     eps: f64,
                     allowance: f64,
+                    check: Check,
                     excluded: Option<&crate::certify::refine::Excluded>,
                     feasible_in_excluded: usize,
                     feasible_outside_domain: usize| Evidence {
@@ -160,7 +191,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         recursive_feasibility: rf,
         eps_sound: g.guarantee == Tier::Sound,
         eps_rests_on: g.assumptions.clone(),
-        check: Check::NotRun,
+        check,
         excluded_unproven: excluded.map_or(0, |e| {
             crate::robust::exclusion::unproven_boxes(cfg, &d.stages, &e.boxes)
         }),
@@ -168,7 +199,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         feasible_outside_domain,
     };
     let mut allowance = f32_allowance(&cfg.name, &net, &cert);
-    let mut v = verdict(&evidence(&guarantee, cert.eps, allowance, None, 0, 0));
+    let mut v = verdict(&evidence(&guarantee, cert.eps, allowance, check_of(&check), None, 0, 0));
     let mut refinement = None;
     if v.status == VerdictStatus::NotCertified && cfg.robust.refine {
         // The design loop's second step: refine data and network with local certificates
@@ -185,8 +216,19 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             &crate::certify::refine::RefineOptions::default(),
         )
         .map_err(|e| io(&rdir, e))?;
-        let lc = crate::certify::refine::write_outputs(&fcfg, &fcfg.refine, &r, &rdir)
-            .map_err(|e| io(&rdir, e))?;
+        // The check at fresh states, as `refine --check` runs it: its result is written into
+        // the certificate (a failed check leaves `met: false`) and a failed check makes the
+        // verdict `not_certified` below.
+        let checked =
+            crate::certify::refine::check(&fcfg, &fcfg.refine, &r, CHECK_STATES, cfg.robust.seed);
+        crate::io::write_atomic(
+            &rdir.join("check.json"),
+            crate::certify::refine::pretty(&checked).as_bytes(),
+        )
+        .map_err(|e| io(&rdir, e))?;
+        let lc =
+            crate::certify::refine::write_outputs(&fcfg, &fcfg.refine, &r, &rdir, Some(&checked))
+                .map_err(|e| io(&rdir, e))?;
         // The ε-per-round curve of the refinement, beside its outputs.
         let fig = crate::study::plots::refine_rounds(&r.state.log, fcfg.refine.target_eps)
             .map_err(|e| io(&rdir, e))?;
@@ -205,6 +247,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
             figure: "refine/refine_rounds.svg".into(),
         });
         if lc.base.eps < cert.eps {
+            check = lc.check.clone();
             net = r.model;
             net.certificate = Some(lc.base.clone());
             cert = lc.base;
@@ -215,6 +258,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
                 &guarantee,
                 cert.eps,
                 allowance,
+                check_of(&check),
                 excluded.as_ref(),
                 0,
                 0,
@@ -264,6 +308,7 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         &guarantee,
         cert.eps,
         allowance,
+        check_of(&check),
         excluded.as_ref(),
         feasible_in_excluded,
         outside.len(),
@@ -271,10 +316,16 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
     let load_nominal = || -> Option<(Model, f64)> {
         let m = Model::load(&root.join("model_regularized.bin")).ok()?;
-        let c: Certificate =
-            serde_json::from_str(&std::fs::read_to_string(root.join("certificate.json")).ok()?)
-                .ok()?;
-        Some((m, c.eps))
+        let (c, _) = crate::certify::file::read_certificate(
+            &root.join("certificate.json"),
+            false,
+            &crate::certify::file::Against {
+                model_hash: Some(&m.content_hash()),
+                ..Default::default()
+            },
+        )
+        .ok()?;
+        Some((m, c.base.eps))
     };
     let nominal = load_nominal();
     let st = study(
@@ -501,9 +552,13 @@ mod tests {
             assert!(runs.iter().all(|r| r["violation_steps"] == 0), "{k}");
         }
         assert!(cl.get("mpc").is_some(), "the pipeline's own keys stay");
-        let cert: Certificate =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("certificate.json")).unwrap())
-                .unwrap();
+        let (cert, _) = crate::certify::file::read_certificate(
+            &dir.join("certificate.json"),
+            false,
+            &Default::default(),
+        )
+        .unwrap();
+        let cert = cert.base;
         assert!((cert.u_hi[0] - 0.9).abs() < 1e-12 && (cert.u_lo[0] + 0.9).abs() < 1e-12);
         // Unchanged inputs: the study is not redone.
         let again = run(&cfg, &opts).unwrap();

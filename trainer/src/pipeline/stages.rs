@@ -7,7 +7,8 @@
 
 use super::manifest::{settings_hash, sha_file, Ctx};
 use super::{fail, PipelineError};
-use crate::certify::certificate::{certify, Certificate, CertifyOptions};
+use crate::certify::certificate::{certify, CertifyOptions};
+use crate::certify::file::CertificateFile;
 use crate::certify::Model;
 use crate::data::dataset::{generate, Dataset, GenerateOptions};
 use crate::io::write_atomic;
@@ -121,6 +122,28 @@ fn load_dataset(stage: &str, p: &Path) -> Result<Dataset, PipelineError> {
 
 fn load_model(stage: &str, p: &Path) -> Result<Model, PipelineError> {
     Model::load(p).map_err(|e| fail(stage, e))
+}
+
+/// The certificate `name` of the run directory `d`, verified (sealed, with its tier) and
+/// re-checked against the model `m`, the run's problem `cfg` and its `dataset.bin`.
+fn read_run_certificate(
+    stage: &str,
+    (d, cfg): (&Path, &ProblemConfig),
+    name: &str,
+    m: &Model,
+) -> Result<CertificateFile, PipelineError> {
+    let data = std::fs::read(d.join("dataset.bin"))
+        .map_err(|e| fail(stage, format!("{}: {e}", d.join("dataset.bin").display())))?;
+    let (model_hash, dataset_hash) = (m.content_hash(), crate::io::sha256_hex(&data));
+    let against = crate::certify::file::Against {
+        model_hash: Some(&model_hash),
+        problem: Some(cfg),
+        dataset_hash: Some(&dataset_hash),
+        cells_csv: None,
+    };
+    crate::certify::file::read_certificate(&d.join(name), false, &against)
+        .map(|(f, _)| f)
+        .map_err(|e| fail(stage, e))
 }
 
 fn load_json<T: serde::de::DeserializeOwned>(stage: &str, p: &Path) -> Result<T, PipelineError> {
@@ -281,9 +304,11 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             c.f32_allowance =
                 crate::deploy::export::f32_allowance(&em, crate::deploy::export::Tanh::Libm).0;
         }
-        let text = crate::certify::seal::sealed_json(&crate::certify::tier::certificate_json(&c))
-            .map_err(|e| fail("certify", e))?;
-        write_atomic(&d.join(json), text.as_bytes()).map_err(|e| fail("certify", e))?;
+        crate::certify::file::write_certificate(
+            &d.join(json),
+            &CertificateFile::theorem1(c.clone()),
+        )
+        .map_err(|e| fail("certify", e))?;
         out += &format!(
             "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
             c.eps, c.eps_d, c.l_nn, c.covering_radius
@@ -300,17 +325,11 @@ fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
 
 fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
     let m = load_model("export", &d.join("model_regularized.bin"))?;
-    let cert_path = d.join("certificate.json");
-    let c: Certificate = load_json("export", &cert_path)?;
-    let text = std::fs::read_to_string(&cert_path)
-        .map_err(|e| fail("export", format!("{}: {e}", cert_path.display())))?;
-    crate::certify::seal::verify(&text, &cert_path.display().to_string())
-        .map_err(|e| fail("export", e))?;
-    let declared = crate::deploy::export::Guarantee::declared_in(&text, "certificate.json")
-        .map_err(|e| fail("export", e))?;
-    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c)
+    let file = read_run_certificate("export", (d, env.cfg), "certificate.json", &m)?;
+    let c = &file.base;
+    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
         .map_err(|e| fail("export", e))?
-        .with_declared_guarantee(declared);
+        .with_certificate_tier(file.tier().into());
     let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
         .map_err(|e| fail("export", e))?;
     // The band the exported controller (libm tanh, the default) clamps to.
@@ -356,7 +375,7 @@ fn closed_loop_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineE
 fn closed_loop_study(env: &Env, d: &Path) -> Result<String, PipelineError> {
     let load = |f: &str, c: &str| -> Result<Model, PipelineError> {
         let mut m = load_model("closed_loop", &d.join(f))?;
-        m.certificate = Some(load_json("closed_loop", &d.join(c))?);
+        m.certificate = Some(read_run_certificate("closed_loop", (d, env.cfg), c, &m)?.base);
         Ok(m)
     };
     let (n, r) = (

@@ -35,8 +35,8 @@ pub use cellcheck::{CellCheck, OffendingCell};
 pub use check::{check, Check, Offender};
 pub use feedback::reopen;
 pub use outputs::{
-    cell_views, certificate, dataset, pretty, sensitivity_spread, write_outputs, CellView,
-    Excluded, LocalCertificate, LocalSummary,
+    cell_views, certificate, check_summary, dataset, pretty, sensitivity_spread, write_outputs,
+    CellView, Excluded, LocalCertificate, LocalSummary,
 };
 pub use rounds::{refine, RefineOptions, Refined};
 

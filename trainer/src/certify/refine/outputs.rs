@@ -4,6 +4,7 @@
 
 use super::rounds::train_set;
 use super::*;
+use crate::certify::file::{write_certificate, CertificateFile, CheckSummary};
 use crate::certify::local::Form;
 use crate::data::dataset::{Dataset, DatasetError, Header, Record};
 use crate::io::write_atomic;
@@ -228,20 +229,60 @@ fn excluded_summary(
     })
 }
 
-/// The certificate JSON of a refinement run: the design's keys plus [`LocalSummary`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// The certificate of a refinement run: the design's keys plus [`LocalSummary`]; written as
+/// a [`CertificateFile`] (its only form on disk).
+#[derive(Debug, Clone, PartialEq)]
 pub struct LocalCertificate {
     /// The design's keys (`eps` is the local bound max_C ε_C).
-    #[serde(flatten)]
     pub base: crate::certify::certificate::Certificate,
     /// The local figures.
     pub local: LocalSummary,
     /// The weakest tier ε rests on, per term its tier, and the assumptions.
-    #[serde(flatten)]
     pub guarantee: crate::certify::tier::Guarantee,
     /// The statistical tier (`trainer refine --statistical N`), absent without it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub statistical: Option<crate::certify::statistical::Statistical>,
+    /// The check at fresh states (`refine --check`), when it ran.
+    pub check: Option<CheckSummary>,
+}
+
+impl LocalCertificate {
+    /// The certificate file of this local certificate.
+    pub fn file(&self) -> CertificateFile {
+        CertificateFile {
+            base: self.base.clone(),
+            guarantee: self.guarantee.clone(),
+            local: Some(self.local.clone()),
+            statistical: self.statistical.clone(),
+            statistical_closed_loop: None,
+            requirement: None,
+            check: self.check.clone(),
+        }
+    }
+
+    /// Records the check's result: a failed check leaves `local.met` false (the
+    /// certificate no longer says the target is met) and the `check` block says so.
+    pub fn with_check(mut self, c: &Check) -> Self {
+        let s = check_summary(c);
+        if !s.passed {
+            self.local.met = false;
+        }
+        self.check = Some(s);
+        self
+    }
+}
+
+/// The summary of a check written into the certificate: exceedances are the states over ε
+/// or over their cell's ε_C and the feasible states found in excluded cells; it passes when
+/// there are none and the per-cell range check is within its tolerance (what `refine
+/// --check` fails on).
+pub fn check_summary(c: &Check) -> CheckSummary {
+    let exceedances = c.over_eps + c.over_cell + c.feasible_in_excluded;
+    CheckSummary {
+        states: c.states,
+        exceedances,
+        passed: exceedances == 0 && c.per_cell.passed,
+        report: "check.json".into(),
+    }
 }
 
 /// Builds the certificate of a finished refinement.
@@ -397,12 +438,14 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         local,
         guarantee: crate::certify::tier::local_exact(n_exact, st.bounds.len()),
         statistical: None,
+        check: None,
     }
 }
 
 /// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),
 /// `certificate.json`, `cells.csv` (every leaf: box, ε_C, corner term, remainder, form),
-/// `refine_log.json`. Returns the certificate. A net imported from another format (ONNX,
+/// `refine_log.json`. With `check` (`refine --check`, run before) its result is written into
+/// the certificate ([`LocalCertificate::with_check`]). Returns the certificate. A net imported from another format (ONNX,
 /// `source_hash` set) is not written as `model.bin`: the certificate binds the source file,
 /// which stays the model to export.
 pub fn write_outputs(
@@ -410,8 +453,12 @@ pub fn write_outputs(
     rs: &RefineSettings,
     r: &Refined,
     dir: &Path,
+    check: Option<&Check>,
 ) -> Result<LocalCertificate, DatasetError> {
-    let cert = certificate(cfg, rs, r);
+    let mut cert = certificate(cfg, rs, r);
+    if let Some(c) = check {
+        cert = cert.with_check(c);
+    }
     if r.model.source_hash.is_none() {
         let mut model = r.model.clone();
         // The model file's certificate has no room for excluded boxes: with them, the
@@ -424,11 +471,11 @@ pub fn write_outputs(
     let ds = dataset(cfg, &r.state);
     ds.save(&dir.join("dataset.bin"))?;
     write_atomic(&dir.join("dataset.csv"), ds.to_csv().as_bytes())?;
-    let sealed = crate::certify::seal::sealed_json(&cert).map_err(|e| DatasetError::Format {
-        path: dir.join("certificate.json").display().to_string(),
+    let path = dir.join(crate::certify::file::FILE_NAME);
+    write_certificate(&path, &cert.file()).map_err(|e| DatasetError::Format {
+        path: path.display().to_string(),
         reason: e.to_string(),
     })?;
-    write_atomic(&dir.join("certificate.json"), sealed.as_bytes())?;
     write_atomic(
         &dir.join("refine_log.json"),
         pretty(&r.state.log).as_bytes(),

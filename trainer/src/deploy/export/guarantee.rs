@@ -1,10 +1,12 @@
 //! The tier of the exported certificate ([`Guarantee`]): sound, statistical or estimated.
 //!
-//! tier = the weaker of (what the learning side's certificate declares in its `"guarantee"`
-//! key, if it has one) and (what its numbers rest on: `estimated` when L_MPC is a sampled
-//! estimate, `l_mpc_is_estimate`, or the network is the untrained placeholder; `sound`
-//! otherwise — ε_D is a maximum over the data, L_NN and r are sound upper bounds). A claim
-//! is never rounded up: a declaration stronger than the numbers allow is lowered.
+//! tier = the certificate's `"guarantee"`, as decided in `certify/` from the tiers of its
+//! terms (`certify::file::CertificateFile`, which refuses a file without the key, without
+//! its checksum, or whose tier is stronger than its terms support). Export copies it
+//! ([`ExportModel::with_certificate_tier`]) and never recomputes or raises it; the only
+//! rules applied here are those of the exported function itself: a placeholder network is
+//! `estimated`, a statistical level is `statistical` (never `sound`). An [`ExportModel`]
+//! made from a certificate without its tier (`from_certified`) is `estimated`.
 //!
 //! **A statistical ε** ([`StatisticalClaim`], `trainer export --statistical-band`): ε is the
 //! level ε_p of the certificate's `"statistical"` block (the (k*+1)-th largest of n i.i.d.
@@ -15,7 +17,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::ExportError;
+use super::{ExportError, ExportModel};
+use crate::certify::tier::Tier;
 
 /// How strong the claim |κ − u_f32| ≤ ε on X is; ordered strongest first.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -99,24 +102,16 @@ impl Guarantee {
         }
     }
 
-    /// The tier the numbers support without a declaration (module doc).
-    pub fn derived(l_mpc_is_estimate: bool, placeholder: bool) -> Self {
-        if l_mpc_is_estimate || placeholder {
-            Guarantee::Estimated
-        } else {
-            Guarantee::Sound
-        }
-    }
-
-    /// The tier the numbers support: `estimated` for a placeholder network, `statistical`
-    /// for a statistical ε (it rests on no Lipschitz constant), else [`Guarantee::derived`].
-    pub fn supported(l_mpc_is_estimate: bool, placeholder: bool, statistical: bool) -> Self {
+    /// The tier the exported function supports at most: `estimated` for a placeholder
+    /// network, `statistical` for a statistical ε (it rests on no Lipschitz constant),
+    /// `sound` otherwise (the certificate's own tier then decides).
+    pub fn supported(placeholder: bool, statistical: bool) -> Self {
         if placeholder {
             Guarantee::Estimated
         } else if statistical {
             Guarantee::Statistical
         } else {
-            Guarantee::derived(l_mpc_is_estimate, false)
+            Guarantee::Sound
         }
     }
 
@@ -124,25 +119,25 @@ impl Guarantee {
     pub fn weakest(self, other: Guarantee) -> Self {
         self.max(other)
     }
+}
 
-    /// The `"guarantee"` a certificate JSON declares: `None` without the key, an error
-    /// naming `file` for a value that is not one of the tiers.
-    pub fn declared_in(json: &str, file: &str) -> Result<Option<Self>, ExportError> {
-        let v: serde_json::Value = serde_json::from_str(json)
-            .map_err(|e| ExportError::Invalid(format!("{file}: not JSON: {e}")))?;
-        match v.get("guarantee") {
-            None | Some(serde_json::Value::Null) => Ok(None),
-            Some(g) => Guarantee::ALL
-                .into_iter()
-                .find(|t| g.as_str() == Some(t.name()))
-                .map(Some)
-                .ok_or_else(|| {
-                    ExportError::Invalid(format!(
-                        "{file}: key \"guarantee\" is {g}, expected \"sound\", \"statistical\" \
-                         or \"estimated\""
-                    ))
-                }),
+impl From<Tier> for Guarantee {
+    /// The certificate's tier as the export names it (the same three, the same order).
+    fn from(t: Tier) -> Self {
+        match t {
+            Tier::Sound => Guarantee::Sound,
+            Tier::Statistical => Guarantee::Statistical,
+            Tier::Estimated => Guarantee::Estimated,
         }
+    }
+}
+
+impl ExportModel {
+    /// This model with the certificate's tier (`certify::file::CertificateFile::tier`):
+    /// copied as it is, up or down — the certificate decided it.
+    pub fn with_certificate_tier(mut self, tier: Guarantee) -> Self {
+        self.guarantee = tier;
+        self
     }
 }
 
@@ -151,23 +146,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn declared_tier_is_read_and_never_raised() {
-        let d = |s: &str| Guarantee::declared_in(s, "c.json");
-        assert_eq!(d(r#"{"eps": 1.0}"#).unwrap(), None);
+    fn the_certificate_tier_is_copied_and_only_the_function_caps_it() {
+        assert_eq!(Guarantee::from(Tier::Sound), Guarantee::Sound);
+        assert_eq!(Guarantee::from(Tier::Statistical), Guarantee::Statistical);
+        assert_eq!(Guarantee::from(Tier::Estimated), Guarantee::Estimated);
+        assert_eq!(Guarantee::supported(false, false), Guarantee::Sound);
+        assert_eq!(Guarantee::supported(false, true), Guarantee::Statistical);
+        assert_eq!(Guarantee::supported(true, false), Guarantee::Estimated);
         assert_eq!(
-            d(r#"{"guarantee": "statistical"}"#).unwrap(),
-            Some(Guarantee::Statistical)
+            Guarantee::Sound.weakest(Guarantee::Estimated),
+            Guarantee::Estimated
         );
-        let e = d(r#"{"guarantee": "proven"}"#).unwrap_err().to_string();
-        assert!(e.contains("c.json") && e.contains("guarantee"), "{e}");
-        // A sampled L_MPC caps any declaration at `estimated`.
-        let from_numbers = Guarantee::derived(true, false);
-        assert_eq!(Guarantee::Sound.weakest(from_numbers), Guarantee::Estimated);
-        assert_eq!(
-            Guarantee::Statistical.weakest(Guarantee::derived(false, false)),
-            Guarantee::Statistical
-        );
-        assert_eq!(Guarantee::derived(false, true), Guarantee::Estimated);
         assert_eq!(Guarantee::default(), Guarantee::Estimated);
     }
 }

@@ -311,15 +311,11 @@ impl ExportModel {
                 return inv(format!("excluded[{k}]: an empty or non-finite box"));
             }
         }
-        let supported = Guarantee::supported(
-            self.l_mpc_is_estimate,
-            self.placeholder,
-            self.statistical.is_some(),
-        );
+        let supported = Guarantee::supported(self.placeholder, self.statistical.is_some());
         if self.guarantee < supported {
             return inv(format!(
-                "guarantee: {} claims more than the numbers support ({}: L_MPC is sampled, \
-                 ε is a statistical level or the network is a placeholder)",
+                "guarantee: {} claims more than the exported function supports ({}: ε is a \
+                 statistical level or the network is a placeholder)",
                 self.guarantee.name(),
                 supported.name()
             ));
@@ -643,7 +639,9 @@ impl ExportModel {
             covering_radius: cert.covering_radius,
             hash: cert.hash.clone(),
             placeholder: false,
-            guarantee: Guarantee::derived(cert.l_mpc_is_estimate, false),
+            // The certificate's tier is set by the caller, who read it from the certificate
+            // file (`with_certificate_tier`); without it, the weakest.
+            guarantee: Guarantee::Estimated,
             statistical: None,
             excluded: Vec::new(),
         })

@@ -19,6 +19,7 @@ mod sections;
 pub use render::{esc, inline};
 
 use crate::certify::certificate::Certificate;
+use crate::certify::file::CertificateFile;
 use crate::certify::Model;
 use crate::data::dataset::Dataset;
 use crate::problem::ProblemConfig;
@@ -114,6 +115,8 @@ struct Artifacts {
     reg: Model,
     /// `certificate.json` (the regularized net's).
     cert: Certificate,
+    /// Its tier, as the certificate states it (`guarantee`, `tiers`, `assumptions`).
+    tier: crate::certify::tier::Guarantee,
     /// `certificate_nominal.json`.
     cert_n: Certificate,
     /// `closed_loop.json`.
@@ -129,12 +132,22 @@ impl Artifacts {
     /// error.
     fn load(dir: &Path) -> Result<Self, ReportError> {
         let e = |e: crate::data::dataset::DatasetError| ReportError(e.to_string());
+        let data_bytes = std::fs::read(dir.join("dataset.bin"))
+            .map_err(|e| ReportError(format!("{}: {e}", dir.join("dataset.bin").display())))?;
+        let data = Dataset::from_bytes(&data_bytes, &dir.join("dataset.bin").display().to_string())
+            .map_err(e)?;
+        let data_hash = crate::io::sha256_hex(&data_bytes);
+        let nom = Model::load(&dir.join("model_nominal.bin")).map_err(e)?;
+        let reg = Model::load(&dir.join("model_regularized.bin")).map_err(e)?;
+        let cert = certificate(&dir.join("certificate.json"), &reg, &data_hash)?;
+        let cert_n = certificate(&dir.join("certificate_nominal.json"), &nom, &data_hash)?;
         Ok(Artifacts {
-            data: Dataset::load(&dir.join("dataset.bin")).map_err(e)?,
-            nom: Model::load(&dir.join("model_nominal.bin")).map_err(e)?,
-            reg: Model::load(&dir.join("model_regularized.bin")).map_err(e)?,
-            cert: load(&dir.join("certificate.json"))?,
-            cert_n: load(&dir.join("certificate_nominal.json"))?,
+            data,
+            nom,
+            reg,
+            tier: cert.guarantee,
+            cert: cert.base,
+            cert_n: cert_n.base,
             cl: load(&dir.join("closed_loop.json"))?,
             seeds: load(&dir.join("seeds.json"))?,
             export: load(&dir.join("export_report.json"))?,
@@ -142,15 +155,23 @@ impl Artifacts {
     }
 }
 
-/// Reads a JSON file (a certificate's checksum verified).
+/// Reads a certificate of the run through `certify::file` (sealed, re-checked against the
+/// net `m` and the dataset's hash).
+fn certificate(p: &Path, m: &Model, data_hash: &str) -> Result<CertificateFile, ReportError> {
+    let model_hash = m.content_hash();
+    let against = crate::certify::file::Against {
+        model_hash: Some(&model_hash),
+        dataset_hash: Some(data_hash),
+        ..Default::default()
+    };
+    crate::certify::file::read_certificate(p, false, &against)
+        .map(|(f, _)| f)
+        .map_err(|e| ReportError(e.to_string()))
+}
+
+/// Reads a JSON file.
 fn load<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T, ReportError> {
     let t = std::fs::read_to_string(p).map_err(|e| ReportError(format!("{}: {e}", p.display())))?;
-    if p.file_name()
-        .is_some_and(|n| n.to_string_lossy().starts_with("certificate"))
-    {
-        crate::certify::seal::verify(&t, &p.display().to_string())
-            .map_err(|e| ReportError(e.to_string()))?;
-    }
     serde_json::from_str(&t).map_err(|e| ReportError(format!("{}: {e}", p.display())))
 }
 

@@ -1,5 +1,5 @@
 //! The report's first section: the verdict in words — what ε the exported controller has,
-//! its tier (sound / statistical / estimated, [`crate::certify::tier`]) and what it rests
+//! its tier (sound / statistical / estimated, as `certificate.json` states it) and what it rests
 //! on, ε against the input range U, and the band the exported controller clamps to.
 //!
 //! ε is measured against the largest distance two inputs of U can have, d_U = ‖u_hi − u_lo‖₂:
@@ -8,7 +8,6 @@
 
 use super::sections::{boxed, num};
 use super::{Artifacts, Block};
-use crate::certify::tier::theorem1;
 use crate::problem::ProblemConfig;
 
 /// The band the exported controller clamps to: `export_report.json`'s `clamp_lo`/`clamp_hi`
@@ -56,7 +55,7 @@ pub fn judge(eps: f64, u_lo: &[f64], u_hi: &[f64]) -> (f64, &'static str) {
 /// The verdict section (module doc).
 pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     let c = &a.cert;
-    let g = theorem1(c);
+    let g = &a.tier;
     let tier = g.guarantee.name();
     let allowance = a.export["f32_allowance_libm"].as_f64().unwrap_or(f64::NAN);
     let (_, inputs) = crate::study::plots::axis_names(&cfg.system);
