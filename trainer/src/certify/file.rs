@@ -3,7 +3,8 @@
 //! the requirement — sealed with its checksum ([`super::seal`]) and re-checked on read.
 //!
 //! ```text
-//! Theorem 1:  eps = eps_d + (l_mpc + l_nn)·covering_radius + f32_allowance
+//! Theorem 1:  eps = eps_d + (l_mpc + l_nn)·covering_radius   (the f64 net's bound; the device's
+//!             is eps + f32_allowance, the 2-norm bound on |κ_NN,f32 − κ_NN,f64| the export adds)
 //! local:      eps = max_C ε_C                      (cells.csv beside the file, when present)
 //! band:       u_lo − eps ≤ clamp_lo ≤ u_lo,  u_hi ≤ clamp_hi ≤ u_hi + eps
 //! tier:       guarantee = max over `tiers`, never stronger than the terms support
@@ -281,14 +282,14 @@ impl CertificateFile {
         let close = |a: f64, b: f64| (a - b).abs() <= REL_TOL * a.abs().max(b.abs()).max(1e-300);
         match &self.local {
             None => {
-                let terms = c.eps_d + (c.l_mpc + c.l_nn) * c.covering_radius + c.f32_allowance;
+                let terms = c.eps_d + (c.l_mpc + c.l_nn) * c.covering_radius;
                 if !close(c.eps, terms) {
                     return bad(
                         "eps",
                         c.eps.to_string(),
                         format!(
-                            "ε_D + (L_MPC + L_NN)·r + f32 allowance = {} + ({} + {})·{} + {} = {terms}",
-                            c.eps_d, c.l_mpc, c.l_nn, c.covering_radius, c.f32_allowance
+                            "ε_D + (L_MPC + L_NN)·r = {} + ({} + {})·{} = {terms}",
+                            c.eps_d, c.l_mpc, c.l_nn, c.covering_radius
                         ),
                     );
                 }
