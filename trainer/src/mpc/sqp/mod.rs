@@ -57,7 +57,7 @@
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.
 
 use crate::mpc::convexity::ReducedHessian;
-use crate::mpc::finite::{abs_max, first_non_finite, nan_max, Failure, Quantity};
+use crate::mpc::finite::{nan_max, Failure, Quantity};
 use crate::mpc::kkt::{ActiveSetKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
 use crate::mpc::qp::ipm::{self, mul_e};
@@ -67,6 +67,8 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 mod polish;
+mod residual;
+use residual::{non_finite_part, residual};
 
 /// How a solve ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -206,93 +208,6 @@ impl Evals {
         ocp.gradient(z, &mut self.grad);
         ocp.constraints(z, xs, &mut self.c, &mut self.jac_x, &mut self.jac_u);
     }
-}
-
-/// The KKT residual of (z, λ, ν) given first-order evaluations at z.
-fn residual(ocp: &Ocp, z: &[f64], ev: &Evals, lam: &[f64], nu: &[f64]) -> KktResidual {
-    let (nx, nuu, n) = (ocp.nx, ocp.nu, ocp.horizon);
-    let mut r = ev.grad.clone();
-    for i in 0..nx {
-        r[i] += lam[i];
-    }
-    for k in 0..n {
-        let l = &lam[(k + 1) * nx..(k + 2) * nx];
-        for j in 0..nx {
-            let mut s = 0.0;
-            for i in 0..nx {
-                s += ev.jac_x[k * nx * nx + i * nx + j] * l[i];
-            }
-            r[ocp.ix(k) + j] += s;
-            r[ocp.ix(k + 1) + j] -= l[j];
-        }
-        for j in 0..nuu {
-            let mut s = 0.0;
-            for i in 0..nx {
-                s += ev.jac_u[k * nx * nuu + i * nuu + j] * l[i];
-            }
-            r[ocp.iu(k) + j] += s;
-        }
-    }
-    // Every fold keeps a NaN (`f64::max` would drop it and read a NaN residual as 0).
-    let mut primal = abs_max(&ev.c);
-    let nu_scale = nan_max(1.0, abs_max(nu));
-    let (mut dual, mut compl) = (0.0f64, 0.0f64);
-    for (row, &v) in ocp.rows.iter().zip(nu) {
-        for j in 0..row.len {
-            r[row.idx[j]] += row.coef[j] * v;
-        }
-        let s = row.slack(z);
-        primal = nan_max(primal, -s);
-        dual = nan_max(dual, -v);
-        // (min(ν, s) with s = +∞ on a row without a bound is ν: `f64::min` is fine here
-        // for s; a NaN ν or s is kept by the check below.)
-        let c = if v.is_nan() || s.is_nan() {
-            f64::NAN
-        } else {
-            v.min(s).abs()
-        };
-        compl = nan_max(compl, c);
-    }
-    let gscale = nan_max(1.0, abs_max(&ev.grad));
-    KktResidual {
-        stationarity: abs_max(&r) / gscale,
-        primal,
-        dual: dual / nu_scale,
-        complementarity: compl / nu_scale,
-    }
-}
-
-/// The first non-finite quantity behind a non-finite KKT residual `res` at `p`.
-fn non_finite_part(ocp: &Ocp, p: &PrimalDual, ev: &Evals, res: &KktResidual) -> Quantity {
-    let rows: Vec<f64> = ocp.rows.iter().map(|row| row.slack(&p.z)).collect();
-    // (An infinite slack is a row without a bound; only a NaN one is at fault.)
-    let rows_nan = if rows.iter().any(|s| s.is_nan()) {
-        &[f64::NAN][..]
-    } else {
-        &[][..]
-    };
-    // (The equations first: a cold start's states are simulated by F, so a NaN there shows
-    // in z too.)
-    first_non_finite([
-        (Quantity::Equations, &ev.c[..]),
-        (Quantity::Equations, &ev.jac_x[..]),
-        (Quantity::Equations, &ev.jac_u[..]),
-        (Quantity::Cost, &ev.grad[..]),
-        (Quantity::Constraints, rows_nan),
-        (Quantity::Solution, &p.z[..]),
-        (Quantity::Multipliers, &p.lam[..]),
-        (Quantity::Multipliers, &p.nu[..]),
-        (
-            Quantity::Stationarity,
-            std::slice::from_ref(&res.stationarity),
-        ),
-        (
-            Quantity::PrimalFeasibility,
-            std::slice::from_ref(&res.primal),
-        ),
-        (Quantity::DualFeasibility, std::slice::from_ref(&res.dual)),
-    ])
-    .unwrap_or(Quantity::Complementarity)
 }
 
 /// The QP's Hessian, block by block: the exact block `∇²L_k` where it is positive
