@@ -5,6 +5,8 @@
 //! fault), 2 usage error.
 
 mod cli;
+#[cfg(test)]
+mod cli_reference;
 
 use clap::Parser;
 
