@@ -267,7 +267,11 @@ fn own_plant_in_five_minutes_as_the_readme_says() {
     );
     // A setpoint away from the origin and a path constraint, as the section promises.
     let cfg = trainer::problem::ProblemConfig::from_toml_str(&toml[0], "README.md").unwrap();
-    assert!(cfg.ocp.x_ref.as_ref().is_some_and(|x| x.iter().any(|v| *v != 0.0)));
+    assert!(cfg
+        .ocp
+        .x_ref
+        .as_ref()
+        .is_some_and(|x| x.iter().any(|v| *v != 0.0)));
     assert!(!cfg.ocp.constraints.is_empty());
 
     let dir = tempdir();
@@ -322,7 +326,10 @@ fn own_plant_in_five_minutes_as_the_readme_says() {
     };
     let (printed, said) = (summary(refine), summary(&section));
     for k in ["certified ε ", ") with "] {
-        let (got, want) = (number_after(&printed, k).unwrap(), number_after(&said, k).unwrap());
+        let (got, want) = (
+            number_after(&printed, k).unwrap(),
+            number_after(&said, k).unwrap(),
+        );
         assert!(
             (got - want).abs() <= 1e-4 * want.abs().max(1.0),
             "refine `{k}`: {got} printed, the README says {want}"

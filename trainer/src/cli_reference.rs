@@ -29,13 +29,15 @@ pub(crate) fn markdown() -> String {
          key, state or value at fault), 2 on a usage error. \
          In depth, with file formats: [commands.md](commands.md).\n\n",
     );
-    let subs: Vec<&Command> = root.get_subcommands().filter(|s| !s.is_hide_set()).collect();
+    // `help` is clap's own subcommand, added by `build`.
+    let listed = |s: &Command| !s.is_hide_set() && s.get_name() != "help";
+    let subs: Vec<&Command> = root.get_subcommands().filter(|s| listed(s)).collect();
     for s in &subs {
         let name = s.get_name();
         let _ = writeln!(md, "- [`trainer {name}`](#trainer-{name})");
     }
     md.push('\n');
-    for s in root.get_subcommands_mut().filter(|s| !s.is_hide_set()) {
+    for s in root.get_subcommands_mut().filter(|s| listed(s)) {
         command(&mut md, s);
     }
     md
@@ -71,7 +73,8 @@ fn argument(a: &Arg) -> String {
         .get_value_names()
         .and_then(|v| v.first())
         .map(|v| v.to_string())
-        .unwrap_or_else(|| a.get_id().as_str().to_uppercase());
+        .unwrap_or_else(|| a.get_id().to_string())
+        .to_uppercase();
     let mut spelling = match (a.get_short(), a.get_long()) {
         (Some(s), Some(l)) => format!("-{s}, --{l}"),
         (None, Some(l)) => format!("--{l}"),
@@ -85,13 +88,20 @@ fn argument(a: &Arg) -> String {
         if matches!(a.get_action(), ArgAction::Append) {
             spelling.push_str("…");
         }
-    } else if matches!(a.get_action(), ArgAction::Append) || a.get_num_args().is_some_and(|n| n.max_values() > 1) {
+    } else if matches!(a.get_action(), ArgAction::Append)
+        || a.get_num_args().is_some_and(|n| n.max_values() > 1)
+    {
         spelling.push('…');
     }
     let help = a
         .get_long_help()
         .or(a.get_help())
-        .map(|h| h.to_string().split_whitespace().collect::<Vec<_>>().join(" "))
+        .map(|h| {
+            h.to_string()
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
         .unwrap_or_default();
     let mut line = format!("`{spelling}`");
     if !help.is_empty() {
@@ -154,6 +164,10 @@ mod tests {
         ] {
             assert!(md.contains(&format!("## `trainer {s}`")), "{s}");
         }
+        assert!(
+            !md.contains("trainer help"),
+            "clap's own help subcommand is not listed"
+        );
         for f in [
             "--statistical-band",
             "--c-header <C_HEADER>",
@@ -161,6 +175,7 @@ mod tests {
             "--seeds <SEEDS>",
             "default `10`",
             "`sample`, `validate`",
+            "--config <CONFIG_FLAG>",
         ] {
             assert!(md.contains(f), "{f}");
         }

@@ -142,16 +142,15 @@ fn every_relative_link_of_the_docs_resolves() {
     // The README links into docs/ (the front door leads somewhere).
     let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
     assert!(
-        links(&readme)
-            .iter()
-            .any(|(_, t)| t.starts_with("docs/")),
+        links(&readme).iter().any(|(_, t)| t.starts_with("docs/")),
         "README.md links to no page of docs/"
     );
 }
 
 #[test]
 fn the_checker_finds_what_it_should() {
-    let md = "# Title\n## A `[x]` section (with: punctuation)\n## A `[x]` section (with: punctuation)\n\
+    let md =
+        "# Title\n## A `[x]` section (with: punctuation)\n## A `[x]` section (with: punctuation)\n\
               see [a](b.md#c) and `[not](a link)`\n```\n[nor](this)\n```\n[t](x \"title\")\n";
     assert_eq!(
         links(md),
