@@ -197,24 +197,20 @@ fn blocks(text: &str, lang: &str) -> Vec<String> {
     let mut out = Vec::new();
     let mut cur: Option<String> = None;
     for line in text.lines() {
-        match (&mut cur, line.trim_start().strip_prefix("```")) {
-            (None, Some(info)) => {
-                if info.trim() == lang {
-                    cur = Some(String::new());
-                } else {
-                    // Another language: skip it as a block of its own.
-                    cur = Some("\u{0}".into());
-                }
-            }
+        let fence = line.trim_start().strip_prefix("```");
+        match (cur.take(), fence) {
+            // A block of another language is kept as a marked block and dropped at its end.
+            (None, Some(info)) if info.trim() == lang => cur = Some(String::new()),
+            (None, Some(_)) => cur = Some("\u{0}".into()),
             (Some(b), Some(_)) => {
                 if !b.starts_with('\u{0}') {
-                    out.push(std::mem::take(b));
+                    out.push(b);
                 }
-                cur = None;
             }
-            (Some(b), None) => {
+            (Some(mut b), None) => {
                 b.push_str(line);
                 b.push('\n');
+                cur = Some(b);
             }
             (None, None) => {}
         }

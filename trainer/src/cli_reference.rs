@@ -86,7 +86,7 @@ fn argument(a: &Arg) -> String {
             let _ = write!(spelling, " <{value}>");
         }
         if matches!(a.get_action(), ArgAction::Append) {
-            spelling.push_str("…");
+            spelling.push('…');
         }
     } else if matches!(a.get_action(), ArgAction::Append)
         || a.get_num_args().is_some_and(|n| n.max_values() > 1)
