@@ -3,8 +3,14 @@
 //! everything, then `certify`, `solve`, `eval`, `compare` (2 seeds instead of 10) and
 //! `export` on the run directory, and the weights `run` wrote equal the ones compiled into
 //! `controller-core` (the README's regeneration command is a copy).
+//!
+//! "Your own plant in five minutes": the problem file and the `trainer` commands are read
+//! from the README's text (so the README and this test cannot drift), the file must be
+//! `configs/arm.toml`, and every command runs as written in a fresh directory; the figures
+//! the README quotes from their output are the ones the commands print.
 
-use ampc_tests::{tempdir, trainer};
+use ampc_tests::{tempdir, trainer, trainer_bin};
+use std::path::Path;
 
 #[test]
 fn main_job_and_tour() {
@@ -168,5 +174,162 @@ fn main_job_and_tour() {
             std::fs::read(format!("{gen}/{committed}")).unwrap(),
             "{committed}"
         );
+    }
+}
+
+/// The README's section whose heading starts with `heading`, up to the next `## `.
+fn readme_section(heading: &str) -> String {
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md"))
+        .expect("README.md");
+    let start = readme
+        .find(heading)
+        .unwrap_or_else(|| panic!("README.md has no section {heading}"));
+    let rest = &readme[start + heading.len()..];
+    let end = rest.find("\n## ").unwrap_or(rest.len());
+    rest[..end].to_string()
+}
+
+/// The fenced blocks of `text` whose info string is `lang`, in order.
+fn blocks(text: &str, lang: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur: Option<String> = None;
+    for line in text.lines() {
+        let fence = line.trim_start().strip_prefix("```");
+        match (cur.take(), fence) {
+            // A block of another language is kept as a marked block and dropped at its end.
+            (None, Some(info)) if info.trim() == lang => cur = Some(String::new()),
+            (None, Some(_)) => cur = Some("\u{0}".into()),
+            (Some(b), Some(_)) => {
+                if !b.starts_with('\u{0}') {
+                    out.push(b);
+                }
+            }
+            (Some(mut b), None) => {
+                b.push_str(line);
+                b.push('\n');
+                cur = Some(b);
+            }
+            (None, None) => {}
+        }
+    }
+    out
+}
+
+/// Runs `trainer` with the arguments of one README line in `dir`.
+fn run_in(dir: &Path, line: &str) -> std::process::Output {
+    assert!(
+        !line.contains(['"', '\'', '$', '|', '>', '<', '&', ';']),
+        "README command needs a shell: {line}"
+    );
+    let args: Vec<&str> = line.split_whitespace().skip(1).collect();
+    let o = std::process::Command::new(trainer_bin())
+        .args(&args)
+        .current_dir(dir)
+        .output()
+        .expect("run trainer");
+    assert!(
+        o.status.success(),
+        "`{line}` failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+/// The first number after `key` in `text`.
+fn number_after(text: &str, key: &str) -> Option<f64> {
+    let at = text.find(key)? + key.len();
+    let t: String = text[at..]
+        .chars()
+        .skip_while(|c| !c.is_ascii_digit())
+        .take_while(|c| c.is_ascii_digit() || *c == '.')
+        .collect();
+    t.parse().ok()
+}
+
+#[test]
+fn own_plant_in_five_minutes_as_the_readme_says() {
+    let section = readme_section("## Your own plant in five minutes");
+    let toml = blocks(&section, "toml");
+    assert_eq!(toml.len(), 1, "one problem file in the section");
+    let shipped = std::fs::read_to_string(ampc_tests::config("arm.toml")).unwrap();
+    assert_eq!(
+        toml[0].trim_end(),
+        shipped.trim_end(),
+        "the README's problem file is configs/arm.toml"
+    );
+    // A setpoint away from the origin and a path constraint, as the section promises.
+    let cfg = trainer::problem::ProblemConfig::from_toml_str(&toml[0], "README.md").unwrap();
+    assert!(cfg
+        .ocp
+        .x_ref
+        .as_ref()
+        .is_some_and(|x| x.iter().any(|v| *v != 0.0)));
+    assert!(!cfg.ocp.constraints.is_empty());
+
+    let dir = tempdir();
+    let d = dir.path();
+    std::fs::create_dir_all(d.join("configs")).unwrap();
+    std::fs::write(d.join("configs/arm.toml"), &toml[0]).unwrap();
+    let commands: Vec<String> = blocks(&section, "sh")
+        .iter()
+        .flat_map(|b| b.lines().map(str::to_string).collect::<Vec<_>>())
+        .filter(|l| l.starts_with("trainer "))
+        .collect();
+    let names: Vec<&str> = commands
+        .iter()
+        .map(|c| c.split_whitespace().nth(1).unwrap())
+        .collect();
+    assert_eq!(names, ["run", "refine", "export"], "{commands:?}");
+    let text: Vec<String> = commands
+        .iter()
+        .map(|c| {
+            let o = run_in(d, c);
+            format!(
+                "{}{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            )
+        })
+        .collect();
+
+    // run: every stage, and the report opens with the verdict the README quotes.
+    let report = std::fs::read_to_string(d.join("runs/arm/report.md")).unwrap();
+    assert!(report.contains("## Verdict"), "{report}");
+    let quoted = |k: &str| number_after(&section, k).unwrap_or_else(|| panic!("README: {k}"));
+    let cert: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(d.join("runs/arm/certificate.json")).unwrap(),
+    )
+    .unwrap();
+    let eps = cert["eps"].as_f64().unwrap();
+    assert!(
+        (eps - quoted("**ε = ")).abs() <= 5e-3 * eps.abs().max(1.0),
+        "run: ε {eps} vs the README's {}",
+        quoted("**ε = ")
+    );
+    // refine: the certified ε and the solves the README quotes, target met, check passed.
+    let refine = &text[1];
+    assert!(refine.contains(", met)"), "{refine}");
+    assert!(refine.contains("passed"), "{refine}");
+    let summary = |t: &str| -> String {
+        t.lines()
+            .find(|l| l.contains("arm: certified ε "))
+            .unwrap_or_else(|| panic!("no refine summary line in {t}"))
+            .to_string()
+    };
+    let (printed, said) = (summary(refine), summary(&section));
+    for k in ["certified ε ", ") with "] {
+        let (got, want) = (
+            number_after(&printed, k).unwrap(),
+            number_after(&said, k).unwrap(),
+        );
+        assert!(
+            (got - want).abs() <= 1e-4 * want.abs().max(1.0),
+            "refine `{k}`: {got} printed, the README says {want}"
+        );
+    }
+    // export: the four files.
+    for f in ["weights.rs", "weights.bin", "ampc.h", "arm.onnx"] {
+        assert!(d.join(f).exists(), "export wrote no {f}");
     }
 }

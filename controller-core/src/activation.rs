@@ -30,10 +30,9 @@
 //! functions on all 2³¹ non-negative f32 values (both are odd) against f64 `tanh` (error
 //! < 2⁻⁵² relative, far below the margins) and checks the constants. `.ci/run` runs it in
 //! release mode. Measured there: `tanh_accurate` max 7.07·10⁻⁸ absolute (at x ≈ 0.8734),
-//! at most 1.19 ulp of the correctly rounded result; the constant keeps the 1.2·10⁻⁷ that
-//! libm's `tanhf` (the default before) had, so certificates exported for it stay valid;
-//! `tanh_fast` max 3.22·10⁻⁶ (at x ≈ 7.63), bound 3.3·10⁻⁶ (the Padé form it replaced had
-//! 10⁻⁴, reached at its clip).
+//! at most 1.19 ulp of the correctly rounded result; the constant is 1.2·10⁻⁷, libm's
+//! `tanhf` bound, so certificates labelled `libm` hold for this function too;
+//! `tanh_fast` max 3.22·10⁻⁶ (at x ≈ 7.63), bound 3.3·10⁻⁶.
 //! The trainer's exporter mirrors both functions operation by operation
 //! (`trainer::deploy::export::Tanh`) and uses the same constants for the certificate's f32
 //! allowance (the `tests/` crate checks that code and constants agree).

@@ -61,6 +61,8 @@ macro_rules! eprint {
 }
 
 mod cli;
+#[cfg(test)]
+mod cli_reference;
 
 use clap::Parser;
 
