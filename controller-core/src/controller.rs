@@ -85,9 +85,9 @@ pub enum InvalidController {
 pub struct Controller<const NX: usize, const NU: usize, N> {
     /// κ_NN in physical units (scalings folded in).
     pub net: N,
-    /// Lower corner of X (f32, rounded inward).
+    /// Lower corner of X (f32, rounded outward by the exporter).
     pub x_lo: [f32; NX],
-    /// Upper corner of X (f32, rounded inward).
+    /// Upper corner of X (f32, rounded outward by the exporter).
     pub x_hi: [f32; NX],
     /// Lower end of the clamp band.
     pub clamp_lo: [f32; NU],

@@ -194,10 +194,10 @@ pub const NET: Net = Hidden::new(
     Hidden::new(Dense::new(W2, B2), Dense::new(W3, B3)),
 );
 
-/// Lower corner of X in f32 (rounded inward).
-pub const X_LO: [f32; 2] = [-6.283185, -1.0];
-/// Upper corner of X in f32 (rounded inward).
-pub const X_HI: [f32; 2] = [6.283185, 1.0];
+/// Lower corner of X in f32 (rounded outward: the f32 box contains X).
+pub const X_LO: [f32; 2] = [-6.2831855, -1.0];
+/// Upper corner of X in f32 (rounded outward: the f32 box contains X).
+pub const X_HI: [f32; 2] = [6.2831855, 1.0];
 
 /// The certificate for the libm tanh.
 pub const CERTIFICATE_LIBM: Certificate<2, 1> = Certificate {

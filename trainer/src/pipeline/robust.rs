@@ -199,7 +199,15 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         feasible_outside_domain,
     };
     let mut allowance = f32_allowance(&cfg.name, &net, &cert);
-    let mut v = verdict(&evidence(&guarantee, cert.eps, allowance, check_of(&check), None, 0, 0));
+    let mut v = verdict(&evidence(
+        &guarantee,
+        cert.eps,
+        allowance,
+        check_of(&check),
+        None,
+        0,
+        0,
+    ));
     let mut refinement = None;
     if v.status == VerdictStatus::NotCertified && cfg.robust.refine {
         // The design loop's second step: refine data and network with local certificates

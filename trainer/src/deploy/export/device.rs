@@ -26,7 +26,7 @@ pub const EXCLUDED: u8 = 8;
 #[derive(Clone, Debug)]
 pub struct Device {
     folded: Folded,
-    /// The f32 domain (rounded inward).
+    /// The f32 domain (rounded outward: it contains X).
     pub domain: (Vec<f32>, Vec<f32>),
     /// The clamp band (f32).
     pub band: (Vec<f32>, Vec<f32>),

@@ -14,8 +14,9 @@
 //! analysis with interval arithmetic on sub-boxes of X (see `allowance`).
 //!
 //! **Clamp band** `(U_d ⊕ [−ε, ε]) ∩ [act_lo, act_hi]`, ε = eps + allowance, rounded to f32
-//! so that it contains U_d and lies within the actuator limits. **Domain** rounded inward to
-//! f32 (the projected state is always in X).
+//! so that it contains U_d and lies within the actuator limits. **Domain** rounded outward to
+//! f32 (the f32 box contains X, so X's own corners are in domain; a projected state lies at
+//! most one f32 step outside X, a box the allowance's interval analysis covers).
 //!
 //! This file holds the model ([`ExportModel`]: validation, reference evaluation, folding,
 //! f32 domain and clamp band), the errors and [`export_files`]; the rest is split by object:

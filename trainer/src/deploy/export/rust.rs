@@ -252,7 +252,7 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
     o.push('\n');
     const_array(
         &mut o,
-        "Lower corner of X in f32 (rounded inward).",
+        "Lower corner of X in f32 (rounded outward: the f32 box contains X).",
         "pub ",
         "X_LO",
         &format!("[f32; {nx}]"),
@@ -260,7 +260,7 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
     );
     const_array(
         &mut o,
-        "Upper corner of X in f32 (rounded inward).",
+        "Upper corner of X in f32 (rounded outward: the f32 box contains X).",
         "pub ",
         "X_HI",
         &format!("[f32; {nx}]"),

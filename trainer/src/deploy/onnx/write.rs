@@ -2,7 +2,7 @@
 //! (IR 7, opset 13), with the certificate in `metadata_props`.
 //!
 //! ```text
-//! x [N, nx] → Clip to X (f32, rounded inward) → Gemm(W₁', b₁', transB = 1) → α → …
+//! x [N, nx] → Clip to X (f32, rounded outward) → Gemm(W₁', b₁', transB = 1) → α → …
 //!           → Gemm(W_L', b_L') → Clip to the band (U_d ⊕ [−ε_tot, ε_tot]) ∩ actuator → u [N, nu]
 //! ```
 //! `W', b'` are the folded weights rounded to f32 (`Folded::f32_layers`: the scalings folded
