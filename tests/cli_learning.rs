@@ -270,7 +270,8 @@ fn f32_allowance_covers_the_device(
         compared += 1;
         worst = worst.max((f64::from(out.u[0]) - u64).abs());
     }
-    assert!(compared > 1000, "{compared} unclamped states");
+    // Outside the clamp band both sides saturate; the unclamped states are the comparison.
+    assert!(compared > 500, "{compared} unclamped states");
     if controller_core::activation::TANH_KIND != "fast" {
         assert!(
             worst > 0.0 && worst <= allowance,

@@ -118,7 +118,14 @@ fn a_perturbed_pandas_label_is_refused_unless_trusted() {
     // pandas' df.to_csv(): unnamed index column, named columns, no Jacobian.
     let mut s = String::from(",x1,x2,u1\n");
     for (i, r) in ds.records.iter().enumerate() {
-        let u = r.u[0] + if i == 20 { 1e-3 } else { 0.0 };
+        // Moved toward the interior of U = [−1, 1], so the label is admissible and only its
+        // disagreement with ampc's re-solve is at fault.
+        let u = r.u[0]
+            + if i == 20 {
+                -1e-3 * r.u[0].signum()
+            } else {
+                0.0
+            };
         s += &format!("{i},{:?},{:?},{:?}\n", r.x[0], r.x[1], u);
     }
     let csv = d.join("pandas.csv");

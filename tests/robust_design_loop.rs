@@ -51,9 +51,9 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     // The expected verdict, stated from the configuration: the pendulum is nonlinear, so the
     // refined certificate's MPC part inside a cell is estimated from its corners (no exact
     // QP cells) — ε's tier is `estimated`; the file enforces no terminal region, so
-    // recursive feasibility is `unknown`; the loop runs no per-cell check. The numbers meet
-    // the design, nothing else is proven: `conditional`, never `certified`, and the three
-    // unproven premises are named.
+    // recursive feasibility is `unknown`; the loop runs the check at fresh states on the
+    // refined certificate (written into it). The numbers meet the design, nothing else is
+    // proven: `conditional`, never `certified`, and the two unproven premises are named.
     assert_eq!(rep["verdict"], "conditional", "{}", rep["verdict_detail"]);
     assert_eq!(rep["guarantee"], "estimated");
     assert_eq!(rep["recursive_feasibility"], "unknown");
@@ -69,13 +69,26 @@ fn robust_design_is_certified_by_refinement_and_keeps_the_constraints() {
     for (what, prefix) in [
         ("the MPC's range in a cell", "mpc_range"),
         ("recursive feasibility", "recursive feasibility"),
-        ("the check", "the per-cell check"),
     ] {
         assert!(
             rests.iter().any(|r| r.starts_with(prefix)),
             "{what} missing from rests_on: {rests:?}"
         );
     }
+    // The check ran and passed: it is in the refined certificate, not an assumption.
+    assert!(
+        !rests.iter().any(|r| r.starts_with("the per-cell check")),
+        "{rests:?}"
+    );
+    let check: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(rdir.join("refine").join("check.json")).unwrap())
+            .unwrap();
+    let cert: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(rdir.join("refine").join("certificate.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(cert["check"]["passed"], true, "{}", cert["check"]);
+    assert!(check.is_object(), "{check}");
     let message = detail["message"].as_str().unwrap();
     assert!(!message.contains("Corollary 1 applies"), "{message}");
     assert!(message.contains("mpc_range"), "{message}");

@@ -180,8 +180,14 @@ fn edited_certificates_are_refused_by_export_and_eval() {
         let problem = trainer::problem::ProblemConfig::load(Path::new(&f.cfg)).unwrap();
         let m = trainer::certify::Model::load(Path::new(&f.model)).unwrap();
         let data = trainer::data::dataset::Dataset::load(&d.join("d.bin")).unwrap();
-        let c = trainer::certify::certificate::certify(&m, &data, &problem, &Default::default())
-            .unwrap();
+        let (c, _) = trainer::deploy::export::certify_deployed(
+            &problem.name,
+            &m,
+            &data,
+            &problem,
+            &Default::default(),
+        )
+        .unwrap();
         let lib = d.join("lib.json");
         trainer::certify::file::write_certificate(
             &lib,

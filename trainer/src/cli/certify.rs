@@ -6,7 +6,7 @@
 use super::common::problem_for_data;
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
-use trainer::certify::certificate::{certify, requirement, Certificate, CertifyOptions};
+use trainer::certify::certificate::{requirement, Certificate, CertifyOptions};
 use trainer::certify::statistical::{
     certify_statistically, Statistical, StatisticalOptions, Tested, DEFAULT_SEED,
 };
@@ -125,7 +125,11 @@ pub(super) fn execute(
             bail!("--target-eps must be a finite number > 0, got {e}");
         }
     }
-    let mut c = certify(
+    // The deployed controller (f32, projection, clamp band): its f32 allowance is stored in
+    // the certificate (the tier of that term is claimed sound), and it is the function the
+    // statistical tiers test.
+    let (c, deployed) = trainer::deploy::export::certify_deployed(
+        &cfg.name,
         &m,
         &d,
         &cfg,
@@ -137,13 +141,6 @@ pub(super) fn execute(
     .with_context(|| format!("cannot certify {} on {}", model.display(), data.display()))?;
     let req =
         target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
-    // The deployed controller (f32, projection, clamp band): its f32 allowance is stored in
-    // the certificate (the tier of that term is claimed sound), and it is the function the
-    // statistical tiers test.
-    let deployed = trainer::deploy::export::Deployed::new(&cfg.name, &m, &c);
-    if let Ok(dep) = &deployed {
-        c.f32_allowance = dep.allowance;
-    }
     let statistical = match stat {
         Some((o, store)) => {
             super::common::refuse_overwrite(&[store], &[model, data])?;

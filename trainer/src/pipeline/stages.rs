@@ -7,7 +7,7 @@
 
 use super::manifest::{settings_hash, sha_file, Ctx};
 use super::{fail, PipelineError};
-use crate::certify::certificate::{certify, CertifyOptions};
+use crate::certify::certificate::CertifyOptions;
 use crate::certify::file::CertificateFile;
 use crate::certify::Model;
 use crate::data::dataset::{generate, Dataset, GenerateOptions};
@@ -288,7 +288,10 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
         ("model_nominal.bin", "certificate_nominal.json"),
     ] {
         let m = load_model("certify", &d.join(file))?;
-        let mut c = certify(
+        // Theorem 1 with the deployed controller's f32 allowance (libm tanh, 2-norm) stored
+        // beside ε, as `trainer certify` writes it.
+        let (c, _) = crate::deploy::export::certify_deployed(
+            &env.cfg.name,
             &m,
             &data,
             env.cfg,
@@ -298,12 +301,6 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
             },
         )
         .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
-        // The deployed controller's f32 allowance (libm tanh, 2-norm), whose tier the
-        // certificate states as sound: computed and stored, not left at 0.
-        if let Ok(em) = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, &c) {
-            c.f32_allowance =
-                crate::deploy::export::f32_allowance(&em, crate::deploy::export::Tanh::Libm).0;
-        }
         crate::certify::file::write_certificate(
             &d.join(json),
             &CertificateFile::theorem1(c.clone()),

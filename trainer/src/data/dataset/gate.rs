@@ -3,6 +3,7 @@
 //! ```text
 //! certifiable(D)  ⇔  #{labelled records} ≥ 1  ∧  no record is `numerical_failure`
 //!                    ∧  every labelled record's u, ∂κ/∂x and cost are finite
+//!                       (∂κ/∂x and the cost may be absent — NaN — in imported labels)
 //! ```
 //! A `numerical_failure` means that the MPC law could not be evaluated at that state — most
 //! often because the plant's arithmetic is not finite there (`log` or `sqrt` of a negative
@@ -95,12 +96,17 @@ impl Dataset {
                 x: state(first),
             });
         }
+        // Labels imported without Jacobian columns store ∂κ/∂x as NaN ("absent": training
+        // drops the Jacobian term there), and imported labels may lack a cost (NaN: no
+        // bound uses it); u must always be finite.
+        let jacobian_absent = self.labels.as_ref().is_some_and(|l| !l.jacobian);
+        let imported = self.labels.is_some();
         for r in self.records.iter().filter(|r| r.is_labelled()) {
             let what = if r.u.iter().any(|v| !v.is_finite()) {
                 "u"
-            } else if r.du_dx.iter().any(|v| !v.is_finite()) {
+            } else if !jacobian_absent && r.du_dx.iter().any(|v| !v.is_finite()) {
                 "du_dx"
-            } else if !r.cost.is_finite() {
+            } else if !imported && !r.cost.is_finite() {
                 "cost"
             } else {
                 continue;
