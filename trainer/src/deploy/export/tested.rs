@@ -68,6 +68,27 @@ impl TestedController for Deployed {
     }
 }
 
+/// Theorem 1's certificate of `model` on `data` as `trainer certify` and the pipeline write
+/// it: [`crate::certify::certificate::certify`], then the deployed controller's f32 allowance
+/// (libm tanh, 2-norm) stored beside ε — the one library entry, so a Rust caller writes the
+/// same `certificate.json` as the CLI. A net the device cannot run (non-tanh) keeps
+/// allowance 0 and the reason in the returned `Err`; `export` refuses such a net.
+pub fn certify_deployed(
+    name: &str,
+    model: &Model,
+    data: &crate::data::dataset::Dataset,
+    cfg: &crate::problem::ProblemConfig,
+    opts: &crate::certify::certificate::CertifyOptions,
+) -> Result<(Certificate, Result<Deployed, ExportError>), crate::certify::certificate::MismatchError>
+{
+    let mut c = crate::certify::certificate::certify(model, data, cfg, opts)?;
+    let deployed = Deployed::new(name, model, &c);
+    if let Ok(dep) = &deployed {
+        c.f32_allowance = dep.allowance;
+    }
+    Ok((c, deployed))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -90,25 +111,4 @@ mod tests {
         }
         assert!(d.describe().contains("f32"));
     }
-}
-
-/// Theorem 1's certificate of `model` on `data` as `trainer certify` and the pipeline write
-/// it: [`crate::certify::certificate::certify`], then the deployed controller's f32 allowance
-/// (libm tanh, 2-norm) stored beside ε — the one library entry, so a Rust caller writes the
-/// same `certificate.json` as the CLI. A net the device cannot run (non-tanh) keeps
-/// allowance 0 and the reason in the returned `Err`; `export` refuses such a net.
-pub fn certify_deployed(
-    name: &str,
-    model: &Model,
-    data: &crate::data::dataset::Dataset,
-    cfg: &crate::problem::ProblemConfig,
-    opts: &crate::certify::certificate::CertifyOptions,
-) -> Result<(Certificate, Result<Deployed, ExportError>), crate::certify::certificate::MismatchError>
-{
-    let mut c = crate::certify::certificate::certify(model, data, cfg, opts)?;
-    let deployed = Deployed::new(name, model, &c);
-    if let Ok(dep) = &deployed {
-        c.f32_allowance = dep.allowance;
-    }
-    Ok((c, deployed))
 }
