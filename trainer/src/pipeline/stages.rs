@@ -326,7 +326,7 @@ fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
     let c = &file.base;
     let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
         .map_err(|e| fail("export", e))?
-        .with_certificate_tier(file.tier().into());
+        .with_certificate_guarantee(&file.guarantee);
     let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
         .map_err(|e| fail("export", e))?;
     // The band the exported controller (libm tanh, the default) clamps to.
