@@ -140,17 +140,19 @@ fn module_path(p: &Path) -> Option<Vec<String>> {
     Some(parts)
 }
 
-/// The code of a file: comment lines dropped, and cut before a trailing `#[cfg(test)]`
-/// module (tests may use any sibling; the circle rule is about the library's code).
+/// The code of a file: comment lines dropped, and cut before an inline `#[cfg(test)]`
+/// module `mod … {` (tests may use any sibling; the circle rule is about the library's
+/// code; a `mod tests;` declaration only skips that line's module, a file of its own).
 fn code_of(text: &str) -> String {
     let mut out = String::new();
     let mut lines = text.lines().peekable();
     while let Some(line) = lines.next() {
         let t = line.trim_start();
         if t.starts_with("#[cfg(test)]")
-            && lines
-                .peek()
-                .is_some_and(|n| n.trim_start().starts_with("mod "))
+            && lines.peek().is_some_and(|n| {
+                let n = n.trim();
+                n.starts_with("mod ") && n.ends_with('{')
+            })
         {
             break;
         }
