@@ -56,7 +56,7 @@ pub use guarantee::{
 };
 pub use rust::render_rust;
 pub use tanh::Tanh;
-pub use tested::{certify_deployed, Deployed};
+pub use tested::{certify_deployed, deployed_allowance, Deployed};
 
 /// One affine layer in f64: `w` is out × in.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
