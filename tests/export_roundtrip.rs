@@ -71,50 +71,6 @@ fn committed_files_are_what_the_exporter_writes() {
 }
 
 #[test]
-fn exporter_and_core_share_tanh_code_and_bounds() {
-    assert_eq!(
-        Tanh::Libm.max_abs_err(),
-        activation::TANH_ACCURATE_MAX_ABS_ERR
-    );
-    assert_eq!(Tanh::Fast.max_abs_err(), activation::TANH_FAST_MAX_ABS_ERR);
-    for ((a, d), (b, e)) in export::TANH_FAST_ERR_BINS
-        .iter()
-        .zip(activation::TANH_FAST_ERR_BINS)
-    {
-        assert_eq!((*a, *d), (f64::from(b), e));
-    }
-    for k in -2_000_000..2_000_000 {
-        let x = k as f32 * 4e-6;
-        assert_eq!(
-            Tanh::Libm.eval(x).to_bits(),
-            activation::tanh_accurate(x).to_bits()
-        );
-        assert_eq!(
-            Tanh::Fast.eval(x).to_bits(),
-            activation::tanh_fast(x).to_bits()
-        );
-    }
-    // Every 4099th bit pattern: both signs, subnormals, both branches of the accurate tanh,
-    // beyond both clips, infinities and NaNs (~10⁶ inputs).
-    for bits in (0..=u32::MAX)
-        .step_by(4099)
-        .chain([0x7f80_0000, 0xff80_0000, 0x7fc0_0000])
-    {
-        let x = f32::from_bits(bits);
-        assert_eq!(
-            Tanh::Libm.eval(x).to_bits(),
-            activation::tanh_accurate(x).to_bits(),
-            "x = {x:e}"
-        );
-        assert_eq!(
-            Tanh::Fast.eval(x).to_bits(),
-            activation::tanh_fast(x).to_bits(),
-            "x = {x:e}"
-        );
-    }
-}
-
-#[test]
 fn core_matches_the_exporters_f32_model_bit_for_bit() {
     let (model, _) = ampc_tests::trained_pendulum();
     let folded = model.folded();

@@ -33,9 +33,11 @@
 //! at most 1.19 ulp of the correctly rounded result; the constant is 1.2·10⁻⁷, libm's
 //! `tanhf` bound, so certificates labelled `libm` hold for this function too;
 //! `tanh_fast` max 3.22·10⁻⁶ (at x ≈ 7.63), bound 3.3·10⁻⁶.
-//! The trainer's exporter mirrors both functions operation by operation
-//! (`trainer::deploy::export::Tanh`) and uses the same constants for the certificate's f32
-//! allowance (the `tests/` crate checks that code and constants agree).
+//! The trainer depends on this module for the device arithmetic: its exporter evaluates
+//! [`tanh_accurate`] and [`tanh_fast`] themselves and takes the error bounds and
+//! [`TANH_FAST_ERR_BINS`] from here for the certificate's f32 allowance; its training engine
+//! evaluates [`tanh_accurate`] on 8-sample lanes in a branch-free form built from the public
+//! coefficients below ([`ACC_P`], [`ACC_Q`], …), checked bit for bit against [`tanh_accurate`].
 //!
 //! The certificate label of the default tanh stays `"libm"` (`CERTIFICATE_LIBM`,
 //! `f32_allowance_libm`): a file-format name for "the default, accurate tanh", kept so that
@@ -45,13 +47,13 @@
 /// `1 − tanh 8 ≈ 2.3·10⁻⁷`); the clip is the saturation of `(x·2²⁸) as i32` at ±2³¹.
 pub const FAST_CLIP: f32 = 8.0;
 /// `2²⁸ = 2³¹ / FAST_CLIP`: the fixed-point scale of the fast tanh's clip.
-const FAST_FIX: f32 = 268_435_456.0;
+pub const FAST_FIX: f32 = 268_435_456.0;
 /// `K·2⁻²⁸` rounded to f32 (`K = 0.025984265`): fixed-point integer → the scaled variable `y`.
-const FAST_Y: f32 = 9.679_893e-11;
+pub const FAST_Y: f32 = 9.679_893e-11;
 /// `a₀, a₁, a₂` of the fast tanh's numerator `y (a₀ + a₁w + a₂w² + w³)`.
-const FAST_A: [f32; 3] = [9.280_053e-5, 0.016_684_914, 0.435_023_87];
+pub const FAST_A: [f32; 3] = [9.280_053e-5, 0.016_684_914, 0.435_023_87];
 /// `b₀, b₁, b₂` of its denominator `b₀ + b₁w + b₂w² + w³`.
-const FAST_B: [f32; 3] = [2.411_385_4e-6, 0.001_623_884_7, 0.107_925_8];
+pub const FAST_B: [f32; 3] = [2.411_385_4e-6, 0.001_623_884_7, 0.107_925_8];
 
 /// Bound on `|tanh_accurate(x) − tanh(x)|` for every f32 `x` (verified exhaustively; the
 /// largest error seen is 7.07·10⁻⁸, see the module doc).
@@ -63,9 +65,9 @@ pub const TANH_FAST_MAX_ABS_ERR: f64 = 3.3e-6;
 
 /// Piecewise bound for [`tanh_fast`]: entry `(a_k, δ_k)` bounds `|tanh_fast(x) − tanh(x)|`
 /// by `δ_k` for `a_{k−1} ≤ |x| < a_k` (`a_{−1} = 0`, the last `a` is +∞). The near-minimax
-/// rational's error is nearly level on `[0, 8]`, so the bins differ little (2.3–3.3·10⁻⁶;
-/// the Padé form before had 4·10⁻⁷ below |x| = 2 and 10⁻⁴ near its clip at 4.97). Verified
-/// exhaustively with the uniform bounds (each bin is the largest error seen, rounded up).
+/// rational's error is nearly level on `[0, 8]`, so the bins differ little (2.3–3.3·10⁻⁶).
+/// Verified exhaustively with the uniform bounds (each bin is the largest error seen,
+/// rounded up).
 pub const TANH_FAST_ERR_BINS: [(f32, f64); 10] = [
     (0.5, 3.0e-6),
     (1.0, 2.8e-6),
@@ -95,9 +97,9 @@ pub const TANH_MAX_ABS_ERR: f64 = if cfg!(feature = "fast-tanh") {
 };
 
 /// `|x|` below which [`tanh_accurate`] evaluates its odd polynomial.
-const ACC_CUT: f32 = 0.875;
+pub const ACC_CUT: f32 = 0.875;
 /// `P(z)` of [`tanh_accurate`]'s first branch, constant term first.
-const ACC_P: [f32; 6] = [
+pub const ACC_P: [f32; 6] = [
     -0.333_331_76,
     0.133_299_98,
     -0.053_710_45,
@@ -106,7 +108,7 @@ const ACC_P: [f32; 6] = [
     0.001_314_905,
 ];
 /// `Q(r)` of [`tanh_accurate`]'s `e^r = 1 + r + r²·Q(r)`, constant term first.
-const ACC_Q: [f32; 5] = [
+pub const ACC_Q: [f32; 5] = [
     0.499_999_94,
     0.166_665_21,
     0.041_668_39,
@@ -114,13 +116,13 @@ const ACC_Q: [f32; 5] = [
     0.001_381_461_3,
 ];
 /// Inputs are clipped to `|x| ≤ ACC_CLIP` (then `1 − tanh < 5·10⁻⁹`).
-const ACC_CLIP: f32 = 10.0;
+pub const ACC_CLIP: f32 = 10.0;
 /// log₂ e in f32.
-const LOG2E: f32 = core::f32::consts::LOG2_E;
+pub const LOG2E: f32 = core::f32::consts::LOG2_E;
 /// ln 2 rounded to 16 significant bits: `k·LN2_HI` is exact for `k < 2⁸`.
-const LN2_HI: f32 = 0.693_145_75;
+pub const LN2_HI: f32 = 0.693_145_75;
 /// `ln 2 − LN2_HI`, rounded to f32.
-const LN2_LO: f32 = 1.428_606_8e-6;
+pub const LN2_LO: f32 = 1.428_606_8e-6;
 
 /// This crate's tanh (see the module doc): max error 7.07·10⁻⁸ absolute, 1.19 ulp, over
 /// every f32. Odd (`t(−x) = −t(x)`; `t(−0) = +0`); finite for every input (±inf → ±t(10) = ±1, NaN → ±t(10)).

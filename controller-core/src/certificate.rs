@@ -23,6 +23,34 @@ pub enum Guarantee {
     Estimated = 2,
 }
 
+impl Guarantee {
+    /// Every tier, strongest first (index = discriminant = the C API's `AMPC_GUARANTEE_*`).
+    pub const ALL: [Guarantee; 3] = [
+        Guarantee::Sound,
+        Guarantee::Statistical,
+        Guarantee::Estimated,
+    ];
+
+    /// The tier's name in certificates (`"guarantee"` in `certificate.json`), reports and
+    /// generated files: `"sound"`, `"statistical"` or `"estimated"`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Guarantee::Sound => "sound",
+            Guarantee::Statistical => "statistical",
+            Guarantee::Estimated => "estimated",
+        }
+    }
+
+    /// The weaker of the two tiers (a claim resting on both is only as strong as this).
+    pub fn weakest(self, other: Guarantee) -> Guarantee {
+        if other > self {
+            other
+        } else {
+            self
+        }
+    }
+}
+
 /// A certificate for a controller with `NX` states and `NU` inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Certificate<const NX: usize, const NU: usize> {
@@ -79,4 +107,26 @@ pub struct Certificate<const NX: usize, const NU: usize> {
     pub hash: &'static str,
     /// True for the placeholder network (no certificate from the learning side yet).
     pub placeholder: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Guarantee;
+
+    #[test]
+    fn tiers_are_ordered_named_and_indexed_by_discriminant() {
+        for (i, g) in Guarantee::ALL.into_iter().enumerate() {
+            assert_eq!(g as usize, i);
+        }
+        let names = Guarantee::ALL.map(Guarantee::name);
+        assert_eq!(names, ["sound", "statistical", "estimated"]);
+        assert_eq!(
+            Guarantee::Sound.weakest(Guarantee::Statistical),
+            Guarantee::Statistical
+        );
+        assert_eq!(
+            Guarantee::Estimated.weakest(Guarantee::Sound),
+            Guarantee::Estimated
+        );
+    }
 }

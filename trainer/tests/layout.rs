@@ -1,7 +1,11 @@
 //! The tree is the pipeline: `trainer/src/` has one folder per stage, and a stage imports only
 //! the stages before it (and the leaf modules `io`, `rng`), so there is no import cycle.
 //! This test reads the sources and checks every `crate::<module>` path outside comments.
+//! Within a stage, the module files form no circle either: two sibling modules (files or
+//! folders under the same parent) never use each other both ways, through `crate::` or
+//! `super::` paths (`sibling_modules_form_no_circle`).
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The library's top-level modules in data-flow order: each may import only those before it.
@@ -118,4 +122,218 @@ fn source_files_are_small_enough_to_read() {
         "files over {MAX_LINES} lines:\n{}",
         long.join("\n")
     );
+}
+
+/// The module path a library source file defines (`a/b/mod.rs` and `a/b.rs` → `[a, b]`), or
+/// `None` for the crate roots and the binary's `cli/`.
+fn module_path(p: &Path) -> Option<Vec<String>> {
+    module_of(p)?;
+    let rel = p.strip_prefix(src()).unwrap();
+    let mut parts: Vec<String> = rel
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().to_string())
+        .collect();
+    let last = parts.pop()?;
+    if last != "mod.rs" {
+        parts.push(last.trim_end_matches(".rs").to_string());
+    }
+    Some(parts)
+}
+
+/// The code of a file: comment lines dropped, and cut before an inline `#[cfg(test)]`
+/// module `mod … {` (tests may use any sibling; the circle rule is about the library's
+/// code; a `mod tests;` declaration only skips that line's module, a file of its own).
+fn code_of(text: &str) -> String {
+    let mut out = String::new();
+    let mut lines = text.lines().peekable();
+    while let Some(line) = lines.next() {
+        let t = line.trim_start();
+        if t.starts_with("#[cfg(test)]")
+            && lines.peek().is_some_and(|n| {
+                let n = n.trim();
+                n.starts_with("mod ") && n.ends_with('{')
+            })
+        {
+            break;
+        }
+        if !t.starts_with("//") {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The paths a file's code names through `crate::` or `super::`, each as the module path it
+/// starts from plus its segments (a `{…}` group gives one path per element).
+fn paths_in(code: &str, own: &[String]) -> Vec<Vec<String>> {
+    let ident = |s: &str| -> String {
+        s.chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect()
+    };
+    let mut out = Vec::new();
+    let bytes = code.as_bytes();
+    let mut i = 0;
+    while i < code.len() {
+        let rest = &code[i..];
+        let starts = rest.starts_with("crate::") || rest.starts_with("super::");
+        let boundary = i == 0
+            || !(bytes[i - 1].is_ascii_alphanumeric()
+                || bytes[i - 1] == b'_'
+                || bytes[i - 1] == b'$'
+                || bytes[i - 1] == b':');
+        if !(starts && boundary) {
+            i += rest.chars().next().map_or(1, char::len_utf8);
+            continue;
+        }
+        // The module the path starts from.
+        let mut base: Vec<String> = if rest.starts_with("crate::") {
+            Vec::new()
+        } else {
+            own.to_vec()
+        };
+        // `super` of module `a::b::c` (file `a/b/c.rs` or `a/b/c/mod.rs`) is `a::b`.
+        let mut r = rest;
+        if let Some(t) = r.strip_prefix("crate::") {
+            r = t;
+        }
+        while let Some(t) = r.strip_prefix("super::") {
+            base.pop();
+            r = t;
+        }
+        let mut segs = Vec::new();
+        loop {
+            let id = ident(r);
+            if id.is_empty() {
+                break;
+            }
+            r = &r[id.len()..];
+            segs.push(id);
+            match r.strip_prefix("::") {
+                Some(t) => r = t,
+                None => break,
+            }
+        }
+        if let Some(group) = r.strip_prefix('{') {
+            let end = group.find('}').unwrap_or(group.len());
+            for item in group[..end].split(',') {
+                let mut p = segs.clone();
+                p.extend(
+                    item.trim()
+                        .split("::")
+                        .map(ident)
+                        .take_while(|id| !id.is_empty()),
+                );
+                out.push(base.iter().cloned().chain(p).collect());
+            }
+        } else {
+            out.push(base.iter().cloned().chain(segs).collect());
+        }
+        i += (rest.len() - r.len()).max(1);
+    }
+    out
+}
+
+/// The module graph between siblings: for every use of module B by a file of module A
+/// (neither inside the other), the edge between their ancestors just below the common
+/// parent.
+fn sibling_edges() -> BTreeMap<Vec<String>, BTreeSet<Vec<String>>> {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let units: Vec<(PathBuf, Vec<String>)> = files
+        .iter()
+        .filter_map(|f| Some((f.clone(), module_path(f)?)))
+        .collect();
+    let known: BTreeSet<Vec<String>> = units.iter().map(|(_, m)| m.clone()).collect();
+    let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
+    for (f, own) in &units {
+        if own.iter().any(|s| s == "tests") {
+            continue;
+        }
+        let text = std::fs::read_to_string(f).unwrap();
+        for path in paths_in(&code_of(&text), own) {
+            // The longest known module prefix of the path is the module it uses.
+            let Some(target) = (0..=path.len())
+                .rev()
+                .map(|k| path[..k].to_vec())
+                .find(|p| known.contains(p))
+            else {
+                continue;
+            };
+            let common = own.iter().zip(&target).take_while(|(a, b)| a == b).count();
+            if common == own.len() || common == target.len() {
+                continue; // the same module, a parent or a child
+            }
+            edges
+                .entry(own[..=common].to_vec())
+                .or_default()
+                .insert(target[..=common].to_vec());
+        }
+    }
+    edges
+}
+
+/// Sibling modules that use each other, directly or around a longer circle.
+fn circles(edges: &BTreeMap<Vec<String>, BTreeSet<Vec<String>>>) -> Vec<String> {
+    let reach = |from: &Vec<String>| {
+        let mut seen = BTreeSet::new();
+        let mut todo = vec![from.clone()];
+        while let Some(n) = todo.pop() {
+            for m in edges.get(&n).into_iter().flatten() {
+                if seen.insert(m.clone()) {
+                    todo.push(m.clone());
+                }
+            }
+        }
+        seen
+    };
+    let mut out = Vec::new();
+    for (a, outs) in edges {
+        for b in outs {
+            if reach(b).contains(a) {
+                out.push(format!(
+                    "{} uses {}, which leads back",
+                    a.join("::"),
+                    b.join("::")
+                ));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn sibling_modules_form_no_circle() {
+    let edges = sibling_edges();
+    assert!(
+        edges.len() > 20,
+        "found only {} modules with sibling uses",
+        edges.len()
+    );
+    let bad = circles(&edges);
+    assert!(bad.is_empty(), "module circles:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn the_checker_sees_a_circle() {
+    let own = |s: &str| s.split("::").map(String::from).collect::<Vec<_>>();
+    // `super::` goes to the parent; a `{…}` group gives one path each; `$crate` skipped.
+    assert_eq!(
+        paths_in(
+            "use super::parse::Func; $crate::x",
+            &own("problem::expr::error")
+        ),
+        vec![own("problem::expr::parse::Func")]
+    );
+    assert_eq!(
+        paths_in("use super::{a, b::C};", &own("data::dataset")),
+        vec![own("data::a"), own("data::b::C")]
+    );
+    let mut edges = BTreeMap::new();
+    edges.insert(own("a::b"), BTreeSet::from([own("a::c")]));
+    edges.insert(own("a::c"), BTreeSet::from([own("a::d")]));
+    assert!(circles(&edges).is_empty());
+    edges.insert(own("a::d"), BTreeSet::from([own("a::b")]));
+    assert_eq!(circles(&edges).len(), 3);
 }

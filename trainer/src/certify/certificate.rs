@@ -200,13 +200,13 @@ pub struct Certificate {
     /// JSON certificate only: the postcard model file does not store it (its format, and
     /// every existing model, stay as they were).
     #[serde(default, skip_serializing_if = "Option::is_none", with = "json_only")]
-    pub labels: Option<crate::data::import::ImportedLabels>,
+    pub labels: Option<crate::data::dataset::ImportedLabels>,
 }
 
 /// Serde adapter of [`Certificate::labels`]: the value in human-readable formats (JSON),
 /// nothing at all in binary ones (postcard writes and reads zero bytes for a unit).
 mod json_only {
-    use crate::data::import::ImportedLabels;
+    use crate::data::dataset::ImportedLabels;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
     pub fn serialize<S: Serializer>(v: &Option<ImportedLabels>, s: S) -> Result<S::Ok, S::Error> {

@@ -20,7 +20,7 @@
 //! hashes) and names the first field that disagrees.
 
 use super::certificate::{Certificate, Requirement};
-use super::refine::LocalSummary;
+use super::local_summary::LocalSummary;
 use super::seal::{Seal, SealError};
 use super::statistical::Statistical;
 use super::tier::{self, Guarantee, Tier};

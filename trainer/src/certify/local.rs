@@ -35,8 +35,8 @@
 //!   them) and, where solved, of the centre's sensitivity, widened about its centre by the
 //!   factor s; its half-width is at least c·G_k (the **floor**), where G_k is the spread
 //!   max − min of ∂_k κ over the corners and the labelled points one cell width outside
-//!   them (the cell's neighbourhood, [`Regional`]): corners that agree no longer mean "no
-//!   variation" when the neighbourhood varies;
+//!   them (the cell's neighbourhood, [`Regional`]), so that corners which agree do not give
+//!   a zero range where the neighbourhood varies;
 //! - |∂²_kk κ| on C, only where all corners are regular hard solutions with the same
 //!   strongly active set (κ is smooth where the active set is constant — assumed to hold on
 //!   the whole cell) and, where the centre was solved, the centre too has that active set

@@ -11,6 +11,7 @@
 //! - [`local`]: the cell bound ε_C from corner labels, enclosures and a remainder.
 //! - [`critical`]: where the MPC is a QP, the proof that κ is affine on a cell (exact MPC part).
 //! - [`refine`]: adaptive refinement of the cells until the target ε is met.
+//! - [`local_summary`]: what `certificate.json` records of a local certificate.
 //! - [`tier`]: sound / statistical / estimated, per term and for ε as a whole.
 //! - [`statistical`]: the Clopper–Pearson bound on P(‖κ − sat κ_NN‖ > ε) from i.i.d. states.
 //! - [`seal`]: the checksum `certificate.json` carries over its own bytes.
@@ -23,6 +24,7 @@ pub mod critical;
 pub mod file;
 pub mod lipschitz;
 pub mod local;
+pub mod local_summary;
 pub mod netbounds;
 pub mod refine;
 pub mod seal;

@@ -6,10 +6,10 @@
 //! file = magic … postcard(TrainedModel) ‖ [ "AMPCPROB" ‖ postcard(String: problem TOML) ] ‖ SHA-256
 //! ```
 //!
-//! Backward compatible both ways: postcard ignores bytes after a complete value, so a
-//! build without the trailer reads a new file as before, and a file written before the
-//! trailer (or of a network without a problem, e.g. an ONNX import) reads back with no
-//! stored problem. The checksum covers the trailer. The stored text is what
+//! The trailer is optional both ways: postcard ignores bytes after a complete value, so a
+//! reader that does not look for it reads the model alone, and a file without it (or of a
+//! network without a problem, e.g. an ONNX import) reads back with no stored problem. The
+//! checksum covers the trailer. The stored text is what
 //! `ProblemConfig::to_toml_string` wrote; `trainer eval`/`export`/`refine` take the
 //! problem from it when no `--config` is given.
 

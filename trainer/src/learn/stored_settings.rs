@@ -1,13 +1,14 @@
 //! How a model file stores its [`TrainSettings`]: the field order of model format 3, with
-//! the two switches packed into the one byte that held `saturation_aware`,
+//! three switches packed into one byte in the place of a postcard `bool`,
 //!
 //! ```text
 //! flags = saturation_aware · 1 + hold_setpoint · 2 + (precision = f32) · 4
 //! ```
 //!
-//! A net trained without the setpoint hold is encoded byte for byte as before the hold
-//! existed (a postcard `bool` is the byte 0 or 1), and a format-3 file written before reads
-//! back as trained without it — which it was. Used by [`TrainedModel`](super::train::TrainedModel)
+//! Contract: a byte 0 or 1 (a plain `bool`, the format-3 files that store only
+//! `saturation_aware`) decodes with `hold_setpoint = false` and f64 precision, and settings
+//! with those two values encode to that same byte, so such files keep their bytes and
+//! their hash. Used by [`TrainedModel`](super::train::TrainedModel)
 //! through `#[serde(with)]`; every other encoding of the settings (TOML, JSON) is the
 //! derived one.
 

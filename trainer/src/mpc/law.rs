@@ -468,7 +468,7 @@ impl MpcLaw {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mpc::ipopt_labels::PENDULUM_IPOPT;
+    use crate::mpc::tests::ipopt_labels::PENDULUM_IPOPT;
 
     #[test]
     fn pendulum_matches_ipopt_reference() {

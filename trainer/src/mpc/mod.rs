@@ -25,20 +25,6 @@ pub mod qp;
 pub mod sensitivity;
 pub mod sqp;
 
-// Tests only: the pendulum's IPOPT reference labels, and the law checked against independent
-// computations (finite differences, the condensed QP, first-order optimality, infeasibility),
-// and the setpoint cost (gradient, equilibrium).
+// Tests only: the law against independent computations, with shared fixtures (`tests/`).
 #[cfg(test)]
-mod constraint_checks;
-#[cfg(test)]
-mod cross_checks;
-#[cfg(test)]
-pub(crate) mod finite_checks;
-#[cfg(test)]
-mod ipopt_labels;
-#[cfg(test)]
-mod plant_checks;
-#[cfg(test)]
-mod public_plants;
-#[cfg(test)]
-mod setpoint_tests;
+pub(crate) mod tests;

@@ -9,16 +9,16 @@
 //! ```
 //! Why these numbers (generous against every shipped problem, safe on a laptop):
 //! - the OCP workspace grows as N·(n_x + n_u)² (stage Hessian blocks, the banded KKT); with
-//!   n_x + n_u ≤ 16 a horizon of 10⁴ needs ~25 MB per solver thread, 10⁸ needed 2 GB before
-//!   the first solve. Shipped problems use N ≤ 60.
+//!   n_x + n_u ≤ 16 a horizon of 10⁴ needs ~25 MB per solver thread, 10⁸ would need 2 GB
+//!   before the first solve. Shipped problems use N ≤ 60.
 //! - one evaluation of F costs 4·rk4_substeps right-hand sides, N of them per SQP iterate:
 //!   N·substeps ≤ 10⁶ keeps an iterate to about a second (shipped problems: ≤ 200).
 //! - a hidden layer of width 4 096 after another is 16.8 M weights (134 MB in f64, plus Adam's
 //!   two moments); 64 layers are far beyond what the Sobolev training or Theorem 1's
 //!   Lipschitz bounds are useful for (shipped nets: 2 layers of ≤ 48).
 //! - certification runs LipSDP-Neuron, dense Cholesky factorisations of order
-//!   n_x + Σ hidden units, thousands of times: Σ ≤ 2 048 keeps it to minutes; a
-//!   2-2000-2000-1 net (4 000 units) ran for many minutes without a word. Bigger nets are
+//!   n_x + Σ hidden units, thousands of times: Σ ≤ 2 048 keeps it to minutes, while a
+//!   2-2000-2000-1 net (4 000 units) takes many minutes without a word. Bigger nets are
 //!   refused at certify time instead of appearing to hang.
 
 use super::{invalid, ConfigError};

@@ -151,12 +151,13 @@ pub struct ProblemConfig {
     #[serde(default)]
     pub closed_loop: ClosedLoopSettings,
     /// Adaptive refinement with local certificates (`[refine]`, used by `trainer
-    /// refine`; not serialised when it is the default, so existing problems serialise as
-    /// before).
+    /// refine`; not serialised when it is the default, so a problem without it serialises
+    /// the same whether or not the section is written out).
     #[serde(default, skip_serializing_if = "RefineSettings::is_default")]
     pub refine: RefineSettings,
     /// Robust MPC design for a certified ε (`[robust]`, off by default; not serialised
-    /// when it is the default, so existing problems hash and serialise as before).
+    /// when it is the default, so a problem without it hashes and serialises the same
+    /// whether or not the section is written out).
     #[serde(default, skip_serializing_if = "RobustSettings::is_default")]
     pub robust: RobustSettings,
     /// Figures of the report.

@@ -58,7 +58,7 @@ fn a_problem_file_with_an_invalid_setting_is_named() {
 #[test]
 fn validation_names_the_key_at_fault() {
     assert_eq!(err_key(|c| c.ocp.horizon = 0), "ocp.horizon");
-    // `validation_n = 0` used to be accepted and hung the plots stage on R² = NaN.
+    // `validation_n = 0` must be refused: accepted, it hangs the plots stage on R² = NaN.
     for n in [0, 1] {
         assert_eq!(
             err_key(|c| c.training.validation_n = n),
@@ -270,7 +270,8 @@ fn setpoint_validation_names_key_and_state() {
 }
 
 /// `training.hold_setpoint`: on by default and not written when off (stored copies and
-/// the training hash are as before it existed); a stored copy without it reads as off.
+/// the training hash are those of a file that never mentions it); a stored copy without it
+/// reads as off.
 #[test]
 fn hold_setpoint_is_stored_only_when_on() {
     let on = ProblemConfig::default();

@@ -53,7 +53,8 @@ pub struct TrainSettings {
     /// (`learn::setpoint`; L_NN is unchanged, ε_D is that of the corrected net). Written
     /// into stored copies of the problem file only when on: a stored copy without it
     /// ([`ProblemConfig::from_stored_toml`](crate::problem::ProblemConfig::from_stored_toml))
-    /// means off, so that runs with it off store, train and hash exactly as before it existed.
+    /// means off, so that a run with it off stores, trains and hashes as one whose problem
+    /// file never mentions it.
     #[serde(skip_serializing_if = "is_false")]
     pub hold_setpoint: bool,
     /// Arithmetic of the training passes (default f32, `learn::mlp::Lanes`). Written into

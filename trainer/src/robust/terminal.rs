@@ -52,7 +52,7 @@
 //! expression linearised by the SQP like any other, [`TerminalRegion::constraint`]);
 //! recursive feasibility of the hard tightened OCP is then [`Feasibility::Proven`] when ρ,
 //! w̄ and ρ_f are all sound. Without it (the default: the region shrinks the feasible set —
-//! the full pendulum's upswing is no longer feasible within the horizon) the region is
+//! the full pendulum's upswing is not feasible within the horizon under it) the region is
 //! computed and reported but **not enforced**, and recursive feasibility is `unknown`. The
 //! OCP's soft fallback (`solver.soft_fallback`) is outside the argument: the theorem is about
 //! the hard problem, and the closed-loop study counts the steps that needed the fallback.

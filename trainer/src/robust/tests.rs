@@ -506,7 +506,7 @@ fn affine_constraint_margins_are_the_support_function_of_the_tube() {
         );
     }
     // (That the OCP's rows carry the margins is checked in `mpc`, which builds them:
-    // `mpc::constraint_checks::robust_margins_reach_the_ocp_rows`.)
+    // `mpc::tests::constraint_checks::robust_margins_reach_the_ocp_rows`.)
     // The terminal region satisfies every constraint with its stage-N margin under the
     // local feedback, on its boundary.
     let tr = d

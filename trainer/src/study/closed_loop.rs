@@ -466,7 +466,7 @@ mod tests {
     /// the run carried NaN to its end and `step_violation` read a NaN state as no violation.
     #[test]
     fn a_non_finite_state_ends_the_run_with_a_status() {
-        let cfg = crate::mpc::finite_checks::pendulum_with(
+        let cfg = crate::mpc::tests::finite_checks::pendulum_with(
             "u/(m*l^2) - g/l*sin(theta + pi) + 0*sqrt(theta - 1)",
             "m = 1.0, l = 1.0, g = 9.81",
         );

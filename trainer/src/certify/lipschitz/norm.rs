@@ -66,7 +66,7 @@ pub(super) fn jacobian_norm(j: &[f64], nu: usize, nx: usize) -> f64 {
 /// `max(+0, max_s Σ_e (lo[e·n + s] + h_e)²)` over the `n` patterns s of the column-major
 /// table `lo` (one column per entry e of `h`), each sum `(−0 + t₀²) + t₁² + …` in entry order
 /// as the vertex loop forms it; the maximum in eight independent lanes (the sums are
-/// ≥ +0, so `f64::max` gives the same maximum in any order, NaNs ignored as before).
+/// ≥ +0, so `f64::max` gives the same maximum in any order; `f64::max` ignores NaNs).
 pub(super) fn max_sq_sum(lo: &[f64], n: usize, h: &[f64]) -> f64 {
     const W: usize = 8;
     let mut best = [0.0f64; W];

@@ -31,12 +31,13 @@ mod outputs;
 mod region;
 mod rounds;
 
+pub use crate::certify::local_summary::{Excluded, LocalSummary};
 pub use cellcheck::{CellCheck, OffendingCell};
 pub use check::{check, Check, Offender};
 pub use feedback::reopen;
 pub use outputs::{
     cell_views, certificate, check_summary, dataset, pretty, sensitivity_spread, write_outputs,
-    CellView, Excluded, LocalCertificate, LocalSummary,
+    CellView, LocalCertificate,
 };
 pub use rounds::{refine, RefineOptions, Refined};
 

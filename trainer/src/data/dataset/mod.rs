@@ -11,7 +11,7 @@
 //! (magic, version, header, records sorted by index) followed by its SHA-256. A dataset
 //! imported from another solver (`trainer import`) is version [`IMPORTED_FORMAT_VERSION`]:
 //! the same bytes followed by the postcard encoding of its
-//! [`ImportedLabels`](crate::data::import::ImportedLabels), then the SHA-256 of it all; ampc's
+//! [`ImportedLabels`], then the SHA-256 of it all; ampc's
 //! own datasets stay version 2, byte for byte, and both versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
@@ -24,9 +24,10 @@
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
 pub mod gate;
+pub mod labels;
 pub use gate::LabelsError;
+pub use labels::ImportedLabels;
 
-use crate::data::import::ImportedLabels;
 use crate::io::{decode_checked, write_atomic};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::mpc::sensitivity::Degeneracy;

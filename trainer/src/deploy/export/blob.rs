@@ -1,16 +1,14 @@
 //! The postcard blob for `controller-core` ([`render_postcard`]):
 //! `postcard(body) ‖ crc32(body).to_le_bytes()`, the body as `controller_core::blob` reads
 //! it (magic, version, dimensions, f32 domain, the clamp band per device tanh, fallback,
-//! folded f32 layers, model hash).
+//! folded f32 layers, model hash). The magic, the format version and the CRC are the
+//! decoder's own (`controller_core::blob::{MAGIC, FORMAT_VERSION, crc32}`).
 
+use controller_core::blob::{crc32, FORMAT_VERSION, MAGIC};
 use serde::Serialize;
 
 use super::{ExportModel, ExportReport};
 
-/// Magic of the postcard blob.
-pub const BLOB_MAGIC: [u8; 4] = *b"AMPC";
-/// Blob format version (`controller_core::FORMAT_VERSION`).
-pub const BLOB_VERSION: u16 = 1;
 /// The blob's body (see `controller_core::blob`), serialised with postcard.
 #[derive(Serialize)]
 struct BlobBody<'a> {
@@ -37,19 +35,6 @@ struct BlobLayer {
     b: Vec<f32>,
 }
 
-/// CRC-32 (IEEE), as `controller_core::blob::crc32`.
-pub fn crc32(data: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &byte in data {
-        crc ^= u32::from(byte);
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
-        }
-    }
-    !crc
-}
-
 /// The postcard blob: `postcard(body) ++ crc32(body).to_le_bytes()`.
 pub fn render_postcard(model: &ExportModel, report: &ExportReport) -> Vec<u8> {
     let folded = model.folded();
@@ -59,8 +44,8 @@ pub fn render_postcard(model: &ExportModel, report: &ExportReport) -> Vec<u8> {
     // The fallback is the same for both bands (it lies in U_d ⊆ both bands).
     let fallback = model.fallback_f32(&lo_l, &hi_l);
     let body = BlobBody {
-        magic: BLOB_MAGIC,
-        version: BLOB_VERSION,
+        magic: MAGIC,
+        version: FORMAT_VERSION,
         nx: model.nx() as u32,
         nu: model.nu() as u32,
         x_lo,

@@ -1,4 +1,6 @@
-//! The tier of the exported certificate ([`Guarantee`]): sound, statistical or estimated.
+//! The tier of the exported certificate: `controller_core::Guarantee` (sound, statistical or
+//! estimated; the device crate's type, so the generated files and the exporter name the same
+//! enum), the export's rules on it, and its serde form ([`GuaranteeDef`]).
 //!
 //! tier = the certificate's `"guarantee"`, as decided in `certify/` from the tiers of its
 //! terms (`certify::file::CertificateFile`, which refuses a file without the key, without
@@ -20,17 +22,47 @@ use serde::{Deserialize, Serialize};
 use super::{ExportError, ExportModel};
 use crate::certify::tier::Tier;
 
-/// How strong the claim |κ − u_f32| ≤ ε on X is; ordered strongest first.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Guarantee {
+pub use controller_core::Guarantee;
+
+/// The serde form of [`Guarantee`] (`#[serde(with = "GuaranteeDef")]`): a unit variant named
+/// `sound`, `statistical` or `estimated`, variant indices in that order (serde's remote
+/// derive over the device crate's enum, which has no serde derive of its own).
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Guarantee", rename_all = "snake_case")]
+pub enum GuaranteeDef {
     /// Every ingredient is a proven bound.
     Sound,
     /// An ingredient holds with a stated probability.
     Statistical,
-    /// An ingredient is a sampled estimate (the weakest tier, and the default).
-    #[default]
+    /// An ingredient is a sampled estimate.
     Estimated,
+}
+
+/// The tier a model has until a certificate says otherwise: the weakest, `estimated`.
+pub fn default_guarantee() -> Guarantee {
+    Guarantee::Estimated
+}
+
+/// The tier the exported function supports at most: `estimated` for a placeholder network,
+/// `statistical` for a statistical ε (it rests on no Lipschitz constant), `sound` otherwise
+/// (the certificate's own tier then decides).
+pub fn supported_guarantee(placeholder: bool, statistical: bool) -> Guarantee {
+    if placeholder {
+        Guarantee::Estimated
+    } else if statistical {
+        Guarantee::Statistical
+    } else {
+        Guarantee::Sound
+    }
+}
+
+/// The variant's Rust path segment in a generated `weights.rs` (`Guarantee::<this>`).
+pub fn rust_name(g: Guarantee) -> &'static str {
+    match g {
+        Guarantee::Sound => "Sound",
+        Guarantee::Statistical => "Statistical",
+        Guarantee::Estimated => "Estimated",
+    }
 }
 
 /// What a statistical ε rests on (module doc): P(‖κ − sat κ_NN‖ > ε) ≤ `p_exceed_upper`
@@ -76,51 +108,6 @@ impl StatisticalClaim {
     }
 }
 
-impl Guarantee {
-    /// Every tier, strongest first (the C header's enum values are the indices).
-    pub const ALL: [Guarantee; 3] = [
-        Guarantee::Sound,
-        Guarantee::Statistical,
-        Guarantee::Estimated,
-    ];
-
-    /// The key's value in JSON: `sound`, `statistical`, `estimated`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Guarantee::Sound => "sound",
-            Guarantee::Statistical => "statistical",
-            Guarantee::Estimated => "estimated",
-        }
-    }
-
-    /// The variant of `controller_core::Guarantee`.
-    pub fn rust_name(self) -> &'static str {
-        match self {
-            Guarantee::Sound => "Sound",
-            Guarantee::Statistical => "Statistical",
-            Guarantee::Estimated => "Estimated",
-        }
-    }
-
-    /// The tier the exported function supports at most: `estimated` for a placeholder
-    /// network, `statistical` for a statistical ε (it rests on no Lipschitz constant),
-    /// `sound` otherwise (the certificate's own tier then decides).
-    pub fn supported(placeholder: bool, statistical: bool) -> Self {
-        if placeholder {
-            Guarantee::Estimated
-        } else if statistical {
-            Guarantee::Statistical
-        } else {
-            Guarantee::Sound
-        }
-    }
-
-    /// The weaker of the two tiers.
-    pub fn weakest(self, other: Guarantee) -> Self {
-        self.max(other)
-    }
-}
-
 impl From<Tier> for Guarantee {
     /// The certificate's tier as the export names it (the same three, the same order).
     fn from(t: Tier) -> Self {
@@ -159,13 +146,13 @@ mod tests {
         assert_eq!(Guarantee::from(Tier::Sound), Guarantee::Sound);
         assert_eq!(Guarantee::from(Tier::Statistical), Guarantee::Statistical);
         assert_eq!(Guarantee::from(Tier::Estimated), Guarantee::Estimated);
-        assert_eq!(Guarantee::supported(false, false), Guarantee::Sound);
-        assert_eq!(Guarantee::supported(false, true), Guarantee::Statistical);
-        assert_eq!(Guarantee::supported(true, false), Guarantee::Estimated);
+        assert_eq!(supported_guarantee(false, false), Guarantee::Sound);
+        assert_eq!(supported_guarantee(false, true), Guarantee::Statistical);
+        assert_eq!(supported_guarantee(true, false), Guarantee::Estimated);
         assert_eq!(
             Guarantee::Sound.weakest(Guarantee::Estimated),
             Guarantee::Estimated
         );
-        assert_eq!(Guarantee::default(), Guarantee::Estimated);
+        assert_eq!(default_guarantee(), Guarantee::Estimated);
     }
 }

@@ -28,7 +28,7 @@
 //! - `tested`: that controller as the function the statistical tiers test ([`Deployed`]);
 //! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
-//! - `blob`: the postcard blob ([`render_postcard`], [`crc32`]).
+//! - `blob`: the postcard blob ([`render_postcard`]).
 
 mod allowance;
 mod blob;
@@ -49,11 +49,13 @@ use serde::Serialize;
 use crate::io::FileError;
 pub use allowance::{certify_f32, eval_f32, f32_allowance, sampled_max_diff, SAMPLES};
 use allowance::{f32_down, f32_up};
-pub use blob::{crc32, render_postcard, BLOB_MAGIC, BLOB_VERSION};
+pub use blob::render_postcard;
 pub use c_header::render_c_header;
-pub use guarantee::{Guarantee, StatisticalClaim};
+pub use guarantee::{
+    default_guarantee, rust_name, supported_guarantee, Guarantee, GuaranteeDef, StatisticalClaim,
+};
 pub use rust::render_rust;
-pub use tanh::{Tanh, TANH_FAST_ERR_BINS};
+pub use tanh::Tanh;
 pub use tested::{certify_deployed, deployed_allowance, Deployed};
 
 /// One affine layer in f64: `w` is out × in.
@@ -133,7 +135,7 @@ pub struct ExportModel {
     /// True for a stand-in network without a certificate.
     pub placeholder: bool,
     /// Tier of the certificate's claim (default: the weakest, `estimated`).
-    #[serde(default)]
+    #[serde(default = "default_guarantee", with = "GuaranteeDef")]
     pub guarantee: Guarantee,
     /// Set when `eps` is a statistical level ([`ExportModel::with_statistical_eps`]): what
     /// it rests on. `None` for a certificate's ε.
@@ -317,7 +319,7 @@ impl ExportModel {
                 return inv(format!("excluded[{k}]: an empty or non-finite box"));
             }
         }
-        let supported = Guarantee::supported(self.placeholder, self.statistical.is_some());
+        let supported = supported_guarantee(self.placeholder, self.statistical.is_some());
         if self.guarantee < supported {
             return inv(format!(
                 "guarantee: {} claims more than the exported function supports ({}: ε is a \
@@ -656,7 +658,8 @@ impl ExportModel {
     }
 
     /// This model with its tier lowered to `declared` (the certificate's `"guarantee"`,
-    /// see [`Guarantee::declared_in`]) when that is weaker: a claim is never raised.
+    /// as `certify::file::CertificateFile` reads it) when that is weaker: a claim is never
+    /// raised.
     pub fn with_declared_guarantee(mut self, declared: Option<Guarantee>) -> Self {
         if let Some(d) = declared {
             self.guarantee = self.guarantee.weakest(d);

@@ -83,7 +83,7 @@ fn certificate_literal(
         ("eps".into(), lit64(eps_total)),
         (
             "guarantee".into(),
-            format!("Guarantee::{}", model.guarantee.rust_name()),
+            format!("Guarantee::{}", super::rust_name(model.guarantee)),
         ),
         ("eps_nn".into(), lit64(model.eps)),
         ("eps_d".into(), lit64(model.eps_d)),

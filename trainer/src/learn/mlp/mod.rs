@@ -26,7 +26,8 @@
 //! - `kernels`: the register-blocked dot products the batched passes share;
 //! - `lanes`: the f32 engine of training ([`Lanes`]): the same loss and gradient over groups
 //!   of 8 samples in f32 vector lanes;
-//! - `tanh32`: the deployed controller's f32 tanh, branch-free;
+//! - `tanh32`: the deployed controller's f32 tanh on lanes, branch-free, from
+//!   `controller_core::activation`'s coefficients;
 //! - `tests`: gradients and Jacobians against central differences, the batched kernels
 //!   against the per-sample reference bit for bit.
 

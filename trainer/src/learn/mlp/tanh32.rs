@@ -1,76 +1,26 @@
-//! The f32 tanh of `controller-core` (`controller_core::activation::tanh_accurate`), the one
-//! the deployed controller runs, mirrored operation by operation:
+//! The f32 tanh of `controller-core` (`controller_core::activation::tanh_accurate`, the one
+//! the deployed controller runs) on `N` lanes at once, from the core's own coefficients
+//! (`controller_core::activation::{ACC_P, ACC_Q, …}`):
 //! ```text
 //! |x| < 0.875:  t = x + x·(z·P(z)),  z = x²                         (odd polynomial)
 //! otherwise:    t = sign(x)·(1 − 2/(e + 1)),  e = e^{2a},  a = min(|x|, 10)
 //!               e = 2^k·(1 + r + r²Q(r)),  k = ⌊2a·log₂e + ½⌋,  r = 2a − k·ln 2 (Cody–Waite)
 //! ```
 //! (max |t − tanh| = 7.07·10⁻⁸ over every f32, verified exhaustively in controller-core).
-//! Written without branches — both formulas are evaluated and one is selected, which gives
-//! the same bits as the device's branching code — so that a loop over lanes vectorises:
-//! the training engine (`lanes`) and the exporter's model of the device both use it.
+//! Written without branches — both formulas are evaluated and one is selected, and ⌊·⌋ is
+//! taken without a float-to-integer conversion — which gives the bits of the device's
+//! branching code lane by lane and lets the loops vectorise: the training engine (`lanes`)
+//! uses it. The contract: `tanh_lanes(x)[i]` has the bits of
+//! `controller_core::activation::tanh_accurate(x[i])` for every f32 (tested below).
 
-/// `controller_core::activation`'s constants of `tanh_accurate` (same names).
-const ACC_CUT: f32 = 0.875;
-const ACC_P: [f32; 6] = [
-    -0.333_331_76,
-    0.133_299_98,
-    -0.053_710_45,
-    0.020_895_608,
-    -0.006_869_007_4,
-    0.001_314_905,
-];
-const ACC_Q: [f32; 5] = [
-    0.499_999_94,
-    0.166_665_21,
-    0.041_668_39,
-    0.008_368_71,
-    0.001_381_461_3,
-];
-const ACC_CLIP: f32 = 10.0;
-const LOG2E: f32 = core::f32::consts::LOG2_E;
-const LN2_HI: f32 = 0.693_145_75;
-const LN2_LO: f32 = 1.428_606_8e-6;
+use controller_core::activation::{ACC_CLIP, ACC_CUT, ACC_P, ACC_Q, LN2_HI, LN2_LO, LOG2E};
+
 /// 2²³: `v + MAGIC − MAGIC` rounds `v ∈ [0, 2²²)` to the nearest integer.
 const MAGIC: f32 = 8_388_608.0;
 
-/// `controller_core::activation::tanh_accurate`: the same f32 operations, the same bits.
-#[inline(always)]
-pub fn tanh_accurate(x: f32) -> f32 {
-    let a = f32::from_bits(x.to_bits() & 0x7fff_ffff);
-    // The polynomial branch.
-    let z = x * x;
-    let [p0, p1, p2, p3, p4, p5] = ACC_P;
-    let p = p0 + z * (p1 + z * (p2 + z * (p3 + z * (p4 + z * p5))));
-    let small = x + x * (z * p);
-    // The exponential branch (NaN fails `a < ACC_CLIP` and becomes ACC_CLIP).
-    let c = if a < ACC_CLIP { a } else { ACC_CLIP };
-    let y = c + c;
-    // y ∈ [0, 20]: v ∈ [0.5, 29.4]; the device truncates v to k (`as i32`), i.e. takes
-    // ⌊v⌋. Here without a float-to-integer conversion (which does not vectorise): rounding
-    // by the magic number 2²³ (exact for v < 2²²), one down where it rounded up, and k read
-    // off the bits of k + 2²³ (0x4b00_0000 + k).
-    let v = y * LOG2E + 0.5;
-    let nearest = (v + MAGIC) - MAGIC;
-    let kf = if nearest > v { nearest - 1.0 } else { nearest };
-    let k = (kf + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
-    let r = (y - kf * LN2_HI) - kf * LN2_LO;
-    let [q0, q1, q2, q3, q4] = ACC_Q;
-    let q = q0 + r * (q1 + r * (q2 + r * (q3 + r * q4)));
-    let e1 = 1.0 + (r + r * (r * q));
-    let e = f32::from_bits(e1.to_bits().wrapping_add(k << 23));
-    let t = 1.0 - 2.0 / (e + 1.0);
-    let big = f32::from_bits(t.to_bits() | (x.to_bits() & 0x8000_0000));
-    if a < ACC_CUT {
-        small
-    } else {
-        big
-    }
-}
-
-/// [`tanh_accurate`] on `N` lanes, written as one loop per operation (each a vector
-/// instruction or two) so that the compiler vectorises it: the same operations, the same
-/// bits as `tanh_accurate` lane by lane.
+/// `controller_core::activation::tanh_accurate` on `N` lanes, written as one loop per
+/// operation (each a vector instruction or two) so that the compiler vectorises it: the
+/// same operations, the same bits lane by lane.
 #[inline(always)]
 pub fn tanh_lanes<const N: usize>(x: &[f32; N]) -> [f32; N] {
     // One plain loop per operation (not `array::from_fn`, which the compiler may leave as
@@ -127,9 +77,10 @@ pub fn tanh_lanes<const N: usize>(x: &[f32; N]) -> [f32; N] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use controller_core::activation::tanh_accurate;
 
-    /// The lane form gives the bits of the scalar form (which `tests/export_roundtrip.rs`
-    /// compares with controller-core's), on every 4099th bit pattern, ±inf and NaN.
+    /// The lane form gives the bits of controller-core's scalar tanh, on every 4099th bit
+    /// pattern, ±inf, NaN, ±0 and a grid of [−12.5, 12.5].
     #[test]
     fn lanes_equal_the_scalar_tanh_bit_for_bit() {
         let xs: Vec<f32> = (0..=u32::MAX)

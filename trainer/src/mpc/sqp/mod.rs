@@ -13,18 +13,16 @@
 //!    would discard curvature the constraints make harmless (the cart-pole's blocks are
 //!    indefinite at most iterates).
 //!    The QP is solved only as accurately as the iterate deserves: to `(0.01·r)²` (r the
-//!    KKT residual of the iterate), between the interior point's own `1e-10` and `1e-4`
-//!    (an inexact Newton method's forcing sequence; squared because the QP's
-//!    complementarity enters r as √gap on weakly active rows — with `0.01·r` the SQP
-//!    stalled at r ≈ 1e-3 on such rows). Near a solution (r < 1e-3) the QPs are exact as
-//!    before. Exact always: an OCP that is itself a QP (affine plant, linear rows), whose
-//!    first QP is its solution, and the soft problem (inexact, one stress state left its
-//!    plain solve for the retry ladder, 20× slower). Inexact only at the first iteration or
-//!    after a full step; an inexact step whose full step the line search rejects is
-//!    discarded and the QP solved exactly, with the penalty as before (an inexact step from
-//!    a nearly feasible point can raise the penalty ~1e7-fold). Measured (BENCHMARKS,
-//!    2026-12-05): planar_quadrotor_nl 0.82 → 0.61 ms per solve + sensitivity, together
-//!    with the polish rule of step 4.
+//!    KKT residual of the iterate), clamped to `[1e-10, 1e-4]` (an inexact Newton method's
+//!    forcing sequence; squared because the QP's complementarity enters r as √gap on weakly
+//!    active rows, where a tolerance linear in r stalls the SQP at r ≈ 1e-3). The QPs are
+//!    exact (`1e-10`) near a solution (r < 1e-3), for an OCP that is itself a QP (affine
+//!    plant, linear rows: its first QP is its solution), and for the soft problem (inexact
+//!    steps there send stress states to the retry ladder, 20× slower). Inexact only at the
+//!    first iteration or after a full step; an inexact step whose full step the line search
+//!    rejects is discarded and the QP solved exactly, the penalty unchanged (an inexact step
+//!    from a nearly feasible point can ask for a penalty ~1e7 times larger). BENCHMARKS.md
+//!    gives the solve times (planar_quadrotor_nl, with the polish rule of step 4).
 //! 3. Backtracking Armijo line search on `φ(z) = f(z) + μ(‖c(z)‖₁ + Σ_r max(0, g_r(z)))`
 //!    (inequality rows enter by their violation), with the penalty raised only as far as the
 //!    step needs to be a descent direction (Nocedal & Wright, eq. 18.36, with the total
@@ -48,10 +46,9 @@
 //!    of the interior-point QP's tolerance. The polish is accepted only if the full KKT
 //!    residual (including ν ≥ 0 and the inactive rows' feasibility) falls below `tol`.
 //!    A wrong guess costs two or three Newton iterations (its residual stops falling) and
-//!    the SQP goes on; waiting for the QP's active set to repeat before guessing (the rule
-//!    until 2026-12-04) cost a whole QP in most solves, and on the soft problem the wait
-//!    could leave the full step's neighbourhood for good (cartpole_public_nl, BENCHMARKS
-//!    "state 86"). Measured with the inexact QPs of step 2 (BENCHMARKS, 2026-12-05).
+//!    the SQP goes on. Guessing at once, rather than waiting for the QP's active set to
+//!    repeat, saves a whole QP in most solves; on the soft problem the wait can leave the
+//!    full step's neighbourhood for good (cartpole_public_nl, BENCHMARKS "state 86").
 //!
 //! Convergence is declared on the scaled KKT residual ([`KktResidual::max`]) ≤ `tol`.
 //! Status is data ([`SqpStatus`]); nothing here panics on a bad state.

@@ -5,7 +5,8 @@
 //! ([`super::plant`]), so later calls allocate nothing.
 
 use super::expr::ConstraintSet;
-use super::plant::{by_nz, Scratch};
+use super::nz::by_nz;
+use super::plant::Scratch;
 use super::MAX_NZ;
 use num_dual::{Dual2SVec64, DualNum, DualSVec64};
 

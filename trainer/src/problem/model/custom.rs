@@ -41,7 +41,7 @@
 //! another. (The prototypes reach serde's `TryFrom` through a thread-local set for the
 //! duration of that one call.)
 
-use super::plant::by_nz;
+use super::nz::by_nz;
 use super::{ad_hessian, ad_linearize, rk4, Dynamics, MAX_NZ};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};

@@ -32,6 +32,7 @@ mod constraint_eval;
 pub mod custom;
 mod double_integrator;
 pub mod expr;
+mod nz;
 mod pendulum;
 mod plant;
 mod staged;

@@ -101,20 +101,7 @@ macro_rules! scratch_duals {
 }
 scratch_duals!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16);
 
-/// Calls `$self.$method::<NZ>(args)` with the constant `NZ` equal to `$nz`.
-macro_rules! by_nz {
-    ($nz:expr, $self:ident . $method:ident $args:tt) => {
-        by_nz!(@ $nz, $self.$method $args, 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
-    };
-    (@ $nz:expr, $self:ident . $method:ident $args:tt, $($n:literal)*) => {
-        match $nz {
-            $($n => $self.$method::<$n> $args,)*
-            n => panic!("plant with nx + nu = {n} > {MAX_NZ} (rejected by validate)"),
-        }
-    };
-}
-/// The same dispatch for the plants implemented in Rust by the library's users (`custom`).
-pub(super) use by_nz;
+use super::nz::by_nz;
 
 impl<const DISCRETE: bool> ExprPlant<DISCRETE> {
     /// The table as written.

@@ -11,8 +11,10 @@
 //!
 //! This file owns the document ([`Report`], [`Block`]), its inputs (the run's artifacts,
 //! [`Timing`]) and [`build`], the list of sections; `sections.rs` builds each section's
-//! blocks, `render.rs` turns the document into Markdown and HTML.
+//! blocks, `verdict.rs` the opening verdict, `format.rs` formats numbers and boxes,
+//! `render.rs` turns the document into Markdown and HTML.
 
+mod format;
 mod render;
 mod sections;
 

@@ -1,7 +1,8 @@
 //! The sections of the report, in report order: each function returns one section's
-//! blocks (heading, paragraphs, tables) from the run's artifacts; plus the number and
-//! table-cell formatting they share.
+//! blocks (heading, paragraphs, tables) from the run's artifacts (numbers and boxes
+//! formatted by `format`).
 
+use super::format::{boxed, num};
 use super::{
     load, med_min_max, Artifacts, Block, ReportError, Timing, PAPER_TABLE_I, PAPER_TABLE_II,
 };
@@ -525,28 +526,4 @@ fn row(cells: impl IntoIterator<Item = String>) -> Vec<String> {
 /// Owned strings.
 pub(super) fn strs(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
-}
-
-/// A number with at most 6 significant digits.
-pub(super) fn num(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    let digits = (5 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
-    let s = format!("{v:.digits$}");
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
-    }
-}
-
-/// A box `[lo₁, hi₁] × [lo₂, hi₂] × …`.
-pub(super) fn boxed(lo: &[f64], hi: &[f64]) -> String {
-    let parts: Vec<String> = lo
-        .iter()
-        .zip(hi)
-        .map(|(l, h)| format!("[{}, {}]", num(*l), num(*h)))
-        .collect();
-    parts.join(" × ")
 }

@@ -1,7 +1,8 @@
 //! The report: inline markup and escaping, Markdown and HTML of the same table, number
 //! and box formatting, medians.
 
-use super::sections::{boxed, num, strs};
+use super::format::{boxed, num};
+use super::sections::strs;
 use super::*;
 
 #[test]

@@ -6,7 +6,7 @@
 //! since both κ and the clamped network lie in U, ‖κ − u‖ ≤ d_U holds without any
 //! certificate, so ε ≥ d_U says nothing (vacuous); ε ≥ d_U / 5 is called weak.
 
-use super::sections::{boxed, num};
+use super::format::{boxed, num};
 use super::{Artifacts, Block};
 use crate::problem::ProblemConfig;
 

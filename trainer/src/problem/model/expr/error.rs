@@ -47,10 +47,7 @@ pub enum ErrorKind {
         known: String,
     },
     /// A call of something that is not one of the functions.
-    #[error(
-        "unknown function `{name}` (functions: {})",
-        super::parse::Func::list()
-    )]
+    #[error("unknown function `{name}` (functions: {})", super::func::Func::list())]
     UnknownFunction {
         /// The name called.
         name: String,

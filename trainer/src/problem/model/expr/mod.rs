@@ -12,6 +12,7 @@
 //! | step | file | object |
 //! |---|---|---|
 //! | TOML table | `spec.rs` | [`SystemSpec`] |
+//! | the functions of the language | `func.rs` | [`Func`] |
 //! | text → syntax tree (grammar in EBNF) | `parse.rs` | `Ast` |
 //! | names, checks, parameters and definitions substituted | `compile.rs` | [`compile`] |
 //! | hash-consed graph: CSE, constant folding | `dag.rs` | `Dag` |
@@ -29,6 +30,7 @@ mod compile;
 mod constraint;
 mod dag;
 mod error;
+mod func;
 mod model;
 mod parse;
 mod partials;

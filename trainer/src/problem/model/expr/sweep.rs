@@ -32,7 +32,7 @@
 //! of `(x, u)`; a call at the same point reuses it instead of sweeping again (a deterministic
 //! sweep of the same program at the same bits: the results are the bits a new sweep gives).
 
-use super::super::plant::by_nz;
+use super::super::nz::by_nz;
 use super::super::MAX_NZ;
 use super::partials::local;
 use super::tape::{args, operands, rename, Op, Tape};

@@ -154,7 +154,7 @@ fn deep_nesting_is_an_error_not_a_stack_overflow() {
         .to_string()
         .contains("nested too deeply"));
     // The length of a flat sum is no nesting: 999 and 100 000 terms are one level deep
-    // (until 2026-12-05 every term was a level and more than 1 000 were refused).
+    // (a parser that counted each term as a level would refuse more than 1 000).
     let sum = vec!["x"; 999].join(" + ");
     assert_eq!(value_at(&sum, 1.0, 0.0), 999.0);
     let long = vec!["x"; 100_000].join("+");

@@ -8,29 +8,14 @@
 //! solves at random states of X with KKT sensitivities equal to central differences of the
 //! converged solver.
 
+use super::{load, point};
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
-use crate::rng::uniform;
-
-fn load(name: &str) -> ProblemConfig {
-    let path =
-        std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/")).join(name);
-    ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"))
-}
 
 fn model(cfg: &ProblemConfig) -> Discrete {
     Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps)
-}
-
-/// A point of the box [lo, hi] (seeded).
-fn point(seed: u64, i: u64, lo: &[f64], hi: &[f64]) -> Vec<f64> {
-    lo.iter()
-        .zip(hi)
-        .enumerate()
-        .map(|(j, (l, h))| l + (h - l) * uniform(seed, i, j as u64))
-        .collect()
 }
 
 /// Gymnasium's `CartPoleEnv.step` (classic_control/cartpole.py) with the force given

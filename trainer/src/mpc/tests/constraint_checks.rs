@@ -5,6 +5,7 @@
 //! solver where curved constraints are active, both QP backends agreeing, and the soft
 //! fallback on the new rows.
 
+use super::random_state;
 use crate::mpc::law::{MpcLaw, SLACK_TOL};
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::{ProblemConfig, QpSolverKind};
@@ -76,15 +77,6 @@ lo = [-2.0, -1.5]
 hi = [2.0, 1.5]
 "#;
     ProblemConfig::from_toml_str(text, "test").unwrap()
-}
-
-fn random_state(cfg: &ProblemConfig, seed: u64, i: u64) -> Vec<f64> {
-    (0..cfg.system.nx())
-        .map(|j| {
-            let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-            lo + (hi - lo) * uniform(seed, i, j as u64)
-        })
-        .collect()
 }
 
 /// Labels of two problems that describe the same feasible set agree; returns how many
@@ -369,9 +361,9 @@ fn infeasible_constraint_gets_a_soft_label() {
 /// A hard-infeasible state of the unseen ball-and-beam (`tests/reference/ball_beam_unseen.toml`:
 /// nonlinear and mixed path constraints, 2 RK4 sub-steps; IPOPT reports
 /// `Infeasible_Problem_Detected` here): the soft problem's multipliers reach the slack weight
-/// (~1e4), and with the blockwise Hessian rule (which drops their curvature λᵀ∇²F) the soft
-/// SQP crawled to its iteration limit, then the whole retry ladder failed (2 s, no label).
-/// Now the plain solve labels it: soft, a positive slack, the KKT residual within `tol`, in
+/// (~1e4); with the blockwise Hessian rule (which drops their curvature λᵀ∇²F) the soft
+/// SQP crawls to its iteration limit and the whole retry ladder fails (2 s, no label).
+/// The plain solve must label it: soft, a positive slack, the KKT residual within `tol`, in
 /// a few dozen iterations.
 #[test]
 fn infeasible_ball_beam_state_gets_a_soft_label_without_the_ladder() {

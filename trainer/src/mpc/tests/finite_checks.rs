@@ -1,9 +1,9 @@
-//! The label gate on plants whose arithmetic is not finite (tests only, issue 38 §1): the
-//! paper's pendulum written as an ODE with a term that gives NaN or ±∞ on part or all of X
-//! (`log` of a negative number, `u/0`, a parameter 0 in a denominator, `sqrt` and a
-//! fractional power of a negative number, `0·sqrt(ω)`). Before the gate, each of these gave
-//! `converged` labels with 0 iterations: the KKT residual was folded with `f64::max`, which
-//! drops a NaN, so a NaN residual read as 0.
+//! The label gate on plants whose arithmetic is not finite (tests only): the paper's
+//! pendulum written as an ODE with a term that gives NaN or ±∞ on part or all of X (`log` of
+//! a negative number, `u/0`, a parameter 0 in a denominator, `sqrt` and a fractional power of
+//! a negative number, `0·sqrt(ω)`). Each must give no label (`numerical_failure`) where the
+//! arithmetic is not finite — never a `converged` label with 0 iterations, which is what a
+//! residual folded with `f64::max` (which drops a NaN, so a NaN residual reads as 0) gives.
 
 use crate::mpc::finite::{Failure, Quantity};
 use crate::mpc::law::MpcLaw;

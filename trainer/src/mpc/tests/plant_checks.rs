@@ -3,17 +3,12 @@
 //! built-in plants, and a 12-state, 4-input nonlinear mass chain solves to convergence with
 //! KKT sensitivities equal to central finite differences of the converged solver.
 
+use super::load;
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::model::test_plants::chain_toml;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
-
-fn load(name: &str) -> ProblemConfig {
-    let path =
-        std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/")).join(name);
-    ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"))
-}
 
 /// Every 12th point of the problem's `sampling.counts` grid (30 of the pendulum's 350).
 fn grid_states(cfg: &ProblemConfig, every: usize) -> Vec<Vec<f64>> {

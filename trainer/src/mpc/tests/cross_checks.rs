@@ -4,26 +4,11 @@
 //! first-order optimality recomputed from scratch (finite-difference gradients,
 //! least-squares multipliers), and infeasibility proofs at the pendulum's corners.
 
+use super::{load, random_state};
 use crate::mpc::law::{MpcLaw, SLACK_TOL};
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::ProblemConfig;
-use crate::rng::uniform;
 use nalgebra::{DMatrix, DVector};
-
-fn load(name: &str) -> ProblemConfig {
-    let path =
-        std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/")).join(name);
-    ProblemConfig::load(&path).unwrap()
-}
-
-fn random_state(cfg: &ProblemConfig, seed: u64, i: u64) -> Vec<f64> {
-    (0..cfg.system.nx())
-        .map(|j| {
-            let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-            lo + (hi - lo) * uniform(seed, i, j as u64)
-        })
-        .collect()
-}
 
 /// Central differences of u0 of the converged solver agree with the KKT sensitivity to
 /// 1e-5 (relative) wherever the active set does not change within ±h.
