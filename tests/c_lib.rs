@@ -464,3 +464,130 @@ fn a_program_does_not_link_with_another_controllers_library() {
         "linked a library built with the other tanh"
     );
 }
+
+/// A 3 → 6 (tanh) → 2 net with deterministic weights and a box the certificate excludes
+/// (through the library, `render_c_lib`): the EXCLUDED flag and two inputs, against the
+/// exporter's f32 model of the device (`trainer eval`'s, bit-identical to controller-core:
+/// tests/own_weights.rs).
+#[test]
+fn excluded_boxes_and_two_inputs_match_the_device_model() {
+    use trainer::deploy::export::{self, device::Device, DenseF64, ExportModel, Scaling, Tanh};
+    let mut s: u64 = 0x5151_7e57_c0de_0042;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut layer = |n_in: usize, n_out: usize| DenseF64 {
+        w: (0..n_out)
+            .map(|_| (0..n_in).map(|_| 1.2 * next()).collect())
+            .collect(),
+        b: (0..n_out).map(|_| 0.2 * next()).collect(),
+    };
+    let mut model = ExportModel {
+        name: "three_two".into(),
+        layers: vec![layer(3, 6), layer(6, 2)],
+        input: Scaling {
+            mean: vec![0.5, 0.0, 1.5],
+            scale: vec![1.5, 0.5, 1.5],
+        },
+        output: Scaling {
+            mean: vec![0.0, 2.5],
+            scale: vec![2.0, 2.5],
+        },
+        domain_lo: vec![-1.0, -0.5, 0.0],
+        domain_hi: vec![2.0, 0.5, 3.0],
+        u_lo: vec![-2.0, 0.0],
+        u_hi: vec![2.0, 5.0],
+        actuator_lo: vec![-2.5, 0.0],
+        actuator_hi: vec![2.5, 6.0],
+        excluded: vec![(vec![0.5, -0.5, 1.0], vec![2.0, 0.0, 3.0])],
+        ..export::placeholder_pendulum()
+    };
+    model.hash = "placeholder-3-6-2-c-lib".into();
+    let dir = tempdir();
+    let lib = dir.path().join("lib");
+    std::fs::create_dir_all(&lib).unwrap();
+    let report = export::certify_f32(&model).unwrap();
+    export::write_files(&export::render_c_lib(&model, &report, &lib).unwrap()).unwrap();
+    let tanh = if FAST_TANH { Tanh::Fast } else { Tanh::Libm };
+    let dev = Device::new(&model, tanh).unwrap();
+    let mut r: u64 = 0x0123_4567_89ab_cdef;
+    let xs: Vec<[f32; 3]> = (0..2000)
+        .map(|k| {
+            std::array::from_fn(|i| {
+                r ^= r << 13;
+                r ^= r >> 7;
+                r ^= r << 17;
+                let t = (r >> 40) as f64 / (1u64 << 24) as f64;
+                let (lo, hi) = (model.domain_lo[i], model.domain_hi[i]);
+                match k % 7 {
+                    0 => f32::from_bits((r >> 32) as u32),
+                    1 => (lo - 0.3 * (hi - lo) + 1.6 * (hi - lo) * t) as f32,
+                    _ => (lo + (hi - lo) * t) as f32,
+                }
+            })
+        })
+        .collect();
+    let mut h = format!(
+        "#define N_STATES {}u\nstatic const uint32_t STATES[N_STATES][AMPC_NX] = {{\n",
+        xs.len()
+    );
+    for x in &xs {
+        let b: Vec<String> = x
+            .iter()
+            .map(|v| format!("0x{:08x}u", v.to_bits()))
+            .collect();
+        h += &format!("    {{{}}},\n", b.join(", "));
+    }
+    h += "};\n";
+    std::fs::write(dir.path().join("states.h"), h).unwrap();
+    let archive = make(&lib, "host", &[]);
+    let exe = dir.path().join("driver");
+    let mut cc = Command::new("cc");
+    cc.args(STRICT)
+        .arg("-O2")
+        .arg("-I")
+        .arg(&lib)
+        .arg("-I")
+        .arg(dir.path())
+        .arg(fixture("driver.c"))
+        .arg(&archive)
+        .arg("-o")
+        .arg(&exe);
+    if FAST_TANH {
+        cc.arg("-DAMPC_FAST_TANH");
+    }
+    run_ok(&mut cc, "cc driver.c + libampc.a (3 -> 2 net)");
+    let out = run_ok(&mut Command::new(&exe), "the driver (3 -> 2 net)");
+    let mut lines = out.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        format!("certificate ok {}", model.hash)
+    );
+    let fb: Vec<String> = dev
+        .fallback
+        .iter()
+        .map(|v| format!("{:08x}", v.to_bits()))
+        .collect();
+    assert_eq!(
+        lines.next().unwrap(),
+        format!("null 130 {} 128", fb.join(" "))
+    );
+    let mut excluded = 0;
+    let mut n = 0;
+    for (x, line) in xs.iter().zip(lines) {
+        let f: Vec<&str> = line.split(' ').collect();
+        let (u, flags) = dev.evaluate(x);
+        let want: Vec<String> = std::iter::once(flags.to_string())
+            .chain(u.iter().map(|v| format!("{:08x}", v.to_bits())))
+            .collect();
+        assert_eq!(f, want, "x = {x:?}");
+        excluded += usize::from(flags & Flags::EXCLUDED.0 != 0);
+        n += 1;
+    }
+    assert_eq!(n, xs.len());
+    assert!(excluded > 100, "{excluded} states in the excluded box");
+    println!("3 -> 2 net: {n} states bit-identical to the device model, {excluded} excluded");
+}
