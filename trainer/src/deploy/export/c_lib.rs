@@ -170,10 +170,10 @@ fn excluded_block(model: &ExportModel) -> String {
                 return 0;\n}\n"
             .into();
     }
-    let rows = |pick: fn(&(Vec<f32>, Vec<f32>)) -> &Vec<f32>| {
+    let rows = |upper: bool| {
         boxes
             .iter()
-            .map(|b| format!("    {},\n", hex_list(pick(b))))
+            .map(|(lo, hi)| format!("    {},\n", hex_list(if upper { hi } else { lo })))
             .collect::<String>()
     };
     format!(
@@ -191,8 +191,8 @@ fn excluded_block(model: &ExportModel) -> String {
          if (inside) {{\n            return 1;\n        }}\n    }}\n    \
          return 0;\n}}\n",
         n = boxes.len(),
-        lo = rows(|b| &b.0),
-        hi = rows(|b| &b.1),
+        lo = rows(false),
+        hi = rows(true),
     )
 }
 
