@@ -3,7 +3,9 @@
  * ampc.h: C interface of controller-core (crate controller-core/capi, libampc_capi.a) for
  * the `pendulum` controller, architecture 2-10-10-1 (tanh hidden layers), model hash
  * 1f7639af1bde100075444b572f2c575992b369a124c19964797bed38cfe80501.
- * Plain C99; link libampc_capi.a built for your target with the same features.
+ * Plain C99. libampc_capi.a (controller-core/capi) implements it only for the controller
+ * compiled into controller-core; for your own net, `trainer export --c-lib DIR` writes this
+ * header with the C sources of that net.
  */
 #ifndef AMPC_H
 #define AMPC_H

@@ -2,6 +2,8 @@
 //! certificate (`--certificate` JSON, or the one stored in the model) and writes the
 //! controller-core files — a generated Rust file (`--rust`) and a postcard blob
 //! (`--postcard`), with the f32 allowance, and with `--c-header` the C API's header — and/or
+//! a C library folder for this network (`--c-lib DIR`: header, C99 sources, Makefile,
+//! CMakeLists.txt; `deploy::export::render_c_lib`) — and/or
 //! an ONNX model (`--onnx`) of the same f32 network with the certificate in its metadata.
 //! controller-core runs tanh networks only; a ReLU/softplus network can be exported to ONNX
 //! alone (its f32 allowance is not analysed). Both paths clamp to (U_d ⊕ ε) ∩ actuator with
@@ -27,8 +29,8 @@ use trainer::certify::file::{read_certificate, Against, CertificateFile};
 use trainer::certify::seal::Seal;
 use trainer::certify::Model;
 use trainer::deploy::export::{
-    certify_f32, render_c_header, render_files, write_files, ExportModel, Guarantee, PendingFiles,
-    StatisticalClaim,
+    certify_f32, render_c_header, render_c_lib, render_files, write_files, ExportModel, Guarantee,
+    PendingFiles, StatisticalClaim,
 };
 use trainer::learn::mlp::Activation;
 
@@ -42,6 +44,8 @@ pub(super) struct Outputs<'a> {
     pub onnx: Option<&'a Path>,
     /// `--c-header` (with `--rust` and `--postcard`).
     pub c_header: Option<&'a Path>,
+    /// `--c-lib`: the folder of the C library (`deploy::export::render_c_lib`).
+    pub c_lib: Option<&'a Path>,
 }
 
 pub(super) fn execute(
@@ -55,8 +59,8 @@ pub(super) fn execute(
     if out.rust.is_some() != out.postcard.is_some() {
         bail!("--rust and --postcard go together (the Rust file and the blob of one export)");
     }
-    if out.rust.is_none() && out.onnx.is_none() {
-        bail!("nothing to export: give --rust and --postcard, or --onnx, or all three");
+    if out.rust.is_none() && out.onnx.is_none() && out.c_lib.is_none() {
+        bail!("nothing to export: give --rust and --postcard, --onnx or --c-lib DIR (or several)");
     }
     if out.c_header.is_some() && out.rust.is_none() {
         bail!("--c-header goes with --rust and --postcard (the header describes that export)");
@@ -96,7 +100,7 @@ pub(super) fn execute(
     // failed write leaves no Rust file without its blob); the messages follow the write.
     let mut files: PendingFiles = Vec::new();
     let mut said: Vec<String> = Vec::new();
-    if let (Some(rust), Some(postcard)) = (out.rust, out.postcard) {
+    if out.rust.is_some() || out.c_lib.is_some() {
         let em = ExportModel::from_trained(name, &m, &cert).with_context(|| {
             format!(
                 "cannot export {} for controller-core with the certificate of {}",
@@ -105,16 +109,31 @@ pub(super) fn execute(
             )
         })?;
         let em = prepare(em)?;
-        let (r, rendered) = render_files(&em, rust, postcard)?;
-        files.extend(rendered);
+        let r = match (out.rust, out.postcard) {
+            (Some(rust), Some(postcard)) => {
+                let (r, rendered) = render_files(&em, rust, postcard)?;
+                files.extend(rendered);
+                r
+            }
+            _ => certify_f32(&em)?,
+        };
         if let Some(h) = out.c_header {
             files.push((h.to_path_buf(), render_c_header(&em, &r)?.into_bytes()));
         }
+        if let Some(dir) = out.c_lib {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create the --c-lib folder {}", dir.display()))?;
+            files.extend(render_c_lib(&em, &r, dir)?);
+        }
         said.push(format!(
-            "exported {} -> {} + {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | {} ε {:.4} + {:.3e} ({}{})",
+            "exported {} -> {} | f32 allowance (sound) {:.3e}, largest difference on {} random states {:.3e} | {} ε {:.4} + {:.3e} ({}{})",
             model.display(),
-            rust.display(),
-            postcard.display(),
+            [out.rust, out.postcard, out.c_lib]
+                .iter()
+                .flatten()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" + "),
             r.f32_allowance[0],
             r.samples,
             r.f32_observed[0],

@@ -219,6 +219,11 @@ enum Cmd {
         /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
         #[arg(long)]
         c_header: Option<PathBuf>,
+        /// Write a C library for this network into the folder DIR (created if missing):
+        /// `ampc.h`, `ampc.c` (portable C99, bit-identical to the Rust controller), a
+        /// `Makefile` and a `CMakeLists.txt` (see docs/deployment.md).
+        #[arg(long, value_name = "DIR")]
+        c_lib: Option<PathBuf>,
         /// Use the certificate's statistical level as ε (and so as the clamp band): the
         /// `"statistical"` block's `eps_at_p_target` of `--certificate` (from `trainer certify
         /// --statistical N --json`), tier `statistical`, instead of its certified ε.
@@ -430,6 +435,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
             onnx,
             name,
             c_header,
+            c_lib,
             statistical_band,
             accept_unsealed,
         } => {
@@ -442,6 +448,7 @@ pub(crate) fn dispatch(cli: Cli) -> Result<()> {
                 postcard: postcard.as_deref(),
                 onnx: onnx.as_deref(),
                 c_header: c_header.as_deref(),
+                c_lib: c_lib.as_deref(),
             };
             export::execute(
                 config.as_deref(),

@@ -26,13 +26,17 @@
 //! - `rust`: the generated Rust file ([`render_rust`]);
 //! - `device`: the exported controller evaluated as `controller-core` does ([`device::Device`]);
 //! - `tested`: that controller as the function the statistical tiers test ([`Deployed`]);
-//! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]);
+//! - `c_header`: the C header of `controller-core/capi` ([`render_c_header`]; template
+//!   `c/ampc.h.in`);
+//! - `c_lib`: the C library folder of `--c-lib` ([`render_c_lib`]: `ampc.h`, `ampc.c`,
+//!   `Makefile`, `CMakeLists.txt`; templates in `c/`);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
 //! - `blob`: the postcard blob ([`render_postcard`]).
 
 mod allowance;
 mod blob;
 mod c_header;
+mod c_lib;
 pub mod device;
 mod guarantee;
 pub mod range;
@@ -51,6 +55,7 @@ pub use allowance::{certify_f32, eval_f32, f32_allowance, sampled_max_diff, SAMP
 use allowance::{f32_down, f32_up};
 pub use blob::render_postcard;
 pub use c_header::render_c_header;
+pub use c_lib::{hex32, link_id, render_c_lib};
 pub use guarantee::{
     default_guarantee, rust_name, supported_guarantee, Guarantee, GuaranteeDef, StatisticalClaim,
 };
