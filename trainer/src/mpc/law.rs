@@ -102,6 +102,11 @@ pub struct MpcLaw {
     cfg: ProblemConfig,
     hard: SqpSolver,
     soft: Option<SqpSolver>,
+    /// The soft problem's warm start of the current [`solve_along`](Self::solve_along) call
+    /// (None outside it: nothing carries over from one call to the next).
+    soft_warm: Option<PrimalDual>,
+    /// The soft optimum that labelled the state of the current call, if any.
+    soft_solution: Option<PrimalDual>,
 }
 
 impl MpcLaw {
@@ -118,6 +123,8 @@ impl MpcLaw {
             cfg: cfg.clone(),
             hard: SqpSolver::new(cfg, false),
             soft: None,
+            soft_warm: None,
+            soft_solution: None,
         }
     }
 
@@ -260,8 +267,22 @@ impl MpcLaw {
         // Hard solve failed: let the exact-penalty problem decide feasibility.
         let cfg = &self.cfg;
         let soft = self.soft.get_or_insert_with(|| SqpSolver::new(cfg, true));
-        let start = soft.cold_start(xs);
-        let mut s = soft.solve(xs, start);
+        let mut s = match self.soft_warm.take() {
+            // Warm-started from the last soft optimum along a trajectory, retried cold if
+            // that does not converge.
+            Some(mut w) if w.z.len() == soft.ocp.n_var => {
+                w.z[..xs.len()].copy_from_slice(xs);
+                let s = soft.solve(xs, w);
+                if s.status == SqpStatus::Converged {
+                    s
+                } else {
+                    let mut cold = soft.solve(xs, soft.cold_start(xs));
+                    cold.info.iterations += s.info.iterations;
+                    cold
+                }
+            }
+            _ => soft.solve(xs, soft.cold_start(xs)),
+        };
         s.info.iterations += r.info.iterations;
         if s.status != SqpStatus::Converged {
             let status = if r.status == SqpStatus::Infeasible {
@@ -301,7 +322,33 @@ impl MpcLaw {
             return (self.unlabelled(xs, SqpStatus::Infeasible, s.info), None);
         }
         let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
-        (self.finish(soft, xs, &s, SqpStatus::Soft), None)
+        let label = self.finish(soft, xs, &s, SqpStatus::Soft);
+        if label.status.is_labelled() {
+            self.soft_solution = Some(s.point);
+        }
+        (label, None)
+    }
+
+    /// [`solve`](Self::solve) at a state of a trajectory: `warm` is the last hard solution
+    /// (as for `solve`), `warm_soft` the last soft optimum, from which the soft problem is
+    /// warm-started (then retried cold if that does not converge). Returns the label, the
+    /// hard solution (for hard labels) and the soft optimum (for soft labels by the plain
+    /// solve), to warm-start the next state.
+    pub fn solve_along(
+        &mut self,
+        xs: &[f64],
+        warm: Option<&PrimalDual>,
+        warm_soft: Option<&PrimalDual>,
+    ) -> (Label, Option<PrimalDual>, Option<PrimalDual>) {
+        self.soft_warm = warm_soft.cloned();
+        self.soft_solution = None;
+        let (label, sol) = self.solve(xs, warm);
+        self.soft_warm = None;
+        let soft = self
+            .soft_solution
+            .take()
+            .filter(|_| label.status == SqpStatus::Soft);
+        (label, sol, soft)
     }
 }
 
@@ -469,6 +516,45 @@ impl MpcLaw {
 mod tests {
     use super::*;
     use crate::mpc::tests::ipopt_labels::PENDULUM_IPOPT;
+
+    /// Along a trajectory through hard-infeasible states (the pendulum's corner, θ = 2π,
+    /// ω > 0.5), `solve_along` hands back the soft optimum, and the next state's soft problem
+    /// warm-started from it converges to the cold soft label in fewer iterations; with no warm
+    /// start, `solve_along` is `solve` bit for bit; a bad warm start is retried cold.
+    #[test]
+    fn solve_along_warm_starts_the_soft_problem() {
+        let cfg = ProblemConfig::default();
+        let two_pi = 2.0 * std::f64::consts::PI;
+        let (a, b) = ([two_pi, 1.0], [two_pi, 0.98]);
+        let mut law = MpcLaw::new(&cfg);
+        let (la, _, soft) = law.solve_along(&a, None, None);
+        assert_eq!(la.status, SqpStatus::Soft);
+        let soft = soft.expect("a soft label hands back its optimum");
+        let (cold, _) = MpcLaw::new(&cfg).solve(&b, None);
+        let (plain, _, _) = law.solve_along(&b, None, None);
+        assert_eq!(plain, cold);
+        let (warm, _, next) = law.solve_along(&b, None, Some(&soft));
+        assert_eq!(warm.status, SqpStatus::Soft);
+        assert!(next.is_some());
+        assert!(
+            (warm.u[0] - cold.u[0]).abs() <= 1e-6,
+            "{} vs {}",
+            warm.u[0],
+            cold.u[0]
+        );
+        assert!(
+            warm.info.iterations < cold.info.iterations,
+            "warm {} vs cold {} iterations",
+            warm.info.iterations,
+            cold.info.iterations
+        );
+        // A warm start that cannot converge (NaN multipliers) falls back to the cold solve.
+        let mut bad = soft.clone();
+        bad.lam.iter_mut().for_each(|v| *v = f64::NAN);
+        let (l, _, _) = law.solve_along(&b, None, Some(&bad));
+        assert_eq!(l.status, SqpStatus::Soft);
+        assert_eq!(l.u, cold.u);
+    }
 
     #[test]
     fn pendulum_matches_ipopt_reference() {

@@ -4,7 +4,10 @@
 //! `x_{k+1} = F_plant(x_k, sat(π(y_k)))`, `y_k = x_k + w_k` (measurement noise), where
 //! F_plant is the OCP's RK4 model, optionally with perturbed physical parameters (model
 //! mismatch), and π is the MPC law κ (solved online at every step, warm-started from the
-//! previous step's solution) or a network κ_NN. The plant receives the controller's input
+//! previous step's hard solution, unshifted with x₀ replaced, and where the hard problem
+//! fails its soft problem from the last soft optimum; each warm-started solve that does not
+//! converge is retried cold, and the retry ladder of [`crate::mpc::law`] runs as for a
+//! label) or a network κ_NN. The plant receives the controller's input
 //! saturated to the actuator limits U; a network's raw output outside the certified band
 //! U ⊕ [−ε, ε] is recorded.
 //!
@@ -301,6 +304,7 @@ pub fn simulate(
     };
     let constraints = cfg.constraint_set().ok().flatten();
     let mut warm: Option<PrimalDual> = None;
+    let mut warm_soft: Option<PrimalDual> = None;
     let mut last_u = vec![0.0; nu];
     let mut next = vec![0.0; nx];
     for k in 0..s.steps {
@@ -312,7 +316,8 @@ pub fn simulate(
             .collect();
         let mut u = match ctrl {
             Controller::Mpc => {
-                let (l, sol) = law.solve(&y, warm.as_ref());
+                let (l, sol, soft) = law.solve_along(&y, warm.as_ref(), warm_soft.as_ref());
+                warm_soft = soft.or(warm_soft);
                 if l.status == crate::mpc::sqp::SqpStatus::Soft {
                     run.mpc_soft_steps += 1;
                 }
@@ -339,7 +344,8 @@ pub fn simulate(
                         }
                     }
                 }
-                let (l, sol) = law.solve(&y, warm.as_ref());
+                let (l, sol, soft) = law.solve_along(&y, warm.as_ref(), warm_soft.as_ref());
+                warm_soft = soft.or(warm_soft);
                 if l.status == crate::mpc::sqp::SqpStatus::Soft {
                     run.mpc_soft_steps += 1;
                 }

@@ -57,15 +57,16 @@ use crate::mpc::convexity::ReducedHessian;
 use crate::mpc::finite::{nan_max, Failure, Quantity};
 use crate::mpc::kkt::{ActiveSetKkt, KktLayout};
 use crate::mpc::ocp::Ocp;
-use crate::mpc::qp::ipm::{self, mul_e};
-use crate::mpc::qp::{QpData, QpSolver, QpStatus};
+use crate::mpc::qp::QpSolver;
 use crate::problem::{ProblemConfig, SolverSettings};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 mod polish;
 mod residual;
+mod step;
 use residual::{non_finite_part, residual};
+use step::Work;
 
 /// How a solve ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -382,255 +383,17 @@ impl SqpSolver {
                 + self.ocp.inequality_violation(z_trial))
     }
 
-    /// Solves OCP(xs) from the primal-dual guess `start`.
+    /// Solves OCP(xs) from the primal-dual guess `start`: [`step`](Self::step) until a step
+    /// ends the solve.
     pub fn solve(&mut self, xs: &[f64], start: PrimalDual) -> SqpResult {
-        let tol = self.settings.tol;
-        let conservative = self.globalisation == Globalisation::Conservative;
-        let max_iter = if conservative {
-            3 * self.settings.max_iter
-        } else {
-            self.settings.max_iter
-        };
         self.qp.reset();
-        let mut p = start;
-        let mut info = SqpInfo::default();
-        let mut ev = Evals::new(&self.ocp);
-        let n_var = self.ocp.n_var;
-        let mut hreg = vec![0.0; ev.hess.len()];
-        let mut gn = vec![0.0; ev.hess.len()];
-        let mut gn_ready = false;
-        let zero_lam = vec![0.0; self.ocp.n_eq];
-        let mut d = vec![0.0; n_var];
-        let mut lam_qp = vec![0.0; self.ocp.n_eq];
-        let mut nu_qp = vec![0.0; self.ocp.rows.len()];
-        let mut c_trial = vec![0.0; self.ocp.n_eq];
-        // The second-order correction acts where the merit's curvature comes from
-        // constraints the linearisation misses: nonlinear rows, and the soft problem (whose
-        // multipliers, up to the slack weight, raise the penalty μ so far that the dynamics'
-        // second-order error rejects full steps). Elsewhere the line search is as before.
-        let soc_enabled = self.ocp.has_nonlinear_rows() || self.ocp.n_slack > 0;
-        let mut c_soc = vec![0.0; self.ocp.n_eq];
-        let mut d_soc = vec![0.0; n_var];
-        let mut lam_soc = vec![0.0; self.ocp.n_eq];
-        let mut nu_soc = vec![0.0; self.ocp.rows.len()];
-        let mut z_trial = vec![0.0; n_var];
-        let mut mu = 1.0f64;
-        // Rounding floor of the merit function near a setpoint (x_ref, u_ref) ≠ 0: there the
-        // constraint residuals c carry an absolute rounding of about ε·|x_ref| per entry
-        // (ε·|u_ref|-sized terms inside F), which a cost near its zero minimum cannot
-        // resolve; without it the line search rejects every step there. 0 at the origin.
-        let floor_scale = 8.0
-            * f64::EPSILON
-            * self.ocp.horizon as f64
-            * (self.ocp.x_ref.iter().chain(&self.ocp.u_ref))
-                .map(|v| v.abs())
-                .sum::<f64>();
-        let mut full_step = false;
-        let status = 'sqp: loop {
-            self.ocp.relinearize(&p.z);
-            ev.first_order(&self.ocp, &p.z, xs);
-            let res = residual(&self.ocp, &p.z, &ev, &p.lam, &p.nu);
-            info.kkt = res;
-            // A non-finite residual (NaN or ±∞ in the plant's equations, the cost, a row,
-            // the multipliers) ends the solve at once, also at the first iterate: no QP is
-            // built on such data and nothing after it can be a label.
-            if !res.max().is_finite() {
-                info.failure = Some(Failure::NonFinite(non_finite_part(
-                    &self.ocp, &p, &ev, &res,
-                )));
-                break SqpStatus::NumericalFailure;
-            }
-            if res.max() <= tol {
-                break SqpStatus::Converged;
-            }
-            if full_step && res.max() < 1e-1 {
-                if let Some(q) = self.polish(xs, &p, &mut info) {
-                    p = q;
-                    break SqpStatus::Converged;
-                }
-            }
-            if info.iterations >= max_iter {
-                break SqpStatus::MaxIterations;
-            }
-            self.ocp.hessian_blocks(&p.z, &p.lam, &p.nu, &mut ev.hess);
-            if ev.hess.iter().any(|v| !v.is_finite()) {
-                info.failure = Some(Failure::NonFinite(Quantity::Hessian));
-                break SqpStatus::NumericalFailure;
-            }
-            // The exact Hessian wherever the test passes, the soft problem and nonlinear
-            // constraint rows included: there the blockwise rule drops the curvature
-            // λᵀ∇²F of multipliers as large as the slack weight (~1e4) and crawled to the
-            // iteration limit on infeasible ball-beam states (BENCHMARKS, "Soft problems").
-            // A QP with the exact Hessian that the QP solver fails on (or calls infeasible) is
-            // re-solved with the blockwise rule.
-            // (Inexact only after a full step or at the start: while the line search cuts
-            // steps, an inexact QP would mostly be solved twice.)
-            let mut qp_tol = if self.inexact_qp && (full_step || info.iterations == 0) {
-                (QP_TOL_FACTOR * res.max())
-                    .powi(2)
-                    .clamp(ipm::TOL, QP_TOL_MAX)
-            } else {
-                ipm::TOL
-            };
-            let convex = !conservative
-                && self
-                    .convexity
-                    .is_positive_definite(&self.ocp, &ev.hess, &ev.jac_x, &ev.jac_u);
-            // One pass per QP accuracy: the inexact one, then (if its full step is rejected)
-            // the exact one with the penalty as it was.
-            let alpha = loop {
-                let mu_before = mu;
-                let mut exact = convex;
-                let st = loop {
-                    if exact {
-                        hreg.copy_from_slice(&ev.hess);
-                    } else {
-                        if !gn_ready {
-                            // With zero multipliers only the objective's (constant)
-                            // Hessian remains.
-                            self.ocp.hessian_blocks(&p.z, &zero_lam, &[], &mut gn);
-                            gn_ready = true;
-                        }
-                        convexify(&self.ocp, &ev.hess, &gn, &mut hreg);
-                    }
-                    let data = QpData {
-                        z: &p.z,
-                        hess: &hreg,
-                        grad: &ev.grad,
-                        c: &ev.c,
-                        jac_x: &ev.jac_x,
-                        jac_u: &ev.jac_u,
-                        tol: qp_tol,
-                    };
-                    let st = self
-                        .qp
-                        .solve(&self.ocp, &data, &mut d, &mut lam_qp, &mut nu_qp);
-                    info.qp_iterations += self.qp.last_iterations as usize;
-                    // (Also on `Infeasible`: the soft problem's QP is feasible whenever its hard
-                    // input rows are, and an indefinite full H may mislead the QP solver.)
-                    if st != QpStatus::Solved && exact {
-                        exact = false;
-                        continue;
-                    }
-                    break st;
-                };
-                info.iterations += 1;
-                match st {
-                    QpStatus::Solved => {}
-                    QpStatus::Infeasible => break 'sqp SqpStatus::Infeasible,
-                    QpStatus::Failed => break 'sqp SqpStatus::NumericalFailure,
-                }
-                // ℓ1 merit line search.
-                // Inequalities enter the merit by their violation Σ max(0, g). A QP step satisfies
-                // the linearised rows, so the merit's directional derivative is at most
-                // ∇fᵀd − μ(‖c‖₁ + Σ max(0, g)) (N&W Thm 18.2 with inequalities): the N&W 18.36
-                // rule applies with the total violation in place of ‖c‖₁.
-                let c1: f64 =
-                    ev.c.iter().map(|v| v.abs()).sum::<f64>() + self.ocp.inequality_violation(&p.z);
-                let gd: f64 = ev.grad.iter().zip(&d).map(|(g, d)| g * d).sum();
-                if c1 > 0.0 {
-                    let dhd = quadratic_form(&self.ocp, &hreg, &d);
-                    let needed = (gd + 0.5 * dhd.max(0.0)) / ((1.0 - PENALTY_RHO) * c1);
-                    if mu < needed {
-                        mu = needed + 1.0;
-                    }
-                }
-                if conservative {
-                    let lam_max = (lam_qp.iter().chain(&nu_qp)).fold(0.0f64, |m, v| m.max(v.abs()));
-                    mu = mu.max(1.1 * lam_max);
-                }
-                let f0 = self.ocp.objective(&p.z);
-                let phi0 = f0 + mu * c1;
-                let dd = gd - mu * c1;
-                let armijo = |phi: f64, alpha: f64| {
-                    phi.is_finite()
-                        && phi
-                            <= phi0
-                                + 1e-4 * alpha * dd.min(0.0)
-                                + 1e-12 * phi0.abs()
-                                + mu * floor_scale
-                };
-                let mut alpha = 1.0;
-                let accepted = loop {
-                    let phi = self.trial_merit(&p.z, &d, alpha, xs, mu, &mut z_trial, &mut c_trial);
-                    if armijo(phi, alpha) {
-                        break true;
-                    }
-                    // An inexact QP's step is taken only in full (module doc, step 2).
-                    if alpha == 1.0 && qp_tol > ipm::TOL {
-                        break false;
-                    }
-                    // (Not from a non-finite trial point: its data would only fail the QP.)
-                    if alpha == 1.0
-                        && soc_enabled
-                        && phi.is_finite()
-                        && c_trial.iter().all(|v| v.is_finite())
-                    {
-                        // Second-order correction (Nocedal & Wright §18.3): the QP again with the
-                        // constraints' constant terms taken at z + d (c(z + d) − ∇c d, the
-                        // nonlinear rows shifted alike), tried as a full step before backtracking.
-                        mul_e(&self.ocp, &ev.jac_x, &ev.jac_u, &d, &mut c_soc);
-                        for (cs, ct) in c_soc.iter_mut().zip(&c_trial) {
-                            *cs = ct - *cs;
-                        }
-                        let saved = self.ocp.shift_for_correction(&p.z, &d);
-                        let data = QpData {
-                            z: &p.z,
-                            hess: &hreg,
-                            grad: &ev.grad,
-                            c: &c_soc,
-                            jac_x: &ev.jac_x,
-                            jac_u: &ev.jac_u,
-                            tol: qp_tol,
-                        };
-                        let st =
-                            self.qp
-                                .solve(&self.ocp, &data, &mut d_soc, &mut lam_soc, &mut nu_soc);
-                        info.qp_iterations += self.qp.last_iterations as usize;
-                        self.ocp.restore_rhs(&saved);
-                        if st == QpStatus::Solved {
-                            let phi = self.trial_merit(
-                                &p.z,
-                                &d_soc,
-                                1.0,
-                                xs,
-                                mu,
-                                &mut z_trial,
-                                &mut c_trial,
-                            );
-                            if armijo(phi, 1.0) {
-                                lam_qp.copy_from_slice(&lam_soc);
-                                nu_qp.copy_from_slice(&nu_soc);
-                                break true;
-                            }
-                        }
-                    }
-                    alpha *= 0.5;
-                    if alpha < 1e-10 {
-                        break false;
-                    }
-                };
-                if !accepted && qp_tol > ipm::TOL {
-                    // (Its IPM iterations count; the discarded QP is no SQP iteration.)
-                    info.iterations -= 1;
-                    qp_tol = ipm::TOL;
-                    mu = mu_before;
-                    continue;
-                }
-                if !accepted {
-                    break 'sqp SqpStatus::NumericalFailure;
-                }
-                break alpha;
-            };
-            full_step = alpha == 1.0;
-            p.z.copy_from_slice(&z_trial);
-            for (l, q) in p.lam.iter_mut().zip(&lam_qp) {
-                *l += alpha * (q - *l);
-            }
-            for (l, q) in p.nu.iter_mut().zip(&nu_qp) {
-                *l += alpha * (q - *l);
+        let mut w = Work::new(self, start);
+        let status = loop {
+            if let Some(status) = self.step(&mut w, xs) {
+                break status;
             }
         };
+        let (p, info) = (w.p, w.info);
         // Leave the rows linearised at the returned point (for sensitivities).
         self.ocp.relinearize(&p.z);
         SqpResult {
