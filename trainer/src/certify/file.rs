@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The file name a run directory keeps its certificate in.
-pub const FILE_NAME: &str = "certificate.json";
+pub const FILE_NAME: &str = crate::io::RunDir::CERTIFICATE;
 
 /// Relative tolerance of the recomputed ε and band (the terms are stored with 17 digits;
 /// the sums are recomputed in the same order, so any difference beyond rounding is an edit).
@@ -547,7 +547,7 @@ pub fn read_certificate(
     })?;
     let origin = path.display().to_string();
     let (f, seal) = CertificateFile::parse(&text, &origin, accept_unsealed)?;
-    let sibling = path.with_file_name("cells.csv");
+    let sibling = path.with_file_name(crate::io::RunDir::CELLS);
     let mut a = *against;
     if a.cells_csv.is_none() && f.local.is_some() {
         a.cells_csv = Some(&sibling);

@@ -15,11 +15,67 @@
 use super::certify::{print_statistical, StatisticalArgs};
 use super::common::{embedded_pendulum, load_config, problem_for_data, problem_for_model};
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
 use trainer::certify::statistical::StatisticalOptions;
 use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
+
+/// The arguments of `trainer refine` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum); its `[refine]` table applies.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Target certified ε (overrides `refine.target_eps`).
+    #[arg(long)]
+    target_eps: Option<f64>,
+    /// Budget of OCP solves (overrides `refine.budget`).
+    #[arg(long)]
+    budget: Option<usize>,
+    /// Output directory (default: runs/<name>/refine).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// After refining, check the certificate at this many random states solved by the
+    /// MPC (writes check.json).
+    #[arg(long)]
+    check: Option<usize>,
+    /// Seed of the check's states.
+    #[arg(long, default_value_t = 2024)]
+    check_seed: u64,
+    /// Labels for the first round: a dataset of this problem (e.g. from `trainer
+    /// import`) whose records on the initial grid label those corners (no OCP solve).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Keep the network of --model fixed: only split the cells (solving the MPC at their
+    /// corners) until the target or the budget, and certify that network (no training).
+    #[arg(long, requires = "model")]
+    certify_only: bool,
+    /// The network to certify with --certify-only: a model file or an ONNX file.
+    #[arg(long, requires = "certify_only")]
+    model: Option<PathBuf>,
+    /// No progress lines.
+    #[arg(long, short)]
+    quiet: bool,
+    #[command(flatten)]
+    statistical: StatisticalArgs,
+}
+
+impl Args {
+    /// Refines (or, with `--certify-only`, certifies `--model` cell by cell).
+    pub(super) fn run(self) -> Result<()> {
+        execute(
+            self.config.as_deref(),
+            self.target_eps,
+            self.budget,
+            self.out.as_deref(),
+            (self.check.map(|n| (n, self.check_seed)), &self.statistical),
+            self.data.as_deref(),
+            self.model.as_deref(),
+            self.quiet,
+        )
+    }
+}
 
 #[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
