@@ -35,6 +35,13 @@ fn small_config(dir: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
 
+/// The problem's `name` in a problem file.
+fn cfg_text_name(cfg: &str) -> String {
+    trainer::problem::ProblemConfig::load(Path::new(cfg))
+        .unwrap()
+        .name
+}
+
 fn ok(o: &std::process::Output) {
     assert!(
         o.status.success(),
@@ -160,6 +167,23 @@ fn refine_meets_its_target_and_passes_the_check() {
         .info()
         .clone();
     assert_eq!((info.width, info.height), (2250, 840));
+    // The f32 allowance the certificate's tier map calls sound is the deployed controller's
+    // (2-norm, libm tanh), stored in certificate.json and in the model's certificate alike —
+    // not a placeholder 0.
+    let model = trainer::certify::Model::load(&out.join("model.bin")).unwrap();
+    let stored = model
+        .certificate
+        .as_ref()
+        .expect("the model stores its certificate");
+    let a = cert["f32_allowance"].as_f64().unwrap();
+    assert!(a > 0.0, "f32_allowance {a}");
+    assert_eq!(cert["tiers"]["f32_allowance"], "sound");
+    assert_eq!(stored.f32_allowance, a);
+    let name = cfg_text_name(&cfg);
+    assert_eq!(
+        trainer::deploy::export::deployed_allowance(&name, &model, stored),
+        Some(a)
+    );
     // The model is the format `trainer train` writes: eval and export take it.
     let states = d.join("s.csv");
     std::fs::write(&states, "x1,x2\n0.1,0.2\n-0.5,0.3\n").unwrap();

@@ -183,7 +183,9 @@ pub(super) fn execute(
             r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
         }
     }
-    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref())?;
+    let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
+        trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
+    })?;
     if let Some((o, store)) = &stat {
         // The function tested: the deployed controller of the refined net; the states
         // drawn from its hash, none a corner the net was trained on.
@@ -237,12 +239,10 @@ pub(super) fn execute(
     }
     if let Some((design, rf)) = robust_design {
         // The exported controller's f32 allowance counts against the design ε too.
+        // (NaN when the device cannot run the net: then nothing is certified.)
         let allowance =
-            trainer::deploy::export::ExportModel::from_trained(&cfg.name, &r.model, &cert.base)
-                .map_or(f64::NAN, |em| {
-                    trainer::deploy::export::f32_allowance(&em, trainer::deploy::export::Tanh::Libm)
-                        .0
-                });
+            trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, &cert.base)
+                .unwrap_or(f64::NAN);
         let check = match &checked {
             None => trainer::robust::Check::NotRun,
             Some(c) if c.per_cell.passed && c.feasible_in_excluded == 0 => {

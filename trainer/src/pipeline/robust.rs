@@ -124,9 +124,7 @@ pub struct Refinement {
 /// The sound f32 allowance (libm tanh) of the export of `net` with `cert`; NaN when the
 /// net cannot be exported (then nothing is certified).
 fn f32_allowance(name: &str, net: &Model, cert: &Certificate) -> f64 {
-    use crate::deploy::export::{f32_allowance, ExportModel, Tanh};
-    ExportModel::from_trained(name, net, cert)
-        .map_or(f64::NAN, |em| f32_allowance(&em, Tanh::Libm).0)
+    crate::deploy::export::deployed_allowance(name, net, cert).unwrap_or(f64::NAN)
 }
 
 /// States of the check the design loop runs on a refined certificate (uniform on X, seeded
@@ -305,9 +303,15 @@ fn refine_step(
         crate::certify::refine::pretty(&checked).as_bytes(),
     )
     .map_err(|e| io(rdir.path(), e))?;
-    let lc =
-        crate::certify::refine::write_outputs(&fcfg, &fcfg.refine, &r, rdir.path(), Some(&checked))
-            .map_err(|e| io(rdir.path(), e))?;
+    let lc = crate::certify::refine::write_outputs(
+        &fcfg,
+        &fcfg.refine,
+        &r,
+        rdir.path(),
+        Some(&checked),
+        &|c| crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c),
+    )
+    .map_err(|e| io(rdir.path(), e))?;
     // The ε-per-round curve of the refinement, beside its outputs.
     let fig = crate::study::plots::refine_rounds(&r.state.log, fcfg.refine.target_eps)
         .map_err(|e| io(rdir.path(), e))?;

@@ -4,6 +4,7 @@
 
 use super::rounds::train_set;
 use super::*;
+use crate::certify::certificate::Certificate;
 use crate::certify::file::{write_certificate, CertificateFile, CheckSummary};
 use crate::certify::local::Form;
 use crate::data::dataset::{Dataset, DatasetError, Header, Record};
@@ -445,7 +446,11 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
 /// Writes the outputs of a refinement into `dir`: `model.bin`, `dataset.bin` (+ `.csv`),
 /// `certificate.json`, `cells.csv` (every leaf: box, ε_C, corner term, remainder, form),
 /// `refine_log.json`. With `check` (`refine --check`, run before) its result is written into
-/// the certificate ([`LocalCertificate::with_check`]). Returns the certificate. A net imported from another format (ONNX,
+/// the certificate ([`LocalCertificate::with_check`]). `allowance` gives the deployed
+/// controller's f32 allowance for the certificate (`deploy` computes it; `certify` may not
+/// import `deploy`): it is stored as `f32_allowance`, so the file, the model's stored
+/// certificate and `export` agree; `None` (a net the device cannot run, which `export`
+/// refuses) stores 0. Returns the certificate. A net imported from another format (ONNX,
 /// `source_hash` set) is not written as `model.bin`: the certificate binds the source file,
 /// which stays the model to export.
 pub fn write_outputs(
@@ -454,11 +459,13 @@ pub fn write_outputs(
     r: &Refined,
     dir: &Path,
     check: Option<&Check>,
+    allowance: &dyn Fn(&Certificate) -> Option<f64>,
 ) -> Result<LocalCertificate, DatasetError> {
     let mut cert = certificate(cfg, rs, r);
     if let Some(c) = check {
         cert = cert.with_check(c);
     }
+    cert.base.f32_allowance = allowance(&cert.base).unwrap_or(0.0);
     if r.model.source_hash.is_none() {
         let mut model = r.model.clone();
         // The model file's certificate has no room for excluded boxes: with them, the

@@ -54,7 +54,7 @@ pub use c_header::render_c_header;
 pub use guarantee::{Guarantee, StatisticalClaim};
 pub use rust::render_rust;
 pub use tanh::{Tanh, TANH_FAST_ERR_BINS};
-pub use tested::{certify_deployed, Deployed};
+pub use tested::{certify_deployed, deployed_allowance, Deployed};
 
 /// One affine layer in f64: `w` is out × in.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]

@@ -89,6 +89,13 @@ pub fn certify_deployed(
     Ok((c, deployed))
 }
 
+/// The f32 allowance (libm tanh, 2-norm over the outputs) of the controller `export` writes
+/// for `model` with `cert`; `None` when the device cannot run it (`export` refuses such a
+/// net). The `allowance` argument of [`crate::certify::refine::write_outputs`].
+pub fn deployed_allowance(name: &str, model: &Model, cert: &Certificate) -> Option<f64> {
+    Deployed::new(name, model, cert).ok().map(|d| d.allowance)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
