@@ -175,9 +175,8 @@ struct Judged {
 }
 
 impl Judged {
-    /// The evidence of the verdict, with the Monte Carlo counts of feasible states inside
-    /// an excluded box and outside X. An excluded box counts as proven infeasible only by
-    /// `robust::exclusion`.
+    /// The verdict's evidence, with the Monte Carlo counts of feasible states in an excluded
+    /// box and outside X (a box counts as proven infeasible only by `robust::exclusion`).
     fn evidence(
         &self,
         cfg: &ProblemConfig,
@@ -220,8 +219,8 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     o.root = root.path().to_path_buf();
     o.until = Some(Stage::ClosedLoop);
     crate::pipeline::run(&rcfg, &text, &o)?;
-    let mut net =
-        Model::load(&dir.model_regularized()).map_err(|e| io(&dir.model_regularized(), e))?;
+    let mpath = dir.model_regularized();
+    let mut net = Model::load(&mpath).map_err(|e| io(&mpath, e))?;
     let cfile = read_run_certificate(&dir, &net, &rcfg)?;
     net.certificate = Some(cfile.base.clone());
     let mut j = Judged {
@@ -298,11 +297,8 @@ fn refine_step(
     // verdict `not_certified`.
     let checked =
         crate::certify::refine::check(&fcfg, &fcfg.refine, &r, CHECK_STATES, cfg.robust.seed);
-    crate::io::write_atomic(
-        &rdir.check(),
-        crate::certify::refine::pretty(&checked).as_bytes(),
-    )
-    .map_err(|e| io(rdir.path(), e))?;
+    let text = crate::certify::refine::pretty(&checked);
+    write_atomic(&rdir.check(), text.as_bytes()).map_err(|e| io(rdir.path(), e))?;
     let lc = crate::certify::refine::write_outputs(
         &fcfg,
         &fcfg.refine,
@@ -322,7 +318,7 @@ fn refine_step(
         ("refine_rounds.png", &png[..]),
     ] {
         let p = rdir.join(name);
-        crate::io::write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
+        write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
     }
     let refinement = Refinement {
         rounds: r.state.log.len(),

@@ -152,8 +152,8 @@ fn read_run_certificate(
 }
 
 fn load_json<T: serde::de::DeserializeOwned>(stage: Stage, p: &Path) -> Result<T, PipelineError> {
-    let text = std::fs::read_to_string(p).map_err(|e| fail_at(stage, &p, e))?;
-    serde_json::from_str(&text).map_err(|e| fail_at(stage, &p, e))
+    let text = std::fs::read_to_string(p).map_err(|e| fail_at(stage, p, e))?;
+    serde_json::from_str(&text).map_err(|e| fail_at(stage, p, e))
 }
 
 // ---- sample: the labelled sampling plan -------------------------------------------------
