@@ -268,7 +268,7 @@ fn add_statistical(
         })?;
     let training: Vec<Vec<f64>> = r.state.points.iter().map(|p| p.x.clone()).collect();
     let s = trainer::certify::statistical::certify_statistically(
-        &cfg,
+        cfg,
         &trainer::certify::statistical::Tested {
             controller: &dep,
             model_hash: &cert.base.hash,
