@@ -91,7 +91,7 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         (
             trainer::deploy::export::ExportModel::from_trained(&cfg.name, &m, &f.base)
                 .expect("export model")
-                .with_certificate_tier(f.tier().into()),
+                .with_certificate_guarantee(&f.guarantee),
             dir,
         )
     })

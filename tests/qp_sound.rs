@@ -116,4 +116,16 @@ fn exported_tier_is_sound(out: &std::path::Path) {
         "ONNX metadata ampc.guarantee: {:?}",
         m.meta("ampc.guarantee")
     );
+    // Sound, and about what: the QP with the f64 plant data — in every exported file.
+    let premise = "the f64 plant data (A, B, c)";
+    assert!(rs.contains(premise), "weights.rs:\n{rs}");
+    assert!(h.contains(premise), "ampc.h:\n{h}");
+    assert!(
+        m.meta("ampc.guarantee")
+            .is_some_and(|g| g.contains(premise)),
+        "ONNX metadata ampc.guarantee: {:?}",
+        m.meta("ampc.guarantee")
+    );
+    let cert = std::fs::read_to_string(out.join("certificate.json")).unwrap();
+    assert!(cert.contains("\"premises\"") && cert.contains(premise));
 }

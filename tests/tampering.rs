@@ -302,6 +302,12 @@ fn edited_certificates_are_refused_by_export_and_eval() {
         err.contains("no checksum") && err.contains("estimated"),
         "{err}"
     );
+    // The reason travels with the files: the Rust file says what ε rests on.
+    let w = std::fs::read_to_string(f.path("accepted.rs")).unwrap();
+    assert!(
+        w.contains("// ε rests on") && w.contains("unsealed:") && w.contains("--accept-unsealed"),
+        "weights.rs does not say why the tier is estimated:\n{w}"
+    );
     let c = f.path("u_eps_acc.json");
     std::fs::write(&c, unsealed(&sealed, |v| v["eps"] = json!(0.01))).unwrap();
     let o = trainer(&[

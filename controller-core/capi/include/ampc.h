@@ -66,6 +66,9 @@ struct ampc_certificate {
 
 /* This header's certificate: define AMPC_FAST_TANH if the library was built with
  * the fast-tanh feature. */
+/* ε rests on (the certificate's assumptions and premises):
+ * - l_mpc: sampled from the data's sensitivities (an estimate)
+ */
 #ifdef AMPC_FAST_TANH
 static const struct ampc_certificate AMPC_CERTIFICATE = {
     31.516801212818464, /* eps */

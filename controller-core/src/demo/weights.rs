@@ -8,6 +8,8 @@
 // f32 allowance (sound bound on |κ_NN,f32 − κ_NN,f64| over X, 65536 sub-boxes) vs the
 // largest difference on 1000000 random states: accurate tanh 2.917e-4 vs 1.200e-5; fast tanh
 // 1.826e-3 vs 2.414e-4. Guarantee tier of ε: estimated.
+// ε rests on (the certificate's assumptions and premises):
+// - l_mpc: sampled from the data's sensitivities (an estimate)
 //
 // Compile it with `controller_core::include_controller!("weights.rs")` (it provides
 // `Certificate`, `Guarantee`, `Dense` and `Hidden`).

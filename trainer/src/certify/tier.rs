@@ -52,6 +52,11 @@ pub struct Guarantee {
     pub tiers: BTreeMap<String, Tier>,
     /// The terms that are not sound, with what they rest on.
     pub assumptions: Vec<String>,
+    /// What even a sound ε is about: the definition of the MPC the arithmetic bounds (e.g.
+    /// a QP with the f64 plant data, [`crate::certify::critical::QP_DATA_NOTE`]). Not an
+    /// unproven term: the tier does not depend on it, but every export repeats it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub premises: Vec<String>,
 }
 
 impl Guarantee {
@@ -65,7 +70,18 @@ impl Guarantee {
                 .filter(|t| t.1 != Tier::Sound)
                 .map(|t| format!("{}: {}", t.0, t.2))
                 .collect(),
+            premises: Vec::new(),
         }
+    }
+
+    /// What ε rests on besides proof, for the exported files: the assumptions, then the
+    /// premises.
+    pub fn rests_on(&self) -> Vec<String> {
+        self.assumptions
+            .iter()
+            .chain(&self.premises)
+            .cloned()
+            .collect()
     }
 }
 
@@ -132,6 +148,14 @@ pub fn local_exact(exact: usize, cells: usize) -> Guarantee {
     if exact == 0 || cells == 0 {
         return local();
     }
+    let mut g = local_exact_terms(exact, cells);
+    g.premises
+        .push(crate::certify::critical::QP_DATA_NOTE.to_string());
+    g
+}
+
+/// [`local_exact`]'s terms (with at least one exact cell).
+fn local_exact_terms(exact: usize, cells: usize) -> Guarantee {
     if exact == cells {
         return Guarantee::from_terms(&[
             ("corner_errors", Tier::Sound, ""),
@@ -156,6 +180,26 @@ pub fn local_exact(exact: usize, cells: usize) -> Guarantee {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A local certificate with exact (QP) cells states what the sound MPC part is about —
+    /// the QP with the f64 plant data — and one without exact cells does not.
+    #[test]
+    fn exact_cells_state_the_qp_data_premise() {
+        for (exact, cells) in [(4, 4), (1, 4)] {
+            let g = local_exact(exact, cells);
+            assert_eq!(
+                g.premises,
+                vec![crate::certify::critical::QP_DATA_NOTE.to_string()]
+            );
+            assert_eq!(
+                g.rests_on().last().map(String::as_str),
+                Some(crate::certify::critical::QP_DATA_NOTE)
+            );
+        }
+        assert_eq!(local_exact(4, 4).guarantee, Tier::Sound);
+        assert!(local_exact(0, 4).premises.is_empty());
+        assert!(local().premises.is_empty());
+    }
 
     #[test]
     fn the_weakest_term_decides() {

@@ -148,7 +148,7 @@ pub(super) fn execute(
         .map_or_else(Vec::new, |e| e.boxes.clone());
     // The model to export: the certificate's ε and tier, or its statistical level.
     let prepare = |em: ExportModel| -> Result<ExportModel> {
-        let mut em = em.with_certificate_tier(file.tier().into());
+        let mut em = em.with_certificate_guarantee(&file.guarantee);
         em.excluded = excluded.clone();
         let mut em = match &band {
             Some((eps_p, claim)) => em.with_statistical_eps(*eps_p, claim.clone())?,

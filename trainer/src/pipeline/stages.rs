@@ -344,7 +344,7 @@ fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let c = &file.base;
     let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
         .map_err(|e| fail(Stage::Export, e))?
-        .with_certificate_tier(file.tier().into());
+        .with_certificate_guarantee(&file.guarantee);
     let r = crate::deploy::export::export_files(&em, &d.weights_rs(), &d.weights_bin())
         .map_err(|e| fail(Stage::Export, e))?;
     // The band the exported controller (libm tanh, the default) clamps to.

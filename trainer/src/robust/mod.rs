@@ -73,6 +73,7 @@ pub mod jacobians;
 pub mod terminal;
 pub mod tube;
 pub mod verdict;
+pub mod verified;
 
 pub use crate::problem::{RobustMethod, RobustSettings};
 pub use design::{design, robust_config, Design, REFINE_TARGET_FRACTION};

@@ -39,6 +39,13 @@
 //! - **other plants**: the maximum over `robust.samples` seeded points of the ball's
 //!   bounding box — **sampled** (an estimate).
 //!
+//! "Proven" means with rounding margins ([`super::verified`]): ρ_f, d₀ and the tube's ρ, w̄,
+//! σ, τ and constraint factors are upper bounds proven by a Cholesky certificate of
+//! ρ²Q − MᵀWM ≽ 0, m = ρ^{N−1}w̄ and the fits (a)–(d) and (c) are evaluated in outward
+//! rounding, and α = c² is rounded down; when the arithmetic cannot prove a bound, ρ_f is
+//! the f64 estimate and the check is `sampled`. The premise left: the Jacobians and
+//! F(x_r, u_r) are the f64 values the code evaluates.
+//!
 //! The radius is the largest c ≤ c_max (from (a), (b)) of the sequence c_max·0.8^k that
 //! satisfies (c). With `robust.terminal_constraint = true` the region is enforced as a
 //! terminal constraint of the tightened OCP (`ocp.terminal_constraints`, a quadratic
@@ -52,6 +59,7 @@
 
 use super::jacobians::{linearize_at, pendulum_rk4_jacobian, JacobianBound};
 use super::tube::{contraction, Tube};
+use super::verified::{down, up};
 use crate::problem::model::{Discrete, System};
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
@@ -172,6 +180,21 @@ fn centre(cfg: &ProblemConfig) -> (Vec<f64>, Vec<f64>) {
     )
 }
 
+/// ρ_f of a sound Jacobian family, proven with rounding margins
+/// ([`super::tube::verified_contraction`]); the f64 estimate and `Sampled` when it cannot be.
+fn proven_rate(
+    js: &super::jacobians::JacobianSet,
+    k: &DMatrix<f64>,
+    p: &DMatrix<f64>,
+    check: TerminalCheck,
+) -> (f64, TerminalCheck) {
+    let est = contraction(js, k, p);
+    match super::tube::verified_contraction(js, k, p, est) {
+        Some((rho, _)) => (rho, check),
+        None => (est.0, TerminalCheck::Sampled),
+    }
+}
+
 /// ρ_f over the P-ball of radius `r` around x_r, and how it was bounded.
 fn local_rate(cfg: &ProblemConfig, t: &Tube, r: f64) -> (f64, TerminalCheck) {
     let (k, p) = (mat(&t.k), mat(&t.p));
@@ -186,7 +209,7 @@ fn local_rate(cfg: &ProblemConfig, t: &Tube, r: f64) -> (f64, TerminalCheck) {
                 b: vec![b],
                 bound: JacobianBound::Exact,
             };
-            (contraction(&js, &k, &p).0, TerminalCheck::Exact)
+            proven_rate(&js, &k, &p, TerminalCheck::Exact)
         }
         System::Pendulum(pd) if model.substeps <= 2 => {
             let ts = model.ts;
@@ -214,7 +237,7 @@ fn local_rate(cfg: &ProblemConfig, t: &Tube, r: f64) -> (f64, TerminalCheck) {
                 b: bv,
                 bound: JacobianBound::Vertices,
             };
-            (contraction(&js, &k, &p).0, TerminalCheck::Vertices)
+            proven_rate(&js, &k, &p, TerminalCheck::Vertices)
         }
         _ => {
             let s = &cfg.robust;
@@ -252,21 +275,23 @@ fn radius_max(cfg: &ProblemConfig, t: &Tube) -> f64 {
     let n = o.horizon;
     let sn = t.s[n];
     let mut c = f64::INFINITY;
+    // Rounded down: the room and the radius it allows are never above the exact ones
+    // (`per` and `shrink` are proven upper bounds, `verified`).
     let mut fit = |centre: f64, lo: f64, hi: f64, per: f64, shrink: f64| {
-        let room = (centre - (lo + shrink)).min(hi - shrink - centre);
-        if room < 0.0 || room.is_nan() {
+        let room = down(down(centre - up(lo + shrink)).min(down(down(hi - shrink) - centre)));
+        if room < 0.0 || room.is_nan() || per.is_nan() {
             c = f64::NEG_INFINITY;
         } else if per > 0.0 {
-            c = c.min(room / per);
+            c = c.min(down(room / per));
         }
     };
     for i in 0..xr.len() {
         let m = t.x_margin[i];
-        fit(xr[i], o.x_lo[i], o.x_hi[i], m, m * sn);
+        fit(xr[i], o.x_lo[i], o.x_hi[i], m, up(m * sn));
     }
     for j in 0..ur.len() {
         let m = t.u_margin[j];
-        fit(ur[j], o.u_lo[j], o.u_hi[j], m, t.eps + m * sn);
+        fit(ur[j], o.u_lo[j], o.u_hi[j], m, up(t.eps + up(m * sn)));
     }
     // (d) the affine `[ocp]` constraints under the local feedback, tightened as at stage N.
     match t.affine_constraints(cfg) {
@@ -280,6 +305,15 @@ fn radius_max(cfg: &ProblemConfig, t: &Tube) -> f64 {
         Err(_) => c = f64::NEG_INFINITY,
     }
     c
+}
+
+/// d₀ = ‖d‖_P proven with rounding margins (`verified`: dᵀPd ≤ d₀², d within u|d| of the
+/// computed difference); `None` when not finite or not proven.
+fn offset_bound(p: &DMatrix<f64>, d: &[f64]) -> Option<f64> {
+    let n = d.len();
+    let col = DMatrix::from_column_slice(n, 1, d);
+    let radius = col.map(|v| v.abs() * f64::EPSILON);
+    super::verified::bound(&col, &radius, p, &DMatrix::identity(1, 1), p_norm(p, d))
 }
 
 /// The terminal constraint `Σ P_ij (x_i − x_r,i)(x_j − x_r,j) <= α` over the state names.
@@ -310,17 +344,24 @@ pub fn terminal_region(cfg: &ProblemConfig, t: &Tube) -> Option<TerminalRegion> 
     let mut f = vec![0.0; xr.len()];
     model.step(&xr, &ur, &mut f);
     let d: Vec<f64> = f.iter().zip(&xr).map(|(a, b)| a - b).collect();
-    let offset = p_norm(&p, &d);
-    let margin = t.s[n] - t.s[n - 1];
+    // d₀ proven from F(x_r, u_r) as evaluated (the subtraction's rounding covered), and
+    // m = ρ^{N−1} w̄ rounded up (not s_N − s_{N−1} of the rounded-up radii).
+    let offset = offset_bound(&p, &d)?;
+    let mut margin = t.w;
+    for _ in 1..n {
+        margin = up(margin * t.rho);
+    }
     let cmax = radius_max(cfg, t);
     if !cmax.is_finite() || cmax <= 0.0 {
         return None;
     }
     let mut c = cmax;
     for _ in 0..60 {
-        let (rho, check) = local_rate(cfg, t, c + margin);
-        if rho * (c + margin) + offset <= c {
-            let alpha = c * c;
+        let (rho, check) = local_rate(cfg, t, up(c + margin));
+        // (c) in outward rounding, for the level α = c² rounded down: states within m of
+        // X_f lie within c + m of x_r and are mapped within √α.
+        let alpha = down(c * c);
+        if up(up(rho * up(c + margin)) + offset) <= down(alpha.sqrt()) {
             return Some(TerminalRegion {
                 constraint: constraint_text(cfg, &t.p, &xr, alpha),
                 x_ref: xr,

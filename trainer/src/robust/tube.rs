@@ -44,6 +44,48 @@ pub fn contraction(js: &JacobianSet, k: &DMatrix<f64>, p: &DMatrix<f64>) -> (f64
     (rho, lb)
 }
 
+/// `(ρ, L_B)` of [`contraction`] **proven** for every member of the family with rounding
+/// margins ([`super::verified`]: MᵀPM ≼ ρ²P for M = A + BK, BᵀPB ≼ L_B²I), from the f64
+/// estimates `est`; `None` when a bound cannot be proven (then the tier is sampled).
+pub fn verified_contraction(
+    js: &JacobianSet,
+    k: &DMatrix<f64>,
+    p: &DMatrix<f64>,
+    est: (f64, f64),
+) -> Option<(f64, f64)> {
+    use super::verified::{bound, sum_product_radius};
+    let eye = DMatrix::identity(k.nrows(), k.nrows());
+    let (mut rho, mut lb) = (0.0f64, 0.0f64);
+    for (a, b) in js.a.iter().zip(&js.b) {
+        let m = a + b * k;
+        rho = rho.max(bound(&m, &sum_product_radius(a, b, k), p, p, est.0)?);
+        let zero = DMatrix::zeros(b.nrows(), b.ncols());
+        lb = lb.max(bound(b, &zero, p, &eye, est.1)?);
+    }
+    Some((rho, lb))
+}
+
+/// The support function `√(aᵀP⁻¹a)` of the row `a = aₓ + Kᵀa_u` over {dᵀPd ≤ 1}, proven
+/// from its estimate (`a_u` empty: the row aₓ alone); `None` when not proven.
+pub fn verified_support(
+    a_x: &[f64],
+    a_u: &[f64],
+    k: &DMatrix<f64>,
+    p: &DMatrix<f64>,
+    estimate: f64,
+) -> Option<f64> {
+    use super::verified::{bound, sum_product_radius};
+    let nx = a_x.len();
+    let ax = DMatrix::from_row_slice(1, nx, a_x);
+    let (m, radius) = if a_u.is_empty() {
+        (ax, DMatrix::zeros(1, nx))
+    } else {
+        let au = DMatrix::from_row_slice(1, a_u.len(), a_u);
+        (&ax + &au * k, sum_product_radius(&ax, &au, k))
+    };
+    bound(&m, &radius, &DMatrix::identity(1, 1), p, estimate)
+}
+
 /// Solves the discrete algebraic Riccati equation by fixed-point iteration; returns
 /// (P, K) with `u = Kx` (K = −(R + BᵀPB)⁻¹BᵀPA), or None if it does not converge.
 pub fn dare(
@@ -126,25 +168,54 @@ impl Tube {
         horizon: usize,
         method: RobustMethod,
     ) -> Tube {
-        let (rho, lb) = contraction(js, k, p);
-        let w = eps * lb;
-        let mut s = vec![0.0; horizon + 1];
-        for i in 1..=horizon {
-            s[i] = rho * s[i - 1] + w;
-        }
+        let est = contraction(js, k, p);
         let pinv = p
             .clone()
             .try_inverse()
             .unwrap_or_else(|| DMatrix::from_element(p.nrows(), p.ncols(), f64::NAN));
-        let x_margin = (0..p.nrows())
+        let x_est: Vec<f64> = (0..p.nrows())
             .map(|i| pinv[(i, i)].max(0.0).sqrt())
             .collect();
-        let u_margin = (0..k.nrows())
+        let u_est: Vec<f64> = (0..k.nrows())
             .map(|j| {
                 let kj = k.row(j);
                 (kj * &pinv * kj.transpose())[(0, 0)].max(0.0).sqrt()
             })
             .collect();
+        // A sound family gets proven ρ, L_B, σ, τ (rounding margins, `verified`); one that
+        // cannot be proven falls to the sampled tier with the estimates.
+        let nx = p.nrows();
+        let unit = |i: usize| {
+            (0..nx)
+                .map(|c| f64::from(u8::from(c == i)))
+                .collect::<Vec<_>>()
+        };
+        let proven = (js.bound != JacobianBound::SampledEstimate)
+            .then(|| {
+                let (rho, lb) = verified_contraction(js, k, p, est)?;
+                let xm = (0..nx)
+                    .map(|i| verified_support(&unit(i), &[], k, p, x_est[i]))
+                    .collect::<Option<Vec<_>>>()?;
+                let um = (0..k.nrows())
+                    .map(|j| {
+                        let kj: Vec<f64> = k.row(j).iter().copied().collect();
+                        verified_support(&kj, &[], k, p, u_est[j])
+                    })
+                    .collect::<Option<Vec<_>>>()?;
+                Some((rho, lb, xm, um))
+            })
+            .flatten();
+        let (bound, (rho, lb), x_margin, u_margin) = match proven {
+            Some((rho, lb, xm, um)) => (js.bound, (rho, lb), xm, um),
+            None => (JacobianBound::SampledEstimate, est, x_est, u_est),
+        };
+        // s_k rounded up (sound: each s_k an upper bound of the real recursion's).
+        let up = super::verified::up;
+        let w = up(eps * lb);
+        let mut s = vec![0.0; horizon + 1];
+        for i in 1..=horizon {
+            s[i] = up(up(rho * s[i - 1]) + w);
+        }
         let rows = |m: &DMatrix<f64>| {
             (0..m.nrows())
                 .map(|i| m.row(i).iter().copied().collect())
@@ -158,7 +229,7 @@ impl Tube {
             lqr_r_scale: None,
             rho,
             w,
-            bound: js.bound,
+            bound,
             s,
             x_margin,
             u_margin,
@@ -173,12 +244,13 @@ impl Tube {
             let mut l = lo.to_vec();
             let mut h = hi.to_vec();
             for i in 0..lo.len() {
-                let d = m(i);
+                // Rounded outward: the tightened interval is never wider than the exact one.
+                let d = super::verified::up(m(i));
                 if l[i].is_finite() {
-                    l[i] += d;
+                    l[i] = super::verified::up(l[i] + d);
                 }
                 if h[i].is_finite() {
-                    h[i] -= d;
+                    h[i] = super::verified::down(h[i] - d);
                 }
                 if l[i] >= h[i] || l[i].is_nan() || h[i].is_nan() {
                     return Err(RobustError::Infeasible {
@@ -224,9 +296,11 @@ impl Tube {
         Ok(st)
     }
 
-    /// The margin of an affine constraint at stage k: `s_k·per + ε‖a_u‖₂` (module doc).
+    /// The margin of an affine constraint at stage k: `s_k·per + ε‖a_u‖₂` (module doc),
+    /// rounded up.
     pub fn margin(&self, c: &AffineConstraint, k: usize) -> f64 {
-        self.s[k] * c.per + self.eps * c.a_u_norm
+        let up = super::verified::up;
+        up(up(self.s[k] * c.per) + up(self.eps * up(c.a_u_norm)))
     }
 
     /// The `[ocp]` constraints of `cfg` (path, then terminal: the compiled set's order) as
@@ -250,6 +324,7 @@ impl Tube {
         cs.linearize(&vec![0.0; nx], &vec![0.0; nu], &mut g0, &mut jac);
         let p = DMatrix::from_fn(nx, nx, |i, j| self.p[i][j]);
         let pinv = p
+            .clone()
             .try_inverse()
             .unwrap_or_else(|| DMatrix::from_element(nx, nx, f64::NAN));
         let k = DMatrix::from_fn(nu, nx, |i, j| self.k[i][j]);
@@ -271,10 +346,13 @@ impl Tube {
                 let v = nalgebra::DVector::from_fn(nx, |i, _| {
                     a_x[i] + (0..nu).map(|j| k[(j, i)] * a_u[j]).sum::<f64>()
                 });
+                let est = (v.transpose() * &pinv * &v)[(0, 0)].max(0.0).sqrt();
+                // Proven (rounding margins); NaN when not, which no fit accepts.
+                let per = verified_support(&a_x, &a_u, &k, &p, est).unwrap_or(f64::NAN);
                 Ok(AffineConstraint {
                     key: item.key.clone(),
                     b: -g0[c],
-                    per: (v.transpose() * &pinv * &v)[(0, 0)].max(0.0).sqrt(),
+                    per,
                     a_u_norm: a_u.iter().map(|a| a * a).sum::<f64>().sqrt(),
                     a_x,
                     a_u,

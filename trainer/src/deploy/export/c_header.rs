@@ -128,6 +128,13 @@ struct ampc_certificate {{
         "/* This header's certificate: define AMPC_FAST_TANH if the library was built with\n \
          * the fast-tanh feature. */\n",
     );
+    if !model.rests_on.is_empty() {
+        o.push_str("/* ε rests on (the certificate's assumptions and premises):\n");
+        for r in &model.rests_on {
+            let _ = writeln!(o, " * - {}", r.replace("*/", "* /").replace('\n', " "));
+        }
+        o.push_str(" */\n");
+    }
     for (t, guard) in [(Tanh::Fast, "#ifdef AMPC_FAST_TANH"), (Tanh::Libm, "#else")] {
         let k = Tanh::ALL.iter().position(|a| *a == t).unwrap_or(0);
         let eps = model.eps + report.f32_allowance[k];

@@ -139,6 +139,15 @@ impl ExportModel {
         self.guarantee = tier;
         self
     }
+
+    /// This model with the certificate's tier and what it rests on (`assumptions`, then
+    /// `premises`): the tier copied as [`ExportModel::with_certificate_tier`] does, the
+    /// reasons into [`ExportModel::rests_on`] so every exported file says them.
+    pub fn with_certificate_guarantee(self, g: &crate::certify::tier::Guarantee) -> Self {
+        let mut m = self.with_certificate_tier(g.guarantee.into());
+        m.rests_on = g.rests_on();
+        m
+    }
 }
 
 #[cfg(test)]

@@ -144,6 +144,11 @@ pub struct ExportModel {
     /// generated controller flags states inside them (`Flags::EXCLUDED`). Usually empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub excluded: Vec<(Vec<f64>, Vec<f64>)>,
+    /// What ε rests on besides proof — the certificate's `assumptions` (e.g. an estimated
+    /// L_MPC, an unsealed file read with `--accept-unsealed`) and `premises` (what a sound ε
+    /// is about) — written into every exported file. Empty: nothing but arithmetic.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rests_on: Vec<String>,
 }
 
 /// What can go wrong in an export.
@@ -550,6 +555,7 @@ pub fn placeholder_pendulum() -> ExportModel {
         guarantee: Guarantee::Estimated,
         statistical: None,
         excluded: Vec::new(),
+        rests_on: Vec::new(),
     }
 }
 
@@ -645,6 +651,7 @@ impl ExportModel {
             guarantee: Guarantee::Estimated,
             statistical: None,
             excluded: Vec::new(),
+            rests_on: Vec::new(),
         })
     }
 

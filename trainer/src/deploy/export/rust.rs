@@ -186,6 +186,15 @@ pub fn render_rust(model: &ExportModel, report: &ExportReport) -> String {
             s.words()
         );
     }
+    if !model.rests_on.is_empty() {
+        o.push_str(
+            "// ε rests on (the certificate's assumptions and premises):
+",
+        );
+        for r in &model.rests_on {
+            let _ = writeln!(o, "// - {}", r.replace('\n', " "));
+        }
+    }
     o.push_str(
         "//\n// Compile it with `controller_core::include_controller!(\"weights.rs\")` (it provides\n\
          // `Certificate`, `Guarantee`, `Dense` and `Hidden`).\n\n",

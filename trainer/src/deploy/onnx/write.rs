@@ -169,6 +169,9 @@ pub fn guarantee(model: &ExportModel, allowance: Option<f64>) -> String {
     } else if model.l_mpc_is_estimate {
         s += "; L_MPC is a sampled estimate, not a proven bound";
     }
+    if !model.rests_on.is_empty() {
+        s += &format!("; ε rests on: {}", model.rests_on.join("; "));
+    }
     s
 }
 
