@@ -76,7 +76,7 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
         let cfg = trainer::problem::ProblemConfig::default();
         let opts = trainer::pipeline::RunOptions {
             root: root.clone(),
-            until: Some("export".into()),
+            until: Some(trainer::pipeline::Stage::Export),
             ..Default::default()
         };
         trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");

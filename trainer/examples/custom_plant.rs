@@ -123,7 +123,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The stages of `trainer run` up to the export, on this problem.
     let opts = RunOptions {
         root: root.clone(),
-        until: Some("export".into()),
+        until: Some(trainer::pipeline::Stage::Export),
         on_stage: Some(print_stage),
         ..Default::default()
     };

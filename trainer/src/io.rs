@@ -14,6 +14,9 @@
 use std::io::Write;
 use std::path::Path;
 
+pub mod run_dir;
+pub use run_dir::RunDir;
+
 /// Errors of reading and writing the trainer's files; each names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {

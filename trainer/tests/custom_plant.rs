@@ -76,7 +76,7 @@ fn a_custom_plant_runs_the_pipeline_and_matches_the_built_in() {
     let root = tmp("pipeline");
     let opts = |until: &str| RunOptions {
         root: root.clone(),
-        until: Some(until.into()),
+        until: Some(until.parse().unwrap()),
         ..Default::default()
     };
     let builtin = small(None);
@@ -165,7 +165,7 @@ fn the_command_line_refuses_a_custom_plant_naming_it() {
     let custom = small(Some(System::Custom(plant())));
     let opts = RunOptions {
         root: root.clone(),
-        until: Some("train".into()),
+        until: Some(trainer::pipeline::Stage::Train),
         ..Default::default()
     };
     run_problem(&custom, &opts).unwrap();

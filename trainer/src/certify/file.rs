@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The file name a run directory keeps its certificate in.
-pub const FILE_NAME: &str = "certificate.json";
+pub const FILE_NAME: &str = crate::io::RunDir::CERTIFICATE;
 
 /// Relative tolerance of the recomputed ε and band (the terms are stored with 17 digits;
 /// the sums are recomputed in the same order, so any difference beyond rounding is an edit).
@@ -114,7 +114,16 @@ pub enum CertFileError {
         /// The file.
         origin: String,
     },
-    /// A key is missing or has the wrong type.
+    /// A key is missing or has the wrong type (the JSON parser's error names the key).
+    #[error("{origin}: not a certificate: {source}")]
+    Json {
+        /// The file.
+        origin: String,
+        /// The parser's error.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The text is not a certificate's JSON object.
     #[error("{origin}: not a certificate: {why}")]
     Format {
         /// The file.
@@ -214,9 +223,9 @@ impl CertificateFile {
             });
         }
         let mut v: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| CertFileError::Format {
+            serde_json::from_str(text).map_err(|e| CertFileError::Json {
                 origin: origin.into(),
-                why: e.to_string(),
+                source: e,
             })?;
         let o = v.as_object_mut().ok_or_else(|| CertFileError::Format {
             origin: origin.into(),
@@ -239,9 +248,9 @@ impl CertificateFile {
             }
         }
         let mut f: CertificateFile =
-            serde_json::from_value(v).map_err(|e| CertFileError::Format {
+            serde_json::from_value(v).map_err(|e| CertFileError::Json {
                 origin: origin.into(),
-                why: e.to_string(),
+                source: e,
             })?;
         if seal == Seal::Absent {
             f.guarantee.guarantee = Tier::Estimated;
@@ -547,7 +556,7 @@ pub fn read_certificate(
     })?;
     let origin = path.display().to_string();
     let (f, seal) = CertificateFile::parse(&text, &origin, accept_unsealed)?;
-    let sibling = path.with_file_name("cells.csv");
+    let sibling = path.with_file_name(crate::io::RunDir::CELLS);
     let mut a = *against;
     if a.cells_csv.is_none() && f.local.is_some() {
         a.cells_csv = Some(&sibling);

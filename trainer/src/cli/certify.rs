@@ -99,6 +99,55 @@ impl StatisticalArgs {
     }
 }
 
+/// The arguments of `trainer certify` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Model file from `trainer train`, or an ONNX file (detected by content).
+    #[arg(long)]
+    model: PathBuf,
+    /// The dataset the model was trained on (for a net trained elsewhere: a dataset of
+    /// this problem from `trainer sample`).
+    #[arg(long)]
+    data: PathBuf,
+    /// Also report the data density a target ε requires.
+    #[arg(long)]
+    target_eps: Option<f64>,
+    /// A proven Lipschitz constant of the MPC law (otherwise an estimate is used).
+    #[arg(long)]
+    l_mpc: Option<f64>,
+    /// Print JSON (the certificate record) instead of text.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    statistical: StatisticalArgs,
+    #[command(flatten)]
+    closed_loop: ClosedLoopArgs,
+}
+
+impl Args {
+    /// Certifies `--model` on `--data` and prints the certificate.
+    pub(super) fn run(self) -> Result<()> {
+        let stat = self
+            .statistical
+            .options(self.model.with_extension("statistical.bin"))?;
+        execute(
+            self.config.as_deref(),
+            &self.model,
+            &self.data,
+            self.target_eps,
+            self.l_mpc,
+            self.json,
+            Tiers {
+                statistical: stat.as_ref(),
+                closed_loop: self.closed_loop.options()?,
+            },
+        )
+    }
+}
+
 pub(super) fn execute(
     config: Option<&Path>,
     model: &Path,

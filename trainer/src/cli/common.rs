@@ -2,7 +2,7 @@
 //! the CSV columns of inputs and Jacobians, number formatting for tables, file hashes.
 
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 use trainer::problem::ProblemConfig;
@@ -264,4 +264,9 @@ pub(super) fn load_model(path: &Path) -> Result<Model> {
         );
     }
     Ok(m)
+}
+
+/// An optional path as a path (the empty path, which names no file, when absent).
+pub(super) fn opt(p: &Option<PathBuf>) -> &Path {
+    p.as_deref().unwrap_or(Path::new(""))
 }

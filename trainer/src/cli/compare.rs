@@ -3,10 +3,10 @@
 //! Markdown table of median [min, max] to stdout and, with `--json`, writes the per-seed
 //! results there.
 
-use super::common::{med_range, problem_for_data, sha256_file};
+use super::common::{med_range, opt, problem_for_data, refuse_overwrite, sha256_file};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::certificate::{certify, CertifyOptions};
 use trainer::data::dataset::Dataset;
 use trainer::learn::setpoint::Hold;
@@ -37,6 +37,36 @@ struct Shared<'a> {
     set: &'a TrainSet,
     val: &'a TrainSet,
     hold: Option<&'a Hold>,
+}
+
+/// The arguments of `trainer compare` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Dataset file.
+    #[arg(long)]
+    data: PathBuf,
+    /// Number of seeds (0..seeds).
+    #[arg(long, default_value_t = 10)]
+    seeds: u64,
+    /// Write the per-seed results as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+impl Args {
+    /// Trains and certifies both nets over the seeds and prints the table.
+    pub(super) fn run(self) -> Result<()> {
+        refuse_overwrite(&[opt(&self.json)], &[&self.data, opt(&self.config)])?;
+        execute(
+            self.config.as_deref(),
+            &self.data,
+            self.seeds,
+            self.json.as_deref(),
+        )
+    }
 }
 
 pub(super) fn execute(

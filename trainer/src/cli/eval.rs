@@ -13,9 +13,9 @@
 //! The certificate is read and re-checked as `export` reads it (`certify::file`: sealed,
 //! ε from its terms, band, tier, X, U_d, hashes; `--accept-unsealed` for an unsealed one).
 
-use super::common::{csv_numbers, jacobian_header, read_states};
+use super::common::{csv_numbers, jacobian_header, opt, read_states, refuse_overwrite};
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::deploy::export::device::Device;
 use trainer::deploy::export::{ExportModel, Tanh};
 use trainer::learn::mlp::Activation;
@@ -32,6 +32,62 @@ pub(super) struct Inputs<'a> {
     pub certificate: Option<&'a Path>,
     /// `--accept-unsealed`: read a certificate without its checksum (tier `estimated`).
     pub accept_unsealed: bool,
+}
+
+/// The arguments of `trainer eval` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file: the model (and certificate) must be of this problem (default: the
+    /// problem stored in the model).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Model file, or an ONNX file (detected by content).
+    #[arg(long)]
+    model: PathBuf,
+    /// Input CSV with header `x1,…,xn`.
+    #[arg(long)]
+    states: PathBuf,
+    /// Output CSV: the controller's `x1..xn,u1..um,flags` (flags: 1 out of domain, 2 not
+    /// finite, 4 clamped, 8 in a box the certificate excludes), or with --raw the bare
+    /// network's
+    /// `x1..xn,u1..um,du1_dx1,…,dum_dxn`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Certificate JSON whose domain and clamp band the controller uses (default: the
+    /// one stored in the model).
+    #[arg(long)]
+    certificate: Option<PathBuf>,
+    /// The bare f64 network and its Jacobian, without projection, clamp or f32.
+    #[arg(long)]
+    raw: bool,
+    /// Read a certificate without a checksum (written before certificates were sealed):
+    /// its numbers cannot be verified, so its tier is lowered to `estimated` (said on
+    /// stderr and in the outputs). Without this flag such a file is refused.
+    #[arg(long)]
+    accept_unsealed: bool,
+}
+
+impl Args {
+    /// Evaluates `--model` at the states of `--states` into `--out`.
+    pub(super) fn run(self) -> Result<()> {
+        refuse_overwrite(
+            &[&self.out],
+            &[
+                &self.model,
+                &self.states,
+                opt(&self.certificate),
+                opt(&self.config),
+            ],
+        )?;
+        let inputs = Inputs {
+            config: self.config.as_deref(),
+            model: &self.model,
+            states: &self.states,
+            certificate: self.certificate.as_deref(),
+            accept_unsealed: self.accept_unsealed,
+        };
+        execute(&inputs, &self.out, self.raw)
+    }
 }
 
 pub(super) fn execute(inputs: &Inputs<'_>, out: &Path, raw: bool) -> Result<()> {

@@ -23,8 +23,9 @@
 //! stored in the model (`learn::model_file`). The generated files' name (`--name`, default
 //! that problem's name, else the model file's stem) is made an identifier ([`identifier`]).
 
+use super::common::{opt, refuse_overwrite};
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::file::{read_certificate, Against, CertificateFile};
 use trainer::certify::seal::Seal;
 use trainer::certify::Model;
@@ -46,6 +47,83 @@ pub(super) struct Outputs<'a> {
     pub c_header: Option<&'a Path>,
     /// `--c-lib`: the folder of the C library (`deploy::export::render_c_lib`).
     pub c_lib: Option<&'a Path>,
+}
+
+/// The arguments of `trainer export` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file: the model and the certificate must be of this problem (default: the
+    /// problem stored in the model).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Model file from `trainer train`, or an ONNX file (detected by content).
+    #[arg(long)]
+    model: PathBuf,
+    /// Certificate JSON (default: the one stored in the model by `trainer train`).
+    #[arg(long)]
+    certificate: Option<PathBuf>,
+    /// Output Rust file (with --postcard).
+    #[arg(long)]
+    rust: Option<PathBuf>,
+    /// Output postcard blob (with --rust).
+    #[arg(long)]
+    postcard: Option<PathBuf>,
+    /// Output ONNX file: the f32 network as the controller computes it (opset 13),
+    /// certificate under `ampc.*` metadata keys.
+    #[arg(long)]
+    onnx: Option<PathBuf>,
+    /// Name used in the generated files (default: the model's problem name), made a
+    /// valid identifier (characters other than A–Z, a–z, 0–9, _ become _).
+    #[arg(long)]
+    name: Option<String>,
+    /// Also write the C header of `controller-core/capi` for this network (`ampc.h`).
+    #[arg(long)]
+    c_header: Option<PathBuf>,
+    /// Write a C library for this network into the folder DIR (created if missing):
+    /// `ampc.h`, `ampc.c` (portable C99, bit-identical to the Rust controller), a
+    /// `Makefile` and a `CMakeLists.txt` (see docs/deployment.md).
+    #[arg(long, value_name = "DIR")]
+    c_lib: Option<PathBuf>,
+    /// Use the certificate's statistical level as ε (and so as the clamp band): the
+    /// `"statistical"` block's `eps_at_p_target` of `--certificate` (from `trainer certify
+    /// --statistical N --json`), tier `statistical`, instead of its certified ε.
+    #[arg(long, requires = "certificate")]
+    statistical_band: bool,
+    /// Read a certificate without a checksum (written before certificates were sealed):
+    /// its numbers cannot be verified, so its tier is lowered to `estimated` (said on
+    /// stderr and in the outputs). Without this flag such a file is refused.
+    #[arg(long)]
+    accept_unsealed: bool,
+}
+
+impl Args {
+    /// Writes the export files that were asked for.
+    pub(super) fn run(self) -> Result<()> {
+        refuse_overwrite(
+            &[
+                opt(&self.rust),
+                opt(&self.postcard),
+                opt(&self.onnx),
+                opt(&self.c_header),
+            ],
+            &[&self.model, opt(&self.certificate), opt(&self.config)],
+        )?;
+        let out = Outputs {
+            rust: self.rust.as_deref(),
+            postcard: self.postcard.as_deref(),
+            onnx: self.onnx.as_deref(),
+            c_header: self.c_header.as_deref(),
+            c_lib: self.c_lib.as_deref(),
+        };
+        execute(
+            self.config.as_deref(),
+            &self.model,
+            self.certificate.as_deref(),
+            &out,
+            self.name.as_deref(),
+            (self.statistical_band, self.accept_unsealed),
+        )
+    }
 }
 
 pub(super) fn execute(

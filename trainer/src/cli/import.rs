@@ -5,10 +5,55 @@
 //! default: the CSV's path with extension `.imported.bin`). No CSV export is written beside it (the
 //! input is one).
 
-use super::common::load_config;
+use super::common::{load_config, opt, refuse_overwrite};
 use anyhow::{bail, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::data::import::{import, ImportOptions};
+
+/// The arguments of `trainer import` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// The CSV file.
+    #[arg(long)]
+    csv: PathBuf,
+    /// Problem file (default: the embedded pendulum).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output dataset file (default: the CSV's path with extension `.imported.bin`, so
+    /// that importing a `dataset.csv` never replaces the `dataset.bin` beside it).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Rows re-solved by ampc's SQP to check the labels (0: none; all if fewer rows).
+    #[arg(long, default_value_t = trainer::data::import::DEFAULT_RESOLVE)]
+    resolve: usize,
+    /// Seed of the re-solved sample.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Accept labels that disagree with ampc's re-solve (recorded in the dataset and
+    /// the certificate, not an error).
+    #[arg(long)]
+    trust_labels: bool,
+    /// No summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl Args {
+    /// Imports `--csv` into a dataset (default: beside it, `.imported.bin`).
+    pub(super) fn run(self) -> Result<()> {
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| self.csv.with_extension("imported.bin"));
+        refuse_overwrite(&[&out], &[&self.csv, opt(&self.config)])?;
+        let opts = ImportOptions {
+            resolve: self.resolve,
+            seed: self.seed,
+            trust_labels: self.trust_labels,
+        };
+        execute(self.config.as_deref(), &self.csv, &out, &opts, self.quiet)
+    }
+}
 
 pub(super) fn execute(
     config: Option<&Path>,

@@ -2,9 +2,35 @@
 //! dataset (`out`, postcard, with a CSV export beside it), identical to an unsharded run.
 //! With `--config`, every shard must be labelled for that problem.
 
+use super::common::{opt, refuse_overwrite};
 use anyhow::Result;
 use std::path::{Path, PathBuf};
 use trainer::data::dataset::{self, Dataset};
+
+/// The arguments of `trainer merge` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file: every shard must be labelled for this problem (default: the shards'
+    /// own, which must agree).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output dataset file.
+    out: PathBuf,
+    /// Shard files.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+}
+
+impl Args {
+    /// Merges the shard files into `out` and its CSV export.
+    pub(super) fn run(self) -> Result<()> {
+        let csv = dataset::csv_path(&self.out);
+        let mut ins: Vec<&Path> = self.inputs.iter().map(PathBuf::as_path).collect();
+        ins.push(opt(&self.config));
+        refuse_overwrite(&[&self.out, &csv], &ins)?;
+        execute(self.config.as_deref(), &self.out, &self.inputs)
+    }
+}
 
 pub(super) fn execute(config: Option<&Path>, out: &Path, inputs: &[PathBuf]) -> Result<()> {
     let ds = inputs

@@ -15,11 +15,67 @@
 use super::certify::{print_statistical, StatisticalArgs};
 use super::common::{embedded_pendulum, load_config, problem_for_data, problem_for_model};
 use anyhow::{bail, Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::refine::{self, LocalCertificate, Refined, RoundLog};
 use trainer::certify::statistical::StatisticalOptions;
 use trainer::data::dataset::Dataset;
 use trainer::problem::{ProblemConfig, RefineSettings};
+
+/// The arguments of `trainer refine` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum); its `[refine]` table applies.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Target certified ε (overrides `refine.target_eps`).
+    #[arg(long)]
+    target_eps: Option<f64>,
+    /// Budget of OCP solves (overrides `refine.budget`).
+    #[arg(long)]
+    budget: Option<usize>,
+    /// Output directory (default: runs/<name>/refine).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// After refining, check the certificate at this many random states solved by the
+    /// MPC (writes check.json).
+    #[arg(long)]
+    check: Option<usize>,
+    /// Seed of the check's states.
+    #[arg(long, default_value_t = 2024)]
+    check_seed: u64,
+    /// Labels for the first round: a dataset of this problem (e.g. from `trainer
+    /// import`) whose records on the initial grid label those corners (no OCP solve).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Keep the network of --model fixed: only split the cells (solving the MPC at their
+    /// corners) until the target or the budget, and certify that network (no training).
+    #[arg(long, requires = "model")]
+    certify_only: bool,
+    /// The network to certify with --certify-only: a model file or an ONNX file.
+    #[arg(long, requires = "certify_only")]
+    model: Option<PathBuf>,
+    /// No progress lines.
+    #[arg(long, short)]
+    quiet: bool,
+    #[command(flatten)]
+    statistical: StatisticalArgs,
+}
+
+impl Args {
+    /// Refines (or, with `--certify-only`, certifies `--model` cell by cell).
+    pub(super) fn run(self) -> Result<()> {
+        execute(
+            self.config.as_deref(),
+            self.target_eps,
+            self.budget,
+            self.out.as_deref(),
+            (self.check.map(|n| (n, self.check_seed)), &self.statistical),
+            self.data.as_deref(),
+            self.model.as_deref(),
+            self.quiet,
+        )
+    }
+}
 
 #[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
@@ -35,50 +91,16 @@ pub(super) fn execute(
     let fixed_model = fixed
         .map(|p| super::common::load_model(p).map(|m| (p, m)))
         .transpose()?;
-    let base = match (config, data, &fixed_model) {
-        (Some(_), _, _) => load_config(config)?,
-        (None, Some(p), _) => problem_for_data(None, p, &Dataset::load(p)?)?,
-        (None, None, Some((p, m))) => problem_for_model(None, p, m)?.with_context(|| {
-            format!(
-                "{} names no problem (an ONNX file or a model of an older build): pass --config",
-                p.display()
-            )
-        })?,
-        (None, None, None) => embedded_pendulum(),
-    };
+    let base = refined_problem(config, data, fixed_model.as_ref())?;
     // A problem stored in an artifact may already be a robust design's tightened MPC.
     let tightened = config.is_none() && base.ocp.stages.is_some();
     let (cfg, robust_design) = refine_config(base, tightened, target_eps, budget)?;
     let initial_labels = data
         .map(|p| first_round_labels(&cfg, p, quiet))
         .transpose()?;
-    let fixed = match fixed_model {
-        Some((p, m)) => {
-            let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
-            if (m.mlp.nx(), m.mlp.nu()) != (nx, nu) {
-                bail!(
-                    "{}: the network maps {} states to {} inputs; problem `{}` has {nx} and {nu}",
-                    p.display(),
-                    m.mlp.nx(),
-                    m.mlp.nu(),
-                    cfg.name
-                );
-            }
-            if !m.problem_hash.is_empty() && m.problem_hash != cfg.problem_hash() {
-                bail!(
-                    "{} was trained on labels of problem {} (hash {}…), not of the refined \
-                     problem `{}` (hash {}…)",
-                    p.display(),
-                    super::common::stored_name(m.problem_toml.as_deref()),
-                    super::common::short(&m.problem_hash),
-                    cfg.name,
-                    super::common::short(&cfg.problem_hash())
-                );
-            }
-            Some(m)
-        }
-        None => None,
-    };
+    let fixed = fixed_model
+        .map(|(p, m)| fixed_network(&cfg, p, m))
+        .transpose()?;
     let rs = cfg.refine.clone();
     let dir = out
         .map(Path::to_path_buf)
@@ -92,84 +114,12 @@ pub(super) fn execute(
         initial_labels,
         fixed,
     };
-    let checkpoint = dir.join("refine_state.bin");
-    let mut r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
-    // `--check`: a failed per-cell check splits its offending cells and refines again, up
-    // to `[refine.check] feedback` times; the last check is the verdict.
-    let mut checked = None;
-    if let Some((n, check_seed)) = check {
-        for pass in 0..=rs.check.feedback {
-            let c = refine::check(&cfg, &rs, &r, n, check_seed);
-            let p = &c.per_cell;
-            // Offending cells, and excluded cells where a feasible state was found: split
-            // both (an excluded cell's feasible part becomes cells of the domain).
-            let mut leaves = p.leaves.clone();
-            leaves.extend(&c.feasible_excluded_leaves);
-            let passed = p.passed && c.feasible_in_excluded == 0;
-            if passed || pass == rs.check.feedback || leaves.is_empty() {
-                checked = Some(c);
-                break;
-            }
-            let split = refine::reopen(&cfg, &rs, &r.state, &leaves, &p.jump_states, &checkpoint)?;
-            if !quiet {
-                eprintln!(
-                    "per-cell check failed (miss rate {:.4} > {}, {} over ε_C, {} jumps in {} \
-                     cells): {split} cells split, refining again (pass {}/{})",
-                    p.miss_rate,
-                    p.tolerance,
-                    p.over_cell,
-                    p.jumps,
-                    p.offending_cells,
-                    pass + 1,
-                    rs.check.feedback
-                );
-            }
-            r = refine::refine(&cfg, &rs, Some(&checkpoint), &opts)?;
-        }
-    }
+    let (r, checked) = refine_and_check(&cfg, &opts, &dir.join("refine_state.bin"), check, quiet)?;
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
         trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
     })?;
-    if let Some((o, store)) = &stat {
-        // The function tested: the deployed controller of the refined net; the states
-        // drawn from its hash, none a corner the net was trained on.
-        let dep = trainer::deploy::export::Deployed::new(&cfg.name, &r.model, &cert.base).map_err(
-            |e| {
-                anyhow::anyhow!(
-                    "--statistical tests the deployed controller, which the refined net cannot \
-                     be: {e}"
-                )
-            },
-        )?;
-        let training: Vec<Vec<f64>> = r.state.points.iter().map(|p| p.x.clone()).collect();
-        let s = trainer::certify::statistical::certify_statistically(
-            &cfg,
-            &trainer::certify::statistical::Tested {
-                controller: &dep,
-                model_hash: &cert.base.hash,
-                training: &training,
-            },
-            cert.base.eps,
-            store,
-            &StatisticalOptions {
-                progress: !quiet,
-                excluded: cert
-                    .local
-                    .excluded
-                    .as_ref()
-                    .map_or_else(Vec::new, |e| e.boxes.clone()),
-                ..o.clone()
-            },
-        )
-        .with_context(|| format!("statistical states in {}", store.display()))?;
-        if !quiet {
-            print_statistical(&s);
-        }
-        cert.statistical = Some(s);
-        trainer::certify::file::write_certificate(
-            &dir.join(trainer::certify::file::FILE_NAME),
-            &cert.file(),
-        )?;
+    if let Some(st) = &stat {
+        add_statistical(&cfg, &r, &mut cert, st, &dir, quiet)?;
     }
     if cfg.system.nx() >= 2 {
         write_eps_map(&cfg, &rs, &r, &dir)?;
@@ -181,33 +131,8 @@ pub(super) fn execute(
     if let Some(c) = &checked {
         check_certificate(c, &dir, quiet)?;
     }
-    if let Some((design, rf)) = robust_design {
-        // The exported controller's f32 allowance counts against the design ε too.
-        // (NaN when the device cannot run the net: then nothing is certified.)
-        let allowance =
-            trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, &cert.base)
-                .unwrap_or(f64::NAN);
-        let check = match &checked {
-            None => trainer::robust::Check::NotRun,
-            Some(c) if c.per_cell.passed && c.feasible_in_excluded == 0 => {
-                trainer::robust::Check::Passed
-            }
-            Some(_) => trainer::robust::Check::Failed,
-        };
-        let v = trainer::robust::verdict(&trainer::robust::Evidence {
-            design_eps: design,
-            certified_eps: cert.base.eps,
-            f32_allowance: allowance,
-            recursive_feasibility: rf,
-            eps_sound: cert.guarantee.guarantee == trainer::certify::tier::Tier::Sound,
-            eps_rests_on: cert.guarantee.assumptions.clone(),
-            check,
-            // `refine` holds no design to prove the exclusions with: each box is assumed.
-            excluded_unproven: cert.local.excluded.as_ref().map_or(0, |e| e.boxes.len()),
-            feasible_in_excluded: checked.as_ref().map_or(0, |c| c.feasible_in_excluded),
-            // `refine` does not search beyond X (the robust loop of `trainer run` does).
-            feasible_outside_domain: 0,
-        });
+    if let Some(design) = robust_design {
+        let v = robust_verdict(&cfg, &r, &cert, checked.as_ref(), design);
         if !quiet {
             println!("robust design: {}", v.message);
         }
@@ -223,6 +148,190 @@ pub(super) fn execute(
         );
     }
     Ok(())
+}
+
+/// The problem refined: `--config`, else the one stored in `--data`, else the one of
+/// `--model`, else the embedded pendulum (module doc).
+fn refined_problem(
+    config: Option<&Path>,
+    data: Option<&Path>,
+    fixed_model: Option<&(&Path, trainer::certify::Model)>,
+) -> Result<ProblemConfig> {
+    Ok(match (config, data, fixed_model) {
+        (Some(_), _, _) => load_config(config)?,
+        (None, Some(p), _) => problem_for_data(None, p, &Dataset::load(p)?)?,
+        (None, None, Some((p, m))) => problem_for_model(None, p, m)?.with_context(|| {
+            format!(
+                "{} names no problem (an ONNX file or a model of an older build): pass --config",
+                p.display()
+            )
+        })?,
+        (None, None, None) => embedded_pendulum(),
+    })
+}
+
+/// The network of `--certify-only --model` (at `p`), checked to be of the refined problem:
+/// its dimensions and (when it records one) its problem hash.
+fn fixed_network(
+    cfg: &ProblemConfig,
+    p: &Path,
+    m: trainer::certify::Model,
+) -> Result<trainer::certify::Model> {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    if (m.mlp.nx(), m.mlp.nu()) != (nx, nu) {
+        bail!(
+            "{}: the network maps {} states to {} inputs; problem `{}` has {nx} and {nu}",
+            p.display(),
+            m.mlp.nx(),
+            m.mlp.nu(),
+            cfg.name
+        );
+    }
+    if !m.problem_hash.is_empty() && m.problem_hash != cfg.problem_hash() {
+        bail!(
+            "{} was trained on labels of problem {} (hash {}…), not of the refined \
+             problem `{}` (hash {}…)",
+            p.display(),
+            super::common::stored_name(m.problem_toml.as_deref()),
+            super::common::short(&m.problem_hash),
+            cfg.name,
+            super::common::short(&cfg.problem_hash())
+        );
+    }
+    Ok(m)
+}
+
+/// Refines from the checkpoint; with `--check` (states, seed) a failed per-cell check
+/// splits its offending cells and refines again, up to `[refine.check] feedback` times;
+/// the last check is the verdict.
+fn refine_and_check(
+    cfg: &ProblemConfig,
+    opts: &refine::RefineOptions,
+    checkpoint: &Path,
+    check: Option<(usize, u64)>,
+    quiet: bool,
+) -> Result<(Refined, Option<refine::Check>)> {
+    let rs = &cfg.refine;
+    let mut r = refine::refine(cfg, rs, Some(checkpoint), opts)?;
+    let Some((n, check_seed)) = check else {
+        return Ok((r, None));
+    };
+    for pass in 0.. {
+        let c = refine::check(cfg, rs, &r, n, check_seed);
+        let p = &c.per_cell;
+        // Offending cells, and excluded cells where a feasible state was found: split
+        // both (an excluded cell's feasible part becomes cells of the domain).
+        let mut leaves = p.leaves.clone();
+        leaves.extend(&c.feasible_excluded_leaves);
+        let passed = p.passed && c.feasible_in_excluded == 0;
+        if passed || pass == rs.check.feedback || leaves.is_empty() {
+            return Ok((r, Some(c)));
+        }
+        let split = refine::reopen(cfg, rs, &r.state, &leaves, &p.jump_states, checkpoint)?;
+        if !quiet {
+            eprintln!(
+                "per-cell check failed (miss rate {:.4} > {}, {} over ε_C, {} jumps in {} \
+                 cells): {split} cells split, refining again (pass {}/{})",
+                p.miss_rate,
+                p.tolerance,
+                p.over_cell,
+                p.jumps,
+                p.offending_cells,
+                pass + 1,
+                rs.check.feedback
+            );
+        }
+        r = refine::refine(cfg, rs, Some(checkpoint), opts)?;
+    }
+    // Pass `feedback` returns above; `0..` ends only past usize::MAX passes.
+    Ok((r, None))
+}
+
+/// `--statistical N`: the statistical tier of the refined net's deployed controller, added
+/// to the certificate (rewritten in `dir`).
+fn add_statistical(
+    cfg: &ProblemConfig,
+    r: &Refined,
+    cert: &mut LocalCertificate,
+    (o, store): &(StatisticalOptions, std::path::PathBuf),
+    dir: &Path,
+    quiet: bool,
+) -> Result<()> {
+    // The function tested: the deployed controller of the refined net; the states
+    // drawn from its hash, none a corner the net was trained on.
+    let dep =
+        trainer::deploy::export::Deployed::new(&cfg.name, &r.model, &cert.base).map_err(|e| {
+            anyhow::anyhow!(
+                "--statistical tests the deployed controller, which the refined net cannot \
+                 be: {e}"
+            )
+        })?;
+    let training: Vec<Vec<f64>> = r.state.points.iter().map(|p| p.x.clone()).collect();
+    let s = trainer::certify::statistical::certify_statistically(
+        cfg,
+        &trainer::certify::statistical::Tested {
+            controller: &dep,
+            model_hash: &cert.base.hash,
+            training: &training,
+        },
+        cert.base.eps,
+        store,
+        &StatisticalOptions {
+            progress: !quiet,
+            excluded: cert
+                .local
+                .excluded
+                .as_ref()
+                .map_or_else(Vec::new, |e| e.boxes.clone()),
+            ..o.clone()
+        },
+    )
+    .with_context(|| format!("statistical states in {}", store.display()))?;
+    if !quiet {
+        print_statistical(&s);
+    }
+    cert.statistical = Some(s);
+    trainer::certify::file::write_certificate(
+        &dir.join(trainer::certify::file::FILE_NAME),
+        &cert.file(),
+    )?;
+    Ok(())
+}
+
+/// The robust design's verdict on the refined certificate (`design`: design ε and how
+/// recursive feasibility is established).
+fn robust_verdict(
+    cfg: &ProblemConfig,
+    r: &Refined,
+    cert: &LocalCertificate,
+    checked: Option<&refine::Check>,
+    (design, rf): (f64, trainer::robust::Feasibility),
+) -> trainer::robust::Verdict {
+    // The exported controller's f32 allowance counts against the design ε too.
+    // (NaN when the device cannot run the net: then nothing is certified.)
+    let allowance = trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, &cert.base)
+        .unwrap_or(f64::NAN);
+    let check = match checked {
+        None => trainer::robust::Check::NotRun,
+        Some(c) if c.per_cell.passed && c.feasible_in_excluded == 0 => {
+            trainer::robust::Check::Passed
+        }
+        Some(_) => trainer::robust::Check::Failed,
+    };
+    trainer::robust::verdict(&trainer::robust::Evidence {
+        design_eps: design,
+        certified_eps: cert.base.eps,
+        f32_allowance: allowance,
+        recursive_feasibility: rf,
+        eps_sound: cert.guarantee.guarantee == trainer::certify::tier::Tier::Sound,
+        eps_rests_on: cert.guarantee.assumptions.clone(),
+        check,
+        // `refine` holds no design to prove the exclusions with: each box is assumed.
+        excluded_unproven: cert.local.excluded.as_ref().map_or(0, |e| e.boxes.len()),
+        feasible_in_excluded: checked.map_or(0, |c| c.feasible_in_excluded),
+        // `refine` does not search beyond X (the robust loop of `trainer run` does).
+        feasible_outside_domain: 0,
+    })
 }
 
 /// `--data`: a dataset (e.g. from `trainer import`) labelled for this very problem, with
@@ -375,7 +484,10 @@ fn print_summary(
 /// its cell's ε_C, if a jump of κ was found, or if the per-cell miss rate of the estimated
 /// ranges exceeds the tolerance (naming the offending cells).
 fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
-    trainer::io::write_atomic(&dir.join("check.json"), refine::pretty(c).as_bytes())?;
+    trainer::io::write_atomic(
+        &dir.join(trainer::io::RunDir::CHECK),
+        refine::pretty(c).as_bytes(),
+    )?;
     let p = &c.per_cell;
     if !quiet {
         println!(
@@ -432,7 +544,7 @@ fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
              MPC — the excluded set reaches into the feasible set, which ε must cover (see {}; \
              raise `refine.check.feedback` or the budget to split those cells)",
             c.feasible_in_excluded,
-            dir.join("check.json").display()
+            dir.join(trainer::io::RunDir::CHECK).display()
         );
     }
     if c.over_eps > 0 || c.over_cell > 0 {
@@ -440,7 +552,7 @@ fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
             "certificate check failed: {} states above ε, {} above their cell's ε_C (see {})",
             c.over_eps,
             c.over_cell,
-            dir.join("check.json").display()
+            dir.join(trainer::io::RunDir::CHECK).display()
         );
     }
     if !p.passed {
@@ -469,7 +581,7 @@ fn check_certificate(c: &refine::Check, dir: &Path, quiet: bool) -> Result<()> {
             p.jumps,
             p.offending_cells,
             cells.join("; "),
-            dir.join("check.json").display()
+            dir.join(trainer::io::RunDir::CHECK).display()
         );
     }
     Ok(())

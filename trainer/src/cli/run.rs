@@ -6,13 +6,54 @@
 use anyhow::{Context, Result};
 use std::io::IsTerminal;
 use std::path::Path;
-use trainer::pipeline::{RunOptions, StageReport};
+use std::path::PathBuf;
+use trainer::pipeline::{RunOptions, Stage, StageReport, STAGES};
 use trainer::problem::ProblemConfig;
+
+/// The arguments of `trainer run` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum).
+    config: Option<PathBuf>,
+    /// Problem file, as a flag (the same as the positional argument).
+    #[arg(long = "config", id = "config_flag", conflicts_with = "config")]
+    config_flag: Option<PathBuf>,
+    /// Root directory of runs; the run goes to `<out>/<name>/`.
+    #[arg(long, default_value = "runs")]
+    out: PathBuf,
+    /// Redo a stage even if its inputs are unchanged (repeatable).
+    #[arg(long, value_parser = stage_parser())]
+    force: Vec<Stage>,
+    /// No progress bars or stage lines.
+    #[arg(long, short, conflicts_with = "verbose")]
+    quiet: bool,
+    /// Robust design for this input error ε (overrides `robust.eps`): tightened MPC,
+    /// data, training, certificate and the robust closed-loop study in `<out>/<name>/robust/`.
+    #[arg(long)]
+    robust_eps: Option<f64>,
+    /// Also list each stage's input hashes and output files.
+    #[arg(long, short)]
+    verbose: bool,
+}
+
+impl Args {
+    /// Runs the whole pipeline (and the robust loop when asked).
+    pub(super) fn run(self) -> Result<()> {
+        execute(
+            self.config.or(self.config_flag).as_deref(),
+            &self.out,
+            &self.force,
+            self.quiet,
+            self.verbose,
+            self.robust_eps,
+        )
+    }
+}
 
 pub(super) fn execute(
     config: Option<&Path>,
     out: &Path,
-    force: &[String],
+    force: &[Stage],
     quiet: bool,
     verbose: bool,
     robust_eps: Option<f64>,
@@ -50,6 +91,12 @@ pub(super) fn execute(
         robust_run(&cfg, &opts, out, quiet)?;
     }
     Ok(())
+}
+
+/// `--force`'s values: the stage names ([`Stage::name`]), listed in the help.
+fn stage_parser() -> impl clap::builder::TypedValueParser<Value = Stage> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(STAGES).try_map(|s| s.parse::<Stage>())
 }
 
 /// The problem file and its text (the pipeline hashes the text), or the embedded pendulum.

@@ -2,11 +2,37 @@
 //! (`--config`), or one shard of it (`--shard K/N`), into `--out` (postcard) with a CSV
 //! export beside it; resumes an interrupted run.
 
-use super::common::load_config;
+use super::common::{load_config, opt, refuse_overwrite};
 use anyhow::Result;
 use std::io::IsTerminal;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::data::dataset::{self, GenerateOptions, Shard};
+
+/// The arguments of `trainer sample` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Output dataset file (postcard); a CSV export is written beside it.
+    #[arg(long)]
+    out: PathBuf,
+    /// Compute only shard K of N (`K/N`, 0 ≤ K < N).
+    #[arg(long)]
+    shard: Option<Shard>,
+    /// No progress bar or summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl Args {
+    /// Generates the dataset (or one shard) into `--out` and its CSV export.
+    pub(super) fn run(self) -> Result<()> {
+        let csv = dataset::csv_path(&self.out);
+        refuse_overwrite(&[&self.out, &csv], &[opt(&self.config)])?;
+        execute(self.config.as_deref(), &self.out, self.shard, self.quiet)
+    }
+}
 
 pub(super) fn execute(
     config: Option<&Path>,

@@ -2,11 +2,35 @@
 //! states CSV (`--states`, header `x1,…,xn`) and writes one CSV row per state (`--out`:
 //! state, u, ∂u/∂x, cost, solver status, iterations).
 
-use super::common::{csv_numbers, jacobian_header, load_config, read_states};
+use super::common::{
+    csv_numbers, jacobian_header, load_config, opt, read_states, refuse_overwrite,
+};
 use anyhow::Result;
 use rayon::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::mpc::law::MpcLaw;
+
+/// The arguments of `trainer solve` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Input CSV with header `x1,…,xn`.
+    #[arg(long)]
+    states: PathBuf,
+    /// Output CSV: `x1..xn,u1..um,du1_dx1,…,dum_dxn,cost,status,iterations`.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+impl Args {
+    /// Solves the OCP at the states of `--states` into `--out`.
+    pub(super) fn run(self) -> Result<()> {
+        refuse_overwrite(&[&self.out], &[&self.states, opt(&self.config)])?;
+        execute(self.config.as_deref(), &self.states, &self.out)
+    }
+}
 
 pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Result<()> {
     let cfg = load_config(config)?;

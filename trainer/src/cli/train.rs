@@ -3,15 +3,61 @@
 //! freshly labelled random states), certifies it and writes the model with its
 //! certificate (`--out`).
 
-use super::common::{problem_for_data, sha256_file};
+use super::common::{opt, problem_for_data, refuse_overwrite, sha256_file};
 use anyhow::{bail, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use trainer::certify::certificate::{certify, Certificate, CertifyOptions};
 use trainer::certify::Model;
 use trainer::data::dataset::Dataset;
 use trainer::learn::setpoint::Hold;
 use trainer::learn::train::{label_random_states, train, TrainOptions, TrainSet};
 use trainer::problem::ProblemConfig;
+
+/// The arguments of `trainer train` (their doc comments are the help text).
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Problem file (default: the embedded pendulum); its `[training]` table applies.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Dataset file from `trainer sample`.
+    #[arg(long)]
+    data: PathBuf,
+    /// Output model file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Nominal training (λ₂ = λ₃ = 0).
+    #[arg(long)]
+    nominal: bool,
+    /// Override the seed of the initial weights and shuffling.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// A labelled validation dataset (e.g. a run's validation.bin); default: label
+    /// `training.validation_n` random states now.
+    #[arg(long)]
+    validation: Option<PathBuf>,
+    /// No progress or summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+impl Args {
+    /// Trains a net on `--data` into `--out`.
+    pub(super) fn run(self) -> Result<()> {
+        refuse_overwrite(
+            &[&self.out],
+            &[&self.data, opt(&self.config), opt(&self.validation)],
+        )?;
+        execute(
+            self.config.as_deref(),
+            &self.data,
+            &self.out,
+            self.nominal,
+            self.seed,
+            self.validation.as_deref(),
+            self.quiet,
+        )
+    }
+}
 
 pub(super) fn execute(
     config: Option<&Path>,

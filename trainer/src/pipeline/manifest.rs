@@ -5,12 +5,12 @@
 //! run again. An output modified or corrupted since the stage wrote it makes the stage run
 //! again, and its summary says which file.
 
-use super::{fail, PipelineError, RunOptions, StageReport};
-use crate::io::{hex, write_atomic};
+use super::{fail, fail_at, PipelineError, RunOptions, Stage, StageReport};
+use crate::io::{hex, write_atomic, RunDir};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// A stage's manifest.
@@ -49,7 +49,7 @@ fn output_hashes(
         .iter()
         .map(|o| {
             let p = dir.join(o);
-            let h = sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
+            let h = sha_file(&p).map_err(|e| fail_at(stage, &p, e))?;
             Ok((o.to_string(), h))
         })
         .collect()
@@ -57,14 +57,12 @@ fn output_hashes(
 
 /// Records the current hash of `file` in `stage`'s manifest, after a later step of the
 /// same run legitimately rewrote it (the robust loop adds its runs to `closed_loop.json`).
-pub fn reseal(dir: &Path, stage: &str, file: &str) -> Result<(), PipelineError> {
-    let mpath = dir.join(format!("manifest_{stage}.json"));
-    let text = std::fs::read_to_string(&mpath)
-        .map_err(|e| fail(stage, format!("{}: {e}", mpath.display())))?;
-    let mut m: Manifest = serde_json::from_str(&text)
-        .map_err(|e| fail(stage, format!("{}: {e}", mpath.display())))?;
+pub fn reseal(dir: &RunDir, stage: Stage, file: &str) -> Result<(), PipelineError> {
+    let mpath = dir.manifest(stage.name());
+    let text = std::fs::read_to_string(&mpath).map_err(|e| fail_at(stage, &mpath, e))?;
+    let mut m: Manifest = serde_json::from_str(&text).map_err(|e| fail_at(stage, &mpath, e))?;
     let p = dir.join(file);
-    let h = sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
+    let h = sha_file(&p).map_err(|e| fail_at(stage, &p, e))?;
     m.output_hashes.insert(file.to_string(), h);
     let json = serde_json::to_string_pretty(&m).map_err(|e| fail(stage, e))?;
     write_atomic(&mpath, json.as_bytes()).map_err(|e| fail(stage, e))
@@ -85,7 +83,7 @@ pub(super) fn settings_hash<T: Serialize>(v: &T) -> String {
 
 /// The run directory and what happened so far.
 pub(super) struct Ctx<'a> {
-    pub(super) dir: PathBuf,
+    pub(super) dir: RunDir,
     pub(super) opts: &'a RunOptions,
     pub(super) reports: Vec<StageReport>,
 }
@@ -94,13 +92,14 @@ impl Ctx<'_> {
     /// Runs `body` unless the manifest says its inputs are unchanged.
     pub(super) fn stage(
         &mut self,
-        name: &str,
+        stage: Stage,
         inputs: BTreeMap<String, String>,
         outputs: &[&str],
-        body: impl FnOnce(&Path) -> Result<String, PipelineError>,
+        body: impl FnOnce(&RunDir) -> Result<String, PipelineError>,
     ) -> Result<(), PipelineError> {
-        let mpath = self.dir.join(format!("manifest_{name}.json"));
-        let forced = self.opts.force.iter().any(|f| f == name);
+        let name = stage.name();
+        let mpath = self.dir.manifest(name);
+        let forced = self.opts.force.contains(&stage);
         let mut note = None;
         if !forced {
             match self.unchanged(&mpath, &inputs, outputs) {
@@ -122,7 +121,9 @@ impl Ctx<'_> {
         }
         let t = Instant::now();
         // Labelling and seed stages draw their own progress bar; the others show a spinner.
-        let spinner = if self.opts.progress && !["sample", "validate", "seeds"].contains(&name) {
+        let spinner = if self.opts.progress
+            && ![Stage::Sample, Stage::Validate, Stage::Seeds].contains(&stage)
+        {
             let b = indicatif::ProgressBar::new_spinner();
             b.set_style(
                 indicatif::ProgressStyle::with_template("{spinner} [{prefix:>11}] {elapsed}")
@@ -148,7 +149,7 @@ impl Ctx<'_> {
             version: env!("CARGO_PKG_VERSION").into(),
             inputs: inputs.clone(),
             outputs: outputs.iter().map(|s| s.to_string()).collect(),
-            output_hashes: output_hashes(&self.dir, name, outputs)?,
+            output_hashes: output_hashes(self.dir.path(), name, outputs)?,
             seconds,
         };
         let json = serde_json::to_string_pretty(&m).map_err(|e| fail(name, e))?;
@@ -200,8 +201,8 @@ impl Ctx<'_> {
     }
 
     /// SHA-256 of a file of the run directory (the error names the stage and the file).
-    pub(super) fn hash(&self, stage: &str, file: &str) -> Result<String, PipelineError> {
+    pub(super) fn hash(&self, stage: Stage, file: &str) -> Result<String, PipelineError> {
         let p = self.dir.join(file);
-        sha_file(&p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
+        sha_file(&p).map_err(|e| fail_at(stage, &p, e))
     }
 }

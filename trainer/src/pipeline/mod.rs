@@ -28,41 +28,157 @@ pub mod manifest;
 pub mod robust;
 mod stages;
 
-use crate::io::write_atomic;
+use crate::io::{write_atomic, RunDir};
 use crate::problem::ProblemConfig;
 use crate::study::report::Timing;
 use manifest::Ctx;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-/// The stages in order.
-pub const STAGES: [&str; 9] = [
-    "sample",
-    "validate",
-    "train",
-    "certify",
-    "export",
-    "closed_loop",
-    "seeds",
-    "plots",
-    "report",
-];
+/// A stage of `trainer run`, in pipeline order (`Ord` is that order). Its name — the
+/// spelling of `--force <stage>`, of `manifest_<stage>.json` and of the stage lines — is
+/// [`Stage::name`]; [`str::parse`] reads it back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stage {
+    /// The labelled sampling plan (`dataset.bin`, `dataset.csv`).
+    Sample,
+    /// MPC labels of random states (`validation.bin`).
+    Validate,
+    /// The nominal and regularized nets.
+    Train,
+    /// Theorem 1 for both nets.
+    Certify,
+    /// The regularized net for controller-core.
+    Export,
+    /// MPC and both nets in the closed loop.
+    ClosedLoop,
+    /// The nets from other seeds' initial weights.
+    Seeds,
+    /// The figures.
+    Plots,
+    /// The report, Markdown and HTML.
+    Report,
+}
 
-/// A failure, naming the stage and the cause.
+impl Stage {
+    /// The stages in order.
+    pub const ALL: [Stage; 9] = [
+        Stage::Sample,
+        Stage::Validate,
+        Stage::Train,
+        Stage::Certify,
+        Stage::Export,
+        Stage::ClosedLoop,
+        Stage::Seeds,
+        Stage::Plots,
+        Stage::Report,
+    ];
+
+    /// The stage's name (`closed_loop` for [`Stage::ClosedLoop`]).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Stage::Sample => "sample",
+            Stage::Validate => "validate",
+            Stage::Train => "train",
+            Stage::Certify => "certify",
+            Stage::Export => "export",
+            Stage::ClosedLoop => "closed_loop",
+            Stage::Seeds => "seeds",
+            Stage::Plots => "plots",
+            Stage::Report => "report",
+        }
+    }
+}
+
+/// The names of the stages in order ([`Stage::ALL`]'s names).
+pub const STAGES: [&str; 9] = {
+    let mut names = [""; 9];
+    let mut i = 0;
+    while i < names.len() {
+        names[i] = Stage::ALL[i].name();
+        i += 1;
+    }
+    names
+};
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A name that is not a stage's.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("unknown stage `{0}` (one of {list})", list = STAGES.join(", "))]
+pub struct UnknownStage(pub String);
+
+impl std::str::FromStr for Stage {
+    type Err = UnknownStage;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Stage::ALL
+            .into_iter()
+            .find(|st| st.name() == s)
+            .ok_or_else(|| UnknownStage(s.to_string()))
+    }
+}
+
+/// A failure, naming the stage (or `setup`) and keeping its cause as the error's source.
 #[derive(Debug, thiserror::Error)]
 #[error("stage `{stage}` failed: {cause}")]
 pub struct PipelineError {
-    /// The stage.
+    /// The stage (`setup` before the first stage).
     pub stage: String,
     /// What went wrong (names the file or setting).
-    pub cause: String,
+    #[source]
+    pub cause: Box<dyn std::error::Error + Send + Sync>,
 }
 
-fn fail(stage: &str, e: impl std::fmt::Display) -> PipelineError {
+/// A failure of `stage` (a [`Stage`] or `"setup"`) caused by `e` (an error, or a message).
+fn fail(
+    stage: impl std::fmt::Display,
+    e: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+) -> PipelineError {
     PipelineError {
         stage: stage.to_string(),
-        cause: e.to_string(),
+        cause: e.into(),
     }
+}
+
+/// A cause that concerns a file (or names what was being done): that, then the error
+/// (`"{context}: {source}"`).
+#[derive(Debug, thiserror::Error)]
+#[error("{context}: {source}")]
+pub struct InContext {
+    /// The file (or the files and what was done with them).
+    pub context: String,
+    /// What went wrong with it.
+    #[source]
+    pub source: Box<dyn std::error::Error + Send + Sync>,
+}
+
+/// A failure of `stage` with the file `path` (reading, writing or parsing it).
+fn fail_at(
+    stage: impl std::fmt::Display,
+    path: &std::path::Path,
+    e: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+) -> PipelineError {
+    fail_in(stage, path.display(), e)
+}
+
+/// A failure of `stage` in `context` (what was being done, with which files).
+fn fail_in(
+    stage: impl std::fmt::Display,
+    context: impl std::fmt::Display,
+    e: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+) -> PipelineError {
+    fail(
+        stage,
+        InContext {
+            context: context.to_string(),
+            source: e.into(),
+        },
+    )
 }
 
 /// What happened to a stage.
@@ -88,13 +204,13 @@ pub struct RunOptions {
     /// Run directory root (the run goes to `root/<name>/`).
     pub root: PathBuf,
     /// Stages to redo even if unchanged.
-    pub force: Vec<String>,
+    pub force: Vec<Stage>,
     /// Progress bars on a terminal.
     pub progress: bool,
     /// Called after each stage (for one summary line per stage).
     pub on_stage: Option<fn(&StageReport)>,
     /// Stop after this stage (default: run all).
-    pub until: Option<String>,
+    pub until: Option<Stage>,
 }
 
 /// Runs the pipeline for a problem held in memory (built in code, or holding a custom
@@ -117,12 +233,12 @@ pub fn run(
     opts: &RunOptions,
 ) -> Result<Vec<StageReport>, PipelineError> {
     let dir = opts.root.join(&cfg.name);
-    std::fs::create_dir_all(&dir).map_err(|e| fail("setup", format!("{}: {e}", dir.display())))?;
+    std::fs::create_dir_all(&dir).map_err(|e| fail_at("setup", &dir, e))?;
     let _lock = lock(&dir)?;
     remove_stale_temporaries(&dir);
     same_problem(&dir, cfg, opts)?;
-    write_atomic(&dir.join("problem.toml"), config_text.as_bytes())
-        .map_err(|e| fail("setup", e))?;
+    let dir = RunDir::new(dir);
+    write_atomic(&dir.problem(), config_text.as_bytes()).map_err(|e| fail("setup", e))?;
     let mut cx = Ctx {
         dir,
         opts,
@@ -145,8 +261,8 @@ pub fn run(
                 })
                 .collect(),
         };
-        cx.stage(stage.name, inputs, &outputs, |d| (stage.body)(&env, d))?;
-        if opts.until.as_deref() == Some(stage.name) {
+        cx.stage(stage.stage, inputs, &outputs, |d| (stage.body)(&env, d))?;
+        if opts.until == Some(stage.stage) {
             break;
         }
     }
@@ -157,7 +273,7 @@ pub fn run(
 /// killed mid-write left in the run directory or its `plots/`: with the lock held, no other
 /// process is writing them.
 fn remove_stale_temporaries(dir: &std::path::Path) {
-    for d in [dir.to_path_buf(), dir.join("plots")] {
+    for d in [dir.to_path_buf(), RunDir::new(dir).plots()] {
         let Ok(entries) = std::fs::read_dir(&d) else {
             continue;
         };
@@ -177,11 +293,11 @@ fn same_problem(
     cfg: &ProblemConfig,
     opts: &RunOptions,
 ) -> Result<(), PipelineError> {
-    let p = dir.join("problem.toml");
+    let p = RunDir::new(dir).problem();
     let Ok(text) = std::fs::read_to_string(&p) else {
         return Ok(());
     };
-    let forced = opts.force.iter().any(|f| f == "sample");
+    let forced = opts.force.contains(&Stage::Sample);
     let refuse = |why: String| {
         fail(
             "setup",
@@ -230,7 +346,7 @@ fn lock(dir: &std::path::Path) -> Result<std::fs::File, PipelineError> {
         .truncate(false)
         .write(true)
         .open(&p)
-        .map_err(|e| fail("setup", format!("{}: {e}", p.display())))?;
+        .map_err(|e| fail_at("setup", &p, e))?;
     match f.try_lock() {
         Ok(()) => Ok(f),
         Err(std::fs::TryLockError::WouldBlock) => Err(fail(
@@ -242,7 +358,7 @@ fn lock(dir: &std::path::Path) -> Result<std::fs::File, PipelineError> {
             ),
         )),
         Err(std::fs::TryLockError::Error(e)) => {
-            Err(fail("setup", format!("{}: {e}", p.display())))
+            Err(fail_at("setup", &p, e))
         }
     }
 }
@@ -251,8 +367,14 @@ fn lock(dir: &std::path::Path) -> Result<std::fs::File, PipelineError> {
 mod tests {
     #[test]
     fn the_stage_list_is_the_documented_order() {
-        let names: Vec<&str> = super::stages::ALL.iter().map(|s| s.name).collect();
-        assert_eq!(names, super::STAGES);
+        let names: Vec<super::Stage> = super::stages::ALL.iter().map(|s| s.stage).collect();
+        assert_eq!(names, super::Stage::ALL);
+        let spelled: Vec<&str> = super::Stage::ALL.iter().map(|s| s.name()).collect();
+        assert_eq!(spelled, super::STAGES);
+        for st in super::Stage::ALL {
+            assert_eq!(st.name().parse::<super::Stage>().unwrap(), st);
+        }
+        assert!("closed-loop".parse::<super::Stage>().is_err());
     }
 
     #[test]

@@ -14,11 +14,11 @@
 //! (`proven` / `sampled` / `unknown`, from the design's terminal region); `verdict_detail`
 //! the same with the message.
 
-use super::{PipelineError, RunOptions};
+use super::{PipelineError, RunOptions, Stage};
 use crate::certify::certificate::Certificate;
 use crate::certify::tier::Tier;
 use crate::certify::Model;
-use crate::io::write_atomic;
+use crate::io::{write_atomic, RunDir};
 use crate::mpc::law::MpcLaw;
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::ProblemConfig;
@@ -31,7 +31,7 @@ use crate::study::robust::*;
 use crate::study::scenarios::{initial_states, ClosedLoop};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Errors of the robust design loop.
 #[derive(Debug, thiserror::Error)]
@@ -42,9 +42,22 @@ pub enum RobustRunError {
     /// A pipeline stage of the robust run failed.
     #[error(transparent)]
     Pipeline(#[from] PipelineError),
-    /// Reading or writing a file of the robust run.
+    /// Reading or writing a file of the robust run, or a step that writes into a directory
+    /// of it (the refinement, its figure).
+    #[error("robust design: {path}: {source}")]
+    File {
+        /// The file or directory.
+        path: String,
+        /// What went wrong.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The robust run's certificate does not read or re-check.
     #[error("robust design: {0}")]
-    Io(String),
+    Certificate(#[from] crate::certify::file::CertFileError),
+    /// The tightened problem cannot be written as a problem file.
+    #[error("robust design: {0}")]
+    Problem(#[from] toml::ser::Error),
 }
 
 /// What a robust run produced (also written as `robust.json`).
@@ -121,11 +134,11 @@ pub const CHECK_STATES: usize = 200;
 /// The robust run's `certificate.json` in `dir`, verified and re-checked against its net,
 /// its problem `rcfg` and its dataset.
 fn read_run_certificate(
-    dir: &Path,
+    dir: &RunDir,
     net: &Model,
     rcfg: &ProblemConfig,
 ) -> Result<crate::certify::file::CertificateFile, RobustRunError> {
-    let dpath = dir.join("dataset.bin");
+    let dpath = dir.dataset();
     let data = std::fs::read(&dpath).map_err(|e| io(&dpath, e))?;
     let (model_hash, dataset_hash) = (net.content_hash(), crate::io::sha256_hex(&data));
     let against = crate::certify::file::Against {
@@ -134,13 +147,62 @@ fn read_run_certificate(
         dataset_hash: Some(&dataset_hash),
         cells_csv: None,
     };
-    crate::certify::file::read_certificate(&dir.join("certificate.json"), false, &against)
-        .map(|(f, _)| f)
-        .map_err(|e| RobustRunError::Io(e.to_string()))
+    Ok(
+        crate::certify::file::read_certificate(&dir.certificate(), false, &against)
+            .map(|(f, _)| f)?,
+    )
 }
 
-fn io(p: &Path, e: impl std::fmt::Display) -> RobustRunError {
-    RobustRunError::Io(format!("{}: {e}", p.display()))
+fn io(p: &Path, e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> RobustRunError {
+    RobustRunError::File {
+        path: p.display().to_string(),
+        source: e.into(),
+    }
+}
+
+/// The net the design loop judges, its certificate and what the verdict rests on.
+struct Judged {
+    net: Model,
+    cert: Certificate,
+    /// The tier the certificate file states (never recomputed here).
+    guarantee: crate::certify::tier::Guarantee,
+    /// The check at fresh states: run on a refined certificate only (the Theorem-1
+    /// certificate of the stages has none; the verdict then rests on it).
+    check: Option<crate::certify::file::CheckSummary>,
+    excluded: Option<crate::certify::refine::Excluded>,
+    /// The f32 allowance of the net's export (libm tanh).
+    allowance: f64,
+}
+
+impl Judged {
+    /// The verdict's evidence, with the Monte Carlo counts of feasible states in an excluded
+    /// box and outside X (a box counts as proven infeasible only by `robust::exclusion`).
+    fn evidence(
+        &self,
+        cfg: &ProblemConfig,
+        d: &Design,
+        feasible_in_excluded: usize,
+        feasible_outside_domain: usize,
+    ) -> Evidence {
+        Evidence {
+            design_eps: cfg.robust.eps,
+            certified_eps: self.cert.eps,
+            f32_allowance: self.allowance,
+            recursive_feasibility: d.recursive_feasibility(),
+            eps_sound: self.guarantee.guarantee == Tier::Sound,
+            eps_rests_on: self.guarantee.assumptions.clone(),
+            check: match &self.check {
+                None => Check::NotRun,
+                Some(k) if k.passed => Check::Passed,
+                Some(_) => Check::Failed,
+            },
+            excluded_unproven: self.excluded.as_ref().map_or(0, |e| {
+                crate::robust::exclusion::unproven_boxes(cfg, &d.stages, &e.boxes)
+            }),
+            feasible_in_excluded,
+            feasible_outside_domain,
+        }
+    }
 }
 
 /// The robust design loop for `cfg` (with `cfg.robust.eps` > 0): design the tightened
@@ -150,142 +212,143 @@ fn io(p: &Path, e: impl std::fmt::Display) -> RobustRunError {
 pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, RobustRunError> {
     let d = design(cfg)?;
     let rcfg = robust_config(cfg, &d);
-    let text = toml::to_string(&rcfg).map_err(|e| RobustRunError::Io(e.to_string()))?;
-    let root: PathBuf = opts.root.join(&cfg.name);
-    let dir = root.join(&rcfg.name);
+    let text = toml::to_string(&rcfg)?;
+    let root = RunDir::new(opts.root.join(&cfg.name));
+    let dir = RunDir::new(root.join(&rcfg.name));
     let mut o = opts.clone();
-    o.root = root.clone();
-    o.until = Some("closed_loop".into());
+    o.root = root.path().to_path_buf();
+    o.until = Some(Stage::ClosedLoop);
     crate::pipeline::run(&rcfg, &text, &o)?;
-    let model_path = dir.join("model_regularized.bin");
-    let mut net = Model::load(&model_path).map_err(|e| io(&model_path, e))?;
+    let mpath = dir.model_regularized();
+    let mut net = Model::load(&mpath).map_err(|e| io(&mpath, e))?;
     let cfile = read_run_certificate(&dir, &net, &rcfg)?;
-    let cert = cfile.base;
-    net.certificate = Some(cert.clone());
-    let mut cert = cert;
-    let rf = d.recursive_feasibility();
-    let mut excluded = None;
-    // The tier the certificate file states (never recomputed here).
-    let mut guarantee = cfile.guarantee.clone();
-    // The check at fresh states runs on a refined certificate; the Theorem-1 certificate of
-    // the stages has none (the verdict then rests on it). An excluded box counts as proven
-    // infeasible only by `robust::exclusion`.
-    let mut check: Option<crate::certify::file::CheckSummary> = None;
-    let check_of = |k: &Option<crate::certify::file::CheckSummary>| match k {
-        None => Check::NotRun,
-        Some(k) if k.passed => Check::Passed,
-        Some(_) => Check::Failed,
+    net.certificate = Some(cfile.base.clone());
+    let mut j = Judged {
+        allowance: f32_allowance(&cfg.name, &net, &cfile.base),
+        net,
+        cert: cfile.base,
+        guarantee: cfile.guarantee,
+        check: None,
+        excluded: None,
     };
-    let evidence = |g: &crate::certify::tier::Guarantee,
-                    eps: f64,
-                    allowance: f64,
-                    check: Check,
-                    excluded: Option<&crate::certify::refine::Excluded>,
-                    feasible_in_excluded: usize,
-                    feasible_outside_domain: usize| Evidence {
-        design_eps: cfg.robust.eps,
-        certified_eps: eps,
-        f32_allowance: allowance,
-        recursive_feasibility: rf,
-        eps_sound: g.guarantee == Tier::Sound,
-        eps_rests_on: g.assumptions.clone(),
-        check,
-        excluded_unproven: excluded.map_or(0, |e| {
-            crate::robust::exclusion::unproven_boxes(cfg, &d.stages, &e.boxes)
-        }),
-        feasible_in_excluded,
-        feasible_outside_domain,
-    };
-    let mut allowance = f32_allowance(&cfg.name, &net, &cert);
-    let mut v = verdict(&evidence(
-        &guarantee,
-        cert.eps,
-        allowance,
-        check_of(&check),
-        None,
-        0,
-        0,
-    ));
+    let mut v = verdict(&j.evidence(cfg, &d, 0, 0));
     let mut refinement = None;
     if v.status == VerdictStatus::NotCertified && cfg.robust.refine {
-        // The design loop's second step: refine data and network with local certificates
-        // until the certified ε meets the design ε (or the refinement budget is spent).
-        let mut fcfg = rcfg.clone();
-        // Room for the exported f32 allowance, which the verdict counts too.
-        fcfg.refine.target_eps = cfg.robust.eps * crate::robust::REFINE_TARGET_FRACTION;
-        let rdir = dir.join("refine");
-        std::fs::create_dir_all(&rdir).map_err(|e| io(&rdir, e))?;
-        let r = crate::certify::refine::refine(
-            &fcfg,
-            &fcfg.refine,
-            Some(&rdir.join("refine_state.bin")),
-            &crate::certify::refine::RefineOptions::default(),
-        )
-        .map_err(|e| io(&rdir, e))?;
-        // The check at fresh states, as `refine --check` runs it: its result is written into
-        // the certificate (a failed check leaves `met: false`) and a failed check makes the
-        // verdict `not_certified` below.
-        let checked =
-            crate::certify::refine::check(&fcfg, &fcfg.refine, &r, CHECK_STATES, cfg.robust.seed);
-        crate::io::write_atomic(
-            &rdir.join("check.json"),
-            crate::certify::refine::pretty(&checked).as_bytes(),
-        )
-        .map_err(|e| io(&rdir, e))?;
-        let lc = crate::certify::refine::write_outputs(
-            &fcfg,
-            &fcfg.refine,
-            &r,
-            &rdir,
-            Some(&checked),
-            &|c| crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c),
-        )
-        .map_err(|e| io(&rdir, e))?;
-        // The ε-per-round curve of the refinement, beside its outputs.
-        let fig = crate::study::plots::refine_rounds(&r.state.log, fcfg.refine.target_eps)
-            .map_err(|e| io(&rdir, e))?;
-        let png = crate::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)
-            .map_err(|e| io(&rdir, e))?;
-        for (name, bytes) in [
-            ("refine_rounds.svg", fig.svg.as_bytes()),
-            ("refine_rounds.png", &png[..]),
-        ] {
-            let p = rdir.join(name);
-            crate::io::write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
-        }
-        refinement = Some(Refinement {
-            rounds: r.state.log.len(),
-            certified_eps: lc.base.eps,
-            figure: "refine/refine_rounds.svg".into(),
-        });
-        if lc.base.eps < cert.eps {
-            check = lc.check.clone();
-            net = r.model;
-            net.certificate = Some(lc.base.clone());
-            cert = lc.base;
-            guarantee = lc.guarantee;
-            excluded = lc.local.excluded;
-            allowance = f32_allowance(&cfg.name, &net, &cert);
-            v = verdict(&evidence(
-                &guarantee,
-                cert.eps,
-                allowance,
-                check_of(&check),
-                excluded.as_ref(),
-                0,
-                0,
-            ));
-        }
+        refinement = Some(refine_step(cfg, &rcfg, &dir, &mut j)?);
+        v = verdict(&j.evidence(cfg, &d, 0, 0));
     }
-
     // The study (skipped when closed_loop.json already holds it for the same inputs).
-    let clpath = dir.join("closed_loop.json");
+    let clpath = dir.closed_loop();
     let cltext = std::fs::read_to_string(&clpath).map_err(|e| io(&clpath, e))?;
     let mut cl: ClosedLoop = serde_json::from_str(&cltext).map_err(|e| io(&clpath, e))?;
-    let nominal_hash = std::fs::read(root.join("model_regularized.bin"))
+    let inputs = study_inputs(cfg, &rcfg, &root, &j.cert);
+    let spath = dir.join("robust_study.json");
+    let cached: Option<(String, RobustReport)> = std::fs::read_to_string(&spath)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    if let Some((inp, rep)) = cached {
+        if inp == inputs && cl.contains_key("robust") && rep.verdict_detail == v {
+            return Ok(rep);
+        }
+    }
+    let (rep, st) = study_report(cfg, &rcfg, &root, d, j, refinement);
+    for (k, runs) in st {
+        cl.insert(k, runs);
+    }
+    let text_cl = serde_json::to_string(&cl).map_err(|e| io(&clpath, e))?;
+    write_atomic(&clpath, text_cl.as_bytes()).map_err(|e| io(&clpath, e))?;
+    super::manifest::reseal(&dir, Stage::ClosedLoop, RunDir::CLOSED_LOOP)?;
+    let json = serde_json::to_string_pretty(&rep).map_err(|e| io(dir.path(), e))?;
+    write_atomic(&dir.robust(), json.as_bytes()).map_err(|e| io(dir.path(), e))?;
+    write_atomic(&dir.join("robust.md"), markdown(&rep).as_bytes())
+        .map_err(|e| io(dir.path(), e))?;
+    let cached = serde_json::to_string(&(&inputs, &rep)).map_err(|e| io(&spath, e))?;
+    write_atomic(&spath, cached.as_bytes()).map_err(|e| io(&spath, e))?;
+    // The report stage (re-runs because closed_loop.json changed).
+    let mut o = opts.clone();
+    o.root = root.path().to_path_buf();
+    crate::pipeline::run(&rcfg, &text, &o)?;
+    Ok(rep)
+}
+
+/// The design loop's second step: refine data and network with local certificates until
+/// the certified ε meets the design ε (or the refinement budget is spent), in `dir/refine/`;
+/// the refined net replaces the judged one when its certified ε is smaller.
+fn refine_step(
+    cfg: &ProblemConfig,
+    rcfg: &ProblemConfig,
+    dir: &RunDir,
+    j: &mut Judged,
+) -> Result<Refinement, RobustRunError> {
+    let mut fcfg = rcfg.clone();
+    // Room for the exported f32 allowance, which the verdict counts too.
+    fcfg.refine.target_eps = cfg.robust.eps * crate::robust::REFINE_TARGET_FRACTION;
+    let rdir = RunDir::new(dir.join("refine"));
+    std::fs::create_dir_all(rdir.path()).map_err(|e| io(rdir.path(), e))?;
+    let r = crate::certify::refine::refine(
+        &fcfg,
+        &fcfg.refine,
+        Some(&rdir.join("refine_state.bin")),
+        &crate::certify::refine::RefineOptions::default(),
+    )
+    .map_err(|e| io(rdir.path(), e))?;
+    // The check at fresh states, as `refine --check` runs it: its result is written into
+    // the certificate (a failed check leaves `met: false`) and a failed check makes the
+    // verdict `not_certified`.
+    let checked =
+        crate::certify::refine::check(&fcfg, &fcfg.refine, &r, CHECK_STATES, cfg.robust.seed);
+    let text = crate::certify::refine::pretty(&checked);
+    write_atomic(&rdir.check(), text.as_bytes()).map_err(|e| io(rdir.path(), e))?;
+    let lc = crate::certify::refine::write_outputs(
+        &fcfg,
+        &fcfg.refine,
+        &r,
+        rdir.path(),
+        Some(&checked),
+        &|c| crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c),
+    )
+    .map_err(|e| io(rdir.path(), e))?;
+    // The ε-per-round curve of the refinement, beside its outputs.
+    let fig = crate::study::plots::refine_rounds(&r.state.log, fcfg.refine.target_eps)
+        .map_err(|e| io(rdir.path(), e))?;
+    let png = crate::study::plots::to_png(fig.name, &fig.svg, cfg.plots.png_scale as f32)
+        .map_err(|e| io(rdir.path(), e))?;
+    for (name, bytes) in [
+        ("refine_rounds.svg", fig.svg.as_bytes()),
+        ("refine_rounds.png", &png[..]),
+    ] {
+        let p = rdir.join(name);
+        write_atomic(&p, bytes).map_err(|e| io(&p, e))?;
+    }
+    let refinement = Refinement {
+        rounds: r.state.log.len(),
+        certified_eps: lc.base.eps,
+        figure: "refine/refine_rounds.svg".into(),
+    };
+    if lc.base.eps < j.cert.eps {
+        j.check = lc.check.clone();
+        j.net = r.model;
+        j.net.certificate = Some(lc.base.clone());
+        j.cert = lc.base;
+        j.guarantee = lc.guarantee;
+        j.excluded = lc.local.excluded;
+        j.allowance = f32_allowance(&cfg.name, &j.net, &j.cert);
+    }
+    Ok(refinement)
+}
+
+/// What the cached study depends on: the version, the nominal net, the tightened problem,
+/// the judged certificate and the robust and closed-loop settings.
+fn study_inputs(
+    cfg: &ProblemConfig,
+    rcfg: &ProblemConfig,
+    root: &RunDir,
+    cert: &Certificate,
+) -> String {
+    let nominal_hash = std::fs::read(root.model_regularized())
         .map(|b| crate::io::hex(&<sha2::Sha256 as sha2::Digest>::digest(&b)))
         .unwrap_or_default();
-    let inputs = format!(
+    format!(
         "{}|{}|{}|{}|{}|{}",
         env!("CARGO_PKG_VERSION"),
         nominal_hash,
@@ -293,57 +356,55 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         cert.hash,
         serde_json::to_string(&cfg.robust).unwrap_or_default(),
         serde_json::to_string(&cfg.closed_loop).unwrap_or_default()
-    );
-    let spath = dir.join("robust_study.json");
-    let cached: Option<(String, RobustReport)> = std::fs::read_to_string(&spath)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
-    let up = initial_states(cfg)[0].clone();
-    if let Some((inp, rep)) = cached {
-        if inp == inputs && cl.contains_key("robust") && rep.verdict_detail == v {
-            return Ok(rep);
-        }
-    }
+    )
+}
+
+/// The nominal design's net (from the nominal run in `root`) and its certified ε, for
+/// comparison; `None` when it does not read.
+fn load_nominal(root: &RunDir) -> Option<(Model, f64)> {
+    let m = Model::load(&root.model_regularized()).ok()?;
+    let (c, _) = crate::certify::file::read_certificate(
+        &root.certificate(),
+        false,
+        &crate::certify::file::Against {
+            model_hash: Some(&m.content_hash()),
+            ..Default::default()
+        },
+    )
+    .ok()?;
+    Some((m, c.base.eps))
+}
+
+/// The robust closed-loop study of the judged net and its report (with the final verdict,
+/// which counts the Monte Carlo states inside excluded boxes and outside X); also the
+/// study's runs per key, for `closed_loop.json`.
+fn study_report(
+    cfg: &ProblemConfig,
+    rcfg: &ProblemConfig,
+    root: &RunDir,
+    d: Design,
+    j: Judged,
+    refinement: Option<Refinement>,
+) -> (RobustReport, ClosedLoop) {
     let t = std::time::Instant::now();
-    let upswing_feasible = MpcLaw::new(&rcfg).solve(&up, None).0.status == SqpStatus::Converged;
-    let mc = feasible_states(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
+    let up = initial_states(cfg)[0].clone();
+    let upswing_feasible = MpcLaw::new(rcfg).solve(&up, None).0.status == SqpStatus::Converged;
+    let mc = feasible_states(rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
     // Feasible states the certificate does not cover (inside an excluded box): Corollary 1
     // needs ε on the whole feasible set, so the verdict cannot be `certified` then.
-    let feasible_in_excluded = excluded.as_ref().map_or(0, |e| {
+    let feasible_in_excluded = j.excluded.as_ref().map_or(0, |e| {
         mc.iter()
             .filter(|x| crate::certify::statistical::in_any_box(x, &e.boxes))
             .count()
     });
     // The feasible set beyond X (within the OCP's state bounds): ε must cover it too.
-    let outside = feasible_outside_domain(&rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
-    let v = verdict(&evidence(
-        &guarantee,
-        cert.eps,
-        allowance,
-        check_of(&check),
-        excluded.as_ref(),
-        feasible_in_excluded,
-        outside.len(),
-    ));
-    // The nominal design's net (from the nominal run in `DIR/<name>/`), for comparison.
-    let load_nominal = || -> Option<(Model, f64)> {
-        let m = Model::load(&root.join("model_regularized.bin")).ok()?;
-        let (c, _) = crate::certify::file::read_certificate(
-            &root.join("certificate.json"),
-            false,
-            &crate::certify::file::Against {
-                model_hash: Some(&m.content_hash()),
-                ..Default::default()
-            },
-        )
-        .ok()?;
-        Some((m, c.base.eps))
-    };
-    let nominal = load_nominal();
+    let outside = feasible_outside_domain(rcfg, cfg.robust.monte_carlo_states, cfg.robust.seed);
+    let v = verdict(&j.evidence(cfg, &d, feasible_in_excluded, outside.len()));
+    let nominal = load_nominal(root);
     let st = study(
         cfg,
-        &rcfg,
-        (&net, cert.eps),
+        rcfg,
+        (&j.net, j.cert.eps),
         nominal.as_ref().map(|(m, e)| (m, *e)),
         &mc,
     );
@@ -359,12 +420,13 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         a[..n].iter().map(|r| r.cost).sum::<f64>() / b[..n].iter().map(|r| r.cost).sum::<f64>()
     };
     let (rm, nm) = (&st["robust_mpc"], &st["nominal_mpc"]);
+    let cert = &j.cert;
     let rep = RobustReport {
         design_eps: v.design_eps,
         certified_eps: v.certified_eps,
         f32_allowance: v.f32_allowance,
         verdict: v.status.name().into(),
-        guarantee: guarantee.guarantee,
+        guarantee: j.guarantee.guarantee,
         recursive_feasibility: v.recursive_feasibility,
         design: d,
         verdict_detail: v,
@@ -382,26 +444,11 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
         cost_ratio_mean: ratio(rm, nm),
         cost_ratio_upswing: rm[0].cost / nm[0].cost,
         study_seconds,
-        excluded,
+        excluded: j.excluded,
         feasible_in_excluded,
         refinement,
     };
-    for (k, runs) in st {
-        cl.insert(k, runs);
-    }
-    let text = serde_json::to_string(&cl).map_err(|e| io(&clpath, e))?;
-    write_atomic(&clpath, text.as_bytes()).map_err(|e| io(&clpath, e))?;
-    super::manifest::reseal(&dir, "closed_loop", "closed_loop.json")?;
-    let json = serde_json::to_string_pretty(&rep).map_err(|e| io(&dir, e))?;
-    write_atomic(&dir.join("robust.json"), json.as_bytes()).map_err(|e| io(&dir, e))?;
-    write_atomic(&dir.join("robust.md"), markdown(&rep).as_bytes()).map_err(|e| io(&dir, e))?;
-    let cached = serde_json::to_string(&(&inputs, &rep)).map_err(|e| io(&spath, e))?;
-    write_atomic(&spath, cached.as_bytes()).map_err(|e| io(&spath, e))?;
-    // The report stage (re-runs because closed_loop.json changed).
-    let mut o = opts.clone();
-    o.root = root;
-    crate::pipeline::run(&rcfg, &text, &o)?;
-    Ok(rep)
+    (rep, st)
 }
 
 /// `robust.md`: design, verdict, Table II rows and the Monte Carlo summaries.

@@ -6,12 +6,12 @@
 //! ```
 
 use super::manifest::{settings_hash, sha_file, Ctx};
-use super::{fail, PipelineError};
+use super::{fail, fail_at, fail_in, PipelineError, Stage};
 use crate::certify::certificate::CertifyOptions;
 use crate::certify::file::CertificateFile;
 use crate::certify::Model;
 use crate::data::dataset::{generate, Dataset, GenerateOptions};
-use crate::io::write_atomic;
+use crate::io::{write_atomic, RunDir};
 use crate::learn::setpoint::Hold;
 use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
@@ -33,72 +33,78 @@ pub(super) struct Env<'a> {
 
 type Inputs = BTreeMap<String, String>;
 
-/// One stage of the pipeline.
-pub(super) struct Stage {
-    /// Its name (`manifest_<name>.json`, `--force <name>`).
-    pub(super) name: &'static str,
+/// One stage of the pipeline: what it reads, writes and does.
+pub(super) struct Step {
+    /// Which stage (its name: `manifest_<name>.json`, `--force <name>`).
+    pub(super) stage: Stage,
     /// Input name → hash.
     pub(super) inputs: fn(&Ctx, &ProblemConfig) -> Result<Inputs, PipelineError>,
     /// The files it writes, relative to the run directory.
     pub(super) outputs: fn() -> Vec<String>,
     /// Does the work in the run directory; returns a one-line summary.
-    pub(super) body: fn(&Env, &Path) -> Result<String, PipelineError>,
+    pub(super) body: fn(&Env, &RunDir) -> Result<String, PipelineError>,
 }
 
-/// The stages in order (their names are [`super::STAGES`]).
-pub(super) const ALL: [Stage; 9] = [
-    Stage {
-        name: "sample",
+/// The stages in order ([`Stage::ALL`]).
+pub(super) const ALL: [Step; 9] = [
+    Step {
+        stage: Stage::Sample,
         inputs: sample_inputs,
-        outputs: || files(&["dataset.bin", "dataset.csv"]),
+        outputs: || files(&[RunDir::DATASET, RunDir::DATASET_CSV]),
         body: sample,
     },
-    Stage {
-        name: "validate",
+    Step {
+        stage: Stage::Validate,
         inputs: validate_inputs,
-        outputs: || files(&["validation.bin"]),
+        outputs: || files(&[RunDir::VALIDATION]),
         body: validate,
     },
-    Stage {
-        name: "train",
+    Step {
+        stage: Stage::Train,
         inputs: train_inputs,
-        outputs: || files(&["model_nominal.bin", "model_regularized.bin"]),
+        outputs: || files(&[RunDir::MODEL_NOMINAL, RunDir::MODEL_REGULARIZED]),
         body: train_both,
     },
-    Stage {
-        name: "certify",
+    Step {
+        stage: Stage::Certify,
         inputs: certify_inputs,
-        outputs: || files(&["certificate.json", "certificate_nominal.json"]),
+        outputs: || files(&[RunDir::CERTIFICATE, RunDir::CERTIFICATE_NOMINAL]),
         body: certify_both,
     },
-    Stage {
-        name: "export",
+    Step {
+        stage: Stage::Export,
         inputs: export_inputs,
-        outputs: || files(&["weights.rs", "weights.bin", "export_report.json"]),
+        outputs: || {
+            files(&[
+                RunDir::WEIGHTS_RS,
+                RunDir::WEIGHTS_BIN,
+                RunDir::EXPORT_REPORT,
+            ])
+        },
         body: export,
     },
-    Stage {
-        name: "closed_loop",
+    Step {
+        stage: Stage::ClosedLoop,
         inputs: closed_loop_inputs,
-        outputs: || files(&["closed_loop.json"]),
+        outputs: || files(&[RunDir::CLOSED_LOOP]),
         body: closed_loop_study,
     },
-    Stage {
-        name: "seeds",
+    Step {
+        stage: Stage::Seeds,
         inputs: seeds_inputs,
-        outputs: || files(&["seeds.json"]),
+        outputs: || files(&[RunDir::SEEDS]),
         body: seeds,
     },
-    Stage {
-        name: "plots",
+    Step {
+        stage: Stage::Plots,
         inputs: plots_inputs,
         outputs: plot_files,
         body: plots,
     },
-    Stage {
-        name: "report",
+    Step {
+        stage: Stage::Report,
         inputs: report_inputs,
-        outputs: || files(&["report.md", "report.html"]),
+        outputs: || files(&[RunDir::REPORT_MD, RunDir::REPORT_HTML]),
         body: report,
     },
 ];
@@ -108,7 +114,7 @@ fn files(names: &[&str]) -> Vec<String> {
 }
 
 /// Hashes of the named files of the run directory.
-fn hashes(cx: &Ctx, stage: &str, names: &[&str]) -> Result<Inputs, PipelineError> {
+fn hashes(cx: &Ctx, stage: Stage, names: &[&str]) -> Result<Inputs, PipelineError> {
     let mut inputs = BTreeMap::new();
     for f in names {
         inputs.insert(f.to_string(), cx.hash(stage, f)?);
@@ -116,24 +122,23 @@ fn hashes(cx: &Ctx, stage: &str, names: &[&str]) -> Result<Inputs, PipelineError
     Ok(inputs)
 }
 
-fn load_dataset(stage: &str, p: &Path) -> Result<Dataset, PipelineError> {
+fn load_dataset(stage: Stage, p: &Path) -> Result<Dataset, PipelineError> {
     Dataset::load(p).map_err(|e| fail(stage, e))
 }
 
-fn load_model(stage: &str, p: &Path) -> Result<Model, PipelineError> {
+fn load_model(stage: Stage, p: &Path) -> Result<Model, PipelineError> {
     Model::load(p).map_err(|e| fail(stage, e))
 }
 
 /// The certificate `name` of the run directory `d`, verified (sealed, with its tier) and
 /// re-checked against the model `m`, the run's problem `cfg` and its `dataset.bin`.
 fn read_run_certificate(
-    stage: &str,
-    (d, cfg): (&Path, &ProblemConfig),
+    stage: Stage,
+    (d, cfg): (&RunDir, &ProblemConfig),
     name: &str,
     m: &Model,
 ) -> Result<CertificateFile, PipelineError> {
-    let data = std::fs::read(d.join("dataset.bin"))
-        .map_err(|e| fail(stage, format!("{}: {e}", d.join("dataset.bin").display())))?;
+    let data = std::fs::read(d.dataset()).map_err(|e| fail_at(stage, &d.dataset(), e))?;
     let (model_hash, dataset_hash) = (m.content_hash(), crate::io::sha256_hex(&data));
     let against = crate::certify::file::Against {
         model_hash: Some(&model_hash),
@@ -146,10 +151,9 @@ fn read_run_certificate(
         .map_err(|e| fail(stage, e))
 }
 
-fn load_json<T: serde::de::DeserializeOwned>(stage: &str, p: &Path) -> Result<T, PipelineError> {
-    let text =
-        std::fs::read_to_string(p).map_err(|e| fail(stage, format!("{}: {e}", p.display())))?;
-    serde_json::from_str(&text).map_err(|e| fail(stage, format!("{}: {e}", p.display())))
+fn load_json<T: serde::de::DeserializeOwned>(stage: Stage, p: &Path) -> Result<T, PipelineError> {
+    let text = std::fs::read_to_string(p).map_err(|e| fail_at(stage, p, e))?;
+    serde_json::from_str(&text).map_err(|e| fail_at(stage, p, e))
 }
 
 // ---- sample: the labelled sampling plan -------------------------------------------------
@@ -161,12 +165,12 @@ fn sample_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
     Ok(inputs)
 }
 
-fn sample(env: &Env, d: &Path) -> Result<String, PipelineError> {
+fn sample(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let g = GenerateOptions {
         shard: None,
         progress: env.progress,
     };
-    let ds = generate(env.cfg, &d.join("dataset.bin"), &g).map_err(|e| fail("sample", e))?;
+    let ds = generate(env.cfg, &d.dataset(), &g).map_err(|e| fail(Stage::Sample, e))?;
     let c = ds.counts();
     Ok(format!(
         "{} states: {} converged, {} soft, {} infeasible, {} failed, {} degenerate",
@@ -198,13 +202,13 @@ fn validate_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError
     Ok(inputs)
 }
 
-fn validate(env: &Env, d: &Path) -> Result<String, PipelineError> {
+fn validate(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let g = GenerateOptions {
         shard: None,
         progress: env.progress,
     };
     let vcfg = validation_config(env.cfg);
-    let ds = generate(&vcfg, &d.join("validation.bin"), &g).map_err(|e| fail("validate", e))?;
+    let ds = generate(&vcfg, &d.validation(), &g).map_err(|e| fail(Stage::Validate, e))?;
     Ok(format!(
         "{} random validation states labelled",
         ds.records.len()
@@ -215,24 +219,28 @@ fn validate(env: &Env, d: &Path) -> Result<String, PipelineError> {
 
 fn train_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
     let mut inputs = BTreeMap::new();
-    inputs.insert("dataset".into(), cx.hash("train", "dataset.bin")?);
-    inputs.insert("validation".into(), cx.hash("train", "validation.bin")?);
+    inputs.insert("dataset".into(), cx.hash(Stage::Train, RunDir::DATASET)?);
+    inputs.insert(
+        "validation".into(),
+        cx.hash(Stage::Train, RunDir::VALIDATION)?,
+    );
     inputs.insert("training".into(), settings_hash(&cfg.training));
     Ok(inputs)
 }
 
-fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
+fn train_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let cfg = env.cfg;
-    let data = load_dataset("train", &d.join("dataset.bin"))?;
-    let val = load_dataset("train", &d.join("validation.bin"))?;
-    let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("train", e))?;
+    let data = load_dataset(Stage::Train, &d.dataset())?;
+    let val = load_dataset(Stage::Train, &d.validation())?;
+    let dh = sha_file(&d.dataset()).map_err(|e| fail(Stage::Train, e))?;
     let (set, vset) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
     if set.is_empty() {
-        return Err(fail("train", "the dataset has no labelled points"));
+        return Err(fail(Stage::Train, "the dataset has no labelled points"));
     }
     // Both nets hold the setpoint (`training.hold_setpoint`): κ(x_ref) solved once.
-    let hold = Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail("train", e))?;
-    let toml = cfg.to_toml_string().map_err(|e| fail("train", e))?;
+    let hold =
+        Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Train, e))?;
+    let toml = cfg.to_toml_string().map_err(|e| fail(Stage::Train, e))?;
     let one = |nominal: bool| -> Model {
         let mut m: Model = train(
             &cfg.training,
@@ -253,10 +261,10 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
         m
     };
     let (n, r) = rayon::join(|| one(true), || one(false));
-    n.save(&d.join("model_nominal.bin"))
-        .map_err(|e| fail("train", e))?;
-    r.save(&d.join("model_regularized.bin"))
-        .map_err(|e| fail("train", e))?;
+    n.save(&d.model_nominal())
+        .map_err(|e| fail(Stage::Train, e))?;
+    r.save(&d.model_regularized())
+        .map_err(|e| fail(Stage::Train, e))?;
     Ok(format!(
         "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}",
         n.train_stats.max, n.validation_stats.r2, r.train_stats.max, r.validation_stats.r2
@@ -268,26 +276,26 @@ fn train_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
 fn certify_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
     hashes(
         cx,
-        "certify",
+        Stage::Certify,
         &[
-            "dataset.bin",
-            "validation.bin",
-            "model_nominal.bin",
-            "model_regularized.bin",
+            RunDir::DATASET,
+            RunDir::VALIDATION,
+            RunDir::MODEL_NOMINAL,
+            RunDir::MODEL_REGULARIZED,
         ],
     )
 }
 
-fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
-    let data = load_dataset("certify", &d.join("dataset.bin"))?;
-    let val = load_dataset("certify", &d.join("validation.bin"))?;
+fn certify_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
+    let data = load_dataset(Stage::Certify, &d.dataset())?;
+    let val = load_dataset(Stage::Certify, &d.validation())?;
     let extra = Some(TrainSet::from_dataset(&val));
     let mut out = String::new();
     for (file, json) in [
-        ("model_regularized.bin", "certificate.json"),
-        ("model_nominal.bin", "certificate_nominal.json"),
+        (RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE),
+        (RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL),
     ] {
-        let m = load_model("certify", &d.join(file))?;
+        let m = load_model(Stage::Certify, &d.join(file))?;
         // Theorem 1 with the deployed controller's f32 allowance (libm tanh, 2-norm) stored
         // beside ε, as `trainer certify` writes it.
         let (c, _) = crate::deploy::export::certify_deployed(
@@ -300,12 +308,18 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
                 ..Default::default()
             },
         )
-        .map_err(|e| fail("certify", format!("{file} on dataset.bin: {e}")))?;
+        .map_err(|e| {
+            fail_in(
+                Stage::Certify,
+                format_args!("{file} on {}", RunDir::DATASET),
+                e,
+            )
+        })?;
         crate::certify::file::write_certificate(
             &d.join(json),
             &CertificateFile::theorem1(c.clone()),
         )
-        .map_err(|e| fail("certify", e))?;
+        .map_err(|e| fail(Stage::Certify, e))?;
         out += &format!(
             "{file}: ε {:.3} (ε_D {:.3}, L_NN {:.1}, r {:.4}); ",
             c.eps, c.eps_d, c.l_nn, c.covering_radius
@@ -317,18 +331,22 @@ fn certify_both(env: &Env, d: &Path) -> Result<String, PipelineError> {
 // ---- export: the regularized net for controller-core -----------------------------------
 
 fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
-    hashes(cx, "export", &["model_regularized.bin", "certificate.json"])
+    hashes(
+        cx,
+        Stage::Export,
+        &[RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE],
+    )
 }
 
-fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
-    let m = load_model("export", &d.join("model_regularized.bin"))?;
-    let file = read_run_certificate("export", (d, env.cfg), "certificate.json", &m)?;
+fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
+    let m = load_model(Stage::Export, &d.model_regularized())?;
+    let file = read_run_certificate(Stage::Export, (d, env.cfg), RunDir::CERTIFICATE, &m)?;
     let c = &file.base;
     let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
-        .map_err(|e| fail("export", e))?
+        .map_err(|e| fail(Stage::Export, e))?
         .with_certificate_guarantee(&file.guarantee);
-    let r = crate::deploy::export::export_files(&em, &d.join("weights.rs"), &d.join("weights.bin"))
-        .map_err(|e| fail("export", e))?;
+    let r = crate::deploy::export::export_files(&em, &d.weights_rs(), &d.weights_bin())
+        .map_err(|e| fail(Stage::Export, e))?;
     // The band the exported controller (libm tanh, the default) clamps to.
     let (blo, bhi) = em.clamp_band(c.eps + r.f32_allowance[0]);
     let f64s = |v: Vec<f32>| v.into_iter().map(f64::from).collect::<Vec<_>>();
@@ -343,8 +361,8 @@ fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
         "eps_f64": c.eps,
         "eps_device_libm": c.eps + r.f32_allowance[0],
     });
-    write_atomic(&d.join("export_report.json"), json.to_string().as_bytes())
-        .map_err(|e| fail("export", e))?;
+    write_atomic(&d.export_report(), json.to_string().as_bytes())
+        .map_err(|e| fail(Stage::Export, e))?;
     Ok(format!(
         "weights.rs + weights.bin; f32 allowance {:.3e} (observed {:.3e} on {} states)",
         r.f32_allowance[0], r.f32_observed[0], r.samples
@@ -356,12 +374,12 @@ fn export(env: &Env, d: &Path) -> Result<String, PipelineError> {
 fn closed_loop_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
     let mut inputs = hashes(
         cx,
-        "closed_loop",
+        Stage::ClosedLoop,
         &[
-            "model_nominal.bin",
-            "model_regularized.bin",
-            "certificate.json",
-            "certificate_nominal.json",
+            RunDir::MODEL_NOMINAL,
+            RunDir::MODEL_REGULARIZED,
+            RunDir::CERTIFICATE,
+            RunDir::CERTIFICATE_NOMINAL,
         ],
     )?;
     inputs.insert("problem".into(), cfg.problem_hash());
@@ -369,20 +387,19 @@ fn closed_loop_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineE
     Ok(inputs)
 }
 
-fn closed_loop_study(env: &Env, d: &Path) -> Result<String, PipelineError> {
+fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let load = |f: &str, c: &str| -> Result<Model, PipelineError> {
-        let mut m = load_model("closed_loop", &d.join(f))?;
-        m.certificate = Some(read_run_certificate("closed_loop", (d, env.cfg), c, &m)?.base);
+        let mut m = load_model(Stage::ClosedLoop, &d.join(f))?;
+        m.certificate = Some(read_run_certificate(Stage::ClosedLoop, (d, env.cfg), c, &m)?.base);
         Ok(m)
     };
     let (n, r) = (
-        load("model_nominal.bin", "certificate_nominal.json")?,
-        load("model_regularized.bin", "certificate.json")?,
+        load(RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL)?,
+        load(RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE)?,
     );
     let cl = closed_loop(env.cfg, &n, &r);
-    let text = serde_json::to_string(&cl).map_err(|e| fail("closed_loop", e))?;
-    write_atomic(&d.join("closed_loop.json"), text.as_bytes())
-        .map_err(|e| fail("closed_loop", e))?;
+    let text = serde_json::to_string(&cl).map_err(|e| fail(Stage::ClosedLoop, e))?;
+    write_atomic(&d.closed_loop(), text.as_bytes()).map_err(|e| fail(Stage::ClosedLoop, e))?;
     let first = |k: &str| cl.get(k).and_then(|v| v.first()).cloned();
     let mut s = String::new();
     for k in ["mpc", "nominal", "regularized"] {
@@ -401,12 +418,12 @@ fn closed_loop_study(env: &Env, d: &Path) -> Result<String, PipelineError> {
 fn seeds_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
     let mut inputs = hashes(
         cx,
-        "seeds",
+        Stage::Seeds,
         &[
-            "dataset.bin",
-            "validation.bin",
-            "model_nominal.bin",
-            "model_regularized.bin",
+            RunDir::DATASET,
+            RunDir::VALIDATION,
+            RunDir::MODEL_NOMINAL,
+            RunDir::MODEL_REGULARIZED,
         ],
     )?;
     inputs.insert("problem".into(), cfg.problem_hash());
@@ -415,19 +432,19 @@ fn seeds_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
     Ok(inputs)
 }
 
-fn seeds(env: &Env, d: &Path) -> Result<String, PipelineError> {
-    let data = load_dataset("seeds", &d.join("dataset.bin"))?;
-    let val = load_dataset("seeds", &d.join("validation.bin"))?;
+fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
+    let data = load_dataset(Stage::Seeds, &d.dataset())?;
+    let val = load_dataset(Stage::Seeds, &d.validation())?;
     let own = [
-        load_model("seeds", &d.join("model_nominal.bin"))?,
-        load_model("seeds", &d.join("model_regularized.bin"))?,
+        load_model(Stage::Seeds, &d.model_nominal())?,
+        load_model(Stage::Seeds, &d.model_regularized())?,
     ];
-    let dh = sha_file(&d.join("dataset.bin")).map_err(|e| fail("seeds", e))?;
-    let hold =
-        Hold::if_enabled(env.cfg, env.cfg.training.hold_setpoint).map_err(|e| fail("seeds", e))?;
+    let dh = sha_file(&d.dataset()).map_err(|e| fail(Stage::Seeds, e))?;
+    let hold = Hold::if_enabled(env.cfg, env.cfg.training.hold_setpoint)
+        .map_err(|e| fail(Stage::Seeds, e))?;
     let study = seed_study(env.cfg, &data, &val, &dh, &own, hold.as_ref(), env.progress);
-    let text = serde_json::to_string(&study).map_err(|e| fail("seeds", e))?;
-    write_atomic(&d.join("seeds.json"), text.as_bytes()).map_err(|e| fail("seeds", e))?;
+    let text = serde_json::to_string(&study).map_err(|e| fail(Stage::Seeds, e))?;
+    write_atomic(&d.seeds(), text.as_bytes()).map_err(|e| fail(Stage::Seeds, e))?;
     Ok(format!(
         "{} seeds × 2 nets from x₀ = {:?}",
         study.len(),
@@ -448,13 +465,13 @@ fn plot_files() -> Vec<String> {
 fn plots_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
     let mut inputs = hashes(
         cx,
-        "plots",
+        Stage::Plots,
         &[
-            "dataset.bin",
-            "validation.bin",
-            "model_nominal.bin",
-            "model_regularized.bin",
-            "closed_loop.json",
+            RunDir::DATASET,
+            RunDir::VALIDATION,
+            RunDir::MODEL_NOMINAL,
+            RunDir::MODEL_REGULARIZED,
+            RunDir::CLOSED_LOOP,
         ],
     )?;
     inputs.insert("problem".into(), cfg.problem_hash());
@@ -462,19 +479,18 @@ fn plots_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
     Ok(inputs)
 }
 
-fn plots(env: &Env, d: &Path) -> Result<String, PipelineError> {
+fn plots(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let cfg = env.cfg;
     let figs = make_plots(cfg, d)?;
-    let pdir = d.join("plots");
-    std::fs::create_dir_all(&pdir)
-        .map_err(|e| fail("plots", format!("{}: {e}", pdir.display())))?;
+    let pdir = d.plots();
+    std::fs::create_dir_all(&pdir).map_err(|e| fail_at(Stage::Plots, &pdir, e))?;
     let pngs: Vec<Result<Vec<u8>, crate::study::plots::PlotError>> = figs
         .par_iter()
         .map(|f| crate::study::plots::to_png(f.name, &f.svg, cfg.plots.png_scale as f32))
         .collect();
     let mut index = Vec::new();
     for (f, png) in figs.iter().zip(pngs) {
-        let png = png.map_err(|e| fail("plots", e))?;
+        let png = png.map_err(|e| fail(Stage::Plots, e))?;
         index.push(FigureEntry {
             name: f.name.to_string(),
             caption: f.caption.clone(),
@@ -482,11 +498,12 @@ fn plots(env: &Env, d: &Path) -> Result<String, PipelineError> {
             png: format!("plots/{}.png", f.name),
         });
         write_atomic(&pdir.join(format!("{}.svg", f.name)), f.svg.as_bytes())
-            .map_err(|e| fail("plots", e))?;
-        write_atomic(&pdir.join(format!("{}.png", f.name)), &png).map_err(|e| fail("plots", e))?;
+            .map_err(|e| fail(Stage::Plots, e))?;
+        write_atomic(&pdir.join(format!("{}.png", f.name)), &png)
+            .map_err(|e| fail(Stage::Plots, e))?;
     }
-    let json = serde_json::to_string_pretty(&index).map_err(|e| fail("plots", e))?;
-    write_atomic(&pdir.join("figures.json"), json.as_bytes()).map_err(|e| fail("plots", e))?;
+    let json = serde_json::to_string_pretty(&index).map_err(|e| fail(Stage::Plots, e))?;
+    write_atomic(&pdir.join("figures.json"), json.as_bytes()).map_err(|e| fail(Stage::Plots, e))?;
     Ok(format!(
         "{} figures (SVG + PNG) in {}",
         figs.len(),
@@ -497,13 +514,13 @@ fn plots(env: &Env, d: &Path) -> Result<String, PipelineError> {
 /// Renders the figures of the run in `dir` (labels the error-map grid with the MPC).
 fn make_plots(
     cfg: &ProblemConfig,
-    d: &Path,
+    d: &RunDir,
 ) -> Result<Vec<crate::study::plots::Figure>, PipelineError> {
-    let data = load_dataset("plots", &d.join("dataset.bin"))?;
-    let val = load_dataset("plots", &d.join("validation.bin"))?;
-    let nom = load_model("plots", &d.join("model_nominal.bin"))?;
-    let reg = load_model("plots", &d.join("model_regularized.bin"))?;
-    let cl: ClosedLoop = load_json("plots", &d.join("closed_loop.json"))?;
+    let data = load_dataset(Stage::Plots, &d.dataset())?;
+    let val = load_dataset(Stage::Plots, &d.validation())?;
+    let nom = load_model(Stage::Plots, &d.model_nominal())?;
+    let reg = load_model(Stage::Plots, &d.model_regularized())?;
+    let cl: ClosedLoop = load_json(Stage::Plots, &d.closed_loop())?;
     let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
     let axes = crate::study::plots::slice_axes(cfg, &train);
     let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid, axes);
@@ -516,7 +533,7 @@ fn make_plots(
         closed_loop: &cl,
         grid: &grid,
     };
-    let figs = crate::study::plots::all(&inputs).map_err(|e| fail("plots", e))?;
+    let figs = crate::study::plots::all(&inputs).map_err(|e| fail(Stage::Plots, e))?;
     debug_assert_eq!(figs.len(), PLOTS.len());
     Ok(figs)
 }
@@ -528,31 +545,31 @@ fn make_plots(
 fn report_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
     let mut inputs = hashes(
         cx,
-        "report",
+        Stage::Report,
         &[
-            "export_report.json",
-            "dataset.bin",
-            "certificate.json",
-            "certificate_nominal.json",
-            "closed_loop.json",
-            "model_nominal.bin",
-            "model_regularized.bin",
-            "seeds.json",
+            RunDir::EXPORT_REPORT,
+            RunDir::DATASET,
+            RunDir::CERTIFICATE,
+            RunDir::CERTIFICATE_NOMINAL,
+            RunDir::CLOSED_LOOP,
+            RunDir::MODEL_NOMINAL,
+            RunDir::MODEL_REGULARIZED,
+            RunDir::SEEDS,
         ],
     )?;
     for f in plot_files() {
-        let h = cx.hash("report", &f)?;
+        let h = cx.hash(Stage::Report, &f)?;
         inputs.insert(f, h);
     }
     Ok(inputs)
 }
 
-fn report(env: &Env, d: &Path) -> Result<String, PipelineError> {
-    let rep =
-        crate::study::report::build(env.cfg, d, &env.timings).map_err(|e| fail("report", e))?;
-    write_atomic(&d.join("report.md"), rep.to_markdown().as_bytes())
-        .map_err(|e| fail("report", e))?;
-    let html = rep.to_html(d).map_err(|e| fail("report", e))?;
-    write_atomic(&d.join("report.html"), html.as_bytes()).map_err(|e| fail("report", e))?;
-    Ok(format!("{} + report.html", d.join("report.md").display()))
+fn report(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
+    let rep = crate::study::report::build(env.cfg, d.path(), &env.timings)
+        .map_err(|e| fail(Stage::Report, e))?;
+    write_atomic(&d.report_md(), rep.to_markdown().as_bytes())
+        .map_err(|e| fail(Stage::Report, e))?;
+    let html = rep.to_html(d.path()).map_err(|e| fail(Stage::Report, e))?;
+    write_atomic(&d.report_html(), html.as_bytes()).map_err(|e| fail(Stage::Report, e))?;
+    Ok(format!("{} + report.html", d.report_md().display()))
 }

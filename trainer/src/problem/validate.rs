@@ -148,12 +148,63 @@ fn check_setpoint(
 }
 
 impl ProblemConfig {
-    /// Checks every setting once; the error names the key at fault.
+    /// Checks every setting once; the error names the key at fault. The sections are
+    /// checked in this order (the first fault is reported): name, system, OCP, constraints,
+    /// domain, setpoint, solver, training, closed loop, robust design, plots, sampling,
+    /// refinement.
     pub fn validate(&self) -> Result<(), ConfigError> {
         crate::io::check_path_component(&self.name).map_err(|r| invalid("name", r))?;
         self.system.validate().map_err(|(k, r)| invalid(k, r))?;
         let (nx, nu) = (self.system.nx(), self.system.nu());
+        self.ocp.validate(nx, nu)?;
+        self.constraint_set()
+            .map_err(|e| invalid(e.key.clone(), e.reason()))?;
+        self.domain.validate(nx)?;
+        self.validate_setpoint()?;
+        self.solver.validate()?;
+        self.training.validate()?;
+        self.closed_loop.validate(nx)?;
+        self.robust.validate(nx, nu)?;
+        self.closed_loop.validate_seeds()?;
+        self.plots.validate()?;
+        self.sampling.validate(nx)?;
+        self.refine.validate(nx)?;
+        Ok(())
+    }
+
+    /// The setpoint: inside X (where the net is trained and certified) and the state
+    /// bounds (else it cannot be held); u_ref inside the input bounds.
+    fn validate_setpoint(&self) -> Result<(), ConfigError> {
         let o = &self.ocp;
+        let expr = self.system.expr_model();
+        if let Some(xr) = &o.x_ref {
+            check_setpoint(
+                "ocp.x_ref",
+                xr,
+                expr.map(|m| m.state_names()),
+                &[
+                    ("domain.lo", "domain.hi", &self.domain.lo, &self.domain.hi),
+                    ("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi),
+                ],
+            )?;
+        }
+        if let Some(ur) = &o.u_ref {
+            check_setpoint(
+                "ocp.u_ref",
+                ur,
+                expr.map(|m| m.input_names()),
+                &[("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi)],
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl OcpSettings {
+    /// `[ocp]` for a system of `nx` states and `nu` inputs: sampling time, horizon, weights,
+    /// bounds and the per-stage bounds of a robust design.
+    fn validate(&self, nx: usize, nu: usize) -> Result<(), ConfigError> {
+        let o = self;
         if !(o.ts.is_finite() && o.ts > 0.0) {
             return Err(invalid(
                 "ocp.ts",
@@ -180,92 +231,84 @@ impl ProblemConfig {
         check_bounds("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi, false)?;
         check_bounds("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi, false)?;
         if let Some(st) = &o.stages {
-            for (key, rows, n_rows, dim) in [
-                ("ocp.stages.x_lo", &st.x_lo, o.horizon, nx),
-                ("ocp.stages.x_hi", &st.x_hi, o.horizon, nx),
-                ("ocp.stages.u_lo", &st.u_lo, o.horizon, nu),
-                ("ocp.stages.u_hi", &st.u_hi, o.horizon, nu),
-            ] {
-                if rows.len() != n_rows {
-                    return Err(invalid(
-                        key,
-                        format!("expected {n_rows} stages (N), got {}", rows.len()),
-                    ));
-                }
-                for (k, r) in rows.iter().enumerate() {
-                    let at = format!("{key}[{k}]");
-                    if key.contains(".u_") {
-                        check_input_bounds(&at, r, dim)?;
-                    } else {
-                        check_vec(&at, r, dim, true)?;
-                    }
-                }
+            st.validate(o.horizon, nx, nu)?;
+        }
+        Ok(())
+    }
+}
+
+impl StageBounds {
+    /// `[ocp.stages]`: N rows of state and input bounds, N + 1 margins per constraint.
+    fn validate(&self, horizon: usize, nx: usize, nu: usize) -> Result<(), ConfigError> {
+        let st = self;
+        for (key, rows, n_rows, dim) in [
+            ("ocp.stages.x_lo", &st.x_lo, horizon, nx),
+            ("ocp.stages.x_hi", &st.x_hi, horizon, nx),
+            ("ocp.stages.u_lo", &st.u_lo, horizon, nu),
+            ("ocp.stages.u_hi", &st.u_hi, horizon, nu),
+        ] {
+            if rows.len() != n_rows {
+                return Err(invalid(
+                    key,
+                    format!("expected {n_rows} stages (N), got {}", rows.len()),
+                ));
             }
-            for (c, m) in st.margins.iter().enumerate() {
-                if m.len() != o.horizon + 1 {
-                    return Err(invalid(
-                        format!("ocp.stages.margins[{c}]"),
-                        format!("expected {} stages (N + 1), got {}", o.horizon + 1, m.len()),
-                    ));
+            for (k, r) in rows.iter().enumerate() {
+                let at = format!("{key}[{k}]");
+                if key.contains(".u_") {
+                    check_input_bounds(&at, r, dim)?;
+                } else {
+                    check_vec(&at, r, dim, true)?;
                 }
-                if let Some(k) = m.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
-                    return Err(invalid(
-                        format!("ocp.stages.margins[{c}][{k}]"),
-                        format!("must be finite and ≥ 0, got {}", m[k]),
-                    ));
-                }
-            }
-            for k in 0..o.horizon {
-                check_bounds(
-                    &format!("ocp.stages.x_lo[{k}]"),
-                    &format!("ocp.stages.x_hi[{k}]"),
-                    &st.x_lo[k],
-                    &st.x_hi[k],
-                    false,
-                )?;
-                check_bounds(
-                    &format!("ocp.stages.u_lo[{k}]"),
-                    &format!("ocp.stages.u_hi[{k}]"),
-                    &st.u_lo[k],
-                    &st.u_hi[k],
-                    false,
-                )?;
             }
         }
-        self.constraint_set()
-            .map_err(|e| invalid(e.key.clone(), e.reason()))?;
-        check_vec("domain.lo", &self.domain.lo, nx, false)?;
-        check_vec("domain.hi", &self.domain.hi, nx, false)?;
-        check_bounds(
-            "domain.lo",
-            "domain.hi",
-            &self.domain.lo,
-            &self.domain.hi,
-            true,
-        )?;
-        // The setpoint: inside X (where the net is trained and certified) and the state
-        // bounds (else it cannot be held); u_ref inside the input bounds.
-        let expr = self.system.expr_model();
-        if let Some(xr) = &o.x_ref {
-            check_setpoint(
-                "ocp.x_ref",
-                xr,
-                expr.map(|m| m.state_names()),
-                &[
-                    ("domain.lo", "domain.hi", &self.domain.lo, &self.domain.hi),
-                    ("ocp.x_lo", "ocp.x_hi", &o.x_lo, &o.x_hi),
-                ],
+        for (c, m) in st.margins.iter().enumerate() {
+            if m.len() != horizon + 1 {
+                return Err(invalid(
+                    format!("ocp.stages.margins[{c}]"),
+                    format!("expected {} stages (N + 1), got {}", horizon + 1, m.len()),
+                ));
+            }
+            if let Some(k) = m.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                return Err(invalid(
+                    format!("ocp.stages.margins[{c}][{k}]"),
+                    format!("must be finite and ≥ 0, got {}", m[k]),
+                ));
+            }
+        }
+        for k in 0..horizon {
+            check_bounds(
+                &format!("ocp.stages.x_lo[{k}]"),
+                &format!("ocp.stages.x_hi[{k}]"),
+                &st.x_lo[k],
+                &st.x_hi[k],
+                false,
+            )?;
+            check_bounds(
+                &format!("ocp.stages.u_lo[{k}]"),
+                &format!("ocp.stages.u_hi[{k}]"),
+                &st.u_lo[k],
+                &st.u_hi[k],
+                false,
             )?;
         }
-        if let Some(ur) = &o.u_ref {
-            check_setpoint(
-                "ocp.u_ref",
-                ur,
-                expr.map(|m| m.input_names()),
-                &[("ocp.u_lo", "ocp.u_hi", &o.u_lo, &o.u_hi)],
-            )?;
-        }
-        let s = &self.solver;
+        Ok(())
+    }
+}
+
+impl Domain {
+    /// `[domain]`: X's finite bounds, lo < hi on every axis.
+    fn validate(&self, nx: usize) -> Result<(), ConfigError> {
+        check_vec("domain.lo", &self.lo, nx, false)?;
+        check_vec("domain.hi", &self.hi, nx, false)?;
+        check_bounds("domain.lo", "domain.hi", &self.lo, &self.hi, true)
+    }
+}
+
+impl SolverSettings {
+    /// `[solver]`: tolerance, iterations, soft-constraint weights, degeneracy tolerance.
+    fn validate(&self) -> Result<(), ConfigError> {
+        let s = self;
         if !(s.tol.is_finite() && s.tol > 0.0 && s.tol < 1.0) {
             return Err(invalid(
                 "solver.tol",
@@ -289,7 +332,14 @@ impl ProblemConfig {
         if !(s.degeneracy_tol.is_finite() && s.degeneracy_tol > 0.0) {
             return Err(invalid("solver.degeneracy_tol", "must be finite and > 0"));
         }
-        let t = &self.training;
+        Ok(())
+    }
+}
+
+impl TrainSettings {
+    /// `[training]`: the net's widths, the optimiser's settings, the loss weights.
+    fn validate(&self) -> Result<(), ConfigError> {
+        let t = self;
         if t.hidden.is_empty() || t.hidden.contains(&0) {
             return Err(invalid(
                 "training.hidden",
@@ -333,7 +383,15 @@ impl ProblemConfig {
                 ),
             ));
         }
-        let c = &self.closed_loop;
+        Ok(())
+    }
+}
+
+impl ClosedLoopSettings {
+    /// `[closed_loop]` for `nx` states: steps, initial state, noise and mismatch fractions
+    /// (the seed count: [`ClosedLoopSettings::validate_seeds`]).
+    fn validate(&self, nx: usize) -> Result<(), ConfigError> {
+        let c = self;
         if c.steps == 0 {
             return Err(invalid("closed_loop.steps", "must be at least 1"));
         }
@@ -348,14 +406,26 @@ impl ProblemConfig {
                 return Err(invalid(k, format!("must be in [0, 1), got {v}")));
             }
         }
-        self.robust.validate(nx, nu)?;
+        Ok(())
+    }
+
+    /// `closed_loop.seeds`: at most 1000.
+    fn validate_seeds(&self) -> Result<(), ConfigError> {
+        let c = self;
         if c.seeds > 1000 {
             return Err(invalid(
                 "closed_loop.seeds",
                 format!("at most 1000, got {}", c.seeds),
             ));
         }
-        let pl = &self.plots;
+        Ok(())
+    }
+}
+
+impl PlotSettings {
+    /// `[plots]`: the error map's grid and the PNG scale.
+    fn validate(&self) -> Result<(), ConfigError> {
+        let pl = self;
         if let Some(i) = pl
             .error_map_grid
             .iter()
@@ -372,7 +442,15 @@ impl ProblemConfig {
                 format!("must be in [0.1, 8], got {}", pl.png_scale),
             ));
         }
-        let sm = &self.sampling;
+        Ok(())
+    }
+}
+
+impl SamplingSettings {
+    /// `[sampling]` for `nx` states: the plan's size (adaptive and imported datasets are
+    /// not sampled).
+    fn validate(&self, nx: usize) -> Result<(), ConfigError> {
+        let sm = self;
         match sm.sampler {
             SamplerKind::Grid => {
                 if sm.counts.len() != nx {
@@ -410,7 +488,6 @@ impl ProblemConfig {
                 ));
             }
         }
-        self.refine.validate(nx)?;
         Ok(())
     }
 }

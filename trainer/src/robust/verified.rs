@@ -59,7 +59,7 @@ fn cholesky_completes(a: &DMatrix<f64>) -> bool {
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > 0.0) || !d.is_finite() {
+        if d.is_nan() || d <= 0.0 || !d.is_finite() {
             return false;
         }
         let djj = d.sqrt();

@@ -67,8 +67,17 @@ pub enum RefineError {
     Corrupt {
         /// The checkpoint.
         path: PathBuf,
-        /// The decoder's message.
+        /// What is wrong with it.
         reason: String,
+    },
+    /// The checkpoint's contents do not decode (another trainer version's layout).
+    #[error("{path}: not a refinement checkpoint of this trainer version ({source}); delete it or use another --out")]
+    Decode {
+        /// The checkpoint.
+        path: PathBuf,
+        /// The decoder's error.
+        #[source]
+        source: postcard::Error,
     },
     /// The checkpoint belongs to another problem or settings.
     #[error("checkpoint {path} was made for another problem or settings (delete it or use another --out)")]
@@ -224,9 +233,9 @@ impl RefineState {
             path: path.to_path_buf(),
             reason: "checksum mismatch: corrupt, modified or of an older version".into(),
         })?;
-        postcard::from_bytes(body).map_err(|e| RefineError::Corrupt {
+        postcard::from_bytes(body).map_err(|e| RefineError::Decode {
             path: path.to_path_buf(),
-            reason: e.to_string(),
+            source: e,
         })
     }
 

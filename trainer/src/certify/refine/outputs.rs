@@ -8,7 +8,7 @@ use crate::certify::certificate::Certificate;
 use crate::certify::file::{write_certificate, CertificateFile, CheckSummary};
 use crate::certify::local::Form;
 use crate::data::dataset::{Dataset, DatasetError, Header, Record};
-use crate::io::write_atomic;
+use crate::io::{write_atomic, RunDir};
 use crate::mpc::sqp::SqpStatus;
 use crate::problem::{ProblemConfig, RefineSettings, SamplerKind, SamplingSettings};
 use serde::Serialize;
@@ -215,7 +215,7 @@ pub fn check_summary(c: &Check) -> CheckSummary {
         states: c.states,
         exceedances,
         passed: exceedances == 0 && c.per_cell.passed,
-        report: "check.json".into(),
+        report: RunDir::CHECK.into(),
     }
 }
 
@@ -409,8 +409,8 @@ pub fn write_outputs(
         model.save(&dir.join("model.bin"))?;
     }
     let ds = dataset(cfg, &r.state);
-    ds.save(&dir.join("dataset.bin"))?;
-    write_atomic(&dir.join("dataset.csv"), ds.to_csv().as_bytes())?;
+    ds.save(&dir.join(RunDir::DATASET))?;
+    write_atomic(&dir.join(RunDir::DATASET_CSV), ds.to_csv().as_bytes())?;
     let path = dir.join(crate::certify::file::FILE_NAME);
     write_certificate(&path, &cert.file()).map_err(|e| DatasetError::Format {
         path: path.display().to_string(),
@@ -447,7 +447,7 @@ pub fn write_outputs(
             }
         ));
     }
-    write_atomic(&dir.join("cells.csv"), csv.as_bytes())?;
+    write_atomic(&dir.join(RunDir::CELLS), csv.as_bytes())?;
     Ok(cert)
 }
 

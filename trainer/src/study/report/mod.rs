@@ -24,15 +24,50 @@ use crate::certify::certificate::Certificate;
 use crate::certify::file::CertificateFile;
 use crate::certify::Model;
 use crate::data::dataset::Dataset;
+use crate::io::RunDir;
 use crate::problem::ProblemConfig;
 use crate::study::scenarios::ClosedLoop;
 use crate::study::seeds::SeedRun;
 use std::path::Path;
 
-/// A report that cannot be built (names the file at fault).
+/// A report that cannot be built (names the file at fault); the cause is kept as the
+/// error's source.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct ReportError(pub String);
+pub enum ReportError {
+    /// A file of the run that does not read or parse.
+    #[error("{path}: {source}")]
+    File {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The run's dataset or a net does not read.
+    #[error(transparent)]
+    Dataset(#[from] crate::data::dataset::DatasetError),
+    /// A certificate of the run does not read or re-check.
+    #[error(transparent)]
+    Certificate(#[from] crate::certify::file::CertFileError),
+    /// `plots/figures.json` lacks a figure the report shows.
+    #[error("{index} lists no figure `{figure}`")]
+    MissingFigure {
+        /// The figure index (`plots/figures.json`).
+        index: String,
+        /// The figure's name.
+        figure: String,
+    },
+}
+
+impl ReportError {
+    /// The file `p` failed with `e`.
+    fn file(p: &Path, e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        ReportError::File {
+            path: p.display().to_string(),
+            source: e.into(),
+        }
+    }
+}
 
 /// The paper's Table I (R², ε_D, L_NN) for the nominal and the regularized net.
 pub const PAPER_TABLE_I: [(&str, [f64; 3]); 2] = [
@@ -133,16 +168,15 @@ impl Artifacts {
     /// Reads the artifacts of the run in `dir`; the first missing or unreadable file is the
     /// error.
     fn load(dir: &Path) -> Result<Self, ReportError> {
-        let e = |e: crate::data::dataset::DatasetError| ReportError(e.to_string());
-        let data_bytes = std::fs::read(dir.join("dataset.bin"))
-            .map_err(|e| ReportError(format!("{}: {e}", dir.join("dataset.bin").display())))?;
-        let data = Dataset::from_bytes(&data_bytes, &dir.join("dataset.bin").display().to_string())
-            .map_err(e)?;
+        let dir = RunDir::new(dir);
+        let dpath = dir.dataset();
+        let data_bytes = std::fs::read(&dpath).map_err(|e| ReportError::file(&dpath, e))?;
+        let data = Dataset::from_bytes(&data_bytes, &dpath.display().to_string())?;
         let data_hash = crate::io::sha256_hex(&data_bytes);
-        let nom = Model::load(&dir.join("model_nominal.bin")).map_err(e)?;
-        let reg = Model::load(&dir.join("model_regularized.bin")).map_err(e)?;
-        let cert = certificate(&dir.join("certificate.json"), &reg, &data_hash)?;
-        let cert_n = certificate(&dir.join("certificate_nominal.json"), &nom, &data_hash)?;
+        let nom = Model::load(&dir.model_nominal())?;
+        let reg = Model::load(&dir.model_regularized())?;
+        let cert = certificate(&dir.certificate(), &reg, &data_hash)?;
+        let cert_n = certificate(&dir.certificate_nominal(), &nom, &data_hash)?;
         Ok(Artifacts {
             data,
             nom,
@@ -150,9 +184,9 @@ impl Artifacts {
             tier: cert.guarantee,
             cert: cert.base,
             cert_n: cert_n.base,
-            cl: load(&dir.join("closed_loop.json"))?,
-            seeds: load(&dir.join("seeds.json"))?,
-            export: load(&dir.join("export_report.json"))?,
+            cl: load(&dir.closed_loop())?,
+            seeds: load(&dir.seeds())?,
+            export: load(&dir.export_report())?,
         })
     }
 }
@@ -166,15 +200,13 @@ fn certificate(p: &Path, m: &Model, data_hash: &str) -> Result<CertificateFile, 
         dataset_hash: Some(data_hash),
         ..Default::default()
     };
-    crate::certify::file::read_certificate(p, false, &against)
-        .map(|(f, _)| f)
-        .map_err(|e| ReportError(e.to_string()))
+    Ok(crate::certify::file::read_certificate(p, false, &against).map(|(f, _)| f)?)
 }
 
 /// Reads a JSON file.
 fn load<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T, ReportError> {
-    let t = std::fs::read_to_string(p).map_err(|e| ReportError(format!("{}: {e}", p.display())))?;
-    serde_json::from_str(&t).map_err(|e| ReportError(format!("{}: {e}", p.display())))
+    let t = std::fs::read_to_string(p).map_err(|e| ReportError::file(p, e))?;
+    serde_json::from_str(&t).map_err(|e| ReportError::file(p, e))
 }
 
 /// Builds the report of the run in `dir` from its artifacts.

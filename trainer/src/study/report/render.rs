@@ -85,8 +85,7 @@ impl Report {
                 }
                 Block::Figure { stem, caption } => {
                     let p = dir.join("plots").join(format!("{stem}.svg"));
-                    let svg = std::fs::read_to_string(&p)
-                        .map_err(|e| ReportError(format!("{}: {e}", p.display())))?;
+                    let svg = std::fs::read_to_string(&p).map_err(|e| ReportError::file(&p, e))?;
                     let svg = svg
                         .find("<svg")
                         .map_or(svg.as_str(), |i| &svg[i..])

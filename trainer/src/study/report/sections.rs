@@ -434,7 +434,10 @@ pub(super) fn figures(dir: &Path) -> Result<Vec<Block>, ReportError> {
             .iter()
             .find(|f| f.name == stem)
             .map(|f| f.caption.clone())
-            .ok_or_else(|| ReportError(format!("plots/figures.json lists no figure `{stem}`")))?;
+            .ok_or_else(|| ReportError::MissingFigure {
+                index: "plots/figures.json".into(),
+                figure: stem.to_string(),
+            })?;
         b.push(Block::Figure {
             stem: stem.to_string(),
             caption,
