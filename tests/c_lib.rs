@@ -503,6 +503,7 @@ fn excluded_boxes_and_two_inputs_match_the_device_model() {
         actuator_lo: vec![-2.5, 0.0],
         actuator_hi: vec![2.5, 6.0],
         excluded: vec![(vec![0.5, -0.5, 1.0], vec![2.0, 0.0, 3.0])],
+        rests_on: Vec::new(),
         ..export::placeholder_pendulum()
     };
     model.hash = "placeholder-3-6-2-c-lib".into();

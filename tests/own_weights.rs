@@ -66,6 +66,7 @@ fn second_net() -> ExportModel {
         statistical: None,
         // One box the certificate excludes: states in it are flagged (EXCLUDED).
         excluded: vec![(vec![0.5, -0.5, 1.0], vec![2.0, 0.0, 3.0])],
+        rests_on: Vec::new(),
     }
 }
 
