@@ -17,13 +17,11 @@
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
-use trainer::certify::certificate::Certificate;
-use trainer::certify::Model;
-use trainer::data::dataset::Dataset;
-use trainer::mpc::law::MpcLaw;
-use trainer::pipeline::{run_problem, RunOptions, StageReport};
-use trainer::problem::model::{CustomPlant, DualNum, Dynamics};
-use trainer::problem::ProblemConfig;
+// Only the crate root's facade (`trainer`'s lib doc), no module paths.
+use trainer::{
+    run_problem, Certificate, CustomPlant, Dataset, DualNum, Dynamics, Model, MpcLaw,
+    ProblemConfig, RunOptions, Stage, StageReport,
+};
 
 /// The plant's parameters: its `serde` record is what problem files and hashes see.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -123,7 +121,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The stages of `trainer run` up to the export, on this problem.
     let opts = RunOptions {
         root: root.clone(),
-        until: Some(trainer::pipeline::Stage::Export),
+        until: Some(Stage::Export),
         on_stage: Some(print_stage),
         ..Default::default()
     };

@@ -337,3 +337,24 @@ fn the_checker_sees_a_circle() {
     edges.insert(own("a::d"), BTreeSet::from([own("a::b")]));
     assert_eq!(circles(&edges).len(), 3);
 }
+
+/// `examples/custom_plant.rs` is written against the crate root's facade only: no
+/// `trainer::<module>::` path (the facade is what a program needs).
+#[test]
+fn the_custom_plant_example_uses_only_the_facade() {
+    let p = src().join("../examples/custom_plant.rs");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let deep: Vec<&str> = text
+        .lines()
+        .filter(|l| {
+            l.split("trainer::").skip(1).any(|rest| {
+                let word: String = rest
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect();
+                word.starts_with(|c: char| c.is_lowercase()) && rest[word.len()..].starts_with("::")
+            })
+        })
+        .collect();
+    assert!(deep.is_empty(), "{}: module paths {deep:?}", p.display());
+}

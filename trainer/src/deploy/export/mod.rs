@@ -46,9 +46,8 @@ mod tested;
 #[cfg(test)]
 mod tests;
 
-use std::path::{Path, PathBuf};
-
 use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 use crate::io::FileError;
 pub use allowance::{certify_f32, eval_f32, f32_allowance, sampled_max_diff, SAMPLES};
@@ -151,9 +150,8 @@ pub struct ExportModel {
     /// generated controller flags states inside them (`Flags::EXCLUDED`). Usually empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub excluded: Vec<(Vec<f64>, Vec<f64>)>,
-    /// What ε rests on besides proof — the certificate's `assumptions` (e.g. an estimated
-    /// L_MPC, an unsealed file read with `--accept-unsealed`) and `premises` (what a sound ε
-    /// is about) — written into every exported file. Empty: nothing but arithmetic.
+    /// What ε rests on besides proof (the certificate's `assumptions` and `premises`),
+    /// written into every exported file. Empty: nothing but arithmetic.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rests_on: Vec<String>,
 }
