@@ -127,6 +127,46 @@ fn statistical_tier_counts_and_bounds_exceedances() {
     let store = d.join("m.statistical.bin");
     let store_csv = d.join("m.statistical.csv");
     assert!(store.exists() && store_csv.exists());
+
+    // Sharded (`--shard K/M`, then `trainer merge`): the same store byte for byte, and the
+    // same statistical block from it.
+    let mut shards = Vec::new();
+    for k in 0..3 {
+        let s = d.join(format!("s{k}.bin"));
+        let o = certify(&[
+            "--statistical",
+            &ns,
+            "--confidence",
+            "0.95",
+            "--shard",
+            &format!("{k}/3"),
+            "--statistical-store",
+            s.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(o.stdout.is_empty(), "a shard computes no bound");
+        shards.push(s.to_str().unwrap().to_string());
+    }
+    let merged = d.join("merged.bin");
+    let mut args = vec!["merge", merged.to_str().unwrap()];
+    args.extend(shards.iter().map(String::as_str));
+    let o = trainer(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&merged).unwrap() == std::fs::read(&store).unwrap(),
+        "the merged shards differ from the unsharded statistical store"
+    );
+    let again = certify(&[
+        "--statistical",
+        &ns,
+        "--confidence",
+        "0.95",
+        "--statistical-store",
+        merged.to_str().unwrap(),
+    ]);
+    assert!(again.status.success());
+    let w: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
+    assert_eq!(w["statistical"], v["statistical"]);
     let (head, rows) = csv(&store_csv);
     assert_eq!(rows.len(), n);
     let col = |name: &str| head.iter().position(|h| h == name).unwrap();

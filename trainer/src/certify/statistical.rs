@@ -332,6 +332,29 @@ pub fn sampling_problem(
     c
 }
 
+/// Labels shard `shard` of the statistical states of the model with content hash
+/// `model_hash` into `store`: the records of that shard exactly as the unsharded labelling
+/// computes them (each state and label a function of its index alone), so `trainer merge`
+/// of all M shards gives the very file [`certify_statistically`] writes and reuses. No
+/// bound is computed from a shard.
+pub fn label_shard(
+    cfg: &ProblemConfig,
+    model_hash: &str,
+    store: &Path,
+    opts: &StatisticalOptions,
+    shard: dataset::Shard,
+) -> Result<Dataset, StatisticalError> {
+    let sc = sampling_problem(cfg, opts, statistical_seed(model_hash, opts.seed));
+    Ok(dataset::generate(
+        &sc,
+        store,
+        &GenerateOptions {
+            shard: Some(shard),
+            progress: opts.progress,
+        },
+    )?)
+}
+
 /// The model tested and the data it was trained on, for [`certify_statistically`].
 pub struct Tested<'a> {
     /// The deployed controller (module doc).

@@ -10,7 +10,7 @@ use trainer::certify::certificate::{requirement, Certificate, CertifyOptions};
 use trainer::certify::statistical::{
     certify_statistically, Statistical, StatisticalOptions, Tested, DEFAULT_SEED,
 };
-use trainer::data::dataset::Dataset;
+use trainer::data::dataset::{Dataset, Shard};
 
 /// The statistical tier's flags (shared by `certify`).
 #[derive(clap::Args, Debug, Clone)]
@@ -123,6 +123,12 @@ pub(super) struct Args {
     json: bool,
     #[command(flatten)]
     statistical: StatisticalArgs,
+    /// With --statistical N: label only shard K of M (`K/M`, 0 ≤ K < M) of the N statistical
+    /// states into the store (give each shard its own --statistical-store) and stop — no
+    /// bound. `trainer merge` of the M stores gives the unsharded store; then
+    /// `certify --statistical N --statistical-store MERGED` computes the bound from it.
+    #[arg(long, value_name = "K/M", requires = "statistical")]
+    shard: Option<Shard>,
     #[command(flatten)]
     closed_loop: ClosedLoopArgs,
 }
@@ -133,6 +139,9 @@ impl Args {
         let stat = self
             .statistical
             .options(self.model.with_extension("statistical.bin"))?;
+        if let (Some(shard), Some(st)) = (self.shard, &stat) {
+            return label_shard(self.config.as_deref(), &self.model, &self.data, st, shard);
+        }
         execute(
             self.config.as_deref(),
             &self.model,
@@ -146,6 +155,37 @@ impl Args {
             },
         )
     }
+}
+
+/// `--statistical N --shard K/M`: the shard's statistical states of `model`, labelled into
+/// the store; nothing else is computed.
+fn label_shard(
+    config: Option<&Path>,
+    model: &Path,
+    data: &Path,
+    (o, store): &(StatisticalOptions, PathBuf),
+    shard: Shard,
+) -> Result<()> {
+    let m = super::common::load_model(model)?;
+    let d = Dataset::load(data)?;
+    let cfg = problem_for_data(config, data, &d)?;
+    super::common::refuse_overwrite(&[store], &[model, data])?;
+    let ds = trainer::certify::statistical::label_shard(&cfg, &m.content_hash(), store, o, shard)
+        .with_context(|| format!("statistical states in {}", store.display()))?;
+    eprintln!(
+        "shard {}/{} of the {} statistical states of {}: {} labelled into {}; `trainer merge` \
+         the {} shard stores, then `trainer certify … --statistical {} --statistical-store \
+         MERGED` computes the bound",
+        shard.index,
+        shard.count,
+        o.samples,
+        model.display(),
+        ds.records.len(),
+        store.display(),
+        shard.count,
+        o.samples
+    );
+    Ok(())
 }
 
 pub(super) fn execute(
