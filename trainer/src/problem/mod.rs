@@ -24,6 +24,7 @@ pub mod ocp;
 pub mod refine;
 pub mod robust;
 pub mod sampling;
+pub mod setpoint;
 pub mod solver;
 pub mod study;
 pub mod training;
@@ -195,7 +196,9 @@ impl ProblemConfig {
                 path: origin.to_string(),
                 message: problem_first(&e),
             })?;
+        let mut cfg = cfg;
         cfg.validate().map_err(|e| e.in_file(origin))?;
+        cfg.settle_setpoint().map_err(|e| e.in_file(origin))?;
         Ok(cfg)
     }
 

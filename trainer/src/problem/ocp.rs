@@ -63,6 +63,18 @@ pub struct OcpSettings {
     /// Not serialised when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_ref: Option<Vec<f64>>,
+    /// Largest accepted one-step residual |F(x_ref, u_ref) − x_ref|_i of the setpoint,
+    /// relative to each state's scale (the domain's half-width or |x_ref_i|); see
+    /// [`crate::problem::setpoint`]. Default 1e-6; not serialised when default.
+    #[serde(
+        default = "default_setpoint_tol",
+        skip_serializing_if = "is_default_setpoint_tol"
+    )]
+    pub setpoint_tol: f64,
+    /// The setpoint input computed from the model when `u_ref` is omitted (the input in U
+    /// that holds x_ref; filled when the file is read). Never serialised.
+    #[serde(skip)]
+    pub derived_u_ref: Option<Vec<f64>>,
     /// Lower state bounds on x₁..x_N (`-inf` for none).
     pub x_lo: Vec<f64>,
     /// Upper state bounds on x₁..x_N (`inf` for none).
@@ -86,6 +98,14 @@ pub struct OcpSettings {
     /// Terminal constraints in the states, on x_N only (a terminal region).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub terminal_constraints: Vec<String>,
+}
+
+fn default_setpoint_tol() -> f64 {
+    crate::problem::setpoint::DEFAULT_SETPOINT_TOL
+}
+
+fn is_default_setpoint_tol(v: &f64) -> bool {
+    *v == default_setpoint_tol()
 }
 
 /// Per-stage bounds of a tightened OCP: `x_lo[k−1]`, `x_hi[k−1]` bound x_k (k = 1..N),
@@ -114,9 +134,13 @@ impl OcpSettings {
     pub fn x_ref_or_origin(&self, nx: usize) -> Vec<f64> {
         self.x_ref.clone().unwrap_or_else(|| vec![0.0; nx])
     }
-    /// The setpoint input u_ref (`ocp.u_ref`, else 0 of dimension `nu`).
+    /// The setpoint input u_ref: `ocp.u_ref`, else the input computed from the model that
+    /// holds x_ref (when the file was read), else 0 of dimension `nu`.
     pub fn u_ref_or_zero(&self, nu: usize) -> Vec<f64> {
-        self.u_ref.clone().unwrap_or_else(|| vec![0.0; nu])
+        self.u_ref
+            .clone()
+            .or_else(|| self.derived_u_ref.clone())
+            .unwrap_or_else(|| vec![0.0; nu])
     }
     /// Bounds `(lo, hi)` on the predicted state x_k, k = 1..N (stage-dependent if
     /// [`stages`](Self::stages) is set).

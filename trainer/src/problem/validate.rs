@@ -211,6 +211,12 @@ impl OcpSettings {
                 format!("must be finite and > 0, got {}", o.ts),
             ));
         }
+        if !(o.setpoint_tol.is_finite() && o.setpoint_tol > 0.0) {
+            return Err(invalid(
+                "ocp.setpoint_tol",
+                format!("must be finite and > 0, got {}", o.setpoint_tol),
+            ));
+        }
         if o.horizon == 0 {
             return Err(invalid("ocp.horizon", "must be at least 1"));
         }

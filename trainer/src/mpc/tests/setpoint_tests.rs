@@ -41,6 +41,15 @@ hi = [1.0, 1.0]
     ProblemConfig::from_toml_str(&text, "spring").unwrap()
 }
 
+/// The spring with a setpoint that is no equilibrium (a moving state): a problem file
+/// refuses it ([`crate::problem::setpoint`]); the OCP's cost is still defined for it, and
+/// the tests of the cost's algebra use it to exercise every term.
+fn spring_moving() -> ProblemConfig {
+    let mut cfg = spring(Some("[0.5, 0.0]"), Some("[1.0]"));
+    cfg.ocp.x_ref = Some(vec![0.5, -0.25]);
+    cfg
+}
+
 fn rand_z(ocp: &Ocp, seed: u64) -> Vec<f64> {
     (0..ocp.n_var)
         .map(|i| 2.0 * crate::rng::uniform(seed, 3, i as u64) - 1.0)
@@ -49,7 +58,7 @@ fn rand_z(ocp: &Ocp, seed: u64) -> Vec<f64> {
 
 #[test]
 fn gradient_with_a_setpoint_matches_central_differences() {
-    let cfg = spring(Some("[0.5, -0.25]"), Some("[1.0]"));
+    let cfg = spring_moving();
     for soft in [false, true] {
         let ocp = Ocp::new(&cfg, soft);
         assert_eq!(
@@ -81,7 +90,7 @@ fn gradient_with_a_setpoint_matches_central_differences() {
 #[test]
 fn objective_is_the_setpoint_deviation_cost() {
     let plain = Ocp::new(&spring(None, None), false);
-    let with = Ocp::new(&spring(Some("[0.5, -0.25]"), Some("[1.0]")), false);
+    let with = Ocp::new(&spring_moving(), false);
     let z = rand_z(&plain, 11);
     // Without a setpoint: Σ xᵀQx + uᵀRu + x_NᵀPx_N, written out.
     let q = |x: &[f64]| 4.0 * x[0] * x[0] + 2.0 * 0.5 * x[0] * x[1] + x[1] * x[1];
@@ -118,11 +127,14 @@ fn law_at_an_equilibrium_setpoint_is_its_input_at_zero_cost() {
     // of a nonnegative objective; the solver's tolerance is the only slack.
     assert!((l.u[0] - 1.0).abs() <= 1e-9, "u0 = {}", l.u[0]);
     assert!(l.cost.abs() <= 1e-15, "cost {}", l.cost);
-    // Without u_ref, holding pos = 0.5 costs R·1² per stage: the law trades offset for
-    // effort and does not apply the equilibrium input.
-    let mut other = MpcLaw::new(&spring(Some("[0.5, 0.0]"), None));
+    // Without u_ref, the problem file computes the input that holds x_ref from the model
+    // (force = k·pos = 1), and the law applies it at zero cost.
+    let derived = spring(Some("[0.5, 0.0]"), None);
+    assert!((derived.ocp.u_ref_or_zero(1)[0] - 1.0).abs() <= 1e-12);
+    let mut other = MpcLaw::new(&derived);
     let (l0, _) = other.solve(&[0.5, 0.0], None);
-    assert!(l0.u[0] < 1.0 - 1e-3, "u0 = {}", l0.u[0]);
+    assert!((l0.u[0] - 1.0).abs() <= 1e-9, "u0 = {}", l0.u[0]);
+    assert!(l0.cost.abs() <= 1e-15, "cost {}", l0.cost);
     // From elsewhere, the MPC's closed loop goes to the setpoint, not to the origin.
     let model = crate::problem::model::Discrete::new(cfg.system.clone(), cfg.ocp.ts, 1);
     let mut x = vec![-0.5, 0.5];
