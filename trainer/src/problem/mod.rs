@@ -35,7 +35,7 @@ pub use refine::{CheckSettings, RefineSettings};
 pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{QpSolverKind, SolverSettings};
-pub use study::{ClosedLoopSettings, PlotSettings};
+pub use study::{ClosedLoopSettings, Mismatch, MismatchScenario, PlotSettings};
 pub use training::{Activation, Precision, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;
 

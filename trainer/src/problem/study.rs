@@ -39,8 +39,18 @@ pub struct ClosedLoopSettings {
     pub noise_runs: usize,
     /// Noise amplitude as a fraction of each domain half-width (default 0.01).
     pub noise_fraction: f64,
-    /// Relative mass mismatch of the robustness runs, ± (default 0.1).
+    /// Relative mass mismatch of the robustness runs, ± (default 0.1): the paper's
+    /// scenario, run only for a plant with a mass (the built-ins; an expression or custom
+    /// plant's parameter `mass`, else `m`) and only when [`mismatch`](Self::mismatch) is
+    /// not given.
     pub mass_mismatch: f64,
+    /// Model-mismatch scenarios named by the parameter perturbed:
+    /// `mismatch = [{ parameter = "k0", relative = 0.1 }]` runs the loops with the plant's
+    /// parameter scaled by 1 + relative and by 1 − relative (keys `<controller>_<parameter>+`
+    /// and `-`). When given it replaces the mass scenario; `[]` runs none. Not serialised
+    /// when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mismatch: Option<Vec<Mismatch>>,
     /// Training seeds of the seed study (default 10: seeds `training.seed` ..
     /// `training.seed + 9`, the first one being the run's own nets): both nets are trained
     /// from each seed's initial weights and simulated from the reference initial state.
@@ -57,7 +67,56 @@ impl Default for ClosedLoopSettings {
             noise_runs: 5,
             noise_fraction: 0.01,
             mass_mismatch: 0.1,
+            mismatch: None,
             seeds: 10,
+        }
+    }
+}
+
+/// One model-mismatch scenario: the plant's parameter `parameter` scaled by 1 ± `relative`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mismatch {
+    /// The parameter's name: a built-in's field (pendulum `m`, `l`, `g`; cart-pole
+    /// `m_cart`, `m_pole`, `l`, `g`; double integrator `mass`) or an expression or custom
+    /// plant's parameter.
+    pub parameter: String,
+    /// Relative change, in (0, 1).
+    pub relative: f64,
+}
+
+/// A scenario as the study runs it: the key's tag (`mass`, or the parameter's name), the
+/// parameter scaled and the relative change (applied with both signs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MismatchScenario {
+    /// Tag of the closed-loop keys `<controller>_<tag>+` / `-`.
+    pub tag: String,
+    /// The parameter scaled (`None`: the plant's mass, see `System::with_mass_scaled`).
+    pub parameter: Option<String>,
+    /// Relative change.
+    pub relative: f64,
+}
+
+impl ClosedLoopSettings {
+    /// The mismatch scenarios to run for a plant: the listed [`mismatch`](Self::mismatch)
+    /// entries, else the mass scenario when `mass_mismatch > 0` and the plant has a mass
+    /// (`has_mass`), else none.
+    pub fn mismatch_scenarios(&self, has_mass: bool) -> Vec<MismatchScenario> {
+        match &self.mismatch {
+            Some(list) => list
+                .iter()
+                .map(|m| MismatchScenario {
+                    tag: m.parameter.clone(),
+                    parameter: Some(m.parameter.clone()),
+                    relative: m.relative,
+                })
+                .collect(),
+            None if self.mass_mismatch > 0.0 && has_mass => vec![MismatchScenario {
+                tag: "mass".into(),
+                parameter: None,
+                relative: self.mass_mismatch,
+            }],
+            None => Vec::new(),
         }
     }
 }

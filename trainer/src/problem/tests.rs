@@ -361,3 +361,73 @@ fn refine_training_keys_replace_only_themselves() {
         assert!(e.contains(key) && e.contains("f.toml"), "{e}");
     }
 }
+
+/// `[system] time_unit`: the unit of ẋ and of `ocp.ts` for reports (default `s`, written
+/// back only when given; a bad one names the key).
+#[test]
+fn time_unit_is_read_checked_and_round_trips() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/pendulum_ode.toml"
+    ))
+    .unwrap();
+    let plain = ProblemConfig::from_toml_str(&text, "p").unwrap();
+    assert_eq!(plain.system.time_unit(), "s");
+    assert!(!plain.to_toml_string().unwrap().contains("time_unit"));
+    let with = text.replacen("[system]\n", "[system]\ntime_unit = \"min\"\n", 1);
+    assert_ne!(with, text);
+    let cfg = ProblemConfig::from_toml_str(&with, "p").unwrap();
+    assert_eq!(cfg.system.time_unit(), "min");
+    let back = ProblemConfig::from_toml_str(&cfg.to_toml_string().unwrap(), "b").unwrap();
+    assert_eq!(back.system.time_unit(), "min");
+    assert_eq!(ProblemConfig::default().system.time_unit(), "s");
+    let bad = text.replacen("[system]\n", "[system]\ntime_unit = \"\"\n", 1);
+    let e = ProblemConfig::from_toml_str(&bad, "p")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("system.time_unit"), "{e}");
+}
+
+/// `closed_loop.mismatch`: scenarios named by the parameter, checked against the plant;
+/// without it the mass scenario only for a plant with a mass.
+#[test]
+fn mismatch_scenarios_are_named_by_their_parameter() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/arm.toml"
+    ))
+    .unwrap();
+    // The arm has parameters g, l, c and no mass: no default scenario.
+    let arm = ProblemConfig::from_toml_str(&text, "arm").unwrap();
+    assert!(arm.closed_loop.mismatch_scenarios(false).is_empty());
+    let with = text.replacen(
+        "[closed_loop]\n",
+        "[closed_loop]\nmismatch = [{ parameter = \"l\", relative = 0.2 }]\n",
+        1,
+    );
+    let cfg = ProblemConfig::from_toml_str(&with, "arm").unwrap();
+    let sc = cfg.closed_loop.mismatch_scenarios(false);
+    assert_eq!((sc.len(), sc[0].tag.as_str()), (1, "l"));
+    assert_eq!(sc[0].parameter.as_deref(), Some("l"));
+    let long = cfg.system.with_parameter_scaled("l", 1.2).unwrap();
+    let params = long.parameter_names();
+    assert!(params.contains(&"l".to_string()), "{params:?}");
+    assert_ne!(long, cfg.system);
+    assert!(cfg.system.with_parameter_scaled("m", 1.2).is_none());
+    let bad = text.replacen(
+        "[closed_loop]\n",
+        "[closed_loop]\nmismatch = [{ parameter = \"mass\", relative = 0.1 }]\n",
+        1,
+    );
+    let e = ProblemConfig::from_toml_str(&bad, "arm").unwrap_err().to_string();
+    assert!(e.contains("closed_loop.mismatch[0].parameter"), "{e}");
+    assert!(e.contains("c, g, l"), "{e}");
+    // The pendulum keeps the paper's mass scenario by default; its fields can be named.
+    let p = ProblemConfig::default();
+    let sc = p.closed_loop.mismatch_scenarios(true);
+    assert_eq!((sc[0].tag.as_str(), sc[0].parameter.clone()), ("mass", None));
+    match p.system.with_parameter_scaled("g", 0.5).unwrap() {
+        crate::problem::model::System::Pendulum(q) => assert_eq!(q.g, 9.81 * 0.5),
+        other => panic!("{other:?}"),
+    }
+}

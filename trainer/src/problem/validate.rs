@@ -166,6 +166,7 @@ impl ProblemConfig {
         self.closed_loop.validate(nx)?;
         self.robust.validate(nx, nu)?;
         self.closed_loop.validate_seeds()?;
+        self.validate_mismatch()?;
         self.plots.validate()?;
         self.sampling.validate(nx)?;
         self.refine.validate(nx)?;
@@ -423,6 +424,44 @@ impl ClosedLoopSettings {
                 "closed_loop.seeds",
                 format!("at most 1000, got {}", c.seeds),
             ));
+        }
+        Ok(())
+    }
+}
+
+impl ProblemConfig {
+    /// `closed_loop.mismatch`: each entry a parameter of the plant (the message lists
+    /// them) and a relative change in (0, 1); no parameter twice.
+    fn validate_mismatch(&self) -> Result<(), ConfigError> {
+        let Some(list) = &self.closed_loop.mismatch else {
+            return Ok(());
+        };
+        let names = self.system.parameter_names();
+        for (i, m) in list.iter().enumerate() {
+            let key = format!("closed_loop.mismatch[{i}]");
+            if !names.contains(&m.parameter) {
+                let known = if names.is_empty() {
+                    "it has none".to_string()
+                } else {
+                    format!("its parameters are {}", names.join(", "))
+                };
+                return Err(invalid(
+                    format!("{key}.parameter"),
+                    format!("`{}` is no parameter of the plant; {known}", m.parameter),
+                ));
+            }
+            if !(m.relative.is_finite() && m.relative > 0.0 && m.relative < 1.0) {
+                return Err(invalid(
+                    format!("{key}.relative"),
+                    format!("must be in (0, 1), got {}", m.relative),
+                ));
+            }
+            if list[..i].iter().any(|o| o.parameter == m.parameter) {
+                return Err(invalid(
+                    format!("{key}.parameter"),
+                    format!("`{}` is listed twice", m.parameter),
+                ));
+            }
         }
         Ok(())
     }

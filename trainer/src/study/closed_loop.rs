@@ -138,8 +138,13 @@ pub struct SimSettings {
     pub noise: Vec<f64>,
     /// Seed of the noise.
     pub seed: u64,
-    /// Relative change of the plant's first mass parameter (0.1 = +10 %).
+    /// Relative change of the plant's parameter (0.1 = +10 %): of `mismatch_parameter`,
+    /// else of the plant's mass.
     pub mass_mismatch: f64,
+    /// The parameter `mass_mismatch` scales (`None`: the mass, see
+    /// [`with_mass_scaled`](crate::problem::model::System::with_mass_scaled)).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mismatch_parameter: Option<String>,
     /// Additive input disturbance (default none).
     #[serde(default)]
     pub disturbance: Disturbance,
@@ -205,18 +210,20 @@ fn is_zero(v: &usize) -> bool {
     *v == 0
 }
 
-/// The simulated plant: the problem's, with its mass scaled by `1 + mismatch`
-/// ([`with_mass_scaled`](crate::problem::model::System::with_mass_scaled)). An expression plant without a parameter `mass` or `m`
-/// has no mass to perturb: it is simulated unchanged (the scenarios make no mismatch runs
-/// for it).
-fn plant(cfg: &ProblemConfig, mismatch: f64) -> Discrete {
+/// The simulated plant: the problem's, with the parameter `parameter` (else its mass,
+/// [`with_mass_scaled`](crate::problem::model::System::with_mass_scaled)) scaled by
+/// `1 + mismatch`. A plant without that parameter is simulated unchanged (the scenarios
+/// make no mismatch runs for it; `closed_loop.mismatch` is validated against the plant).
+fn plant(cfg: &ProblemConfig, mismatch: f64, parameter: Option<&str>) -> Discrete {
     let sys = if mismatch == 0.0 {
-        cfg.system.clone()
+        None
     } else {
-        cfg.system
-            .with_mass_scaled(1.0 + mismatch)
-            .unwrap_or_else(|| cfg.system.clone())
-    };
+        match parameter {
+            Some(p) => cfg.system.with_parameter_scaled(p, 1.0 + mismatch),
+            None => cfg.system.with_mass_scaled(1.0 + mismatch),
+        }
+    }
+    .unwrap_or_else(|| cfg.system.clone());
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
 }
 
@@ -279,7 +286,7 @@ pub fn simulate(
 ) -> Run {
     let nx = cfg.system.nx();
     let nu = cfg.system.nu();
-    let model = plant(cfg, s.mass_mismatch);
+    let model = plant(cfg, s.mass_mismatch, s.mismatch_parameter.as_deref());
     let (q, r) = (cfg.q(), cfg.r());
     let (x_ref, u_ref) = (cfg.ocp.x_ref_or_origin(nx), cfg.ocp.u_ref_or_zero(nu));
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
@@ -487,6 +494,7 @@ mod tests {
             noise: vec![],
             seed: 0,
             mass_mismatch: 0.0,
+            mismatch_parameter: None,
             disturbance: Disturbance::None,
         };
         let r = simulate(&cfg, &mut law, &Controller::Mpc, &[1.2, -1.0], &s);
@@ -515,6 +523,7 @@ mod tests {
             noise: vec![],
             seed: 0,
             mass_mismatch: 0.0,
+            mismatch_parameter: None,
             disturbance: Disturbance::None,
         };
         let r = simulate(

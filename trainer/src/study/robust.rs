@@ -185,6 +185,7 @@ pub fn study(
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
+        mismatch_parameter: None,
         disturbance: Disturbance::None,
     };
     let up = initial_states(cfg)[0].clone();
@@ -310,6 +311,7 @@ mod tests {
                 noise: vec![],
                 seed: 1,
                 mass_mismatch: 0.0,
+                mismatch_parameter: None,
                 disturbance: dist,
             };
             let r = simulate(&rcfg, &mut law, &Controller::Mpc, &up, &s);
@@ -346,6 +348,7 @@ mod tests {
             noise: vec![],
             seed: 0,
             mass_mismatch: 0.0,
+            mismatch_parameter: None,
             disturbance: Disturbance::None,
         };
         let run = simulate(
@@ -435,6 +438,7 @@ mod tests {
                         noise: vec![],
                         seed: *seed,
                         mass_mismatch: 0.0,
+                        mismatch_parameter: None,
                         disturbance: *dist,
                     };
                     let r = simulate(&rcfg, law, &Controller::Mpc, x, &s);

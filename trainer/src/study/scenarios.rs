@@ -1,6 +1,8 @@
 //! The closed-loop study of a run (`closed_loop.json`): the MPC and both nets from every
 //! initial state x₀ (nominal plant), then noise and model-mismatch runs from the first:
-//! x_{t+1} = F(x_t, κ(x_t + n_t)) with F's mass scaled by 1 ± `mass_mismatch`.
+//! x_{t+1} = F(x_t, κ(x_t + n_t)) with one of F's parameters scaled by 1 ± its relative
+//! change (`closed_loop.mismatch`, else the paper's mass ± `mass_mismatch` for a plant
+//! with a mass; [`ClosedLoopSettings::mismatch_scenarios`](crate::problem::ClosedLoopSettings::mismatch_scenarios)).
 
 use crate::certify::certificate::Certificate;
 use crate::certify::Model;
@@ -47,8 +49,9 @@ pub fn initial_states(cfg: &ProblemConfig) -> Vec<Vec<f64>> {
 
 /// The closed-loop study: MPC and both nets from every initial state (nominal plant, no
 /// noise), then robustness runs from the first state: uniform measurement noise
-/// (`noise_fraction` of the domain's half-width, `noise_runs` seeds) and ± `mass_mismatch`.
-/// Keys: `mpc`, `nominal`, `regularized`, and `<name>_noise`, `<name>_mass+`, `<name>_mass-`.
+/// (`noise_fraction` of the domain's half-width, `noise_runs` seeds) and each mismatch
+/// scenario with both signs. Keys: `mpc`, `nominal`, `regularized`, and `<name>_noise`,
+/// `<name>_<tag>+`, `<name>_<tag>-` (tag `mass` for the mass scenario, else the parameter).
 pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) -> ClosedLoop {
     let st = &cfg.closed_loop;
     let base = SimSettings {
@@ -56,6 +59,7 @@ pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) ->
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
+        mismatch_parameter: None,
         disturbance: Default::default(),
     };
     let x0s = initial_states(cfg);
@@ -90,13 +94,15 @@ pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) ->
             jobs.push((format!("{name}_noise"), m, x0s[0].clone(), s));
         }
         // An expression plant without a parameter `mass` or `m` has no mass to perturb.
-        if st.mass_mismatch > 0.0 && cfg.system.with_mass_scaled(1.0).is_some() {
-            for (tag, mm) in [("mass+", st.mass_mismatch), ("mass-", -st.mass_mismatch)] {
+        let has_mass = cfg.system.with_mass_scaled(1.0).is_some();
+        for sc in st.mismatch_scenarios(has_mass) {
+            for (sign, mm) in [("+", sc.relative), ("-", -sc.relative)] {
                 let s = SimSettings {
                     mass_mismatch: mm,
+                    mismatch_parameter: sc.parameter.clone(),
                     ..base.clone()
                 };
-                jobs.push((format!("{name}_{tag}"), m, x0s[0].clone(), s));
+                jobs.push((format!("{name}_{}{sign}", sc.tag), m, x0s[0].clone(), s));
             }
         }
     }

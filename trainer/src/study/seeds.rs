@@ -57,6 +57,7 @@ pub fn seed_study(
         noise: vec![],
         seed: 0,
         mass_mismatch: 0.0,
+        mismatch_parameter: None,
         disturbance: Default::default(),
     };
     let bar = if progress {

@@ -95,6 +95,7 @@ impl CartPole {
             rhs: Some(s(&["v", "om", "p_dd", "th_dd"])),
             next: None,
             units: Default::default(),
+            time_unit: None,
         }
     }
 }

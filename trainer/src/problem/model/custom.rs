@@ -356,6 +356,26 @@ impl CustomPlant {
         Self::build(self.spec.clone(), imp)
     }
 
+    /// The names of the plant's numeric parameters (those a mismatch scenario can scale).
+    pub fn numeric_parameter_names(&self) -> Vec<String> {
+        self.spec
+            .parameters
+            .iter()
+            .filter(|(_, v)| v.as_float().is_some())
+            .map(|(k, _)| k.clone())
+            .collect()
+    }
+
+    /// The plant with its numeric parameter `name` scaled by `factor`; `None` without it.
+    pub fn with_parameter_scaled(&self, name: &str, factor: f64) -> Option<Self> {
+        self.spec.parameters.get(name)?.as_float()?;
+        self.with_parameters(|t| {
+            let v = t[name].as_float().unwrap_or(f64::NAN);
+            t.insert(name.to_string(), toml::Value::Float(v * factor));
+        })
+        .ok()
+    }
+
     /// The plant with its parameter `mass`, else `m`, scaled by `factor` (model mismatch
     /// in closed-loop studies); `None` without such a number.
     pub fn with_mass_scaled(&self, factor: f64) -> Option<Self> {

@@ -169,6 +169,7 @@ impl System {
             rhs: None,
             next: None,
             units: Default::default(),
+            time_unit: None,
         };
         match self {
             System::Pendulum(_) => named(&["theta", "omega"], &["u"]),
@@ -184,8 +185,19 @@ impl System {
                 rhs: None,
                 next: None,
                 units: Default::default(),
+                time_unit: None,
             },
         }
+    }
+    /// The unit of time of the model and of `ocp.ts`: an expression plant's `time_unit`,
+    /// else `"s"` (the built-in and custom plants are in seconds).
+    pub fn time_unit(&self) -> &str {
+        let spec = match self {
+            System::Ode(p) => p.spec(),
+            System::Discrete(p) => p.spec(),
+            _ => return "s",
+        };
+        spec.time_unit.as_deref().unwrap_or("s")
     }
     /// The compiler's warnings of an expression plant (non-smooth functions, unused names;
     /// empty for a built-in). `problem` prints nothing: the caller shows them.
@@ -213,6 +225,44 @@ impl System {
             System::Ode(p) => *p = scaled(p, factor)?,
             System::Discrete(p) => *p = scaled(p, factor)?,
             System::Custom(p) => *p = p.with_mass_scaled(factor)?,
+        }
+        Some(sys)
+    }
+    /// The names of the parameters [`with_parameter_scaled`](Self::with_parameter_scaled)
+    /// can perturb: a built-in's fields, an expression plant's `parameters`, a custom
+    /// plant's numeric parameters.
+    pub fn parameter_names(&self) -> Vec<String> {
+        let s = |v: &[&str]| v.iter().map(|t| t.to_string()).collect();
+        match self {
+            System::Pendulum(_) => s(&["m", "l", "g"]),
+            System::CartPole(_) => s(&["m_cart", "m_pole", "l", "g"]),
+            System::DoubleIntegrator(_) => s(&["mass"]),
+            System::Ode(p) => p.spec().parameters.keys().cloned().collect(),
+            System::Discrete(p) => p.spec().parameters.keys().cloned().collect(),
+            System::Custom(p) => p.numeric_parameter_names(),
+        }
+    }
+    /// The plant with its parameter `name` scaled by `factor` (a model-mismatch scenario);
+    /// `None` when the plant has no such parameter or the scaled plant does not rebuild.
+    pub fn with_parameter_scaled(&self, name: &str, factor: f64) -> Option<System> {
+        fn scaled<const D: bool>(p: &ExprPlant<D>, name: &str, f: f64) -> Option<ExprPlant<D>> {
+            let v = *p.spec().parameters.get(name)?;
+            p.with_parameter(name, v * f).ok()
+        }
+        let mut sys = self.clone();
+        match (&mut sys, name) {
+            (System::Pendulum(p), "m") => p.m *= factor,
+            (System::Pendulum(p), "l") => p.l *= factor,
+            (System::Pendulum(p), "g") => p.g *= factor,
+            (System::CartPole(p), "m_cart") => p.m_cart *= factor,
+            (System::CartPole(p), "m_pole") => p.m_pole *= factor,
+            (System::CartPole(p), "l") => p.l *= factor,
+            (System::CartPole(p), "g") => p.g *= factor,
+            (System::DoubleIntegrator(p), "mass") => p.mass *= factor,
+            (System::Ode(p), _) => *p = scaled(p, name, factor)?,
+            (System::Discrete(p), _) => *p = scaled(p, name, factor)?,
+            (System::Custom(p), _) => *p = p.with_parameter_scaled(name, factor)?,
+            _ => return None,
         }
         Some(sys)
     }

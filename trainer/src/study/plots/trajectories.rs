@@ -32,6 +32,7 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let (xnames, unames) = axis_names(&cfg.system);
     let ts = cfg.ocp.ts;
+    let unit = cfg.system.time_unit();
     let t_end = first.steps as f64 * ts;
     let panels = nx + nu;
     let o = &cfg.ocp;
@@ -48,7 +49,7 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
         let root = root
             .titled(
                 &format!(
-                    "Closed loop from x₀ = {} ({} steps, Ts = {} s)",
+                    "Closed loop from x₀ = {} ({} steps, Ts = {} {unit})",
                     fmt_vec(&first.x0),
                     first.steps,
                     ts
@@ -76,7 +77,7 @@ pub fn trajectories(p: &PlotInputs) -> Result<Figure, PlotError> {
                     reference: setpoint.as_ref().map(|s| s.1[idx]),
                 }
             };
-            draw_panel(area, &signal, &runs, ts, t_end, row == 0)?;
+            draw_panel(area, &signal, &runs, (ts, unit), t_end, row == 0)?;
         }
         root.present().map_err(draw_err(NAME))?;
     }
@@ -144,7 +145,7 @@ fn draw_panel(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     s: &Signal,
     runs: &[Controller],
-    ts: f64,
+    (ts, unit): (f64, &str),
     t_end: f64,
     legend: bool,
 ) -> Result<(), PlotError> {
@@ -164,7 +165,7 @@ fn draw_panel(
     let yfmt = tick_fmt(yhi - ylo);
     chart
         .configure_mesh()
-        .x_desc("t [s]")
+        .x_desc(format!("t [{unit}]"))
         .y_label_formatter(&yfmt)
         .y_desc(s.name)
         .axis_desc_style((FONT, 17))

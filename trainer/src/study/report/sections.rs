@@ -28,11 +28,12 @@ pub(super) fn problem(cfg: &ProblemConfig) -> Vec<Block> {
     vec![
         Block::Heading(2, "Problem".into()),
         Block::Para(format!(
-            "System `{}` (nx = {}, nu = {}), Ts = {} s, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.{setpoint}",
+            "System `{}` (nx = {}, nu = {}), Ts = {} {}, horizon N = {}, RK4 sub-steps {}; Q = {}, R = {}, P = {}. State bounds on x₁..x_N: x ∈ {}; input bounds U = {}. Certified (and sampled) domain X = {}.{setpoint}",
             cfg.system.name(),
             cfg.system.nx(),
             cfg.system.nu(),
             cfg.ocp.ts,
+            cfg.system.time_unit(),
             cfg.ocp.horizon,
             cfg.ocp.rk4_substeps,
             json(&cfg.ocp.q),
@@ -310,9 +311,10 @@ pub(super) fn table_ii(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     vec![
         Block::Heading(2, "Table II: closed loop".into()),
         Block::Para(format!(
-            "From x₀ = ({}) ({steps} steps = {} s, nominal plant, no noise), training seed {}:",
+            "From x₀ = ({}) ({steps} steps = {} {}, nominal plant, no noise), training seed {}:",
             x0.join(", "),
             steps as f64 * cfg.ocp.ts,
+            cfg.system.time_unit(),
             cfg.training.seed
         )),
         Block::Table { head, rows },
@@ -402,13 +404,22 @@ pub(super) fn all_runs(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             col(|r| r.cost),
         ]));
     }
+    let has_mass = cfg.system.with_mass_scaled(1.0).is_some();
+    let mismatch: String = cfg
+        .closed_loop
+        .mismatch_scenarios(has_mass)
+        .iter()
+        .map(|sc| match &sc.parameter {
+            None => format!("; `_mass±`: plant mass ±{} %", 100.0 * sc.relative),
+            Some(p) => format!("; `_{p}±`: parameter `{p}` ±{} %", 100.0 * sc.relative),
+        })
+        .collect();
     vec![
         Block::Para(format!(
-            "Over all initial states (x₀ and {} random states of X) and the robustness runs (`_noise`: measurement noise {} of the domain half-width, {} seeds; `_mass±`: plant mass ±{} %), training seed {}, median [min, max]:",
+            "Over all initial states (x₀ and {} random states of X) and the robustness runs (`_noise`: measurement noise {} of the domain half-width, {} seeds{mismatch}), training seed {}, median [min, max]:",
             cfg.closed_loop.random_initial_states,
             cfg.closed_loop.noise_fraction,
             cfg.closed_loop.noise_runs,
-            100.0 * cfg.closed_loop.mass_mismatch,
             cfg.training.seed
         )),
         Block::Table {

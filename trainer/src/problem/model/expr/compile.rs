@@ -62,6 +62,14 @@ pub fn compile(spec: &SystemSpec, discrete: bool) -> Result<ExprModel, ExprError
         outputs.push(node);
     }
 
+    if let Some(t) = &spec.time_unit {
+        let ok =
+            !t.trim().is_empty() && t.chars().count() <= 16 && !t.chars().any(char::is_control);
+        if !ok {
+            let kind = ErrorKind::BadTimeUnit { unit: t.clone() };
+            return Err(ExprError::key("system.time_unit", kind));
+        }
+    }
     for name in spec.units.keys() {
         if !table.contains_key(name) {
             let kind = ErrorKind::UnknownUnitName { name: name.clone() };

@@ -112,6 +112,12 @@ pub enum ErrorKind {
     /// inputs, or a terminal constraint that uses an input (the message says which).
     #[error("{0}")]
     Constraint(String),
+    /// A `time_unit` that is empty, longer than 16 characters or has control characters.
+    #[error("time unit `{unit}` must be 1 to 16 printable characters, e.g. \"s\" or \"min\"")]
+    BadTimeUnit {
+        /// The unit as written.
+        unit: String,
+    },
     /// A `units` entry for a name that is no state, input, parameter or definition.
     #[error("units given for `{name}`, which is no state, input, parameter or definition")]
     UnknownUnitName {

@@ -9,6 +9,7 @@
 //! definitions = ["spring = k*pos + 0.5*pos^3"]   # optional, in order
 //! rhs = ["vel", "force - spring - c*vel"]        # one expression per state
 //! units = { pos = "m", force = "N" }  # optional
+//! time_unit = "s"                     # optional: the unit of time of ẋ and ocp.ts
 //! ```
 //!
 //! `kind` is not a field: the caller's `#[serde(tag = "kind")]` enum reads it and holds a
@@ -44,4 +45,8 @@ pub struct SystemSpec {
     /// Units of states, inputs, parameters or definitions (for reports).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub units: BTreeMap<String, String>,
+    /// The unit of time of `rhs` (ẋ per this unit) and of `ocp.ts`, e.g. `"min"` (default
+    /// `"s"`; reports and figures label times with it). Not serialised when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_unit: Option<String>,
 }

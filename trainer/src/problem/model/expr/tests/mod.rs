@@ -31,6 +31,7 @@ pub(super) fn spec(
         rhs: Some(s(rhs)),
         next: None,
         units: BTreeMap::new(),
+        time_unit: None,
     }
 }
 
