@@ -5,7 +5,7 @@
 //! `sample` (dataset.bin/.csv) → `validate` (validation.bin: MPC labels of random states)
 //! → `train` (model_nominal.bin, model_regularized.bin, same initial weights) → `certify`
 //! (certificate.json, certificate_nominal.json) → `export` (weights.rs, weights.bin,
-//! export_report.json: the regularized net for controller-core) → `closed_loop`
+//! export_report.json: the net with the strongest guarantee, see `choice`, for controller-core) → `closed_loop`
 //! (closed_loop.json) → `seeds` (seeds.json: both nets retrained from other seeds' initial
 //! weights and simulated from the reference initial state) → `plots` (plots/*.svg,
 //! plots/*.png) → `report` (report.md, report.html). A stage whose manifest matches its current inputs and whose
@@ -25,6 +25,7 @@
 //! can ([`ProblemConfig::from_toml_str_with`]).
 
 pub mod api;
+mod choice;
 pub mod manifest;
 pub mod robust;
 mod stages;

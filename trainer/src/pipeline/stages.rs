@@ -328,19 +328,36 @@ fn certify_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     Ok(out)
 }
 
-// ---- export: the regularized net for controller-core -----------------------------------
+// ---- export: the net with the strongest guarantee for controller-core ------------------
 
 fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
     hashes(
         cx,
         Stage::Export,
-        &[RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE],
+        &[
+            RunDir::MODEL_REGULARIZED,
+            RunDir::CERTIFICATE,
+            RunDir::MODEL_NOMINAL,
+            RunDir::CERTIFICATE_NOMINAL,
+        ],
     )
 }
 
 fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
-    let m = load_model(Stage::Export, &d.model_regularized())?;
-    let file = read_run_certificate(Stage::Export, (d, env.cfg), RunDir::CERTIFICATE, &m)?;
+    let read = |model: &str, cert: &str| -> Result<(Model, CertificateFile), PipelineError> {
+        let m = load_model(Stage::Export, &d.join(model))?;
+        let f = read_run_certificate(Stage::Export, (d, env.cfg), cert, &m)?;
+        Ok((m, f))
+    };
+    let nominal = read(RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL)?;
+    let regularized = read(RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE)?;
+    let (net, reason) =
+        super::choice::choose((&nominal.0, &nominal.1), (&regularized.0, &regularized.1));
+    let (m, file) = if net == "nominal" {
+        nominal
+    } else {
+        regularized
+    };
     let c = &file.base;
     let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
         .map_err(|e| fail(Stage::Export, e))?
@@ -360,11 +377,13 @@ fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         "samples": r.samples,
         "eps_f64": c.eps,
         "eps_device_libm": c.eps + r.f32_allowance[0],
+        "net": net,
+        "net_reason": reason,
     });
     write_atomic(&d.export_report(), json.to_string().as_bytes())
         .map_err(|e| fail(Stage::Export, e))?;
     Ok(format!(
-        "weights.rs + weights.bin; f32 allowance {:.3e} (observed {:.3e} on {} states)",
+        "weights.rs + weights.bin of the {net} net; f32 allowance {:.3e} (observed {:.3e} on {} states)",
         r.f32_allowance[0], r.f32_observed[0], r.samples
     ))
 }

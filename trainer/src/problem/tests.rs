@@ -392,11 +392,8 @@ fn time_unit_is_read_checked_and_round_trips() {
 /// without it the mass scenario only for a plant with a mass.
 #[test]
 fn mismatch_scenarios_are_named_by_their_parameter() {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../configs/arm.toml"
-    ))
-    .unwrap();
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/arm.toml"))
+        .unwrap();
     // The arm has parameters g, l, c and no mass: no default scenario.
     let arm = ProblemConfig::from_toml_str(&text, "arm").unwrap();
     assert!(arm.closed_loop.mismatch_scenarios(false).is_empty());
@@ -419,13 +416,18 @@ fn mismatch_scenarios_are_named_by_their_parameter() {
         "[closed_loop]\nmismatch = [{ parameter = \"mass\", relative = 0.1 }]\n",
         1,
     );
-    let e = ProblemConfig::from_toml_str(&bad, "arm").unwrap_err().to_string();
+    let e = ProblemConfig::from_toml_str(&bad, "arm")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("closed_loop.mismatch[0].parameter"), "{e}");
     assert!(e.contains("c, g, l"), "{e}");
     // The pendulum keeps the paper's mass scenario by default; its fields can be named.
     let p = ProblemConfig::default();
     let sc = p.closed_loop.mismatch_scenarios(true);
-    assert_eq!((sc[0].tag.as_str(), sc[0].parameter.clone()), ("mass", None));
+    assert_eq!(
+        (sc[0].tag.as_str(), sc[0].parameter.clone()),
+        ("mass", None)
+    );
     match p.system.with_parameter_scaled("g", 0.5).unwrap() {
         crate::problem::model::System::Pendulum(q) => assert_eq!(q.g, 9.81 * 0.5),
         other => panic!("{other:?}"),

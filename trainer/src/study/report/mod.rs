@@ -156,6 +156,8 @@ struct Artifacts {
     tier: crate::certify::tier::Guarantee,
     /// `certificate_nominal.json`.
     cert_n: Certificate,
+    /// Its tier.
+    tier_n: crate::certify::tier::Guarantee,
     /// `closed_loop.json`.
     cl: ClosedLoop,
     /// `seeds.json`: per training seed, the nominal and the regularized net.
@@ -165,6 +167,15 @@ struct Artifacts {
 }
 
 impl Artifacts {
+    /// The exported net's name (`export_report.json`'s `net`; runs before the choice
+    /// existed exported the regularized net), its certificate and tier.
+    fn exported(&self) -> (&str, &Certificate, &crate::certify::tier::Guarantee) {
+        match self.export["net"].as_str() {
+            Some("nominal") => ("nominal", &self.cert_n, &self.tier_n),
+            _ => ("regularized", &self.cert, &self.tier),
+        }
+    }
+
     /// Reads the artifacts of the run in `dir`; the first missing or unreadable file is the
     /// error.
     fn load(dir: &Path) -> Result<Self, ReportError> {
@@ -183,6 +194,7 @@ impl Artifacts {
             reg,
             tier: cert.guarantee,
             cert: cert.base,
+            tier_n: cert_n.guarantee,
             cert_n: cert_n.base,
             cl: load(&dir.closed_loop())?,
             seeds: load(&dir.seeds())?,
@@ -234,6 +246,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
 }
 
 mod verdict;
+pub use verdict::judge;
 
 #[cfg(test)]
 mod tests;

@@ -54,8 +54,7 @@ pub fn judge(eps: f64, u_lo: &[f64], u_hi: &[f64]) -> (f64, &'static str) {
 
 /// The verdict section (module doc).
 pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
-    let c = &a.cert;
-    let g = &a.tier;
+    let (net, c, g) = a.exported();
     let tier = g.guarantee.name();
     let allowance = a.export["f32_allowance_libm"].as_f64().unwrap_or(f64::NAN);
     let (_, inputs) = crate::study::plots::axis_names(&cfg.system);
@@ -89,13 +88,19 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     vec![
         Block::Heading(2, "Verdict".into()),
         Block::Para(format!(
-            "**ε = {}{unit}, {tier}** (Theorem 1, the exported regularized net): for every state in X = {}, the MPC's input and the network's differ by at most ε (on the device: ε + f32 allowance {} = {}{unit}). Tier **{tier}**: {rests_on}.",
+            "**ε = {}{unit}, {tier}** (Theorem 1, the exported {net} net): for every state in X = {}, the MPC's input and the network's differ by at most ε (on the device: ε + f32 allowance {} = {}{unit}). Tier **{tier}**: {rests_on}.",
             num(c.eps),
             boxed(&c.domain_lo, &c.domain_hi),
             num(allowance),
             num(c.eps + allowance),
         )),
         Block::Para(format!("Against the input range: {meaning}.")),
+        Block::Para(format!(
+            "Exported: {}.",
+            a.export["net_reason"]
+                .as_str()
+                .unwrap_or("the regularized net (the run predates the choice between the nets)")
+        )),
         Block::Para(format!(
             "The exported controller projects the state onto X and clamps its output to u ∈ {}.",
             boxed(&blo, &bhi)
