@@ -354,7 +354,7 @@ mod tests {
         // The second file cannot be written (its "directory" is a file): nothing changes.
         let bad = dir.join("d.bin").join("x.csv");
         let e = write_atomic_all(&[(&a, b"new bin"), (&bad, b"new csv")]).unwrap_err();
-        // The error names the path and why (issue 38 §4: not "File exists (os error 17)").
+        // The error names the path and why (not only "File exists (os error 17)").
         let e = e.to_string();
         assert!(
             e.contains(&bad.display().to_string())

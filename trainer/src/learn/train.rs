@@ -586,7 +586,7 @@ mod tests {
                 .to_string()
                 .contains("m.bin")
         );
-        // One flipped byte anywhere is an error (it used to evaluate to other u silently).
+        // One flipped byte anywhere is an error (never a model that evaluates to other u).
         for i in 0..bytes.len() {
             let mut b = bytes.clone();
             b[i] ^= 0x04;

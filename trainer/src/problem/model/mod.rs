@@ -455,7 +455,7 @@ impl Discrete {
             System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             // The built-in cart-pole through its expression form (F = the f64 step's bits,
             // ∂F and ∇²λᵀF = its dual numbers' to rounding; `plant::tests`). Should it not
-            // compile (a non-finite parameter), the dual numbers serve as before.
+            // compile (a non-finite parameter), the dual numbers of the f64 step serve.
             System::CartPole(c) => expr::compile(&c.expressions(), false)
                 .ok()
                 .map(|m| Arc::new(m.sweep(ts, substeps))),
