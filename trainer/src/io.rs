@@ -14,7 +14,7 @@
 use std::io::Write;
 use std::path::Path;
 
-pub mod run_dir;
+pub(crate) mod run_dir;
 pub use run_dir::RunDir;
 
 /// Errors of reading and writing the trainer's files; each names the file.
@@ -35,6 +35,14 @@ pub enum FileError {
         path: String,
         /// What is wrong.
         reason: String,
+    },
+    /// A file's checked body does not decode.
+    #[error("{path}: not a valid ampc file: decode error: {source}")]
+    Decode {
+        /// The file.
+        path: String,
+        /// The decoder's error.
+        source: postcard::Error,
     },
 }
 
@@ -91,7 +99,10 @@ pub fn decode_checked<T: serde::de::DeserializeOwned>(
             "checksum mismatch: the {what} file is corrupt or was modified after it was written"
         )));
     };
-    let v: T = postcard::from_bytes(body).map_err(|e| fmt(format!("decode error: {e}")))?;
+    let v: T = postcard::from_bytes(body).map_err(|source| FileError::Decode {
+        path: origin.to_string(),
+        source,
+    })?;
     if version_of(&v) != expected {
         return Err(fmt(format!(
             "format version {} (this build reads {expected})",

@@ -39,7 +39,7 @@ mod c_header;
 mod c_lib;
 pub mod device;
 mod guarantee;
-pub mod range;
+pub(crate) mod range;
 mod rust;
 mod tanh;
 mod tested;
@@ -183,6 +183,10 @@ impl From<FileError> for ExportError {
             FileError::Format { path, reason } => ExportError::Io {
                 path: path.into(),
                 source: std::io::Error::new(std::io::ErrorKind::InvalidData, reason),
+            },
+            FileError::Decode { path, source } => ExportError::Io {
+                path: path.into(),
+                source: std::io::Error::new(std::io::ErrorKind::InvalidData, source),
             },
         }
     }

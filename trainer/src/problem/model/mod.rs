@@ -29,7 +29,7 @@
 
 mod cartpole;
 mod constraint_eval;
-pub mod custom;
+pub(crate) mod custom;
 mod double_integrator;
 pub mod expr;
 mod nz;
@@ -40,7 +40,7 @@ mod staged;
 pub(crate) mod test_plants;
 
 pub use cartpole::CartPole;
-pub use custom::{CustomPlant, CustomPlantError, ErasedPlant};
+pub use custom::{CustomPlant, CustomPlantError, ErasedPlant, RecordError};
 pub use double_integrator::DoubleIntegrator;
 pub use pendulum::Pendulum;
 pub use plant::{DiscretePlant, ExprPlant, OdePlant, MAX_NZ};
