@@ -21,7 +21,7 @@ mod adam;
 mod epoch;
 mod metrics;
 pub mod mlp;
-pub mod model_file;
+pub(crate) mod model_file;
 pub mod setpoint;
 mod stored_settings;
 pub mod train;
