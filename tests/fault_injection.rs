@@ -1,4 +1,4 @@
-//! Fault injection through the CLI (issue 14): every command (`trainer run` included) killed
+//! Fault injection through the CLI: every command (`trainer run` included) killed
 //! (SIGKILL) at random times
 //! and rerun, and random bytes flipped in every input file type. Each outcome must be the
 //! clean run's result byte for byte, or a nonzero exit whose message names the file — never

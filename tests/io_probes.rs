@@ -1,4 +1,4 @@
-//! The I/O probes of issue 38 §4, through the CLI: stdout on a full disk, an export that
+//! I/O probes through the CLI: stdout on a full disk, an export that
 //! cannot write one of its files, an output path under a regular file, a run name that is
 //! not one path component, and a states CSV in Excel's form with the problem's state names.
 //! Each ends with a clear error (non-zero status, never the panic status 101), names what

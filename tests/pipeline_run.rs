@@ -223,7 +223,7 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     let o = trainer(&quiet);
     assert!(o.status.success() && o.stderr.is_empty());
     // A deliverable overwritten after the run is not trusted: its stage is redone, saying
-    // which file, and the deliverable is rebuilt (it used to skip every stage and exit 0).
+    // which file, and the deliverable is rebuilt (never every stage skipped with exit 0).
     let weights = std::fs::read(run.join("weights.bin")).unwrap();
     std::fs::write(run.join("weights.bin"), "garbage").unwrap();
     let o = trainer(&args);

@@ -1,4 +1,4 @@
-//! A certificate edited by hand never leaves the trainer (issue 38 §2): `export` and `eval`
+//! A certificate edited by hand never leaves the trainer: `export` and `eval`
 //! refuse a `certificate.json` whose ε, domain X, clamp band or tier was edited — with its
 //! checksum recomputed (the refusal names the field) and without its checksum (refused as
 //! unsealed unless `--accept-unsealed`, which then exports the tier `estimated`) — and one
@@ -247,7 +247,7 @@ fn edited_certificates_are_refused_by_export_and_eval() {
         "`problem_hash`",
     );
     // A certificate that does not say its tier is refused, not taken as sound (a user-given
-    // L_MPC used to export as `sound` without the key).
+    // L_MPC would otherwise export as `sound`).
     let given = certify(&["--l-mpc", "2.0"]);
     let (tier, _) = f.exported_tier("given", &given, &[]);
     assert_eq!(

@@ -316,7 +316,7 @@ mod tests {
         // A state projected into the box is flagged too (with OUT_OF_DOMAIN).
         let o = E.evaluate(&[5.0, -1.0]);
         assert!(o.flags.contains(Flags::EXCLUDED) && o.flags.contains(Flags::OUT_OF_DOMAIN));
-        // Non-finite state: the fallback alone, as before.
+        // Non-finite state: the fallback alone (only NON_FINITE).
         assert_eq!(E.evaluate(&[f32::NAN, 0.0]).flags, Flags::NON_FINITE);
         assert_eq!(E.validate(), Ok(()));
         assert_eq!(

@@ -14,7 +14,7 @@
 use std::io::Write;
 use std::path::Path;
 
-pub mod run_dir;
+pub(crate) mod run_dir;
 pub use run_dir::RunDir;
 
 /// Errors of reading and writing the trainer's files; each names the file.
@@ -35,6 +35,14 @@ pub enum FileError {
         path: String,
         /// What is wrong.
         reason: String,
+    },
+    /// A file's checked body does not decode.
+    #[error("{path}: not a valid ampc file: decode error: {source}")]
+    Decode {
+        /// The file.
+        path: String,
+        /// The decoder's error.
+        source: postcard::Error,
     },
 }
 
@@ -91,7 +99,10 @@ pub fn decode_checked<T: serde::de::DeserializeOwned>(
             "checksum mismatch: the {what} file is corrupt or was modified after it was written"
         )));
     };
-    let v: T = postcard::from_bytes(body).map_err(|e| fmt(format!("decode error: {e}")))?;
+    let v: T = postcard::from_bytes(body).map_err(|source| FileError::Decode {
+        path: origin.to_string(),
+        source,
+    })?;
     if version_of(&v) != expected {
         return Err(fmt(format!(
             "format version {} (this build reads {expected})",
@@ -354,7 +365,7 @@ mod tests {
         // The second file cannot be written (its "directory" is a file): nothing changes.
         let bad = dir.join("d.bin").join("x.csv");
         let e = write_atomic_all(&[(&a, b"new bin"), (&bad, b"new csv")]).unwrap_err();
-        // The error names the path and why (issue 38 §4: not "File exists (os error 17)").
+        // The error names the path and why (not only "File exists (os error 17)").
         let e = e.to_string();
         assert!(
             e.contains(&bad.display().to_string())

@@ -1,4 +1,4 @@
-//! Fuzzing every reader of the trainer (issue 14): the problem file (TOML, including the
+//! Fuzzing every reader of the trainer: the problem file (TOML, including the
 //! `[system]` expression language), the states CSV of `solve`/`eval`, the import CSV, and the
 //! artifact decoders — dataset, labelling checkpoint (`.partial`), model, refinement
 //! checkpoint, certificate JSON, pipeline manifest, ONNX. (`controller-core`'s `blob::decode`

@@ -358,3 +358,129 @@ fn the_custom_plant_example_uses_only_the_facade() {
         .collect();
     assert!(deep.is_empty(), "{}: module paths {deep:?}", p.display());
 }
+
+/// Longest function of the library and the binary, in lines from its `fn` line to its
+/// closing brace (test code and generated files excepted).
+const MAX_FN_LINES: usize = 150;
+
+/// Functions over [`MAX_FN_LINES`] whose rewrite is another change's (the refinement rounds,
+/// their check and certificate under `certify/refine/`, and the closed-loop simulation):
+/// `(file under src/, function)`. An entry that has become short is reported, not failed.
+const LONG_FN_ALLOWED: &[(&str, &str)] = &[
+    ("certify/refine/rounds.rs", "refine"),
+    ("certify/refine/check.rs", "check"),
+    ("certify/refine/outputs.rs", "certificate"),
+    ("study/closed_loop.rs", "simulate"),
+];
+
+/// The functions of `text` over `max` lines: (name, 1-based `fn` line, lines). A function
+/// runs from its `fn` line to the first later line at its indentation starting with `}`;
+/// the text is cut before an inline `#[cfg(test)]` module.
+fn long_functions(text: &str, max: usize) -> Vec<(String, usize, usize)> {
+    let mut lines: Vec<&str> = Vec::new();
+    let mut it = text.lines().peekable();
+    while let Some(line) = it.next() {
+        if line.trim_start().starts_with("#[cfg(test)]")
+            && it.peek().is_some_and(|n| {
+                let n = n.trim();
+                n.starts_with("mod ") && n.ends_with('{')
+            })
+        {
+            break;
+        }
+        lines.push(line);
+    }
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let mut t = line.trim_start();
+        let indent = &line[..line.len() - t.len()];
+        while let Some(rest) = ["pub(crate) ", "pub(super) ", "pub ", "const ", "unsafe "]
+            .iter()
+            .find_map(|p| t.strip_prefix(p))
+        {
+            t = rest;
+        }
+        let Some(rest) = t.strip_prefix("fn ") else {
+            continue;
+        };
+        let tail = line.trim_end();
+        if tail.ends_with(';') || tail.ends_with('}') {
+            continue; // a declaration, or a function on one line
+        }
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        // The closing brace: the first later line at this indentation that is not the
+        // signature's continuation (`) -> T {`, `where`); anything else ends the search.
+        for (j, l) in lines.iter().enumerate().skip(i + 1) {
+            let lt = l.trim_start();
+            if lt.is_empty() || l.len() - lt.len() > indent.len() {
+                continue;
+            }
+            if l.len() - lt.len() < indent.len() {
+                break;
+            }
+            if lt.starts_with('}') {
+                if j - i + 1 > max {
+                    out.push((name.clone(), i + 1, j - i + 1));
+                }
+                break;
+            }
+            if !(lt.starts_with(')') || lt.starts_with("where") || lt.starts_with('{')) {
+                break;
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn functions_are_short_enough_to_read() {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let mut long = Vec::new();
+    let mut allowed_seen = BTreeSet::new();
+    for f in &files {
+        let rel = f
+            .strip_prefix(src())
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
+        let name = f.file_name().unwrap().to_string_lossy();
+        let test_file = name == "tests.rs"
+            || name.ends_with("_tests.rs")
+            || rel.split('/').any(|c| c == "tests");
+        let text = std::fs::read_to_string(f).unwrap();
+        if test_file || text.contains("@generated") {
+            continue;
+        }
+        for (func, line, n) in long_functions(&text, MAX_FN_LINES) {
+            if LONG_FN_ALLOWED.contains(&(rel.as_str(), func.as_str())) {
+                allowed_seen.insert((rel.clone(), func));
+            } else {
+                long.push(format!("src/{rel}:{line}: fn {func}: {n} lines"));
+            }
+        }
+    }
+    for (file, func) in LONG_FN_ALLOWED {
+        if !allowed_seen.contains(&(file.to_string(), func.to_string())) {
+            eprintln!("note: src/{file} fn {func} is not over {MAX_FN_LINES} lines: drop it from LONG_FN_ALLOWED");
+        }
+    }
+    assert!(
+        long.is_empty(),
+        "functions over {MAX_FN_LINES} lines:\n{}",
+        long.join("\n")
+    );
+}
+
+#[test]
+fn the_checker_sees_a_long_function() {
+    let body = "        x += 1;\n".repeat(4);
+    let text = format!(
+        "pub(crate) fn short() {{}}\nimpl A {{\n    pub fn long(&self) {{\n{body}    }}\n}}\nfn decl();\n#[cfg(test)]\nmod tests {{\n    fn long_test() {{\n{body}    }}\n}}\n"
+    );
+    assert_eq!(long_functions(&text, 5), vec![("long".to_string(), 3, 6)]);
+    assert!(long_functions(&text, 6).is_empty());
+}

@@ -13,7 +13,7 @@
 //! (`export`, the pipeline's export stage, the report) instead of being baked into a
 //! controller. The checksum is over the text, not over re-serialised values, so it does not
 //! depend on how a JSON library prints or parses floating-point numbers. A file that was
-//! reformatted (e.g. by `jq`) no longer matches: regenerate it.
+//! reformatted (e.g. by `jq`) does not match: regenerate it.
 
 use serde::Serialize;
 use serde_json::Value;

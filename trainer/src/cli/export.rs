@@ -174,8 +174,8 @@ pub(super) fn execute(
     let name = name.as_str();
     let tanh = m.mlp.activation == Activation::Tanh;
     let mut allowance = None;
-    // Every output is rendered first and written at the end as one set (issue 38 §4: a
-    // failed write leaves no Rust file without its blob); the messages follow the write.
+    // Every output is rendered first and written at the end as one set (a failed
+    // write leaves no Rust file without its blob); the messages follow the write.
     let mut files: PendingFiles = Vec::new();
     let mut said: Vec<String> = Vec::new();
     if out.rust.is_some() || out.c_lib.is_some() {

@@ -123,7 +123,7 @@ mod tests {
 
     #[test]
     fn a_bom_state_names_and_a_long_field() {
-        // Excel's UTF-8 byte-order mark; the problem's state names, in any order (issue 38).
+        // Excel's UTF-8 byte-order mark; the problem's state names, in any order.
         let names = ["theta".to_string(), "omega".to_string()];
         let x = parse_states_named("\u{feff}x1,x2\n0.5,-1\n", "s.csv", 2, &[]).unwrap();
         assert_eq!(x, vec![vec![0.5, -1.0]]);

@@ -5,6 +5,8 @@
 //! ```
 //! - [`mlp`]: the multilayer perceptron, its forward, tangent and backward passes, the loss.
 //! - `adam`: the Adam optimiser's moments and update.
+//! - `epoch`: one epoch — the learning-rate schedule, the seeded shuffle, the minibatch
+//!   passes and their Adam steps.
 //! - `metrics`: the training set's layout, the error statistics (ε_D, R²) and the points of
 //!   the training curve.
 //! - [`train`]: Adam over the loss, learning-rate schedules, early stopping, the model file.
@@ -16,9 +18,10 @@
 //! Imports `problem`, `mpc` and `data`.
 
 mod adam;
+mod epoch;
 mod metrics;
 pub mod mlp;
-pub mod model_file;
+pub(crate) mod model_file;
 pub mod setpoint;
 mod stored_settings;
 pub mod train;

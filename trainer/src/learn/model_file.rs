@@ -31,21 +31,32 @@ pub fn append(body: &mut Vec<u8>, toml: Option<&str>) {
 }
 
 /// The problem text stored in the bytes that follow an encoded model (`rest`): `None` if
-/// there are none; an error (the reason) if they are not one well-formed trailer.
-pub fn read(rest: &[u8]) -> Result<Option<String>, String> {
+/// there are none; an error naming `origin` if they are not one well-formed trailer.
+pub fn read(rest: &[u8], origin: &str) -> Result<Option<String>, DatasetError> {
+    let fmt = |reason: String| DatasetError::Format {
+        path: origin.to_string(),
+        reason,
+    };
     if rest.is_empty() {
         return Ok(None);
     }
     let Some(tail) = rest.strip_prefix(&PROBLEM_MAGIC[..]) else {
-        return Err(format!("{} unexpected bytes after the model", rest.len()));
+        return Err(fmt(format!(
+            "{} unexpected bytes after the model",
+            rest.len()
+        )));
     };
     match postcard::take_from_bytes::<String>(tail) {
         Ok((s, [])) => Ok(Some(s)),
-        Ok((_, extra)) => Err(format!(
+        Ok((_, extra)) => Err(fmt(format!(
             "{} unexpected bytes after the stored problem",
             extra.len()
-        )),
-        Err(e) => Err(format!("stored problem: {e}")),
+        ))),
+        Err(source) => Err(DatasetError::Decode {
+            path: origin.to_string(),
+            part: "stored problem",
+            source,
+        }),
     }
 }
 
@@ -87,7 +98,7 @@ impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
         }
         let body = crate::io::unseal(bytes).unwrap_or_default();
         let rest = postcard::take_from_bytes::<Self>(body).map_or(&[][..], |(_, r)| r);
-        m.problem_toml = read(rest).map_err(fmt)?;
+        m.problem_toml = read(rest, origin)?;
         Ok(m)
     }
     /// SHA-256 (hex) of the network's parameters and scaling: what a certificate is about
@@ -122,12 +133,31 @@ mod tests {
         append(&mut body, None);
         assert_eq!(body, [1, 2, 3]);
         append(&mut body, Some("name = \"x\"\n"));
-        assert_eq!(read(&body[3..]).unwrap().as_deref(), Some("name = \"x\"\n"));
-        assert_eq!(read(&[]).unwrap(), None);
-        assert!(read(&body[4..]).is_err());
+        assert_eq!(
+            read(&body[3..], "m.bin").unwrap().as_deref(),
+            Some("name = \"x\"\n")
+        );
+        assert_eq!(read(&[], "m.bin").unwrap(), None);
+        assert!(read(&body[4..], "m.bin").is_err());
         let mut longer = body[3..].to_vec();
         longer.push(0);
-        assert!(read(&longer).unwrap_err().contains("1 unexpected"));
-        assert!(read(&body[3..body.len() - 1]).is_err());
+        let e = read(&longer, "m.bin").unwrap_err().to_string();
+        assert!(
+            e.starts_with("m.bin: ") && e.contains("1 unexpected"),
+            "{e}"
+        );
+        let e = read(&body[3..body.len() - 1], "m.bin").unwrap_err();
+        // A truncated stored problem keeps the decoder's error as its source.
+        assert!(
+            matches!(
+                e,
+                DatasetError::Decode {
+                    part: "stored problem",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(std::error::Error::source(&e).is_some());
     }
 }

@@ -16,12 +16,12 @@
 //! the Jacobian term. Metrics: ε_D = max_i ‖κ(x_i) − κ_NN(x_i)‖ over the training set
 //! (eq. (explespd)) with the error distribution, and R² on MPC-labelled random states.
 
-use crate::learn::adam::Adam;
+use crate::learn::epoch::{learning_rate, shuffle, Passes};
 use crate::learn::metrics::CurvePoint;
 pub use crate::learn::metrics::{errors, EpochLog, ErrorStats, KeepBest, TrainSet};
-use crate::learn::mlp::{Batch, Grad, Lanes, LossWeights, Mlp, Workspace};
+use crate::learn::mlp::{Batch, Lanes, LossWeights, Mlp};
 use crate::learn::setpoint::Hold;
-use crate::problem::{Precision, Schedule, TrainSettings};
+use crate::problem::{Precision, TrainSettings};
 use crate::rng::{splitmix64, FastMod};
 use serde::{Deserialize, Serialize};
 
@@ -88,13 +88,6 @@ pub struct TrainedModel<C> {
     pub problem_toml: Option<String>,
 }
 
-fn flatten(mlp: &Mlp) -> Vec<f64> {
-    mlp.layers
-        .iter()
-        .flat_map(|l| l.w.iter().chain(&l.b).copied())
-        .collect()
-}
-
 /// Options of a training run.
 #[derive(Debug, Clone)]
 pub struct TrainOptions {
@@ -138,16 +131,6 @@ pub fn train<C>(
     )
 }
 
-/// One Adam step of `mlp`'s layers (in place) with the gradient `grad`; the moments are
-/// flat in the order of `flatten`.
-fn adam_step(adam: &mut Adam, mlp: &mut Mlp, grad: &Grad, lr: f64) {
-    let c = adam.begin_step();
-    let params = mlp.layers.iter_mut().zip(grad.w.iter().zip(&grad.b));
-    let params =
-        params.flat_map(|(l, (gw, gb))| [(&mut l.w[..], &gw[..]), (&mut l.b[..], &gb[..])]);
-    adam.update(params, lr, c);
-}
-
 /// [`train`], started from the weights of `init` (a warm start, e.g. after new data
 /// arrived) instead of the seeded initial weights. `init` must have the settings' layer
 /// widths; its input/output scaling is kept.
@@ -163,45 +146,13 @@ pub fn train_from<C>(
     problem_hash: &str,
     dataset_hash: &str,
 ) -> TrainedModel<C> {
-    let mut widths = vec![train.nx];
-    widths.extend(&settings.hidden);
-    widths.push(train.nu);
-    let mut mlp = match init {
-        Some(m) if m.widths() == widths => m,
-        _ => Mlp::new(
-            &widths,
-            settings.activation,
-            settings.seed,
-            domain.0,
-            domain.1,
-            u_range.0,
-            u_range.1,
-        ),
-    };
-    let lam = if opts.nominal {
-        LossWeights {
-            value: settings.lambda[0],
-            jacobian: 0.0,
-            weights: 0.0,
-        }
-    } else {
-        LossWeights {
-            value: settings.lambda[0],
-            jacobian: settings.lambda[1],
-            weights: settings.lambda[2],
-        }
-    };
+    let mut mlp = initial_mlp(init, settings, train, domain, u_range);
+    let lam = loss_weights(settings, opts.nominal);
     let band = settings.saturation_aware.then_some(u_range);
-    let (nx, nu) = (train.nx, train.nu);
     let n = train.len();
     let bs = settings.batch_size.min(n.max(1));
-    let n_params = flatten(&mlp).len();
-    let mut adam = Adam::new(n_params);
-    let mut grad = mlp.zero_grad();
-    let mut ws = Workspace::default();
-    let mut lanes = Lanes::default();
     let f32_passes = settings.precision == Precision::F32;
-    let (mut bx, mut bu, mut bdu, mut bj) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut passes = Passes::new(&mlp, f32_passes);
     let mut order: Vec<usize> = (0..n).collect();
     // The shuffle's divisors 1…n (the remainders of `%`, without its divisions).
     let divisors: Vec<FastMod> = (1..=n as u64).map(FastMod::new).collect();
@@ -247,47 +198,9 @@ pub fn train_from<C>(
             (None, None)
         };
         for epoch in 0..settings.epochs {
-            let lr = match settings.schedule {
-                Schedule::Constant => settings.learning_rate,
-                Schedule::Cosine => {
-                    let f = epoch as f64 / settings.epochs as f64;
-                    settings.learning_rate
-                        * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * f).cos()))
-                }
-            };
-            // Seeded Fisher–Yates shuffle.
-            for i in (1..n).rev() {
-                let r = splitmix64(shuffle_key ^ ((epoch as u64) << 32) ^ i as u64);
-                order.swap(i, divisors[i].of(r) as usize);
-            }
-            for chunk in order.chunks(bs) {
-                if f32_passes {
-                    // The lanes read the minibatch's rows in place.
-                    lanes.grad(&mlp, &set, chunk, lam, &mut grad);
-                    adam_step(&mut adam, &mut mlp, &grad, lr);
-                    continue;
-                }
-                bx.clear();
-                bu.clear();
-                bdu.clear();
-                bj.clear();
-                // Element by element: rows this short cost more as `memcpy` calls.
-                for &i in chunk {
-                    bx.extend(train.x[i * nx..(i + 1) * nx].iter());
-                    bu.extend(train.u[i * nu..(i + 1) * nu].iter());
-                    bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
-                    bj.push(train.use_jac[i]);
-                }
-                let batch = Batch {
-                    x: &bx,
-                    u: &bu,
-                    du: &bdu,
-                    use_jac: &bj,
-                    band,
-                };
-                mlp.loss_grad(&batch, lam, &mut grad, &mut ws);
-                adam_step(&mut adam, &mut mlp, &grad, lr);
-            }
+            shuffle(&mut order, &divisors, shuffle_key, epoch);
+            let lr = learning_rate(settings, epoch);
+            passes.epoch(&mut mlp, train, &set, &order, bs, lam, lr);
             epochs_run = epoch + 1;
             let last = epoch + 1 == settings.epochs;
             if let (Some(kb), Some((s, m))) = (&opts.keep_best, &mut best) {
@@ -362,6 +275,50 @@ pub fn train_from<C>(
         certificate: None,
         source_hash: None,
         problem_toml: None,
+    }
+}
+
+/// The starting weights: `init` when it has the settings' layer widths, else the seeded
+/// initial weights scaled to the domain and the output range.
+fn initial_mlp(
+    init: Option<Mlp>,
+    settings: &TrainSettings,
+    train: &TrainSet,
+    domain: (&[f64], &[f64]),
+    u_range: (&[f64], &[f64]),
+) -> Mlp {
+    let mut widths = vec![train.nx];
+    widths.extend(&settings.hidden);
+    widths.push(train.nu);
+    match init {
+        Some(m) if m.widths() == widths => m,
+        _ => Mlp::new(
+            &widths,
+            settings.activation,
+            settings.seed,
+            domain.0,
+            domain.1,
+            u_range.0,
+            u_range.1,
+        ),
+    }
+}
+
+/// The loss weights (λ₁, λ₂, λ₃) of `settings.lambda`; nominal: (λ₁, 0, 0).
+fn loss_weights(settings: &TrainSettings, nominal: bool) -> LossWeights {
+    let [value, jacobian, weights] = settings.lambda;
+    if nominal {
+        LossWeights {
+            value,
+            jacobian: 0.0,
+            weights: 0.0,
+        }
+    } else {
+        LossWeights {
+            value,
+            jacobian,
+            weights,
+        }
     }
 }
 
@@ -516,7 +473,7 @@ mod tests {
         let start = run(&cfg, &set, &val, false).mlp;
         let (lo, hi) = (cfg.ocp.u_lo.clone(), cfg.ocp.u_hi.clone());
         let excess = |m: &Mlp, th: f64| -> f64 {
-            let mut ws = Workspace::default();
+            let mut ws = crate::learn::mlp::Workspace::default();
             let mut u = vec![0.0; set.len() * set.nu];
             m.eval_batch(&set.x, &mut u, None, &mut ws);
             (0..set.len())
@@ -629,7 +586,7 @@ mod tests {
                 .to_string()
                 .contains("m.bin")
         );
-        // One flipped byte anywhere is an error (it used to evaluate to other u silently).
+        // One flipped byte anywhere is an error (never a model that evaluates to other u).
         for i in 0..bytes.len() {
             let mut b = bytes.clone();
             b[i] ^= 0x04;

@@ -16,13 +16,13 @@
 //!
 //! Imports only `problem` (and the leaf modules `io`, `rng`).
 
-pub mod convexity;
-pub mod finite;
+pub(crate) mod convexity;
+pub(crate) mod finite;
 pub mod kkt;
 pub mod law;
 pub mod ocp;
 pub mod qp;
-pub mod sensitivity;
+pub(crate) mod sensitivity;
 pub mod sqp;
 
 // Tests only: the law against independent computations, with shared fixtures (`tests/`).

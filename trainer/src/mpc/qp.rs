@@ -34,7 +34,7 @@ macro_rules! by_nx {
 
 pub(crate) use by_nx;
 
-pub mod ipm;
+pub(crate) mod ipm;
 pub mod riccati;
 
 use crate::mpc::ocp::Ocp;

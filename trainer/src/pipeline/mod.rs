@@ -24,7 +24,7 @@
 //! weights). The CLI cannot reopen a custom plant's files; the program that has the plant
 //! can ([`ProblemConfig::from_toml_str_with`]).
 
-pub mod api;
+pub(crate) mod api;
 mod choice;
 pub mod manifest;
 pub mod robust;

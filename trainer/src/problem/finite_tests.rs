@@ -33,8 +33,8 @@ fn input_bounds_must_be_finite_state_bounds_may_be_infinite() {
     c.validate().unwrap();
 }
 
-/// `ocp.horizon = 1e8` allocated 2 GB before any output, `rk4_substeps = 1e10` hung,
-/// `hidden = [100000000]` aborted on allocation: each is now refused at validation, naming the
+/// `ocp.horizon = 1e8` (2 GB before any output), `rk4_substeps = 1e10` (a hang),
+/// `hidden = [100000000]` (an abort on allocation): each is refused at validation, naming the
 /// key, the limit and the value.
 #[test]
 fn sizes_beyond_the_documented_limits_are_refused() {
@@ -88,7 +88,7 @@ fn sizes_beyond_the_documented_limits_are_refused() {
 }
 
 /// The first line of an expression error names the key and the problem; where it sits in
-/// the file follows (it used to open with "TOML parse error at line 6").
+/// the file follows (it does not open with "TOML parse error at line 6").
 #[test]
 fn an_expression_error_opens_with_the_key_and_the_problem() {
     let text = ODE.replacen("g/l*sin(theta + pi)", "g/l*sin(thetaa + pi)", 1);

@@ -18,16 +18,16 @@
 //! Every later stage reads its settings from here; `problem` imports nothing of the crate
 //! but `io`.
 
-pub mod limits;
+pub(crate) mod limits;
 pub mod model;
-pub mod ocp;
-pub mod refine;
-pub mod robust;
-pub mod sampling;
-pub mod setpoint;
-pub mod solver;
-pub mod study;
-pub mod training;
+pub(crate) mod ocp;
+pub(crate) mod refine;
+pub(crate) mod robust;
+pub(crate) mod sampling;
+pub(crate) mod setpoint;
+pub(crate) mod solver;
+pub(crate) mod study;
+pub(crate) mod training;
 mod validate;
 
 pub use ocp::{MatrixSpec, OcpSettings, StageBounds};

@@ -68,12 +68,12 @@
 //! `pipeline::robust`. Imports `problem`, `mpc` and `certify`.
 
 pub mod design;
-pub mod exclusion;
-pub mod jacobians;
-pub mod terminal;
-pub mod tube;
+pub(crate) mod exclusion;
+pub(crate) mod jacobians;
+pub(crate) mod terminal;
+pub(crate) mod tube;
 pub mod verdict;
-pub mod verified;
+pub(crate) mod verified;
 
 pub use crate::problem::{RobustMethod, RobustSettings};
 pub use design::{design, robust_config, Design, REFINE_TARGET_FRACTION};

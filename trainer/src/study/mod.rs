@@ -13,7 +13,7 @@
 pub mod closed_loop;
 pub mod plots;
 pub mod report;
-pub mod robust;
-pub mod scenarios;
-pub mod seeds;
+pub(crate) mod robust;
+pub(crate) mod scenarios;
+pub(crate) mod seeds;
 pub mod statistical_loop;

@@ -1,4 +1,4 @@
-//! Expression plants with random NaN/∞-producing terms (issue 38 §5), through the library
+//! Expression plants with random NaN/∞-producing terms, through the library
 //! (no CLI): the paper's pendulum as an ODE with one of `log(θ − c)`, `sqrt(θ − c)`,
 //! `(θ − c)^p` (p fractional), `0·sqrt(ω − c)`, `asin(θ/c)`, `u/0`, or the mass parameter 0
 //! in the input's denominator, c drawn inside X so that each plant is non-finite on part (or

@@ -23,8 +23,8 @@
 
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
-pub mod gate;
-pub mod labels;
+pub(crate) mod gate;
+pub(crate) mod labels;
 pub use gate::LabelsError;
 pub use labels::ImportedLabels;
 
@@ -66,6 +66,16 @@ pub enum DatasetError {
         /// What is wrong.
         reason: String,
     },
+    /// A part of a file does not decode.
+    #[error("{path}: {part}: {source}")]
+    Decode {
+        /// The file.
+        path: String,
+        /// The part that does not decode (`decode error` for the whole body).
+        part: &'static str,
+        /// The decoder's error.
+        source: postcard::Error,
+    },
     /// Shards cannot be merged.
     #[error("cannot merge: {0}")]
     Merge(String),
@@ -79,6 +89,11 @@ impl From<crate::io::FileError> for DatasetError {
         match e {
             crate::io::FileError::Io { path, source } => DatasetError::Io { path, source },
             crate::io::FileError::Format { path, reason } => DatasetError::Format { path, reason },
+            crate::io::FileError::Decode { path, source } => DatasetError::Decode {
+                path,
+                part: "decode error",
+                source,
+            },
         }
     }
 }
@@ -262,7 +277,11 @@ impl Dataset {
             let body = crate::io::unseal(bytes).unwrap_or_default();
             let labels = postcard::take_from_bytes::<Dataset>(body)
                 .and_then(|(_, rest)| postcard::from_bytes::<ImportedLabels>(rest))
-                .map_err(|e| fmt(format!("imported dataset without its labels record: {e}")))?;
+                .map_err(|source| DatasetError::Decode {
+                    path: origin.to_string(),
+                    part: "imported dataset without its labels record",
+                    source,
+                })?;
             d.labels = Some(labels);
         }
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);

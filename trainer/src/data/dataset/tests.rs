@@ -163,8 +163,8 @@ fn an_interrupted_run_resumes_to_the_same_file() {
     assert_eq!(std::fs::read(&out).unwrap(), reference);
 }
 
-/// One flipped byte anywhere in a dataset is an error naming the file (it used to decode
-/// into other labels and move ε_D silently); a flipped checkpoint is not resumed from.
+/// One flipped byte anywhere in a dataset is an error naming the file (never decoded
+/// into other labels that move ε_D silently); a flipped checkpoint is not resumed from.
 #[test]
 fn every_flipped_byte_is_caught() {
     let cfg = small_cfg();

@@ -207,7 +207,6 @@ pub fn parse(
     let head: Vec<&str> = header.split(',').collect();
     let cols = columns(&head, names, nx, nu, &|c, r| err_at(hl, c, r))?;
     let jacobian = cols.iter().any(|c| matches!(c, Col::Du(..)));
-    let name = |k: usize| unquote(head[k]).to_string();
     // Widened X: states written with `{:?}` round-trip exactly, a tolerance of 1e-12 of the
     // width only absorbs another tool's last-digit rounding.
     let slack: Vec<f64> = lo.iter().zip(hi).map(|(l, h)| 1e-12 * (h - l)).collect();
@@ -222,130 +221,10 @@ pub fn parse(
                 format!("{} columns, the header has {}", fields.len(), cols.len()),
             ));
         }
-        let mut r = Record {
-            index: records.len() as u64,
-            x: vec![f64::NAN; nx],
-            u: vec![f64::NAN; nu],
-            du_dx: vec![f64::NAN; nx * nu],
-            cost: f64::NAN,
-            status: SqpStatus::Converged,
-            iterations: 0,
-            kkt: f64::NAN,
-            degeneracy: None,
-            max_slack: 0.0,
-        };
-        for (k, (col, raw)) in cols.iter().zip(&fields).enumerate() {
-            let v = unquote(raw);
-            let num = || -> Result<f64, CsvError> {
-                // Empty fields are missing values (pandas writes NaN as an empty field).
-                if v.is_empty() {
-                    return Ok(f64::NAN);
-                }
-                v.parse::<f64>().map_err(|_| {
-                    err_at(ln, Some(&name(k)), format!("{} is not a number", quote(v)))
-                })
-            };
-            match *col {
-                Col::Index => {}
-                Col::X(i) => r.x[i] = num()?,
-                Col::U(j) => r.u[j] = num()?,
-                Col::Du(j, i) => r.du_dx[j * nx + i] = num()?,
-                Col::Cost => r.cost = num()?,
-                Col::MaxSlack => r.max_slack = num()?,
-                Col::Kkt => r.kkt = num()?,
-                Col::Iterations => {
-                    r.iterations = if v.is_empty() {
-                        0
-                    } else {
-                        v.parse().map_err(|_| {
-                            err_at(ln, Some(&name(k)), format!("{} is not a count", quote(v)))
-                        })?
-                    }
-                }
-                Col::Status => {
-                    r.status = parse_status(v).ok_or_else(|| {
-                        err_at(
-                            ln,
-                            Some(&name(k)),
-                            format!(
-                                "unknown status {} (converged, soft, infeasible, \
-                                 max_iterations, numerical_failure)",
-                                quote(v)
-                            ),
-                        )
-                    })?
-                }
-                Col::Degenerate => {
-                    r.degeneracy = match v {
-                        "" => None,
-                        // dataset.csv does not keep the count: 0 stands for "unknown".
-                        "weakly_active" => Some(Degeneracy::WeaklyActive(0)),
-                        "singular" => Some(Degeneracy::Singular),
-                        _ => {
-                            return Err(err_at(
-                                ln,
-                                Some(&name(k)),
-                                format!("{} is not empty, weakly_active or singular", quote(v)),
-                            ))
-                        }
-                    }
-                }
-            }
-        }
-        let col_of = |c: Col| cols.iter().position(|&d| d == c).map(name);
-        for i in 0..nx {
-            let v = r.x[i];
-            if !v.is_finite() {
-                return Err(err_at(
-                    ln,
-                    col_of(Col::X(i)).as_deref(),
-                    format!("state x{} = {v} is not finite", i + 1),
-                ));
-            }
-            if v < lo[i] - slack[i] || v > hi[i] + slack[i] {
-                return Err(err_at(
-                    ln,
-                    col_of(Col::X(i)).as_deref(),
-                    format!(
-                        "state x{} = {v} is outside the problem's domain X: [{}, {}]",
-                        i + 1,
-                        lo[i],
-                        hi[i]
-                    ),
-                ));
-            }
-        }
-        if r.status.is_labelled() {
-            if let Some(j) = r.u.iter().position(|v| !v.is_finite()) {
-                return Err(err_at(
-                    ln,
-                    col_of(Col::U(j)).as_deref(),
-                    format!(
-                        "label u{} = {} is not finite in a row of status {} (mark unlabelled \
-                         rows with status infeasible / numerical_failure)",
-                        j + 1,
-                        r.u[j],
-                        r.status.as_str()
-                    ),
-                ));
-            }
-            if jacobian && r.degeneracy.is_none() {
-                if let Some(k) = r.du_dx.iter().position(|v| !v.is_finite()) {
-                    let (j, i) = (k / nx, k % nx);
-                    return Err(err_at(
-                        ln,
-                        col_of(Col::Du(j, i)).as_deref(),
-                        format!(
-                            "Jacobian label du{}_dx{} = {} is not finite (mark the row \
-                             `degenerate` to drop its Jacobian)",
-                            j + 1,
-                            i + 1,
-                            r.du_dx[k]
-                        ),
-                    ));
-                }
-            }
-        }
+        let err = |c: Option<&str>, reason: String| err_at(ln, c, reason);
+        let index = records.len() as u64;
+        let r = read_row(&fields, &cols, &head, (nx, nu), index, &err)?;
+        check_row(&r, &cols, &head, (lo, hi), &slack, jacobian, &err)?;
         records.push(r);
         at.push(ln);
     }
@@ -357,6 +236,154 @@ pub fn parse(
         lines: at,
         jacobian,
     })
+}
+
+/// Reads one data row's `fields` (one per column of `cols`, named by `head`) into the
+/// record numbered `index`; missing values are NaN. `err` makes the error of the row's
+/// line naming a column.
+fn read_row(
+    fields: &[&str],
+    cols: &[Col],
+    head: &[&str],
+    (nx, nu): (usize, usize),
+    index: u64,
+    err: &dyn Fn(Option<&str>, String) -> CsvError,
+) -> Result<Record, CsvError> {
+    let name = |k: usize| unquote(head[k]).to_string();
+    let mut r = Record {
+        index,
+        x: vec![f64::NAN; nx],
+        u: vec![f64::NAN; nu],
+        du_dx: vec![f64::NAN; nx * nu],
+        cost: f64::NAN,
+        status: SqpStatus::Converged,
+        iterations: 0,
+        kkt: f64::NAN,
+        degeneracy: None,
+        max_slack: 0.0,
+    };
+    for (k, (col, raw)) in cols.iter().zip(fields).enumerate() {
+        let v = unquote(raw);
+        let num = || -> Result<f64, CsvError> {
+            // Empty fields are missing values (pandas writes NaN as an empty field).
+            if v.is_empty() {
+                return Ok(f64::NAN);
+            }
+            v.parse::<f64>()
+                .map_err(|_| err(Some(&name(k)), format!("{} is not a number", quote(v))))
+        };
+        match *col {
+            Col::Index => {}
+            Col::X(i) => r.x[i] = num()?,
+            Col::U(j) => r.u[j] = num()?,
+            Col::Du(j, i) => r.du_dx[j * nx + i] = num()?,
+            Col::Cost => r.cost = num()?,
+            Col::MaxSlack => r.max_slack = num()?,
+            Col::Kkt => r.kkt = num()?,
+            Col::Iterations => {
+                r.iterations = if v.is_empty() {
+                    0
+                } else {
+                    v.parse()
+                        .map_err(|_| err(Some(&name(k)), format!("{} is not a count", quote(v))))?
+                }
+            }
+            Col::Status => {
+                r.status = parse_status(v).ok_or_else(|| {
+                    err(
+                        Some(&name(k)),
+                        format!(
+                            "unknown status {} (converged, soft, infeasible, \
+                             max_iterations, numerical_failure)",
+                            quote(v)
+                        ),
+                    )
+                })?
+            }
+            Col::Degenerate => {
+                r.degeneracy = match v {
+                    "" => None,
+                    // dataset.csv does not keep the count: 0 stands for "unknown".
+                    "weakly_active" => Some(Degeneracy::WeaklyActive(0)),
+                    "singular" => Some(Degeneracy::Singular),
+                    _ => {
+                        return Err(err(
+                            Some(&name(k)),
+                            format!("{} is not empty, weakly_active or singular", quote(v)),
+                        ))
+                    }
+                }
+            }
+        }
+    }
+    Ok(r)
+}
+
+/// Checks a row read by [`read_row`]: x finite and in X = [lo, hi] widened by `slack`; a
+/// labelled row's u finite, and its ∂u/∂x too when the table has them (`jacobian`) and
+/// the row is not `degenerate`.
+fn check_row(
+    r: &Record,
+    cols: &[Col],
+    head: &[&str],
+    (lo, hi): (&[f64], &[f64]),
+    slack: &[f64],
+    jacobian: bool,
+    err: &dyn Fn(Option<&str>, String) -> CsvError,
+) -> Result<(), CsvError> {
+    let nx = lo.len();
+    let name = |k: usize| unquote(head[k]).to_string();
+    let col_of = |c: Col| cols.iter().position(|&d| d == c).map(name);
+    for i in 0..nx {
+        let v = r.x[i];
+        if !v.is_finite() {
+            return Err(err(
+                col_of(Col::X(i)).as_deref(),
+                format!("state x{} = {v} is not finite", i + 1),
+            ));
+        }
+        if v < lo[i] - slack[i] || v > hi[i] + slack[i] {
+            return Err(err(
+                col_of(Col::X(i)).as_deref(),
+                format!(
+                    "state x{} = {v} is outside the problem's domain X: [{}, {}]",
+                    i + 1,
+                    lo[i],
+                    hi[i]
+                ),
+            ));
+        }
+    }
+    if r.status.is_labelled() {
+        if let Some(j) = r.u.iter().position(|v| !v.is_finite()) {
+            return Err(err(
+                col_of(Col::U(j)).as_deref(),
+                format!(
+                    "label u{} = {} is not finite in a row of status {} (mark unlabelled \
+                     rows with status infeasible / numerical_failure)",
+                    j + 1,
+                    r.u[j],
+                    r.status.as_str()
+                ),
+            ));
+        }
+        if jacobian && r.degeneracy.is_none() {
+            if let Some(k) = r.du_dx.iter().position(|v| !v.is_finite()) {
+                let (j, i) = (k / nx, k % nx);
+                return Err(err(
+                    col_of(Col::Du(j, i)).as_deref(),
+                    format!(
+                        "Jacobian label du{}_dx{} = {} is not finite (mark the row \
+                         `degenerate` to drop its Jacobian)",
+                        j + 1,
+                        i + 1,
+                        r.du_dx[k]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Relative tolerance of the input-bound check of labels: a label u_j is accepted when

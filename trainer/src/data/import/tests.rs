@@ -256,7 +256,7 @@ fn a_column_numbered_zero_is_an_unknown_column_not_a_panic() {
 
 #[test]
 fn a_bom_is_skipped_and_a_long_field_is_quoted_short() {
-    // Excel's CSV: a UTF-8 byte-order mark before the header (issue 38 §4).
+    // Excel's CSV: a UTF-8 byte-order mark before the header.
     let cfg = small_cfg();
     let d = dir("bom");
     let csv = write(&d, "bom.csv", "\u{feff}x1,x2,u1\n0.5,0.25,0.1\n");

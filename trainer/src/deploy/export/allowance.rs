@@ -375,7 +375,7 @@ mod tests {
 
     /// ε is a 2-norm over the outputs: the allowance of two equal outputs is √2 times the
     /// one-output allowance (each output's analysis is the same), not the maximum over outputs
-    /// (which today's code returned: equal to the one-output figure).
+    /// (which would equal the one-output figure).
     #[test]
     fn allowance_of_two_equal_outputs_is_sqrt2_times_one() {
         let one = placeholder_pendulum();

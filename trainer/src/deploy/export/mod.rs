@@ -39,7 +39,7 @@ mod c_header;
 mod c_lib;
 pub mod device;
 mod guarantee;
-pub mod range;
+pub(crate) mod range;
 mod rust;
 mod tanh;
 mod tested;
@@ -175,15 +175,15 @@ pub enum ExportError {
 impl From<FileError> for ExportError {
     /// A failed [`crate::io::write_atomic`] (which only fails with [`FileError::Io`]).
     fn from(e: FileError) -> Self {
-        match e {
-            FileError::Io { path, source } => ExportError::Io {
-                path: path.into(),
-                source,
-            },
-            FileError::Format { path, reason } => ExportError::Io {
-                path: path.into(),
-                source: std::io::Error::new(std::io::ErrorKind::InvalidData, reason),
-            },
+        use std::io::{Error, ErrorKind::InvalidData};
+        let (path, source) = match e {
+            FileError::Io { path, source } => (path, source),
+            FileError::Format { path, reason } => (path, Error::new(InvalidData, reason)),
+            FileError::Decode { path, source } => (path, Error::new(InvalidData, source)),
+        };
+        ExportError::Io {
+            path: path.into(),
+            source,
         }
     }
 }

@@ -69,7 +69,7 @@ fn band_contains_u_d_and_stays_in_actuator_limits() {
     m.u_lo = vec![-0.1];
     let (lo, _) = m.clamp_band(1e-9);
     assert!(f64::from(lo[0]) <= -0.1 - 1e-9);
-    // The f32 domain contains X, and the f32 state nearest each corner of X (issue 38 §4).
+    // The f32 domain contains X, and the f32 state nearest each corner of X.
     let (dlo, dhi) = m.domain_f32();
     for i in 0..2 {
         let (lo, hi) = (m.domain_lo[i], m.domain_hi[i]);
@@ -205,7 +205,7 @@ fn a_statistical_eps_is_statistical_and_narrows_the_band() {
 
 #[test]
 fn numbers_beyond_the_f32_range_are_refused_naming_the_value() {
-    // A weight, ε and a scaling whose folding overflows f32 (issue 38 §3): each refused
+    // A weight, ε and a scaling whose folding overflows f32: each refused
     // before anything is written, the message naming the field and the value.
     let dir = std::env::temp_dir().join(format!("ampc_range_{}", std::process::id()));
     let (rs, bin) = (dir.join("w.rs"), dir.join("w.bin"));

@@ -133,23 +133,52 @@ impl OnnxModel {
     }
 }
 
-type R<T> = Result<T, String>;
+/// Why bytes are not an ONNX model of the form read here: a malformed protobuf field (the
+/// part being read and the wire error) or another fault, naming the part.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GraphError {
+    /// A malformed protobuf field.
+    #[error("{what}: {source}")]
+    Wire {
+        /// The part being read (`tensor dims`, `node`, …).
+        what: &'static str,
+        /// The wire error (its byte offset).
+        source: WireError,
+    },
+    /// Any other fault (an unsupported element type, an inconsistent shape, no graph).
+    #[error("{0}")]
+    Invalid(String),
+}
 
-fn wire(what: &str) -> impl Fn(WireError) -> String + '_ {
-    move |e| format!("{what}: {e}")
+impl From<String> for GraphError {
+    fn from(s: String) -> Self {
+        GraphError::Invalid(s)
+    }
+}
+
+impl From<&str> for GraphError {
+    fn from(s: &str) -> Self {
+        GraphError::Invalid(s.to_string())
+    }
+}
+
+type R<T> = Result<T, GraphError>;
+
+fn wire(what: &'static str) -> impl Fn(WireError) -> GraphError {
+    move |source| GraphError::Wire { what, source }
 }
 
 fn bytes<'a>(v: &Value<'a>, what: &str) -> R<&'a [u8]> {
     match v {
         Value::Bytes(b) => Ok(b),
-        _ => Err(format!("{what}: expected a length-delimited field")),
+        _ => Err(format!("{what}: expected a length-delimited field").into()),
     }
 }
 
 fn int(v: &Value<'_>, what: &str) -> R<i64> {
     match v {
         Value::Varint(x) => Ok(*x as i64),
-        _ => Err(format!("{what}: expected a varint field")),
+        _ => Err(format!("{what}: expected a varint field").into()),
     }
 }
 
@@ -179,7 +208,8 @@ pub fn tensor(b: &[u8]) -> R<Tensor> {
     if external {
         return Err(format!(
             "{label} keeps its data in an external file (save the model with its weights inside)"
-        ));
+        )
+        .into());
     }
     // Non-negative dimensions whose product fits (a corrupt shape is an error, not an
     // overflow).
@@ -188,7 +218,7 @@ pub fn tensor(b: &[u8]) -> R<Tensor> {
         .iter()
         .try_fold(1i64, |a, &d| if d < 0 { None } else { a.checked_mul(d) })
     else {
-        return Err(format!("{label}: invalid shape {:?}", t.dims));
+        return Err(format!("{label}: invalid shape {:?}", t.dims).into());
     };
     match (t.data_type, raw) {
         (FLOAT, Some(r)) if r.len() % 4 == 0 => {
@@ -221,7 +251,8 @@ pub fn tensor(b: &[u8]) -> R<Tensor> {
         (ty, _) => {
             return Err(format!(
                 "{label}: element type {ty} not supported (float, double, int32, int64 are)"
-            ))
+            )
+            .into())
         }
     }
     let len = t.values.len().max(t.ints.len()) as i64;
@@ -229,7 +260,8 @@ pub fn tensor(b: &[u8]) -> R<Tensor> {
         return Err(format!(
             "{label}: {len} values for shape {:?} ({count} expected)",
             t.dims
-        ));
+        )
+        .into());
     }
     Ok(t)
 }

@@ -22,7 +22,7 @@
 //! unique.
 
 use super::clips::{clip_bounds, Clip, Side};
-use super::graph::{Node, OnnxModel, Tensor};
+use super::graph::{Node, OnnxModel, Tensor, ValueInfo};
 use crate::learn::mlp::{Activation, Layer, Mlp};
 use std::collections::HashMap;
 
@@ -108,6 +108,16 @@ fn constant_value(n: &Node, label: &str) -> R<Tensor> {
     ))
 }
 
+/// The chain read so far: the name of the running value, its components after a `Split`
+/// (projection / clamp of an ampc export), the steps and the Clip nodes of an ampc export
+/// (checked against its metadata once the chain is known).
+struct Chain {
+    current: String,
+    parts: Option<Vec<String>>,
+    steps: Vec<Step>,
+    clips: Vec<Clip>,
+}
+
 /// Reads the graph as a dense MLP; errors name the node (or tensor) at fault.
 pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
     let ampc = m.meta("ampc.hash").is_some();
@@ -118,29 +128,13 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
         clips_dropped: 0,
     };
     let mut consts: HashMap<String, Tensor> = super::clips::initializers(m)?;
-    // The Clip nodes of an ampc export, checked against its metadata once the chain is known.
-    let mut clips: Vec<Clip> = Vec::new();
-    let inputs: Vec<_> = m
-        .inputs
-        .iter()
-        .filter(|v| !consts.contains_key(&v.name))
-        .collect();
-    let [input] = inputs.as_slice() else {
-        return Err(format!(
-            "the graph has {} inputs besides its weights (a controller has one: the state)",
-            inputs.len()
-        ));
+    let (input, output) = input_and_output(m, &consts)?;
+    let mut chain = Chain {
+        current: input.name.clone(),
+        parts: None,
+        steps: Vec::new(),
+        clips: Vec::new(),
     };
-    let [output] = m.outputs.as_slice() else {
-        return Err(format!(
-            "the graph has {} outputs (a controller has one: the input u)",
-            m.outputs.len()
-        ));
-    };
-    let mut current = input.name.clone();
-    // Components of `current` after a Split (projection / clamp of an ampc export).
-    let mut parts: Option<Vec<String>> = None;
-    let mut steps: Vec<Step> = Vec::new();
     for (k, n) in m.nodes.iter().enumerate() {
         let label = n.label(k);
         if !(n.domain.is_empty() || n.domain == "ai.onnx") {
@@ -166,62 +160,12 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
             consts.insert(out, t);
             continue;
         }
-        if ampc {
-            // The ampc export's per-component Clip: Split → Clip each → Concat.
-            match n.op.as_str() {
-                "Split" if n.inputs.first() == Some(&current) && parts.is_none() => {
-                    unit_split(n, &label, &consts)?;
-                    parts = Some(n.outputs.clone());
-                    continue;
-                }
-                "Clip" if !n.inputs.is_empty() => {
-                    let (component, slot) = match parts.as_mut() {
-                        Some(p) => match p.iter_mut().position(|s| *s == n.inputs[0]) {
-                            Some(k) => (Some(k), Some(&mut p[k])),
-                            None => (None, None),
-                        },
-                        None if n.inputs[0] == current => (None, Some(&mut current)),
-                        None => (None, None),
-                    };
-                    if let Some(slot) = slot {
-                        *slot = out;
-                        let (lo, hi) = clip_bounds(n, &label, |name| consts.get(name).cloned())?;
-                        let linear = steps.iter().any(|s| matches!(s, Step::Linear(..)));
-                        if !linear && !steps.is_empty() {
-                            return Err(format!(
-                                "{label}: a Clip after the input scaling (only the projection \
-                                 onto X before the first layer and the output clamp after the \
-                                 last are supported)"
-                            ));
-                        }
-                        clips.push(Clip {
-                            label: label.clone(),
-                            side: if linear {
-                                Side::Clamp
-                            } else {
-                                Side::Projection
-                            },
-                            component,
-                            lo,
-                            hi,
-                            at_step: steps.len(),
-                        });
-                        notes.clips_dropped += 1;
-                        continue;
-                    }
-                }
-                "Concat"
-                    if parts.as_deref() == Some(&n.inputs[..]) && int_attr(n, "axis", 1) == 1 =>
-                {
-                    parts = None;
-                    current = out;
-                    continue;
-                }
-                _ => {}
-            }
+        if ampc && chain.ampc_node(n, &label, &consts, &mut notes)? {
+            continue;
         }
-        let pos = n.inputs.iter().position(|i| *i == current);
-        let Some(pos) = pos.filter(|_| parts.is_none()) else {
+        let current = &chain.current;
+        let pos = n.inputs.iter().position(|i| i == current);
+        let Some(pos) = pos.filter(|_| chain.parts.is_none()) else {
             return Err(format!(
                 "{label}: does not take the network's running value ({current}); only a \
                  single chain of dense layers is supported"
@@ -230,95 +174,21 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
         let other = |i: usize| constant(&consts, n, i, &label);
         let step = match n.op.as_str() {
             "Identity" => {
-                current = out;
+                chain.current = out;
                 continue;
             }
             "Tanh" => Step::Act(Activation::Tanh, label.clone()),
             "Relu" => Step::Act(Activation::Relu, label.clone()),
             "Softplus" => Step::Act(Activation::Softplus, label.clone()),
-            "Gemm" | "MatMul" => {
-                if pos != 0 {
-                    return Err(format!(
-                        "{label}: the running value must be the first operand"
-                    ));
-                }
-                let gemm = n.op == "Gemm";
-                if gemm && int_attr(n, "transA", 0) != 0 {
-                    return Err(format!("{label}: transA = 1 is not supported"));
-                }
-                let b = other(1)?;
-                let &[r, c] = &b.dims[..] else {
-                    return Err(format!(
-                        "{label}: weight of shape {:?} (2-D expected)",
-                        b.dims
-                    ));
-                };
-                // An integer tensor (no float values) or a shape its values do not fill is
-                // refused here, before it is indexed.
-                if r < 0 || c < 0 || b.values.len() as u64 != r as u64 * c as u64 {
-                    return Err(format!(
-                        "{label}: weight of shape {:?} with {} floating-point values",
-                        b.dims,
-                        b.values.len()
-                    ));
-                }
-                let (r, c) = (r as usize, c as usize);
-                let trans = gemm && int_attr(n, "transB", 0) != 0;
-                let (out_w, in_w) = if trans { (r, c) } else { (c, r) };
-                let alpha = if gemm {
-                    scalar_attr(n, "alpha", 1.0)
-                } else {
-                    1.0
-                };
-                let mut w = vec![0.0; out_w * in_w];
-                for o in 0..out_w {
-                    for i in 0..in_w {
-                        let v = if trans {
-                            b.values[o * c + i]
-                        } else {
-                            b.values[i * c + o]
-                        };
-                        w[o * in_w + i] = if alpha == 1.0 { v } else { alpha * v };
-                    }
-                }
-                let mut bias = vec![0.0; out_w];
-                if gemm && n.inputs.get(2).is_some_and(|s| !s.is_empty()) {
-                    let beta = scalar_attr(n, "beta", 1.0);
-                    let cb = broadcast(other(2)?, out_w, &label)?;
-                    for (b, v) in bias.iter_mut().zip(cb) {
-                        *b = if beta == 1.0 { v } else { beta * v };
-                    }
-                }
-                Step::Linear(
-                    Layer {
-                        inp: in_w,
-                        out: out_w,
-                        w,
-                        b: bias,
-                    },
-                    label.clone(),
-                    !gemm,
-                )
-            }
+            "Gemm" | "MatMul" => dense(n, pos, &label, other)?,
             "Add" | "Sub" | "Mul" | "Div" => {
                 let t = other(1 - pos.min(1))?;
-                let op = match (n.op.as_str(), pos) {
-                    ("Add", _) => '+',
-                    ("Mul", _) => '*',
-                    ("Sub", 0) => '-',
-                    ("Sub", _) => 'r',
-                    ("Div", 0) => '/',
-                    _ => {
-                        return Err(format!(
-                            "{label}: a constant divided by the running value is not an affine map"
-                        ))
-                    }
-                };
+                let op = elem_op(n, pos, &label)?;
                 // A MatMul followed by Add is a layer with its bias.
-                if let (Some(Step::Linear(l, _, open @ true)), '+') = (steps.last_mut(), op) {
+                if let (Some(Step::Linear(l, _, open @ true)), '+') = (chain.steps.last_mut(), op) {
                     l.b = broadcast(t, l.out, &label)?;
                     *open = false;
-                    current = out;
+                    chain.current = out;
                     continue;
                 }
                 Step::Elem(op, t.values.clone(), label.clone())
@@ -330,19 +200,196 @@ pub fn to_mlp(m: &OnnxModel) -> R<(Mlp, ImportNotes)> {
                 ))
             }
         };
-        steps.push(step);
-        current = out;
+        chain.steps.push(step);
+        chain.current = out;
     }
-    if current != output.name {
+    if chain.current != output.name {
         return Err(format!(
-            "the graph output '{}' is not the end of the chain ('{current}')",
-            output.name
+            "the graph output '{}' is not the end of the chain ('{}')",
+            output.name, chain.current
         ));
     }
-    let n_steps = steps.len();
-    let (mlp, notes) = assemble(steps, notes, input.dims.last().copied().flatten())?;
-    super::clips::check(m, &clips, n_steps, mlp.nx(), mlp.nu())?;
+    let n_steps = chain.steps.len();
+    let (mlp, notes) = assemble(chain.steps, notes, input.dims.last().copied().flatten())?;
+    super::clips::check(m, &chain.clips, n_steps, mlp.nx(), mlp.nu())?;
     Ok((mlp, notes))
+}
+
+/// The graph's single input besides its weights (the state) and its single output.
+fn input_and_output<'a>(
+    m: &'a OnnxModel,
+    consts: &HashMap<String, Tensor>,
+) -> R<(&'a ValueInfo, &'a ValueInfo)> {
+    let inputs: Vec<_> = m
+        .inputs
+        .iter()
+        .filter(|v| !consts.contains_key(&v.name))
+        .collect();
+    let [input] = inputs.as_slice() else {
+        return Err(format!(
+            "the graph has {} inputs besides its weights (a controller has one: the state)",
+            inputs.len()
+        ));
+    };
+    let [output] = m.outputs.as_slice() else {
+        return Err(format!(
+            "the graph has {} outputs (a controller has one: the input u)",
+            m.outputs.len()
+        ));
+    };
+    Ok((input, output))
+}
+
+/// The element-wise op of node `n` with the running value as operand `pos`: `+`, `*`, `-`
+/// (x − v), `r` (v − x), `/` (x / v); a constant divided by the running value is refused.
+fn elem_op(n: &Node, pos: usize, label: &str) -> R<char> {
+    Ok(match (n.op.as_str(), pos) {
+        ("Add", _) => '+',
+        ("Mul", _) => '*',
+        ("Sub", 0) => '-',
+        ("Sub", _) => 'r',
+        ("Div", 0) => '/',
+        _ => {
+            return Err(format!(
+                "{label}: a constant divided by the running value is not an affine map"
+            ))
+        }
+    })
+}
+
+/// The dense layer of a `Gemm` (`alpha·A·op(B) + beta·C`, `transA = 0`) or `MatMul` node
+/// whose first operand (`pos`) is the running value; `other(i)` is its constant input `i`.
+fn dense<'a>(n: &Node, pos: usize, label: &str, other: impl Fn(usize) -> R<&'a Tensor>) -> R<Step> {
+    if pos != 0 {
+        return Err(format!(
+            "{label}: the running value must be the first operand"
+        ));
+    }
+    let gemm = n.op == "Gemm";
+    if gemm && int_attr(n, "transA", 0) != 0 {
+        return Err(format!("{label}: transA = 1 is not supported"));
+    }
+    let b = other(1)?;
+    let &[r, c] = &b.dims[..] else {
+        return Err(format!(
+            "{label}: weight of shape {:?} (2-D expected)",
+            b.dims
+        ));
+    };
+    // An integer tensor (no float values) or a shape its values do not fill is
+    // refused here, before it is indexed.
+    if r < 0 || c < 0 || b.values.len() as u64 != r as u64 * c as u64 {
+        return Err(format!(
+            "{label}: weight of shape {:?} with {} floating-point values",
+            b.dims,
+            b.values.len()
+        ));
+    }
+    let (r, c) = (r as usize, c as usize);
+    let trans = gemm && int_attr(n, "transB", 0) != 0;
+    let (out_w, in_w) = if trans { (r, c) } else { (c, r) };
+    let alpha = if gemm {
+        scalar_attr(n, "alpha", 1.0)
+    } else {
+        1.0
+    };
+    let mut w = vec![0.0; out_w * in_w];
+    for o in 0..out_w {
+        for i in 0..in_w {
+            let v = if trans {
+                b.values[o * c + i]
+            } else {
+                b.values[i * c + o]
+            };
+            w[o * in_w + i] = if alpha == 1.0 { v } else { alpha * v };
+        }
+    }
+    let mut bias = vec![0.0; out_w];
+    if gemm && n.inputs.get(2).is_some_and(|s| !s.is_empty()) {
+        let beta = scalar_attr(n, "beta", 1.0);
+        let cb = broadcast(other(2)?, out_w, label)?;
+        for (b, v) in bias.iter_mut().zip(cb) {
+            *b = if beta == 1.0 { v } else { beta * v };
+        }
+    }
+    Ok(Step::Linear(
+        Layer {
+            inp: in_w,
+            out: out_w,
+            w,
+            b: bias,
+        },
+        label.to_string(),
+        !gemm,
+    ))
+}
+
+impl Chain {
+    /// Takes node `n` when it is part of an ampc export's projection or clamp (`Split` →
+    /// `Clip` per component → `Concat`, or one `Clip`): records the Clip for the check
+    /// against the metadata and returns `true`; `false` for any other node.
+    fn ampc_node(
+        &mut self,
+        n: &Node,
+        label: &str,
+        consts: &HashMap<String, Tensor>,
+        notes: &mut ImportNotes,
+    ) -> R<bool> {
+        let out = n.outputs.first().cloned().unwrap_or_default();
+        // The ampc export's per-component Clip: Split → Clip each → Concat.
+        match n.op.as_str() {
+            "Split" if n.inputs.first() == Some(&self.current) && self.parts.is_none() => {
+                unit_split(n, label, consts)?;
+                self.parts = Some(n.outputs.clone());
+                return Ok(true);
+            }
+            "Clip" if !n.inputs.is_empty() => {
+                let (component, slot) = match self.parts.as_mut() {
+                    Some(p) => match p.iter_mut().position(|s| *s == n.inputs[0]) {
+                        Some(k) => (Some(k), Some(&mut p[k])),
+                        None => (None, None),
+                    },
+                    None if n.inputs[0] == self.current => (None, Some(&mut self.current)),
+                    None => (None, None),
+                };
+                if let Some(slot) = slot {
+                    *slot = out;
+                    let (lo, hi) = clip_bounds(n, label, |name| consts.get(name).cloned())?;
+                    let linear = self.steps.iter().any(|s| matches!(s, Step::Linear(..)));
+                    if !linear && !self.steps.is_empty() {
+                        return Err(format!(
+                            "{label}: a Clip after the input scaling (only the projection \
+                             onto X before the first layer and the output clamp after the \
+                             last are supported)"
+                        ));
+                    }
+                    self.clips.push(Clip {
+                        label: label.to_string(),
+                        side: if linear {
+                            Side::Clamp
+                        } else {
+                            Side::Projection
+                        },
+                        component,
+                        lo,
+                        hi,
+                        at_step: self.steps.len(),
+                    });
+                    notes.clips_dropped += 1;
+                    return Ok(true);
+                }
+            }
+            "Concat"
+                if self.parts.as_deref() == Some(&n.inputs[..]) && int_attr(n, "axis", 1) == 1 =>
+            {
+                self.parts = None;
+                self.current = out;
+                return Ok(true);
+            }
+            _ => {}
+        }
+        Ok(false)
+    }
 }
 
 /// An ampc export's `Split` along axis 1 into parts of width 1 (input 2 or attribute `split`
@@ -393,6 +440,9 @@ fn broadcast(t: &Tensor, n: usize, label: &str) -> R<Vec<f64>> {
     }
 }
 
+/// The MLP of the chain: its dense layers alternating with one hidden activation, the
+/// element-wise ops before the first layer as the input scaling, those after the last as
+/// the output scaling; `nx_decl` is the input width the graph declares, if any.
 fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Mlp, ImportNotes)> {
     let first = steps
         .iter()
@@ -452,9 +502,42 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
             "the graph input has {d} components, the first layer takes {nx}"
         ));
     }
-    // Input scaling a₀ = (x − c) ⊘ h from the leading element-wise ops.
+    let (c, h) = input_scaling(&steps[..first], nx)?;
+    let (o, sc) = output_scaling(&steps[last + 1..], nu)?;
+    if let Some(i) = h
+        .iter()
+        .chain(&sc)
+        .position(|v| *v == 0.0 || !v.is_finite())
+    {
+        return Err(format!("scaling {i}: zero or non-finite scale"));
+    }
+    let finite = layers
+        .iter()
+        .all(|l| l.w.iter().chain(&l.b).all(|v| v.is_finite()))
+        && c.iter().chain(&o).all(|v| v.is_finite());
+    if !finite {
+        return Err("non-finite weights".into());
+    }
+    // A net without hidden layers has no activation: any will do.
+    let activation = act.unwrap_or(Activation::Tanh);
+    Ok((
+        Mlp {
+            layers,
+            activation,
+            in_center: c,
+            in_half: h,
+            out_center: o,
+            out_half: sc,
+        },
+        notes,
+    ))
+}
+
+/// The input scaling a₀ = (x − c) ⊘ h composed from the element-wise ops before the first
+/// layer, in f64; an activation there is refused.
+fn input_scaling(steps: &[Step], nx: usize) -> R<(Vec<f64>, Vec<f64>)> {
     let (mut c, mut h) = (vec![0.0; nx], vec![1.0; nx]);
-    for s in &steps[..first] {
+    for s in steps {
         let Step::Elem(op, v, label) = s else {
             let Step::Act(_, label) = s else {
                 unreachable!()
@@ -482,9 +565,14 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
             }
         }
     }
-    // Output scaling u = o + s ∘ y from the trailing ones.
+    Ok((c, h))
+}
+
+/// The output scaling u = o + s ∘ y composed from the element-wise ops after the last layer,
+/// in f64; an activation there is refused (the output must be linear).
+fn output_scaling(steps: &[Step], nu: usize) -> R<(Vec<f64>, Vec<f64>)> {
     let (mut o, mut sc) = (vec![0.0; nu], vec![1.0; nu]);
-    for s in &steps[last + 1..] {
+    for s in steps {
         let Step::Elem(op, v, label) = s else {
             let Step::Act(_, label) = s else {
                 unreachable!()
@@ -520,31 +608,5 @@ fn assemble(steps: Vec<Step>, notes: ImportNotes, nx_decl: Option<i64>) -> R<(Ml
             }
         }
     }
-    if let Some(i) = h
-        .iter()
-        .chain(&sc)
-        .position(|v| *v == 0.0 || !v.is_finite())
-    {
-        return Err(format!("scaling {i}: zero or non-finite scale"));
-    }
-    let finite = layers
-        .iter()
-        .all(|l| l.w.iter().chain(&l.b).all(|v| v.is_finite()))
-        && c.iter().chain(&o).all(|v| v.is_finite());
-    if !finite {
-        return Err("non-finite weights".into());
-    }
-    // A net without hidden layers has no activation: any will do.
-    let activation = act.unwrap_or(Activation::Tanh);
-    Ok((
-        Mlp {
-            layers,
-            activation,
-            in_center: c,
-            in_half: h,
-            out_center: o,
-            out_half: sc,
-        },
-        notes,
-    ))
+    Ok((o, sc))
 }

@@ -22,9 +22,9 @@
 //! `import` (graph → [`crate::learn::mlp::Mlp`], unsupported nodes named), `write` (the
 //! export).
 
-pub mod clips;
+pub(crate) mod clips;
 pub mod graph;
-pub mod import;
+pub(crate) mod import;
 pub mod proto;
 #[cfg(test)]
 mod tamper_tests;
@@ -54,12 +54,12 @@ pub enum ModelFileError {
     #[error(transparent)]
     Model(#[from] crate::data::dataset::DatasetError),
     /// Neither a model file nor an ONNX model.
-    #[error("{path}: neither a trainer model file (magic AMPCMODL) nor an ONNX model ({reason})")]
+    #[error("{path}: neither a trainer model file (magic AMPCMODL) nor an ONNX model ({source})")]
     Unrecognised {
         /// The file.
         path: String,
         /// Why it is not ONNX.
-        reason: String,
+        source: graph::GraphError,
     },
     /// An ONNX model that is not a supported dense MLP (the message names the node).
     #[error("{path}: ONNX model not supported: {reason}")]
@@ -73,9 +73,9 @@ pub enum ModelFileError {
 
 /// The network of an ONNX file as a model (`origin` names it in errors).
 pub fn import_bytes(bytes: &[u8], origin: &str) -> Result<(Model, ImportNotes), ModelFileError> {
-    let g = graph::decode(bytes).map_err(|reason| ModelFileError::Unrecognised {
+    let g = graph::decode(bytes).map_err(|source| ModelFileError::Unrecognised {
         path: origin.to_string(),
-        reason,
+        source,
     })?;
     let (mlp, notes) = import::to_mlp(&g).map_err(|reason| ModelFileError::Unsupported {
         path: origin.to_string(),

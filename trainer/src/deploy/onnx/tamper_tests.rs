@@ -1,4 +1,4 @@
-//! ONNX files that are not what they say (issue 38 §3): an ampc export whose Clip bounds
+//! ONNX files that are not what they say: an ampc export whose Clip bounds
 //! were edited, a file without a default-domain opset or with one outside the supported
 //! range, and duplicate initializer names — each refused, naming what is wrong.
 

@@ -35,7 +35,7 @@ mod kernels;
 mod lanes;
 mod loss;
 mod tangent;
-pub mod tanh32;
+pub(crate) mod tanh32;
 #[cfg(test)]
 mod tests;
 

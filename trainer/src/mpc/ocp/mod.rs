@@ -11,7 +11,7 @@
 //!        g_i(x_N) ≤ 0  [− s]              terminal constraints (`ocp.terminal_constraints`)
 //! ```
 //! The setpoint (x_r, u_r) is `ocp.x_ref`, `ocp.u_ref` (default the origin: then the cost is
-//! today's xᵀQx + uᵀRu bit for bit, since v − 0 = v). It enters the objective and its
+//! xᵀQx + uᵀRu bit for bit, since v − 0 = v). It enters the objective and its
 //! gradient only; the Hessian 2·diag(Q, R), P does not depend on it.
 //! The bounds are the constant `ocp.x_lo`… of the problem file, or the stage-dependent
 //! `ocp.stages` of a tightened (robust) design ([`crate::problem::OcpSettings::x_bounds`]);
@@ -136,7 +136,7 @@ impl Ocp {
     /// Objective f(z) (with the k = 0 state term, which is constant in the OCP but part of
     /// the reported cost).
     pub fn objective(&self, z: &[f64]) -> f64 {
-        // (v − c)ᵀM(v − c); with c = 0 exactly today's vᵀMv.
+        // (v − c)ᵀM(v − c); with c = 0 exactly vᵀMv.
         let quad = |m: &DMatrix<f64>, v: &[f64], c: &[f64]| -> f64 {
             let n = v.len();
             (0..n)

@@ -348,6 +348,105 @@ impl IpmQp {
         true
     }
 
+    /// The starting point: the solution with W = I, i.e. of
+    /// min ½dᵀHd + gᵀd + ½‖Gd − b‖² s.t. Ed = −c, into (d, λ); `false` on a singular system.
+    fn start<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        hess: &[f64],
+        grad: &[f64],
+        c: &[f64],
+        jac_x: &[f64],
+        jac_u: &[f64],
+    ) -> bool {
+        let (nv, ne) = (ocp.n_var, ocp.n_eq);
+        self.use_riccati = self.riccati.is_some();
+        self.band_ready = false;
+        self.w.fill(1.0);
+        if !self.factor::<NX>(ocp, hess, jac_x, jac_u, 1e-14) {
+            return false;
+        }
+        for i in 0..nv {
+            self.rhs[i] = -grad[i];
+        }
+        for i in 0..ne {
+            self.rhs[nv + i] = -c[i];
+        }
+        add_gt(ocp, &self.b, &mut self.rhs[..nv]);
+        if !self.solve_system::<NX>(ocp, jac_x, jac_u) {
+            return false;
+        }
+        self.d.copy_from_slice(&self.rhs[..nv]);
+        self.lam.copy_from_slice(&self.rhs[nv..]);
+        true
+    }
+
+    /// t̂ = b − G d, ν̂ = −t̂, both shifted into the interior (t, ν > 0).
+    fn shift_into_interior(&mut self, ocp: &Ocp) {
+        let m = ocp.rows.len();
+        // t̂ = b − G d, ν̂ = −t̂, both shifted into the interior.
+        for (i, row) in ocp.rows.iter().enumerate() {
+            self.t[i] = self.b[i] - row.dot(&self.d);
+        }
+        let tmin = self.t.iter().fold(f64::INFINITY, |a, &v| a.min(v));
+        let tmax = -self.t.iter().fold(f64::INFINITY, |a, &v| a.min(-v));
+        let shift_t = if tmin <= 0.0 { 1.0 - tmin } else { 0.0 };
+        let shift_n = if -tmax <= 0.0 { 1.0 + tmax } else { 0.0 };
+        for i in 0..m {
+            let r = self.t[i];
+            self.t[i] = r + shift_t;
+            self.nu[i] = -r + shift_n;
+        }
+    }
+
+    /// One Mehrotra predictor–corrector step at (d, λ, t, ν) with the factored system: the
+    /// affine direction, σ = (gap_aff / gap)³, the corrected direction and the step
+    /// α = min(1, τ·α_max) to the boundary; `false` on a singular system.
+    fn step<const NX: usize>(
+        &mut self,
+        ocp: &Ocp,
+        jac_x: &[f64],
+        jac_u: &[f64],
+        mu: f64,
+        gap: f64,
+    ) -> bool {
+        let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
+        // Predictor (affine scaling) step: r_c = −t∘ν.
+        for i in 0..m {
+            self.tmp[i] = -self.t[i] * self.nu[i];
+        }
+        if !self.newton::<NX>(ocp, jac_x, jac_u, true) {
+            return false;
+        }
+        let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
+        let mut gap_aff = 0.0;
+        for i in 0..m {
+            gap_aff +=
+                (self.t[i] + a_aff * self.dt_aff[i]) * (self.nu[i] + a_aff * self.dnu_aff[i]);
+        }
+        let sigma = (gap_aff / gap).powi(3).clamp(0.0, 1.0);
+        // Corrector: r_c = σμ − t∘ν − Δt_aff∘Δν_aff.
+        for i in 0..m {
+            self.tmp[i] = sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
+        }
+        if !self.newton::<NX>(ocp, jac_x, jac_u, false) {
+            return false;
+        }
+        let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));
+        let alpha = (TAU * amax).min(1.0);
+        for i in 0..nv {
+            self.d[i] += alpha * self.rhs[i];
+        }
+        for i in 0..ne {
+            self.lam[i] += alpha * self.rhs[nv + i];
+        }
+        for i in 0..m {
+            self.t[i] += alpha * self.dt[i];
+            self.nu[i] += alpha * self.dnu[i];
+        }
+        true
+    }
+
     /// Solves the subproblem (same arguments and outputs as the clarabel solver). Returns
     /// [`QpStatus::Failed`] at the iteration limit, on divergence (e.g. an infeasible QP)
     /// or on a singular Newton system — unless an iterate reached the reduced accuracy
@@ -382,7 +481,7 @@ impl IpmQp {
             tol,
         } = *data;
         let tol = tol.max(TOL);
-        let (nv, ne, m) = (ocp.n_var, ocp.n_eq, ocp.rows.len());
+        let m = ocp.rows.len();
         self.last_iterations = 0;
         for (i, row) in ocp.rows.iter().enumerate() {
             self.b[i] = row.slack(z);
@@ -393,25 +492,9 @@ impl IpmQp {
         if !(scale_g.is_finite() && scale_c.is_finite() && scale_b.is_finite()) {
             return QpStatus::Failed;
         }
-        // Starting point: solve with W = I, i.e. min ½dᵀHd + gᵀd + ½‖Gd − b‖² s.t. Ed = −c.
-        self.use_riccati = self.riccati.is_some();
-        self.band_ready = false;
-        self.w.fill(1.0);
-        if !self.factor::<NX>(ocp, hess, jac_x, jac_u, 1e-14) {
+        if !self.start::<NX>(ocp, hess, grad, c, jac_x, jac_u) {
             return QpStatus::Failed;
         }
-        for i in 0..nv {
-            self.rhs[i] = -grad[i];
-        }
-        for i in 0..ne {
-            self.rhs[nv + i] = -c[i];
-        }
-        add_gt(ocp, &self.b, &mut self.rhs[..nv]);
-        if !self.solve_system::<NX>(ocp, jac_x, jac_u) {
-            return QpStatus::Failed;
-        }
-        self.d.copy_from_slice(&self.rhs[..nv]);
-        self.lam.copy_from_slice(&self.rhs[nv..]);
         if m == 0 {
             // No inequalities: the equality-constrained QP is solved exactly.
             d.copy_from_slice(&self.d);
@@ -419,19 +502,7 @@ impl IpmQp {
             self.last_iterations = 1;
             return QpStatus::Solved;
         }
-        // t̂ = b − G d, ν̂ = −t̂, both shifted into the interior.
-        for (i, row) in ocp.rows.iter().enumerate() {
-            self.t[i] = self.b[i] - row.dot(&self.d);
-        }
-        let tmin = self.t.iter().fold(f64::INFINITY, |a, &v| a.min(v));
-        let tmax = -self.t.iter().fold(f64::INFINITY, |a, &v| a.min(-v));
-        let shift_t = if tmin <= 0.0 { 1.0 - tmin } else { 0.0 };
-        let shift_n = if -tmax <= 0.0 { 1.0 + tmax } else { 0.0 };
-        for i in 0..m {
-            let r = self.t[i];
-            self.t[i] = r + shift_t;
-            self.nu[i] = -r + shift_n;
-        }
+        self.shift_into_interior(ocp);
         let (mut best, mut best_mu, mut best_res) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         let mut stall = 0;
         let mut it = 0;
@@ -499,39 +570,8 @@ impl IpmQp {
                 }
                 return kept_or_failed(kept);
             }
-            // Predictor (affine scaling) step: r_c = −t∘ν.
-            for i in 0..m {
-                self.tmp[i] = -self.t[i] * self.nu[i];
-            }
-            if !self.newton::<NX>(ocp, jac_x, jac_u, true) {
+            if !self.step::<NX>(ocp, jac_x, jac_u, mu, gap) {
                 return kept_or_failed(kept);
-            }
-            let a_aff = max_step(&self.t, &self.dt_aff).min(max_step(&self.nu, &self.dnu_aff));
-            let mut gap_aff = 0.0;
-            for i in 0..m {
-                gap_aff +=
-                    (self.t[i] + a_aff * self.dt_aff[i]) * (self.nu[i] + a_aff * self.dnu_aff[i]);
-            }
-            let sigma = (gap_aff / gap).powi(3).clamp(0.0, 1.0);
-            // Corrector: r_c = σμ − t∘ν − Δt_aff∘Δν_aff.
-            for i in 0..m {
-                self.tmp[i] =
-                    sigma * mu - self.t[i] * self.nu[i] - self.dt_aff[i] * self.dnu_aff[i];
-            }
-            if !self.newton::<NX>(ocp, jac_x, jac_u, false) {
-                return kept_or_failed(kept);
-            }
-            let amax = max_step(&self.t, &self.dt).min(max_step(&self.nu, &self.dnu));
-            let alpha = (TAU * amax).min(1.0);
-            for i in 0..nv {
-                self.d[i] += alpha * self.rhs[i];
-            }
-            for i in 0..ne {
-                self.lam[i] += alpha * self.rhs[nv + i];
-            }
-            for i in 0..m {
-                self.t[i] += alpha * self.dt[i];
-                self.nu[i] += alpha * self.dnu[i];
             }
             it += 1;
         }

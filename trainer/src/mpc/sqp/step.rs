@@ -89,8 +89,8 @@ impl Work {
             // The second-order correction acts where the merit's curvature comes from
             // constraints the linearisation misses: nonlinear rows, and the soft problem
             // (whose multipliers, up to the slack weight, raise the penalty μ so far that the
-            // dynamics' second-order error rejects full steps). Elsewhere the line search is
-            // as before.
+            // dynamics' second-order error rejects full steps). Elsewhere the line search runs
+            // without it.
             soc_enabled: ocp.has_nonlinear_rows() || ocp.n_slack > 0,
             conservative,
             max_iter,

@@ -149,8 +149,8 @@ fn law_at_an_equilibrium_setpoint_is_its_input_at_zero_cost() {
 }
 
 /// States within 1e-10…1e-4 of a nonzero setpoint: the cost there is far below the
-/// rounding of the constraint residuals (ε·|x_ref|), which used to make the merit line
-/// search reject every step (`NumericalFailure`); the SQP's rounding floor lets it converge.
+/// rounding of the constraint residuals (ε·|x_ref|), where a merit line search without a
+/// floor rejects every step (`NumericalFailure`); the SQP's rounding floor lets it converge.
 #[test]
 fn law_converges_arbitrarily_close_to_a_nonzero_setpoint() {
     let cfg = spring(Some("[0.5, 0.0]"), Some("[1.0]"));

@@ -86,9 +86,9 @@ pub trait ErasedPlant: Send + Sync + 'static {
         hess: &mut [f64],
     );
     /// The parameter record as a TOML table (the struct's `serde` serialisation).
-    fn parameters(&self) -> Result<toml::Table, String>;
+    fn parameters(&self) -> Result<toml::Table, RecordError>;
     /// The same kind of plant built from a parameter record.
-    fn rebuild(&self, parameters: &toml::Table) -> Result<Arc<dyn ErasedPlant>, String>;
+    fn rebuild(&self, parameters: &toml::Table) -> Result<Arc<dyn ErasedPlant>, RecordError>;
 }
 
 /// Calls the AD kernels with the dual size `NZ` as a method (the form `by_nz!` expects);
@@ -169,13 +169,14 @@ where
         let ad = Ad(self);
         by_nz!(T::NX + T::NU, ad.hess(ts, m, x, u, lam, hess))
     }
-    fn parameters(&self) -> Result<toml::Table, String> {
-        toml::Table::try_from(self).map_err(|e| {
-            format!("the plant's parameters do not serialise as a TOML table (use a struct with named fields): {e}")
-        })
+    fn parameters(&self) -> Result<toml::Table, RecordError> {
+        toml::Table::try_from(self).map_err(RecordError::Serialise)
     }
-    fn rebuild(&self, parameters: &toml::Table) -> Result<Arc<dyn ErasedPlant>, String> {
-        let t: T = parameters.clone().try_into().map_err(|e| e.to_string())?;
+    fn rebuild(&self, parameters: &toml::Table) -> Result<Arc<dyn ErasedPlant>, RecordError> {
+        let t: T = parameters
+            .clone()
+            .try_into()
+            .map_err(RecordError::Deserialise)?;
         Ok(Arc::new(t))
     }
 }
@@ -212,6 +213,35 @@ pub struct CustomPlantError {
     pub key: String,
     /// What is wrong.
     pub reason: String,
+    /// The TOML error `reason` states, when the parameter record does not convert.
+    #[source]
+    pub source: Option<Box<RecordError>>,
+}
+
+impl CustomPlantError {
+    /// The error of a parameter record that does not convert (key `system.parameters`).
+    fn record(plant: &str, e: RecordError) -> Self {
+        CustomPlantError {
+            plant: plant.to_string(),
+            key: "system.parameters".into(),
+            reason: e.to_string(),
+            source: Some(Box::new(e)),
+        }
+    }
+}
+
+/// A plant's parameter record that does not convert to or from TOML.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RecordError {
+    /// The plant struct does not serialise as a TOML table.
+    #[error(
+        "the plant's parameters do not serialise as a TOML table (use a struct with named \
+         fields): {0}"
+    )]
+    Serialise(toml::ser::Error),
+    /// A record does not deserialise into the plant struct.
+    #[error("{0}")]
+    Deserialise(toml::de::Error),
 }
 
 /// A plant implemented in Rust by the library's user, with its name, version, names and
@@ -257,12 +287,9 @@ impl CustomPlant {
 
     /// Completes the record from the implementation: canonical parameters, fingerprint.
     fn build(mut spec: CustomSpec, imp: Arc<dyn ErasedPlant>) -> Result<Self, CustomPlantError> {
-        let err = |key: &str, reason: String| CustomPlantError {
-            plant: spec.name.clone(),
-            key: key.to_string(),
-            reason,
-        };
-        spec.parameters = imp.parameters().map_err(|r| err("system.parameters", r))?;
+        spec.parameters = imp
+            .parameters()
+            .map_err(|e| CustomPlantError::record(&spec.name, e))?;
         spec.fingerprint = Some(fingerprint(imp.as_ref()));
         let p = CustomPlant { spec, imp };
         p.validate()?;
@@ -274,6 +301,7 @@ impl CustomPlant {
             plant: self.spec.name.clone(),
             key: key.to_string(),
             reason: reason.into(),
+            source: None,
         }
     }
 
@@ -352,7 +380,7 @@ impl CustomPlant {
         let imp = self
             .imp
             .rebuild(&t)
-            .map_err(|r| self.err("system.parameters", r))?;
+            .map_err(|e| CustomPlantError::record(&self.spec.name, e))?;
         Self::build(self.spec.clone(), imp)
     }
 
@@ -399,6 +427,7 @@ impl CustomPlant {
             plant: spec.name.clone(),
             key: key.to_string(),
             reason,
+            source: None,
         };
         let Some(proto) = plants.iter().find(|p| p.name() == spec.name) else {
             let known = if plants.is_empty() {
@@ -444,7 +473,7 @@ impl CustomPlant {
         let imp = proto
             .imp
             .rebuild(&params)
-            .map_err(|r| err("system.parameters", r))?;
+            .map_err(|e| CustomPlantError::record(&spec.name, e))?;
         let mut named = proto.spec.clone();
         for (key, file, own) in [
             ("system.states", &spec.states, &mut named.states),

@@ -230,7 +230,7 @@ fn parameters_in_the_file_rebuild_the_plant() {
     let heavy = text.replace("m = 1.0", "m = 2");
     assert_ne!(heavy, text);
     let cfg = ProblemConfig::from_toml_str_with(&heavy, "p.toml", std::slice::from_ref(&proto));
-    // The fingerprint written for m = 1 no longer matches: the file is refused ...
+    // The fingerprint written for m = 1 does not match m = 3: the file is refused ...
     assert!(parse_err(cfg).contains("`system.fingerprint`"));
     // ... and without it the plant is rebuilt with m = 2.
     let heavy: String = heavy

@@ -29,7 +29,7 @@
 
 mod cartpole;
 mod constraint_eval;
-pub mod custom;
+pub(crate) mod custom;
 mod double_integrator;
 pub mod expr;
 mod nz;
@@ -40,7 +40,7 @@ mod staged;
 pub(crate) mod test_plants;
 
 pub use cartpole::CartPole;
-pub use custom::{CustomPlant, CustomPlantError, ErasedPlant};
+pub use custom::{CustomPlant, CustomPlantError, ErasedPlant, RecordError};
 pub use double_integrator::DoubleIntegrator;
 pub use pendulum::Pendulum;
 pub use plant::{DiscretePlant, ExprPlant, OdePlant, MAX_NZ};
@@ -505,7 +505,7 @@ impl Discrete {
             System::Discrete(p) => Some(Arc::new(p.model().sweep(ts, substeps))),
             // The built-in cart-pole through its expression form (F = the f64 step's bits,
             // ∂F and ∇²λᵀF = its dual numbers' to rounding; `plant::tests`). Should it not
-            // compile (a non-finite parameter), the dual numbers serve as before.
+            // compile (a non-finite parameter), the dual numbers of the f64 step serve.
             System::CartPole(c) => expr::compile(&c.expressions(), false)
                 .ok()
                 .map(|m| Arc::new(m.sweep(ts, substeps))),

@@ -78,12 +78,12 @@ pub enum PlotError {
         cause: String,
     },
     /// The SVG could not be parsed or rasterised.
-    #[error("rasterising figure `{figure}`: {cause}")]
+    #[error("rasterising figure `{figure}`: {source}")]
     Raster {
         /// Figure name.
         figure: String,
-        /// What failed.
-        cause: String,
+        /// What failed: the SVG parser's or the PNG encoder's error, or the size at fault.
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// The data needed for a figure is missing.
     #[error("figure `{figure}`: {cause}")]
@@ -137,9 +137,9 @@ pub fn all(p: &PlotInputs) -> Result<Vec<Figure>, PlotError> {
 /// Rasterises an SVG document to PNG at `scale` × its size, with the embedded font.
 pub fn to_png(figure: &str, svg: &str, scale: f32) -> Result<Vec<u8>, PlotError> {
     use resvg::{tiny_skia, usvg};
-    let err = |cause: String| PlotError::Raster {
+    let err = |source: Box<dyn std::error::Error + Send + Sync>| PlotError::Raster {
         figure: figure.to_string(),
-        cause,
+        source,
     };
     let mut db = usvg::fontdb::Database::new();
     db.load_font_data(dejavu::sans::regular().to_vec());
@@ -150,21 +150,21 @@ pub fn to_png(figure: &str, svg: &str, scale: f32) -> Result<Vec<u8>, PlotError>
         fontdb: std::sync::Arc::new(db),
         ..Default::default()
     };
-    let tree = usvg::Tree::from_str(svg, &opt).map_err(|e| err(e.to_string()))?;
+    let tree = usvg::Tree::from_str(svg, &opt).map_err(|e| err(e.into()))?;
     let size = tree
         .size()
         .to_int_size()
         .scale_by(scale)
-        .ok_or_else(|| err(format!("cannot scale {:?} by {scale}", tree.size())))?;
+        .ok_or_else(|| err(format!("cannot scale {:?} by {scale}", tree.size()).into()))?;
     let mut pix = tiny_skia::Pixmap::new(size.width(), size.height())
-        .ok_or_else(|| err(format!("empty image {size:?}")))?;
+        .ok_or_else(|| err(format!("empty image {size:?}").into()))?;
     pix.fill(tiny_skia::Color::WHITE);
     resvg::render(
         &tree,
         tiny_skia::Transform::from_scale(scale, scale),
         &mut pix.as_mut(),
     );
-    pix.encode_png().map_err(|e| err(e.to_string()))
+    pix.encode_png().map_err(|e| err(e.into()))
 }
 
 const MPC_COLOR: RGBColor = RGBColor(0, 0, 0);

@@ -84,74 +84,19 @@ pub(super) fn local(op: Op, v: &[f64]) -> (f64, [f64; 5]) {
                 ],
             )
         }
-        Op::Sin(a) => {
-            let x = g(a);
-            let s = DualNum::sin(&x);
-            un(s, x.cos(), -s)
-        }
-        Op::Cos(a) => {
-            let x = g(a);
-            let c = DualNum::cos(&x);
-            un(c, -x.sin(), -c)
-        }
-        Op::Tan(a) => {
-            let t = DualNum::tan(&g(a));
-            let d = 1.0 + t * t;
-            un(t, d, 2.0 * t * d)
-        }
-        Op::Asin(a) | Op::Acos(a) => {
-            let x = g(a);
-            let r = 1.0 / (1.0 - x * x);
-            let d = r.sqrt();
-            let sign = if matches!(op, Op::Asin(_)) { 1.0 } else { -1.0 };
-            let value = if sign > 0.0 {
-                DualNum::asin(&x)
-            } else {
-                DualNum::acos(&x)
-            };
-            un(value, sign * d, sign * x * d * r)
-        }
-        Op::Atan(a) => {
-            let x = g(a);
-            let r = 1.0 / (1.0 + x * x);
-            un(DualNum::atan(&x), r, -2.0 * x * r * r)
-        }
-        Op::Exp(a) => {
-            let e = DualNum::exp(&g(a));
-            un(e, e, e)
-        }
-        Op::Log(a) => {
-            let x = g(a);
-            let r = 1.0 / x;
-            un(DualNum::ln(&x), r, -r * r)
-        }
-        Op::Sqrt(a) => {
-            let x = g(a);
-            let s = DualNum::sqrt(&x);
-            let d = s * x.recip() * 0.5;
-            un(s, d, -0.5 * d / x)
-        }
-        Op::Sinh(a) => {
-            let x = g(a);
-            let s = DualNum::sinh(&x);
-            un(s, x.cosh(), s)
-        }
-        Op::Cosh(a) => {
-            let x = g(a);
-            let c = DualNum::cosh(&x);
-            un(c, x.sinh(), c)
-        }
-        Op::Tanh(a) => {
-            let t = DualNum::tanh(&g(a));
-            let d = 1.0 - t * t;
-            un(t, d, -2.0 * t * d)
-        }
-        Op::Abs(a) => {
-            // num-dual's convention (`is_positive` of num-traits is `is_sign_positive`): the
-            // derivative is +1 at +0.0 and −1 at −0.0.
-            let x = g(a);
-            un(x.abs(), if x.is_sign_positive() { 1.0 } else { -1.0 }, 0.0)
-        }
+        Op::Sin(a)
+        | Op::Cos(a)
+        | Op::Tan(a)
+        | Op::Asin(a)
+        | Op::Acos(a)
+        | Op::Atan(a)
+        | Op::Exp(a)
+        | Op::Log(a)
+        | Op::Sqrt(a)
+        | Op::Sinh(a)
+        | Op::Cosh(a)
+        | Op::Tanh(a)
+        | Op::Abs(a) => elementary(op, g(a)),
         Op::Atan2(a, b) => {
             let (x, y) = (g(a), g(b));
             let r = 1.0 / (x * x + y * y);
@@ -182,5 +127,74 @@ pub(super) fn local(op: Op, v: &[f64]) -> (f64, [f64; 5]) {
                 (g(a), [1.0, 0.0, 0.0, 0.0, 0.0])
             }
         }
+    }
+}
+
+/// [`local`] of an elementary function `c = φ(a)` at `a = x`: the value and `[φ', 0, φ'', 0,
+/// 0]`. `op` is one of `Sin … Abs`; any other op gives NaN (`local` handles those).
+#[inline(always)]
+fn elementary(op: Op, x: f64) -> (f64, [f64; 5]) {
+    let un = |value: f64, d: f64, dd: f64| (value, [d, 0.0, dd, 0.0, 0.0]);
+    match op {
+        Op::Sin(_) => {
+            let s = DualNum::sin(&x);
+            un(s, x.cos(), -s)
+        }
+        Op::Cos(_) => {
+            let c = DualNum::cos(&x);
+            un(c, -x.sin(), -c)
+        }
+        Op::Tan(_) => {
+            let t = DualNum::tan(&x);
+            let d = 1.0 + t * t;
+            un(t, d, 2.0 * t * d)
+        }
+        Op::Asin(_) | Op::Acos(_) => {
+            let r = 1.0 / (1.0 - x * x);
+            let d = r.sqrt();
+            let sign = if matches!(op, Op::Asin(_)) { 1.0 } else { -1.0 };
+            let value = if sign > 0.0 {
+                DualNum::asin(&x)
+            } else {
+                DualNum::acos(&x)
+            };
+            un(value, sign * d, sign * x * d * r)
+        }
+        Op::Atan(_) => {
+            let r = 1.0 / (1.0 + x * x);
+            un(DualNum::atan(&x), r, -2.0 * x * r * r)
+        }
+        Op::Exp(_) => {
+            let e = DualNum::exp(&x);
+            un(e, e, e)
+        }
+        Op::Log(_) => {
+            let r = 1.0 / x;
+            un(DualNum::ln(&x), r, -r * r)
+        }
+        Op::Sqrt(_) => {
+            let s = DualNum::sqrt(&x);
+            let d = s * x.recip() * 0.5;
+            un(s, d, -0.5 * d / x)
+        }
+        Op::Sinh(_) => {
+            let s = DualNum::sinh(&x);
+            un(s, x.cosh(), s)
+        }
+        Op::Cosh(_) => {
+            let c = DualNum::cosh(&x);
+            un(c, x.sinh(), c)
+        }
+        Op::Tanh(_) => {
+            let t = DualNum::tanh(&x);
+            let d = 1.0 - t * t;
+            un(t, d, -2.0 * t * d)
+        }
+        Op::Abs(_) => {
+            // num-dual's convention (`is_positive` of num-traits is `is_sign_positive`): the
+            // derivative is +1 at +0.0 and −1 at −0.0.
+            un(x.abs(), if x.is_sign_positive() { 1.0 } else { -1.0 }, 0.0)
+        }
+        _ => (f64::NAN, [f64::NAN; 5]),
     }
 }
