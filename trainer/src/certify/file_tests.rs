@@ -32,6 +32,8 @@ fn base() -> Certificate {
         problem_hash: "cd".into(),
         dataset_hash: "ef".into(),
         labels: None,
+        scales: None,
+        epsilon_per_input: vec![],
     }
 }
 
