@@ -243,7 +243,9 @@ fn numbers_beyond_the_f32_range_are_refused_naming_the_value() {
 /// U_d ⊕ [−s_u·ε, s_u·ε]: its physical bound, the same band as the unscaled ε·s_u.
 #[test]
 fn scaled_norm_allowance_and_band_are_per_input_physical() {
-    let m = placeholder_pendulum();
+    let mut m = placeholder_pendulum();
+    m.actuator_lo = vec![-20.0];
+    m.actuator_hi = vec![20.0];
     let mut s = m.clone();
     s.u_scale = vec![15.0];
     let (a, _) = f32_allowance(&m, Tanh::Libm);
