@@ -248,7 +248,7 @@ impl OcpSettings {
 /// `ocp.x_scale` / `ocp.u_scale`: one finite entry > 0 per state (input).
 fn check_scale(key: &str, v: &[f64], n: usize) -> Result<(), ConfigError> {
     check_vec(key, v, n, false)?;
-    if let Some(i) = v.iter().position(|s| !(*s > 0.0)) {
+    if let Some(i) = v.iter().position(|s| *s <= 0.0) {
         return Err(invalid(
             format!("{key}[{i}]"),
             format!(

@@ -101,14 +101,14 @@ pub fn eval_f32(folded: &Folded, lo: &[f32], hi: &[f32], x: &[f32], tanh: Tanh) 
 }
 
 /// Interval bound on |computed − exact| of the folded network over the box `[a, b]`, for
-/// unit roundoff `u`, rounded weights `wr` (or exact if `None`), tanh error `dt`.
+/// unit roundoff `u` and relative input error `input_rel`, rounded weights `wr` (or exact if
+/// `None`), tanh error `dt`, the per-output bounds divided by `u_scale` (the norm's S_u).
 fn box_error(
     layers: &[DenseF64],
     rounded: Option<&[LayerF32]>,
     a: &[f64],
     b: &[f64],
-    u: f64,
-    input_rel: f64,
+    (u, input_rel): (f64, f64),
     dt: &dyn Fn(f64, f64) -> f64,
     u_scale: &[f64],
 ) -> f64 {
@@ -253,8 +253,7 @@ pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
                     Some(&folded.f32_layers),
                     a,
                     b,
-                    2f64.powi(-24),
-                    2f64.powi(-23),
+                    (2f64.powi(-24), 2f64.powi(-23)),
                     &|lo, hi| tanh.max_abs_err_on(lo, hi),
                     &model.u_scale,
                 );
@@ -263,8 +262,7 @@ pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
                     None,
                     a,
                     b,
-                    8.0 * 2f64.powi(-53),
-                    8.0 * 2f64.powi(-53),
+                    (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
                     &|_, _| 1e-15,
                     &model.u_scale,
                 );
