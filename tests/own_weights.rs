@@ -67,6 +67,7 @@ fn second_net() -> ExportModel {
         // One box the certificate excludes: states in it are flagged (EXCLUDED).
         excluded: vec![(vec![0.5, -0.5, 1.0], vec![2.0, 0.0, 3.0])],
         rests_on: Vec::new(),
+        u_scale: Vec::new(),
     }
 }
 

@@ -201,15 +201,67 @@ pub struct Certificate {
     /// every existing model, stay as they were).
     #[serde(default, skip_serializing_if = "Option::is_none", with = "json_only")]
     pub labels: Option<crate::data::dataset::ImportedLabels>,
+    /// `"norm"`: the scales S_x, S_u of the norm ε, ε_D, L_MPC, L_NN and the covering radius
+    /// are stated in ([`Norm`](crate::certify::norm::Norm): ε bounds ‖S_u⁻¹(κ − κ_NN)‖₂,
+    /// states measured as ‖S_x⁻¹Δx‖₂). Absent in certificates of older versions, which
+    /// were computed unscaled (S = I): [`Certificate::norm`] reads them so. JSON only
+    /// (the postcard model file does not store it: its format stays as it was).
+    #[serde(
+        default,
+        rename = "norm",
+        skip_serializing_if = "Option::is_none",
+        with = "json_only"
+    )]
+    pub scales: Option<crate::certify::norm::Norm>,
+    /// `"epsilon_per_input"`: ε per input in physical units, |κ_j − κ_NN,j| ≤ entry j
+    /// (s_u,j·ε rounded up). Absent in older certificates (then ε itself, unscaled). JSON
+    /// only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty", with = "json_only")]
+    pub epsilon_per_input: Vec<f64>,
 }
 
-/// Serde adapter of [`Certificate::labels`]: the value in human-readable formats (JSON),
-/// nothing at all in binary ones (postcard writes and reads zero bytes for a unit).
+impl Certificate {
+    /// The norm the certificate is stated in: its `"norm"`, else (an older certificate)
+    /// the unscaled one it was computed in.
+    pub fn norm(&self) -> crate::certify::norm::Norm {
+        self.scales.clone().unwrap_or_else(|| {
+            crate::certify::norm::Norm::unscaled(self.domain_lo.len(), self.u_lo.len())
+        })
+    }
+
+    /// A bound on ‖κ − κ_NN‖₂ in physical units: min(‖(ε_j)_j‖₂, max_j s_u,j·ε) (ε
+    /// itself for the unscaled norm), from |κ_j − κ_NN,j| ≤ ε_j and ‖S_u v‖₂ ≤ max s·‖v‖₂.
+    pub fn eps_physical(&self) -> f64 {
+        let norm = self.norm();
+        let smax = norm.u_scale.iter().copied().fold(0.0, f64::max);
+        let by_max = crate::certify::norm::mul_up(smax, self.eps);
+        let per = self.eps_per_input();
+        let s: f64 = per.iter().map(|e| e * e).sum();
+        let by_inputs = if per.len() == 1 {
+            per[0]
+        } else {
+            s.sqrt() * (1.0 + 4.0 * f64::EPSILON)
+        };
+        by_max.min(by_inputs)
+    }
+
+    /// ε per input in physical units: `epsilon_per_input`, else s_u,j·ε.
+    pub fn eps_per_input(&self) -> Vec<f64> {
+        if self.epsilon_per_input.len() == self.u_lo.len() {
+            self.epsilon_per_input.clone()
+        } else {
+            self.norm().per_input(self.eps)
+        }
+    }
+}
+
+/// Serde adapter of the JSON-only fields ([`Certificate::labels`], `norm`,
+/// `epsilon_per_input`): the value in human-readable formats (JSON), nothing at all in binary
+/// ones (postcard writes and reads zero bytes for a unit; the default is read back).
 mod json_only {
-    use crate::data::dataset::ImportedLabels;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-    pub fn serialize<S: Serializer>(v: &Option<ImportedLabels>, s: S) -> Result<S::Ok, S::Error> {
+    pub fn serialize<T: Serialize, S: Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
         if s.is_human_readable() {
             v.serialize(s)
         } else {
@@ -217,13 +269,13 @@ mod json_only {
         }
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(
+    pub fn deserialize<'de, T: Deserialize<'de> + Default, D: Deserializer<'de>>(
         d: D,
-    ) -> Result<Option<ImportedLabels>, D::Error> {
+    ) -> Result<T, D::Error> {
         if d.is_human_readable() {
-            Option::deserialize(d)
+            T::deserialize(d)
         } else {
-            <()>::deserialize(d).map(|_| None)
+            <()>::deserialize(d).map(|_| T::default())
         }
     }
 }
@@ -399,10 +451,16 @@ pub fn certify(
 ) -> Result<Certificate, MismatchError> {
     use crate::certify::lipschitz;
     check_inputs(model, data, cfg)?;
-    let set = crate::learn::train::TrainSet::from_dataset(data);
-    let (_, stats) = crate::learn::train::errors(&model.mlp, &set);
-    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
-    let naive = lipschitz::naive_bound(&model.mlp);
+    // Every term in the problem's norm (crate::certify::norm): the scaled net on the scaled
+    // points over the scaled box; the unit norm borrows the originals unchanged.
+    let norm = crate::certify::norm::Norm::of_problem(cfg);
+    let phys = crate::learn::train::TrainSet::from_dataset(data);
+    let set = norm.scale_set(&phys);
+    let mlp = norm.scale_mlp(&model.mlp);
+    let (_, stats) = crate::learn::train::errors(&mlp, &set);
+    let (lo, hi) = norm.scale_box(&cfg.domain.lo, &cfg.domain.hi);
+    let (lo, hi) = (&lo, &hi);
+    let naive = lipschitz::naive_bound(&mlp);
     let (nx, nu) = (set.nx, set.nu);
     // L_MPC: the proven value given, or the estimates from the data and the extra states.
     let l_mpc_term = || match opts.l_mpc {
@@ -410,6 +468,7 @@ pub fn certify(
         None => {
             let (s, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, nu);
             let (s2, q2) = opts.extra.as_ref().map_or((0.0f64, 0.0f64), |e| {
+                let e = norm.scale_set(e);
                 lipschitz::mpc_estimates(&e.x, &e.u, &e.du, &e.use_jac, nx, nu)
             });
             let method = if opts.extra.is_some() {
@@ -429,13 +488,13 @@ pub fn certify(
     // The four are independent and deterministic: LipSDP (the longest) beside the other
     // three.
     let (sdp, ((vertex, lower), (l_mpc, l_mpc_is_estimate, l_mpc_method))) = rayon::join(
-        || lipschitz::lipsdp_bound(&model.mlp),
+        || lipschitz::lipsdp_bound(&mlp),
         || {
             rayon::join(
                 || {
                     (
-                        lipschitz::vertex_bound(&model.mlp, opts.vertex_max_hidden.unwrap_or(22)),
-                        lipschitz::sampled_lower_bound(&model.mlp, lo, hi, 20_000, 7),
+                        lipschitz::vertex_bound(&mlp, opts.vertex_max_hidden.unwrap_or(22)),
+                        lipschitz::sampled_lower_bound(&mlp, lo, hi, 20_000, 7),
                     )
                 },
                 l_mpc_term,
@@ -469,6 +528,9 @@ pub fn certify(
         (ub, format!("sound upper bound by branch and bound over X (lower {lb:.6}); labelled points only"))
     };
     let eps = stats.max + (l_mpc + l_nn) * covering_radius;
+    // Per input in physical units: the clamp band U_d ⊕ [−ε_j, ε_j].
+    let per_input = norm.per_input(eps);
+    let (u_lo, u_hi) = cfg.ocp.u_bounds(0);
     Ok(Certificate {
         eps,
         eps_d: stats.max,
@@ -484,162 +546,23 @@ pub fn certify(
         covering_radius,
         covering_method,
         f32_allowance: 0.0,
-        domain_lo: lo.clone(),
-        domain_hi: hi.clone(),
+        domain_lo: cfg.domain.lo.clone(),
+        domain_hi: cfg.domain.hi.clone(),
         // U_d, the input bounds of the data: the stage-0 bounds (tightened by the design ε
         // in a robust design; the problem's U otherwise).
-        u_lo: cfg.ocp.u_bounds(0).0.to_vec(),
-        u_hi: cfg.ocp.u_bounds(0).1.to_vec(),
-        clamp_lo: cfg.ocp.u_bounds(0).0.iter().map(|u| u - eps).collect(),
-        clamp_hi: cfg.ocp.u_bounds(0).1.iter().map(|u| u + eps).collect(),
+        u_lo: u_lo.to_vec(),
+        u_hi: u_hi.to_vec(),
+        clamp_lo: u_lo.iter().zip(&per_input).map(|(u, e)| u - e).collect(),
+        clamp_hi: u_hi.iter().zip(&per_input).map(|(u, e)| u + e).collect(),
         n_points: set.len(),
         hash: model.content_hash(),
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&data.to_bytes()),
         labels: data.labels.clone(),
+        scales: Some(norm),
+        epsilon_per_input: per_input,
     })
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-
-    #[test]
-    fn scattered_bound_agrees_with_the_exact_grid_radius() {
-        let (lo, hi, counts) = ([-1.0, 0.0], [2.0, 1.0], [7usize, 4usize]);
-        let mut pts = Vec::new();
-        for i in 0..counts[0] {
-            for j in 0..counts[1] {
-                pts.push(lo[0] + (hi[0] - lo[0]) * i as f64 / 6.0);
-                pts.push(lo[1] + (hi[1] - lo[1]) * j as f64 / 3.0);
-            }
-        }
-        let exact = grid_covering_radius(&lo, &hi, &counts);
-        let (ub, lb) = scattered_covering_radius(&pts, &lo, &hi, 1e-6);
-        assert!(
-            ub >= exact - 1e-12 && lb <= exact + 1e-12,
-            "{lb} {exact} {ub}"
-        );
-        assert!(ub - exact < 2e-6, "{ub} vs {exact}");
-        assert!((exact - 0.5 * ((0.5f64).powi(2) + (1.0f64 / 3.0).powi(2)).sqrt()).abs() < 1e-15);
-    }
-
-    #[test]
-    fn scattered_bound_is_above_sampled_distances() {
-        let lo = [0.0, 0.0, 0.0];
-        let hi = [1.0, 2.0, 1.0];
-        let pts: Vec<f64> = (0..40 * 3)
-            .map(|k| crate::rng::uniform(9, k as u64, 0) * if k % 3 == 1 { 2.0 } else { 1.0 })
-            .collect();
-        let (ub, lb) = scattered_covering_radius(&pts, &lo, &hi, 1e-3);
-        assert!(ub >= lb && ub - lb <= 1e-3 + 1e-12);
-        for s in 0..20000u64 {
-            let x: Vec<f64> = (0..3usize)
-                .map(|k| crate::rng::uniform(10, s, k as u64) * (hi[k] - lo[k]))
-                .collect();
-            let d = (0..40)
-                .map(|i| {
-                    (0..3)
-                        .map(|k| (x[k] - pts[i * 3 + k]).powi(2))
-                        .sum::<f64>()
-                        .sqrt()
-                })
-                .fold(f64::INFINITY, f64::min);
-            assert!(d <= ub + 1e-12, "sampled {d} > bound {ub}");
-        }
-    }
-
-    #[test]
-    fn requirement_inverts_theorem_1() {
-        let (lo, hi) = ([-1.0, -1.0], [1.0, 1.0]);
-        let r = requirement(1.0, 0.2, 3.0, 5.0, &lo, &hi);
-        let delta = r.delta.unwrap();
-        assert!((0.2 + 8.0 * delta - 1.0).abs() < 1e-12);
-        let c = ((2.0 / r.spacing.unwrap()).ceil() + 1.0) as usize;
-        assert!(grid_covering_radius(&lo, &hi, &[c, c]) <= delta + 1e-12);
-        assert!(requirement(0.1, 0.2, 3.0, 5.0, &lo, &hi).delta.is_none());
-    }
-
-    /// Two small problems with equal dimensions (the pendulum near upright and the double
-    /// integrator), their datasets (written by `generate`, headers included) and a briefly
-    /// trained net of each.
-    pub(crate) fn two_problems(
-        dir: &std::path::Path,
-    ) -> [(
-        crate::problem::ProblemConfig,
-        crate::data::dataset::Dataset,
-        crate::certify::Model,
-    ); 2] {
-        use crate::data::dataset::{generate, GenerateOptions};
-        use crate::learn::train::{train, TrainOptions, TrainSet};
-        use crate::problem::ProblemConfig;
-        let mut pend = ProblemConfig::default();
-        pend.domain.lo = vec![-0.5, -0.5];
-        pend.domain.hi = vec![0.5, 0.5];
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../configs/double_integrator.toml"
-        );
-        let di = ProblemConfig::load(std::path::Path::new(path)).unwrap();
-        [pend, di].map(|mut cfg| {
-            cfg.sampling.counts = vec![4, 3];
-            cfg.training.epochs = 3;
-            cfg.training.hidden = vec![4];
-            // The header stores the problem file: the serialised config stands for it.
-            let file = dir.join(format!("{}.bin", cfg.name));
-            let opts = GenerateOptions {
-                shard: None,
-                progress: false,
-            };
-            let data = generate(&cfg, &file, &opts).unwrap();
-            let set = TrainSet::from_dataset(&data);
-            let model = train(
-                &cfg.training,
-                &TrainOptions {
-                    nominal: false,
-                    progress: None,
-                    hold: None,
-                    keep_best: None,
-                },
-                &set,
-                &set,
-                (&cfg.domain.lo, &cfg.domain.hi),
-                (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
-                &data.header.problem_hash,
-                "d",
-            );
-            (cfg, data, model)
-        })
-    }
-
-    /// The inputs of a certificate must belong together: a pendulum net on double-integrator
-    /// data, data certified for another problem or another domain X are refused (they used
-    /// to be certified with exit 0).
-    #[test]
-    fn mismatched_inputs_are_refused_and_certificates_bind_their_inputs() {
-        let dir = std::env::temp_dir().join(format!("ampc_mismatch_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let [(pcfg, pdata, pmodel), (dcfg, ddata, dmodel)] = two_problems(&dir);
-        let o = CertifyOptions::default();
-        let c = certify(&dmodel, &ddata, &dcfg, &o).unwrap();
-        assert_eq!(c.problem_hash, dcfg.problem_hash());
-        let file = std::fs::read(dir.join(format!("{}.bin", dcfg.name))).unwrap();
-        assert_eq!(c.dataset_hash, crate::io::sha256_hex(&file));
-        assert_eq!(c.hash, dmodel.content_hash());
-        assert!(certify(&pmodel, &pdata, &pcfg, &o).is_ok());
-        assert!(matches!(
-            certify(&pmodel, &ddata, &dcfg, &o),
-            Err(MismatchError::ModelProblem { .. })
-        ));
-        let e = certify(&dmodel, &ddata, &pcfg, &o).unwrap_err();
-        assert!(matches!(e, MismatchError::DataProblem { .. }), "{e}");
-        assert!(e.to_string().contains(&dcfg.name), "{e}");
-        let mut wide = dcfg.clone();
-        wide.domain.hi[1] *= 10.0;
-        assert!(matches!(
-            certify(&dmodel, &ddata, &wide, &o),
-            Err(MismatchError::Coverage { .. })
-        ));
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-}
+pub(crate) mod tests;

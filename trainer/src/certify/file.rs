@@ -6,7 +6,9 @@
 //! Theorem 1:  eps = eps_d + (l_mpc + l_nn)·covering_radius   (the f64 net's bound; the device's
 //!             is eps + f32_allowance, the 2-norm bound on |κ_NN,f32 − κ_NN,f64| the export adds)
 //! local:      eps = max_C ε_C                      (cells.csv beside the file, when present)
-//! band:       u_lo − eps ≤ clamp_lo ≤ u_lo,  u_hi ≤ clamp_hi ≤ u_hi + eps
+//! band:       u_lo − eps_j ≤ clamp_lo ≤ u_lo,  u_hi ≤ clamp_hi ≤ u_hi + eps_j
+//!             eps_j = epsilon_per_input[j] = s_u,j·eps in the certificate's norm
+//!             (`norm`: ‖S_u⁻¹Δu‖₂; absent in older files = unscaled, eps_j = eps)
 //! tier:       guarantee = max over `tiers`, never stronger than the terms support
 //! ```
 //!
@@ -369,11 +371,15 @@ impl CertificateFile {
                 });
             }
         }
-        let slack = |u: f64| REL_TOL * (u.abs() + c.eps).max(1e-300);
+        self.recheck_norm(origin)?;
+        // Per input in physical units (the norm's s_u,j·ε; ε itself for the unscaled norm).
+        let per = c.eps_per_input();
         for j in 0..nu {
+            let e = per[j];
+            let slack = |u: f64| REL_TOL * (u.abs() + e).max(1e-300);
             let (ul, uh, cl, ch) = (c.u_lo[j], c.u_hi[j], c.clamp_lo[j], c.clamp_hi[j]);
-            let lo_ok = cl >= ul - c.eps - slack(ul) && cl <= ul;
-            let hi_ok = ch <= uh + c.eps + slack(uh) && ch >= uh;
+            let lo_ok = cl >= ul - e - slack(ul) && cl <= ul;
+            let hi_ok = ch <= uh + e + slack(uh) && ch >= uh;
             if !(lo_ok && hi_ok) {
                 let key = if lo_ok { "clamp_hi" } else { "clamp_lo" };
                 let found = if lo_ok { ch } else { cl };
@@ -382,11 +388,66 @@ impl CertificateFile {
                     key: format!("{key}[{j}]"),
                     found: found.to_string(),
                     expected: format!(
-                        "the band lies in U_d ⊕ [−ε, ε] = [{}, {}] and contains U_d = [{ul}, {uh}]",
-                        ul - c.eps,
-                        uh + c.eps
+                        "the band lies in U_d ⊕ [−ε_{j}, ε_{j}] = [{}, {}] (ε_{j} = {e}, ε per \
+                         input in physical units) and contains U_d = [{ul}, {uh}]",
+                        ul - e,
+                        uh + e
                     ),
                 });
+            }
+        }
+        Ok(())
+    }
+
+    /// `norm` (when present): one scale per state and input, each finite and > 0; and
+    /// `epsilon_per_input` (when present): s_u,j·ε per input, as [`Norm::per_input`]
+    /// computes it.
+    ///
+    /// [`Norm::per_input`]: crate::certify::norm::Norm::per_input
+    fn recheck_norm(&self, origin: &str) -> Result<(), CertFileError> {
+        let c = &self.base;
+        let bad = |key: String, found: String, expected: String| {
+            Err(CertFileError::Inconsistent {
+                origin: origin.into(),
+                key,
+                found,
+                expected,
+            })
+        };
+        if let Some(n) = &c.scales {
+            for (key, v, len) in [
+                ("norm.x_scale", &n.x_scale, c.domain_lo.len()),
+                ("norm.u_scale", &n.u_scale, c.u_lo.len()),
+            ] {
+                if v.len() != len {
+                    return bad(key.into(), format!("{v:?}"), format!("{len} entries"));
+                }
+                if let Some(i) = v.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+                    return bad(
+                        format!("{key}[{i}]"),
+                        v[i].to_string(),
+                        "a finite scale > 0".into(),
+                    );
+                }
+            }
+        }
+        if !c.epsilon_per_input.is_empty() {
+            let want = c.norm().per_input(c.eps);
+            if c.epsilon_per_input.len() != want.len() {
+                return bad(
+                    "epsilon_per_input".into(),
+                    format!("{:?}", c.epsilon_per_input),
+                    format!("{} entries, one per input", want.len()),
+                );
+            }
+            for (j, (f, w)) in c.epsilon_per_input.iter().zip(&want).enumerate() {
+                if (f - w).abs() > REL_TOL * f.abs().max(w.abs()).max(1e-300) {
+                    return bad(
+                        format!("epsilon_per_input[{j}]"),
+                        f.to_string(),
+                        format!("s_u,{j}·ε = {w} (norm.u_scale[{j}] times eps, rounded up)"),
+                    );
+                }
             }
         }
         Ok(())

@@ -32,6 +32,8 @@ fn base() -> Certificate {
         problem_hash: "cd".into(),
         dataset_hash: "ef".into(),
         labels: None,
+        scales: None,
+        epsilon_per_input: vec![],
     }
 }
 
@@ -187,4 +189,57 @@ fn a_failed_check_is_refused() {
     let text = f.sealed().unwrap();
     let e = refused(&text);
     assert!(e.contains("check failed") && e.contains("2 of 100"), "{e}");
+}
+
+/// A certificate in a scaled norm states it (`norm`, `epsilon_per_input`), its band is
+/// per input U_d ⊕ [−s_u·ε, s_u·ε], and both are re-checked naming the key; one without
+/// `norm` (an older file) reads as unscaled: its band is checked against ε itself.
+#[test]
+fn a_scaled_certificate_states_its_norm_and_older_ones_read_as_unscaled() {
+    let mut c = base();
+    let norm = crate::certify::norm::Norm {
+        x_scale: vec![1.0, 2.0],
+        u_scale: vec![5.0],
+    };
+    c.epsilon_per_input = norm.per_input(c.eps);
+    c.clamp_lo = vec![-5.0 - c.epsilon_per_input[0]];
+    c.clamp_hi = vec![5.0 + c.epsilon_per_input[0]];
+    c.scales = Some(norm);
+    let text = CertificateFile::theorem1(c.clone()).sealed().unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["norm"]["u_scale"][0], 5.0);
+    assert_eq!(v["epsilon_per_input"][0], c.epsilon_per_input[0]);
+    let (back, _) = CertificateFile::parse(&text, "c.json", false).unwrap();
+    back.recheck("c.json", &Against::default()).unwrap();
+    assert_eq!(back.base.eps_per_input(), c.epsilon_per_input);
+    let e = refused(&reseal(
+        &text,
+        "\"u_scale\": [\n      5.0",
+        "\"u_scale\": [\n      0.5",
+    ));
+    assert!(e.contains("epsilon_per_input[0]"), "{e}");
+    let e = refused(&reseal(
+        &text,
+        "\"u_scale\": [\n      5.0",
+        "\"u_scale\": [\n      -1.0",
+    ));
+    assert!(e.contains("norm.u_scale[0]"), "{e}");
+    // The same numbers without `norm` and `epsilon_per_input`: unscaled, so the band
+    // U_d ⊕ [−5ε, 5ε] is outside U_d ⊕ [−ε, ε].
+    let mut old: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let o = old.as_object_mut().unwrap();
+    o.remove("norm");
+    o.remove("epsilon_per_input");
+    o.remove("checksum");
+    let old = crate::certify::seal::sealed_json(&old).unwrap();
+    let e = refused(&old);
+    assert!(e.contains("clamp_lo[0]") && e.contains("ε_0 = "), "{e}");
+    let (f, _) = CertificateFile::parse(
+        &CertificateFile::theorem1(base()).sealed().unwrap(),
+        "c.json",
+        false,
+    )
+    .unwrap();
+    assert!(f.base.norm().is_unit());
+    assert_eq!(f.base.eps_per_input(), vec![f.base.eps]);
 }

@@ -79,6 +79,27 @@ pub struct Statistical {
     /// those cells.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub excluded_states: u64,
+    /// The norm the errors are measured in (the certificate's, `[ocp] x_scale`,
+    /// `u_scale`): errors are ‖S_u⁻¹(κ − κ̂)‖₂. Absent in older files: unscaled.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub norm: Option<crate::certify::norm::Norm>,
+    /// `eps` per input in physical units (s_u,j·eps, rounded up). Empty in older files.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub epsilon_per_input: Vec<f64>,
+    /// `eps_at_p_target` per input in physical units. Absent in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eps_at_p_target_per_input: Option<Vec<f64>>,
+}
+
+impl Statistical {
+    /// This block stated in `norm` (errors already measured in it): the norm and the
+    /// per-input physical levels of `eps` and `eps_at_p_target`.
+    pub fn in_norm(mut self, norm: crate::certify::norm::Norm) -> Self {
+        self.epsilon_per_input = norm.per_input(self.eps);
+        self.eps_at_p_target_per_input = self.eps_at_p_target.map(|e| norm.per_input(e));
+        self.norm = Some(norm);
+        self
+    }
 }
 
 fn is_zero(v: &u64) -> bool {
@@ -195,6 +216,9 @@ pub fn from_errors(
                    as an exceedance); Clopper–Pearson bound, no Lipschitz or cell assumption"
             .into(),
         excluded_states: 0,
+        norm: None,
+        epsilon_per_input: Vec::new(),
+        eps_at_p_target_per_input: None,
     }
 }
 
@@ -421,6 +445,8 @@ pub fn certify_statistically(
         seed,
     )?;
     let inside = |x: &[f64]| in_any_box(x, &opts.excluded);
+    // Errors in the certificate's norm ‖S_u⁻¹(κ − κ̂)‖₂ (crate::certify::norm).
+    let norm = crate::certify::norm::Norm::of_problem(cfg);
     let dropped = data.records.iter().filter(|r| inside(&r.x)).count() as u64;
     let errors: Vec<f64> = data
         .records
@@ -432,11 +458,8 @@ pub fn certify_statistically(
             }
             let u = tested.controller.input(&r.x);
             let e = if u.len() == r.u.len() {
-                r.u.iter()
-                    .zip(&u)
-                    .map(|(k, v)| (k - v).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
+                let d: Vec<f64> = r.u.iter().zip(&u).map(|(k, v)| k - v).collect();
+                norm.input_norm(&d)
             } else {
                 f64::INFINITY
             };
@@ -448,7 +471,7 @@ pub fn certify_statistically(
             }
         })
         .collect();
-    let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target);
+    let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target).in_norm(norm);
     s.user_seed = opts.seed;
     s.model_hash = tested.model_hash.to_string();
     s.function = tested.controller.describe();

@@ -228,8 +228,9 @@ pub(super) fn execute(
         },
     )
     .with_context(|| format!("cannot certify {} on {}", model.display(), data.display()))?;
-    let req =
-        target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &cfg.domain.lo, &cfg.domain.hi));
+    // In the certificate's norm: the target, δ and the spacing in scaled units (the box S_x⁻¹X).
+    let (slo, shi) = c.norm().scale_box(&cfg.domain.lo, &cfg.domain.hi);
+    let req = target.map(|e| requirement(e, c.eps_d, c.l_mpc, c.l_nn, &slo, &shi));
     let statistical = match stat {
         Some((o, store)) => {
             super::common::refuse_overwrite(&[store], &[model, data])?;

@@ -378,34 +378,54 @@ pub(super) fn load_certificate(
         dataset_hash: None,
         cells_csv: None,
     };
-    let (file, seal) = match certificate {
-        Some(p) => {
-            let (file, seal) = read_certificate(p, accept_unsealed, &against)?;
-            if seal == Seal::Absent {
-                eprintln!(
-                    "warning: {} carries no checksum (--accept-unsealed): its numbers are not \
+    let (file, seal) =
+        match certificate {
+            Some(p) => {
+                let (file, seal) = read_certificate(p, accept_unsealed, &against)?;
+                if seal == Seal::Absent {
+                    eprintln!(
+                        "warning: {} carries no checksum (--accept-unsealed): its numbers are not \
                      verified, its tier is lowered to `estimated` in every output",
-                    p.display()
-                );
+                        p.display()
+                    );
+                }
+                (file, seal)
             }
-            (file, seal)
-        }
-        None => {
-            let stored = m.certificate.clone().with_context(|| {
-                format!(
-                    "{} holds no certificate: pass --certificate",
-                    model_path.display()
-                )
-            })?;
-            let file = CertificateFile::theorem1(stored);
-            file.recheck_against(
-                &format!("the certificate stored in {}", model_path.display()),
-                &against,
-            )?;
-            // Sealed with the model file (its envelope's checksum).
-            (file, Seal::Verified)
-        }
-    };
+            None => {
+                let stored = m.certificate.clone().with_context(|| {
+                    format!(
+                        "{} holds no certificate: pass --certificate",
+                        model_path.display()
+                    )
+                })?;
+                // The model file stores the certificate without its norm (postcard keeps the old
+                // format); its band tells which: U_d ⊕ [−s_u,j·ε, s_u,j·ε] in the problem's norm,
+                // U_d ⊕ [−ε, ε] in an older, unscaled certificate (then it reads as unscaled).
+                let mut stored = stored;
+                if let Some(p) = problem {
+                    let norm = trainer::certify::norm::Norm::of_problem(p);
+                    let per = norm.per_input(stored.eps);
+                    let scaled =
+                        per.len() == stored.u_lo.len()
+                            && stored.u_lo.iter().zip(&stored.clamp_lo).zip(&per).all(
+                                |((u, c), w)| {
+                                    ((u - c) - w).abs() <= 1e-12 * (u.abs() + w).max(1e-300)
+                                },
+                            );
+                    if scaled && stored.scales.is_none() {
+                        stored.scales = Some(norm);
+                        stored.epsilon_per_input = per;
+                    }
+                }
+                let file = CertificateFile::theorem1(stored);
+                file.recheck_against(
+                    &format!("the certificate stored in {}", model_path.display()),
+                    &against,
+                )?;
+                // Sealed with the model file (its envelope's checksum).
+                (file, Seal::Verified)
+            }
+        };
     let cert = &file.base;
     let origin = || {
         certificate.map_or_else(

@@ -372,7 +372,8 @@ fn load_nominal(root: &RunDir) -> Option<(Model, f64)> {
         },
     )
     .ok()?;
-    Some((m, c.base.eps))
+    // The band's half-width in physical units (ε itself for the unscaled norm).
+    Some((m, c.base.eps_per_input().into_iter().fold(0.0, f64::max)))
 }
 
 /// The robust closed-loop study of the judged net and its report (with the final verdict,

@@ -294,8 +294,14 @@ impl ProblemConfig {
     /// Content hash (SHA-256, hex) of everything that determines a label: system, OCP and
     /// solver settings. Sampler settings are not part of it.
     pub fn problem_hash(&self) -> String {
-        let bytes =
-            postcard::to_allocvec(&(&self.system, &self.ocp, &self.solver)).unwrap_or_default();
+        // The norm's scales are not part of the MPC (its labels do not depend on them).
+        let mut ocp = std::borrow::Cow::Borrowed(&self.ocp);
+        if ocp.x_scale.is_some() || ocp.u_scale.is_some() {
+            let o = ocp.to_mut();
+            o.x_scale = None;
+            o.u_scale = None;
+        }
+        let bytes = postcard::to_allocvec(&(&self.system, &*ocp, &self.solver)).unwrap_or_default();
         hex(&Sha256::digest(&bytes))
     }
 }

@@ -98,6 +98,18 @@ pub struct OcpSettings {
     /// Terminal constraints in the states, on x_N only (a terminal region).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub terminal_constraints: Vec<String>,
+    /// Scale S_x of the states in the certificate's norm (one finite entry > 0 per state):
+    /// every bound measures a state difference as ‖S_x⁻¹ Δx‖₂. Default (absent): the
+    /// half-widths of the domain X. Not part of the problem hash (labels do not depend on
+    /// it) and not serialised when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub x_scale: Option<Vec<f64>>,
+    /// Scale S_u of the inputs in the certificate's norm (one finite entry > 0 per input):
+    /// ε bounds ‖S_u⁻¹(κ − κ_NN)‖₂, so |κ_j − κ_NN,j| ≤ s_u,j·ε per input in physical
+    /// units. Default (absent): the half-widths of U (`u_lo`, `u_hi`). Not part of the
+    /// problem hash and not serialised when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_scale: Option<Vec<f64>>,
 }
 
 fn default_setpoint_tol() -> f64 {
@@ -142,6 +154,18 @@ impl OcpSettings {
             .or_else(|| self.derived_u_ref.clone())
             .unwrap_or_else(|| vec![0.0; nu])
     }
+    /// The state scale S_x of the certificate's norm: `x_scale`, else the half-widths of
+    /// the domain `[lo, hi]` (an entry that is not finite and > 0 becomes 1).
+    pub fn x_scale_or_default(&self, lo: &[f64], hi: &[f64]) -> Vec<f64> {
+        self.x_scale.clone().unwrap_or_else(|| half_widths(lo, hi))
+    }
+    /// The input scale S_u of the certificate's norm: `u_scale`, else the half-widths of U
+    /// (`u_lo`, `u_hi`; an entry that is not finite and > 0 becomes 1).
+    pub fn u_scale_or_default(&self) -> Vec<f64> {
+        self.u_scale
+            .clone()
+            .unwrap_or_else(|| half_widths(&self.u_lo, &self.u_hi))
+    }
     /// Bounds `(lo, hi)` on the predicted state x_k, k = 1..N (stage-dependent if
     /// [`stages`](Self::stages) is set).
     pub fn x_bounds(&self, k: usize) -> (&[f64], &[f64]) {
@@ -167,6 +191,21 @@ impl OcpSettings {
             None => (&self.u_lo, &self.u_hi),
         }
     }
+}
+
+/// ½(hi − lo) per entry; 1 where that is not finite and > 0.
+fn half_widths(lo: &[f64], hi: &[f64]) -> Vec<f64> {
+    lo.iter()
+        .zip(hi)
+        .map(|(l, h)| {
+            let w = 0.5 * (h - l);
+            if w.is_finite() && w > 0.0 {
+                w
+            } else {
+                1.0
+            }
+        })
+        .collect()
 }
 
 fn one() -> usize {

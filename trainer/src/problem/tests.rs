@@ -433,3 +433,38 @@ fn mismatch_scenarios_are_named_by_their_parameter() {
         other => panic!("{other:?}"),
     }
 }
+
+/// `ocp.x_scale` / `ocp.u_scale`: one finite entry > 0 per state (input), errors naming the
+/// key and the index; the defaults are the half-widths of X and U; neither enters the
+/// problem hash.
+#[test]
+fn norm_scales_are_validated_defaulted_and_not_hashed() {
+    assert_eq!(
+        err_key(|c| c.ocp.x_scale = Some(vec![1.0, 0.0])),
+        "ocp.x_scale[1]"
+    );
+    assert_eq!(
+        err_key(|c| c.ocp.u_scale = Some(vec![f64::INFINITY])),
+        "ocp.u_scale[0]"
+    );
+    assert_eq!(
+        err_key(|c| c.ocp.u_scale = Some(vec![-2.0])),
+        "ocp.u_scale[0]"
+    );
+    assert_eq!(err_key(|c| c.ocp.x_scale = Some(vec![1.0])), "ocp.x_scale");
+    let text = PENDULUM_TOML.replacen("u_scale = [1.0]", "u_scale = [0.0]", 1);
+    let e = ProblemConfig::from_toml_str(&text, "configs/mine.toml").unwrap_err();
+    assert!(e.to_string().contains("`ocp.u_scale[0]`"), "{e}");
+    let mut c = ProblemConfig::default();
+    assert_eq!(c.ocp.x_scale, Some(vec![1.0, 1.0]));
+    let h = c.problem_hash();
+    c.ocp.x_scale = None;
+    c.ocp.u_scale = None;
+    assert_eq!(c.problem_hash(), h);
+    let tau = std::f64::consts::TAU;
+    assert_eq!(
+        c.ocp.x_scale_or_default(&c.domain.lo, &c.domain.hi),
+        vec![tau, 1.0]
+    );
+    assert_eq!(c.ocp.u_scale_or_default(), vec![15.0]);
+}

@@ -240,8 +240,31 @@ impl OcpSettings {
         if let Some(st) = &o.stages {
             st.validate(o.horizon, nx, nu)?;
         }
+        for (key, v, n) in [
+            ("ocp.x_scale", &o.x_scale, nx),
+            ("ocp.u_scale", &o.u_scale, nu),
+        ] {
+            if let Some(v) = v {
+                check_scale(key, v, n)?;
+            }
+        }
         Ok(())
     }
+}
+
+/// `ocp.x_scale` / `ocp.u_scale`: one finite entry > 0 per state (input).
+fn check_scale(key: &str, v: &[f64], n: usize) -> Result<(), ConfigError> {
+    check_vec(key, v, n, false)?;
+    if let Some(i) = v.iter().position(|s| *s <= 0.0) {
+        return Err(invalid(
+            format!("{key}[{i}]"),
+            format!(
+                "a scale of the certificate's norm must be finite and > 0, got {}",
+                v[i]
+            ),
+        ));
+    }
+    Ok(())
 }
 
 impl StageBounds {

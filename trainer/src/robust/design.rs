@@ -118,11 +118,16 @@ pub const REFINE_TARGET_FRACTION: f64 = 0.99;
 /// constraint when enforced (`robust.terminal_constraint`, which also turns on
 /// `refine.exclude_infeasible`: cells outside the tightened MPC's feasible set leave the
 /// certified domain). The constant bounds remain the true constraints (actuator limits and the
-/// violation check of the closed loop).
+/// violation check of the closed loop). Its norm is the unscaled one (`x_scale`, `u_scale`
+/// all 1), that of the design's ε.
 pub fn robust_config(cfg: &ProblemConfig, d: &Design) -> ProblemConfig {
     let mut r = cfg.clone();
     r.name = "robust".into();
     r.ocp.stages = Some(d.stages.clone());
+    // Corollary 1's tube is designed for ‖Δu‖₂ ≤ ε in physical units: the tightened
+    // problem's certificates are stated in the unscaled norm, so ε is comparable with it.
+    r.ocp.x_scale = Some(vec![1.0; cfg.system.nx()]);
+    r.ocp.u_scale = Some(vec![1.0; cfg.system.nu()]);
     if let Some(t) = d.terminal.as_ref().filter(|t| t.enforced) {
         r.ocp.terminal_constraints.push(t.constraint.clone());
         // The terminal region shrinks the feasible set below X: certify where the

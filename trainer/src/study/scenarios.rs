@@ -66,7 +66,11 @@ pub fn closed_loop(cfg: &ProblemConfig, nominal: &Model, regularized: &Model) ->
     let eps = |m: &Model| {
         m.certificate
             .as_ref()
-            .map_or(f64::INFINITY, |c: &Certificate| c.eps)
+            // The band's half-width in physical units: the largest per-input bound (ε
+            // itself for the unscaled norm).
+            .map_or(f64::INFINITY, |c: &Certificate| {
+                c.eps_per_input().into_iter().fold(0.0, f64::max)
+            })
     };
     let nets: [(&str, Option<&Model>); 3] = [
         ("mpc", None),

@@ -311,6 +311,13 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&dataset(cfg, st).to_bytes()),
         labels: None,
+        // The cells' bounds are computed in the unscaled norm (not yet in `[ocp] x_scale`,
+        // `u_scale`): the certificate says so.
+        scales: Some(crate::certify::norm::Norm::unscaled(
+            lo.len(),
+            cfg.system.nu(),
+        )),
+        epsilon_per_input: vec![eps; cfg.system.nu()],
     };
     let local = LocalSummary {
         method: "local".into(),

@@ -25,6 +25,8 @@
 //! would understate it by up to √nu; for nu = 1 the two are the same number. The
 //! per-axis clamp band `U ⊕ [−(ε + a), ε + a]` stays sound with the 2-norm a (≥ every
 //! output's bound). The observed differences ([`sampled_max_diff`]) are 2-norms too.
+//! Both are stated in the certificate's norm ‖S_u⁻¹·‖₂ (`ExportModel::u_scale`): each
+//! output's bound divided by s_u,o (rounded up), exactly the unscaled numbers when s_u = 1.
 
 use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
 
@@ -99,15 +101,16 @@ pub fn eval_f32(folded: &Folded, lo: &[f32], hi: &[f32], x: &[f32], tanh: Tanh) 
 }
 
 /// Interval bound on |computed − exact| of the folded network over the box `[a, b]`, for
-/// unit roundoff `u`, rounded weights `wr` (or exact if `None`), tanh error `dt`.
+/// unit roundoff `u` and relative input error `input_rel`, rounded weights `wr` (or exact if
+/// `None`), tanh error `dt`, the per-output bounds divided by `u_scale` (the norm's S_u).
 fn box_error(
     layers: &[DenseF64],
     rounded: Option<&[LayerF32]>,
     a: &[f64],
     b: &[f64],
-    u: f64,
-    input_rel: f64,
+    (u, input_rel): (f64, f64),
     dt: &dyn Fn(f64, f64) -> f64,
+    u_scale: &[f64],
 ) -> f64 {
     const TINY: f64 = 1.401_298_464_324_817e-45; // 2^-149
     let widen = |v: f64| v * (1.0 + 1e-12) + 1e-300;
@@ -176,7 +179,22 @@ fn box_error(
         hi = zhi;
         err = zerr;
     }
-    norm2_up(&err)
+    norm2_up(&scaled_up(&err, u_scale))
+}
+
+/// e_o / s_u,o rounded up (unchanged where s_u,o = 1 or no scale is given): a per-output
+/// bound in the certificate's norm ‖S_u⁻¹·‖₂.
+fn scaled_up(err: &[f64], u_scale: &[f64]) -> Vec<f64> {
+    err.iter()
+        .enumerate()
+        .map(|(o, e)| match u_scale.get(o) {
+            Some(s) if *s != 1.0 => {
+                let q = e / s;
+                q + q.abs() * f64::EPSILON
+            }
+            _ => *e,
+        })
+        .collect()
 }
 
 /// ‖v‖₂ rounded up (relative 4·10⁻¹⁶ covers the sum's and the root's rounding for the
@@ -235,18 +253,18 @@ pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
                     Some(&folded.f32_layers),
                     a,
                     b,
-                    2f64.powi(-24),
-                    2f64.powi(-23),
+                    (2f64.powi(-24), 2f64.powi(-23)),
                     &|lo, hi| tanh.max_abs_err_on(lo, hi),
+                    &model.u_scale,
                 );
                 let e64 = box_error(
                     &exact,
                     None,
                     a,
                     b,
-                    8.0 * 2f64.powi(-53),
-                    8.0 * 2f64.powi(-53),
+                    (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
                     &|_, _| 1e-15,
+                    &model.u_scale,
                 );
                 e32 + e64
             },
@@ -296,7 +314,8 @@ pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) ->
                 let d: Vec<f64> = y32
                     .iter()
                     .zip(&y64)
-                    .map(|(a, b)| f64::from(*a) - b)
+                    .enumerate()
+                    .map(|(o, (a, b))| (f64::from(*a) - b) / model.u_scale_of(o))
                     .collect();
                 norm2_sampled(&d)
             })

@@ -13,7 +13,9 @@
 //! **f32 allowance**: the bound on |κ_NN,f32(x) − κ_NN,f64(x)| for x ∈ X, by forward error
 //! analysis with interval arithmetic on sub-boxes of X (see `allowance`).
 //!
-//! **Clamp band** `(U_d ⊕ [−ε, ε]) ∩ [act_lo, act_hi]`, ε = eps + allowance, rounded to f32
+//! **Clamp band** `(U_d ⊕ [−ε_j, ε_j]) ∩ [act_lo, act_hi]` per input j, ε_j = s_u,j·(eps +
+//! allowance) (both in the certificate's norm ‖S_u⁻¹Δu‖₂, `u_scale`; s_u,j = 1 unscaled: the
+//! physical per-input bound), rounded to f32
 //! so that it contains U_d and lies within the actuator limits. **Domain** rounded outward to
 //! f32 (the f32 box contains X, so X's own corners are in domain; a projected state lies at
 //! most one f32 step outside X, a box the allowance's interval analysis covers).
@@ -31,7 +33,8 @@
 //! - `c_lib`: the C library folder of `--c-lib` ([`render_c_lib`]: `ampc.h`, `ampc.c`,
 //!   `Makefile`, `CMakeLists.txt`; templates in `c/`);
 //! - `guarantee`: the certificate's tier ([`Guarantee`]);
-//! - `blob`: the postcard blob ([`render_postcard`]).
+//! - `blob`: the postcard blob ([`render_postcard`]);
+//! - `placeholder`: the untrained stand-in pendulum ([`placeholder_pendulum`]).
 
 mod allowance;
 mod blob;
@@ -39,6 +42,7 @@ mod c_header;
 mod c_lib;
 pub mod device;
 mod guarantee;
+mod placeholder;
 pub(crate) mod range;
 mod rust;
 mod tanh;
@@ -58,6 +62,7 @@ pub use c_lib::{hex32, link_id, render_c_lib};
 pub use guarantee::{
     default_guarantee, rust_name, supported_guarantee, Guarantee, GuaranteeDef, StatisticalClaim,
 };
+pub use placeholder::placeholder_pendulum;
 pub use rust::render_rust;
 pub use tanh::Tanh;
 pub use tested::{certify_deployed, deployed_allowance, Deployed};
@@ -154,6 +159,11 @@ pub struct ExportModel {
     /// written into every exported file. Empty: nothing but arithmetic.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rests_on: Vec<String>,
+    /// S_u of the certificate's norm (`certificate.json`'s `norm.u_scale`): `eps` bounds
+    /// ‖S_u⁻¹(κ − κ_NN)‖₂, so input j's band is U_d,j ⊕ [−s_u,j·ε, s_u,j·ε]; the f32
+    /// allowance is stated in the same norm. Empty: the unscaled norm (all 1).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub u_scale: Vec<f64>,
 }
 
 /// What can go wrong in an export.
@@ -425,12 +435,19 @@ impl ExportModel {
         )
     }
 
-    /// Clamp band for a total ε (module doc), in f32.
+    /// Input j's scale s_u,j of the certificate's norm (1 when unscaled).
+    pub fn u_scale_of(&self, j: usize) -> f64 {
+        self.u_scale.get(j).copied().unwrap_or(1.0)
+    }
+
+    /// Clamp band for a total ε in the certificate's norm (module doc), in f32: input j's
+    /// half-width is s_u,j·ε rounded up, its physical bound.
     pub fn clamp_band(&self, eps: f64) -> (Vec<f32>, Vec<f32>) {
         let nu = self.nu();
         let mut lo = Vec::with_capacity(nu);
         let mut hi = Vec::with_capacity(nu);
         for j in 0..nu {
+            let eps = crate::certify::norm::mul_up(self.u_scale_of(j), eps);
             let mut l = f32_down((self.u_lo[j] - eps).max(self.actuator_lo[j]));
             if f64::from(l) < self.actuator_lo[j] {
                 l = f32_up(self.actuator_lo[j]);
@@ -502,66 +519,6 @@ pub fn write_files(files: &[(PathBuf, Vec<u8>)]) -> Result<(), ExportError> {
         .collect();
     crate::io::write_atomic_all(&set)?;
     Ok(())
-}
-
-/// PLACEHOLDER pendulum network (2-10-10-1) until the trained one exists: deterministic
-/// pseudo-random weights (xorshift, seed 0x5EED, uniform in ±1.5/√fan_in), normalisation by
-/// the domain's half-widths, output scale 15 N·m. Not trained and not certified: the
-/// certificate numbers are zero and `placeholder = true`.
-pub fn placeholder_pendulum() -> ExportModel {
-    let mut s: u64 = 0x5EED;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
-    let sizes = [2usize, 10, 10, 1];
-    let layers = sizes
-        .windows(2)
-        .map(|d| {
-            let g = 1.5 / (d[0] as f64).sqrt();
-            DenseF64 {
-                w: (0..d[1])
-                    .map(|_| (0..d[0]).map(|_| g * next()).collect())
-                    .collect(),
-                b: (0..d[1]).map(|_| 0.1 * next()).collect(),
-            }
-        })
-        .collect();
-    let tau = std::f64::consts::TAU;
-    ExportModel {
-        name: "pendulum".into(),
-        layers,
-        input: Scaling {
-            mean: vec![0.0, 0.0],
-            scale: vec![tau, 1.0],
-        },
-        output: Scaling {
-            mean: vec![0.0],
-            scale: vec![15.0],
-        },
-        domain_lo: vec![-tau, -1.0],
-        domain_hi: vec![tau, 1.0],
-        u_lo: vec![-15.0],
-        u_hi: vec![15.0],
-        actuator_lo: vec![-15.0],
-        actuator_hi: vec![15.0],
-        fallback: None,
-        eps: 0.0,
-        eps_d: 0.0,
-        l_nn: 0.0,
-        l_nn_method: "placeholder (untrained network, no certificate)".into(),
-        l_mpc: 0.0,
-        l_mpc_is_estimate: true,
-        covering_radius: 0.0,
-        hash: "placeholder-2-10-10-1-seed-5eed".into(),
-        placeholder: true,
-        guarantee: Guarantee::Estimated,
-        statistical: None,
-        excluded: Vec::new(),
-        rests_on: Vec::new(),
-    }
 }
 
 impl ExportModel {
@@ -657,6 +614,7 @@ impl ExportModel {
             statistical: None,
             excluded: Vec::new(),
             rests_on: Vec::new(),
+            u_scale: cert.norm().u_scale,
         })
     }
 

@@ -237,3 +237,27 @@ fn numbers_beyond_the_f32_range_are_refused_naming_the_value() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// In a scaled norm (u_scale = S_u) the f32 allowance is ‖S_u⁻¹(κ_NN,f32 − κ_NN,f64)‖₂ (for
+/// one output the unscaled bound divided by s_u, rounded up) and the band is per input
+/// U_d ⊕ [−s_u·ε, s_u·ε]: its physical bound, the same band as the unscaled ε·s_u.
+#[test]
+fn scaled_norm_allowance_and_band_are_per_input_physical() {
+    let mut m = placeholder_pendulum();
+    m.actuator_lo = vec![-20.0];
+    m.actuator_hi = vec![20.0];
+    let mut s = m.clone();
+    s.u_scale = vec![15.0];
+    let (a, _) = f32_allowance(&m, Tanh::Libm);
+    let (b, _) = f32_allowance(&s, Tanh::Libm);
+    assert!(
+        b * 15.0 >= a && b * 15.0 <= a * (1.0 + 1e-12),
+        "{a} vs 15·{b}"
+    );
+    let (lo, hi) = s.clamp_band(0.01);
+    let (ulo, uhi) = m.clamp_band(0.15);
+    assert!(f64::from(lo[0]) <= -15.15 && f64::from(hi[0]) >= 15.15);
+    assert_eq!((lo, hi), (ulo, uhi));
+    let d = sampled_max_diff(&s, Tanh::Libm, 10_000, 3);
+    assert!(d <= b && d > 0.0, "observed {d} vs allowance {b}");
+}

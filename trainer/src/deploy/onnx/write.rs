@@ -149,8 +149,17 @@ fn list(v: &[f64]) -> String {
 
 /// The guarantee the certificate makes, in words (`ampc.guarantee`).
 pub fn guarantee(model: &ExportModel, allowance: Option<f64>) -> String {
+    // The certificate's norm: ‖S_u⁻¹·‖₂ when it is scaled (crate::certify::norm).
+    let diff = if model.u_scale.iter().all(|s| *s == 1.0) {
+        "‖κ_MPC(x) − κ_NN(x)‖₂".to_string()
+    } else {
+        format!(
+            "‖S_u⁻¹(κ_MPC(x) − κ_NN(x))‖₂ (S_u = diag{}, so input j errs by ≤ S_u,j·ε)",
+            list(&model.u_scale)
+        )
+    };
     let mut s = format!(
-        "for every state x in the box X = {} … {}: ‖κ_MPC(x) − κ_NN(x)‖₂ ≤ {} (ampc.eps; \
+        "for every state x in the box X = {} … {}: {diff} ≤ {} (ampc.eps; \
          tier: {}, ampc.tier) for the f64 network",
         list(&model.domain_lo),
         list(&model.domain_hi),

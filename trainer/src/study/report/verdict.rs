@@ -63,7 +63,8 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         .and_then(|s| s.split('[').nth(1))
         .map(|s| format!(" {}", s.trim_end_matches(']')))
         .unwrap_or_default();
-    let (ratio, word) = judge(c.eps, &c.u_lo, &c.u_hi);
+    // Against U in physical units (ε itself for the unscaled norm).
+    let (ratio, word) = judge(c.eps_physical(), &c.u_lo, &c.u_hi);
     let range = boxed(&c.u_lo, &c.u_hi);
     let meaning = match word {
         "vacuous" => format!(
@@ -94,7 +95,7 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             num(allowance),
             num(c.eps + allowance),
         )),
-        Block::Para(format!("Against the input range: {meaning}.")),
+        Block::Para(format!("{}Against the input range: {meaning}.", scaled_note(c))),
         Block::Para(format!(
             "Exported: {}.",
             a.export["net_reason"]
@@ -106,6 +107,24 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             boxed(&blo, &bhi)
         )),
     ]
+}
+
+/// For a scaled norm: what ε measures and its bound per input in physical units (empty for
+/// the unscaled norm, whose ε is the physical 2-norm).
+fn scaled_note(c: &crate::certify::certificate::Certificate) -> String {
+    let n = c.norm();
+    if n.is_unit() {
+        return String::new();
+    }
+    let per: Vec<String> = c.eps_per_input().iter().map(|e| num(*e)).collect();
+    format!(
+        "ε is stated in the scaled norm ‖S_u⁻¹Δu‖₂ (u_scale = {:?}, states as ‖S_x⁻¹Δx‖₂ with \
+         x_scale = {:?}): per input in physical units |Δu_j| ≤ [{}], ‖Δu‖₂ ≤ {}. ",
+        n.u_scale,
+        n.x_scale,
+        per.join(", "),
+        num(c.eps_physical())
+    )
 }
 
 #[cfg(test)]
