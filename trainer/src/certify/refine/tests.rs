@@ -303,7 +303,12 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
         assert_eq!(st.bounds.iter().any(|(l, _)| *l == n), !all_infeasible);
     }
     // Training data: no point that is only a corner of excluded leaves.
-    let keep = super::rounds::kept_points(st, true);
+    // (min_size 0: no exclusion for unlabelled corners, only the infeasible rule.)
+    let ex = super::Exclusion {
+        infeasible: true,
+        min_size: vec![0; st.nodes[0].lo.len()],
+    };
+    let keep = super::rounds::kept_points(st, &ex);
     for (i, p) in st.points.iter().enumerate() {
         let in_included = leaves
             .iter()
@@ -316,7 +321,7 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
         }
     }
     // The merged boxes: disjoint, inside X, and their volume is the excluded leaves'.
-    let boxes = super::outputs::excluded_lattice_boxes(st, true);
+    let boxes = super::outputs::excluded_lattice_boxes(st, &ex);
     let vol = |s: &[u64]| s.iter().map(|&v| v as f64).product::<f64>();
     let leaf_vol: f64 = excluded.iter().map(|&n| vol(&st.nodes[n].size)).sum();
     let box_vol: f64 = boxes.iter().map(|(_, s)| vol(s)).sum();
