@@ -128,21 +128,7 @@ pub struct UnlabelledShare {
     pub bounding_box: Option<(Vec<f64>, Vec<f64>)>,
 }
 
-/// The smallest box (lower, upper corner) holding `states`; None when there are none.
-pub fn bounding_box<'a>(
-    states: impl IntoIterator<Item = &'a [f64]>,
-) -> Option<(Vec<f64>, Vec<f64>)> {
-    let mut it = states.into_iter();
-    let first = it.next()?;
-    let (mut lo, mut hi) = (first.to_vec(), first.to_vec());
-    for x in it {
-        for (i, v) in x.iter().enumerate() {
-            lo[i] = lo[i].min(*v);
-            hi[i] = hi[i].max(*v);
-        }
-    }
-    Some((lo, hi))
-}
+pub use crate::data::unlabelled::bounding_box;
 
 fn is_zero(v: &u64) -> bool {
     *v == 0

@@ -172,10 +172,23 @@ fn sample(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     };
     let ds = generate(env.cfg, &d.dataset(), &g).map_err(|e| fail(Stage::Sample, e))?;
     let c = ds.counts();
-    Ok(format!(
+    let mut line = format!(
         "{} states: {} converged, {} soft, {} infeasible, {} failed, {} degenerate",
         c.total, c.converged, c.soft, c.infeasible, c.failed, c.degenerate
-    ))
+    );
+    // The feasibility pre-scan: where the plan's states have no label (the later stages
+    // use the labelled ones).
+    let un = crate::data::unlabelled::Unlabelled::of(&ds);
+    if let Some((lo, hi)) = &un.bounding_box {
+        let text = serde_json::to_string_pretty(&un).map_err(|e| fail(Stage::Sample, e))?;
+        write_atomic(&d.infeasible(), text.as_bytes()).map_err(|e| fail(Stage::Sample, e))?;
+        line += &format!(
+            "; {} unlabelled, inside {lo:?} … {hi:?} (infeasible.json; later stages use the \
+             labelled states)",
+            un.unlabelled
+        );
+    }
+    Ok(line)
 }
 
 // ---- validate: MPC labels of random states (R², L_MPC estimate) ------------------------
