@@ -461,17 +461,17 @@ pub fn simulate(
             Some(format!(
                 "the closed-loop cost overflowed at x = {x:?}, u = {u:?}"
             ))
-        } else if let Some(i) = outside(&next) {
-            Some(format!(
-                "state {} = {} left X = [{}, {}] by more than {DIVERGED_MARGIN} × its width \
-                 (from x = {x:?}, u = {u:?})",
-                i + 1,
-                next[i],
-                dlo[i],
-                dhi[i]
-            ))
         } else {
-            None
+            outside(&next).map(|i| {
+                format!(
+                    "state {} = {} left X = [{}, {}] by more than {DIVERGED_MARGIN} × its width \
+                     (from x = {x:?}, u = {u:?})",
+                    i + 1,
+                    next[i],
+                    dlo[i],
+                    dhi[i]
+                )
+            })
         };
         let viol = match reason {
             Some(_) => f64::INFINITY,

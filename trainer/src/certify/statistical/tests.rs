@@ -128,7 +128,7 @@ fn conditional_on_labelled_states_and_the_unlabelled_share() {
     errors[7] = 0.5;
     errors[70] = 0.7;
     errors[170] = f64::INFINITY; // a non-finite output at a labelled state: an exceedance
-    errors.extend(std::iter::repeat(f64::NAN).take(50));
+    errors.extend(std::iter::repeat_n(f64::NAN, 50));
     let s = from_errors(&errors, 0.1, 0.99, 0, 1e-3);
     // The unconditional block as before: unlabelled states count as exceedances.
     assert_eq!((s.samples, s.exceedances, s.unlabelled), (250, 53, 50));
