@@ -342,9 +342,10 @@ pub fn check_inputs(
     data: &crate::data::dataset::Dataset,
     cfg: &crate::problem::ProblemConfig,
 ) -> Result<(), MismatchError> {
-    // No certificate from labels that do not exist or are not finite (data::dataset::gate),
-    // nor for a net beyond the documented size limits (problem::limits).
-    data.check_labels()?;
+    // No certificate from labels that do not exist or are not finite (data::dataset::gate;
+    // a solver breakdown where the plant itself is finite counts as unlabelled), nor for a
+    // net beyond the documented size limits (problem::limits).
+    data.check_labels_for(cfg)?;
     crate::problem::limits::check_net(&model.mlp.widths())?;
     let (mx, mu) = (model.mlp.widths()[0], model.mlp.nu());
     let (dx, du) = (data.header.nx as usize, data.header.nu as usize);

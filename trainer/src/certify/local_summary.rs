@@ -61,7 +61,8 @@ pub struct LocalSummary {
 /// X minus these boxes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Excluded {
-    /// Excluded leaf cells (every corner hard-infeasible).
+    /// Excluded leaf cells (every corner hard-infeasible, or an unlabelled corner at the
+    /// smallest cell size `refine.min_cell`).
     pub cells: usize,
     /// Their share of the volume of X.
     pub volume_fraction: f64,
@@ -69,6 +70,10 @@ pub struct Excluded {
     /// into maximal subtrees and then across shared faces (their union is exactly the
     /// union of the excluded leaves).
     pub boxes: Vec<(Vec<f64>, Vec<f64>)>,
+    /// The states at the excluded cells' corners that the MPC left unlabelled (absent when
+    /// none, and in files written before it existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unlabelled_states: Vec<Vec<f64>>,
     /// What the exclusion rests on.
     pub note: String,
 }

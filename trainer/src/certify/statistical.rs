@@ -29,6 +29,14 @@
 //! being κ (a state the MPC leaves unlabelled counts as an exceedance), not on Lipschitz
 //! constants or cells — hence it scales to any dimension.
 //!
+//! **Infeasible regions.** Where the MPC has no solution there is no κ to approximate, so
+//! the statement that means something is conditional ([`GivenLabelled`]): of the n states,
+//! the n_L the MPC labels are — given n_L — i.i.d. uniform on the labelled part X_L of X, so
+//! k_L exceedances among them give P(‖κ − κ̂‖ > ε | x ∈ X_L) ≤ p̄(n_L, k_L) at the same
+//! confidence. The share of X left unlabelled gets its own bound ([`UnlabelledShare`]):
+//! u unlabelled states of n give P(x ∉ X_L) ≤ p̄(n, u). The unconditional bound above
+//! (an unlabelled state an exceedance) is kept: it is the conjunction's worst case.
+//!
 //! [`eps_for_probability`] turns it around: the smallest observed-error level ε_p such that
 //! the bound for ε_p is ≤ a target p (the (k*+1)-th largest error, k* the largest count
 //! whose bound is ≤ p).
@@ -89,6 +97,14 @@ pub struct Statistical {
     /// `eps_at_p_target` per input in physical units. Absent in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub eps_at_p_target_per_input: Option<Vec<f64>>,
+    /// The bound conditional on the states the MPC labels (module doc; absent in files
+    /// written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub given_labelled: Option<GivenLabelled>,
+    /// The bound on the share of X the MPC leaves unlabelled (module doc; absent in files
+    /// written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unlabelled_share: Option<UnlabelledShare>,
 }
 
 impl Statistical {
@@ -101,6 +117,39 @@ impl Statistical {
         self
     }
 }
+
+/// P(‖κ − κ̂‖ > ε | the MPC labels x) ≤ `p_exceed_upper`: the Clopper–Pearson bound from the
+/// n_L labelled states alone (given n_L they are i.i.d. uniform on the labelled part of X);
+/// unlabelled states are not exceedances here, they are counted in [`UnlabelledShare`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GivenLabelled {
+    /// n_L: states the MPC labelled.
+    pub samples: u64,
+    /// k_L: labelled states whose error exceeds ε (a non-finite output included).
+    pub exceedances: u64,
+    /// Clopper–Pearson upper bound p̄(n_L, k_L) at the block's confidence.
+    pub p_exceed_upper: f64,
+    /// The smallest ε whose conditional bound is ≤ `p_target` (None when n_L is too small).
+    pub eps_at_p_target: Option<f64>,
+}
+
+/// P(the MPC leaves x unlabelled) ≤ `p_upper` for x uniform on X (minus excluded boxes):
+/// the Clopper–Pearson bound from u unlabelled states among n, at the block's confidence —
+/// the share of X where the MPC has no solution (or its solver found none).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnlabelledShare {
+    /// u: unlabelled states.
+    pub unlabelled: u64,
+    /// n: all states.
+    pub samples: u64,
+    /// Clopper–Pearson upper bound p̄(n, u).
+    pub p_upper: f64,
+    /// The smallest box holding every unlabelled state (lower, upper corner; None if u = 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounding_box: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+pub use crate::data::unlabelled::bounding_box;
 
 fn is_zero(v: &u64) -> bool {
     *v == 0
@@ -183,7 +232,8 @@ pub fn eps_for_probability(errors: &[f64], p_target: f64, confidence: f64) -> Op
     sorted.get(lo as usize).copied().or(Some(0.0))
 }
 
-/// The statistical tier from per-sample errors (+∞ or NaN for an unlabelled state).
+/// The statistical tier from per-sample errors: NaN for a state the MPC left unlabelled,
+/// +∞ for a labelled state where the controller's output is not finite (an exceedance).
 pub fn from_errors(
     errors: &[f64],
     eps: f64,
@@ -192,9 +242,24 @@ pub fn from_errors(
     p_target: f64,
 ) -> Statistical {
     let bad = |e: &f64| !e.is_finite();
-    let unlabelled = errors.iter().filter(|e| bad(e)).count() as u64;
+    let unlabelled = errors.iter().filter(|e| e.is_nan()).count() as u64;
     let exceedances = errors.iter().filter(|e| bad(e) || **e > eps).count() as u64;
     let n = errors.len() as u64;
+    let labelled: Vec<f64> = errors.iter().copied().filter(|e| !e.is_nan()).collect();
+    let n_l = labelled.len() as u64;
+    let k_l = labelled.iter().filter(|e| bad(e) || **e > eps).count() as u64;
+    let given_labelled = GivenLabelled {
+        samples: n_l,
+        exceedances: k_l,
+        p_exceed_upper: clopper_pearson_upper(n_l, k_l, confidence),
+        eps_at_p_target: eps_for_probability(&labelled, p_target, confidence),
+    };
+    let unlabelled_share = UnlabelledShare {
+        unlabelled,
+        samples: n,
+        p_upper: clopper_pearson_upper(n, unlabelled, confidence),
+        bounding_box: None,
+    };
     Statistical {
         samples: n,
         exceedances,
@@ -219,6 +284,8 @@ pub fn from_errors(
         norm: None,
         epsilon_per_input: Vec::new(),
         eps_at_p_target_per_input: None,
+        given_labelled: Some(given_labelled),
+        unlabelled_share: Some(unlabelled_share),
     }
 }
 
@@ -454,7 +521,8 @@ pub fn certify_statistically(
         .filter(|r| !inside(&r.x))
         .map(|r| {
             if !r.is_labelled() || r.u.iter().any(|v| !v.is_finite()) {
-                return f64::INFINITY;
+                // Unlabelled: no κ to compare with (NaN, counted apart by `from_errors`).
+                return f64::NAN;
             }
             let u = tested.controller.input(&r.x);
             let e = if u.len() == r.u.len() {
@@ -472,6 +540,16 @@ pub fn certify_statistically(
         })
         .collect();
     let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target).in_norm(norm);
+    if let Some(share) = s.unlabelled_share.as_mut() {
+        share.bounding_box = bounding_box(
+            data.records
+                .iter()
+                .filter(|r| {
+                    !inside(&r.x) && (!r.is_labelled() || r.u.iter().any(|v| !v.is_finite()))
+                })
+                .map(|r| r.x.as_slice()),
+        );
+    }
     s.user_seed = opts.seed;
     s.model_hash = tested.model_hash.to_string();
     s.function = tested.controller.describe();
@@ -489,126 +567,13 @@ pub fn certify_statistically(
     };
     s.rests_on = format!(
         "{domain}, drawn from the model's hash (none is a training state), labelled by the MPC \
-         (an unlabelled state counts as an exceedance); the errors are those of {}; \
-         Clopper–Pearson bound, no Lipschitz or cell assumption",
+         (an unlabelled state counts as an exceedance here; `given_labelled` bounds the \
+         error on the labelled states alone, `unlabelled_share` the share left unlabelled); \
+         the errors are those of {}; Clopper–Pearson bound, no Lipschitz or cell assumption",
         s.function
     );
     Ok(s)
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Against scipy 1.x `beta.ppf(1 − β, k + 1, n − k)` (an independent implementation
-    /// of the same quantile), computed once with Python and written here.
-    #[test]
-    fn matches_the_beta_quantile() {
-        for (n, k, c, want) in [
-            (10, 1, 0.95, 0.394_163_302_436_504_66),
-            (200, 3, 0.99, 0.049_348_311_348_674_84),
-            (500_000, 0, 0.99, 9.210_297_956_921_517e-6),
-            (100_000, 7, 0.99, 1.599_924_346_890_874_6e-4),
-            (50, 49, 0.9, 0.997_895_008_295_863_2),
-            (1_000_000, 250, 0.99, 2.893_142_251_211_049_6e-4),
-        ] {
-            let got = clopper_pearson_upper(n, k, c);
-            assert!(
-                (got - want).abs() <= 1e-9 * want,
-                "n {n} k {k} c {c}: {got} vs {want}"
-            );
-            assert!(got >= want * (1.0 - 1e-12), "never rounded down");
-        }
-    }
-
-    #[test]
-    fn zero_exceedances_closed_form_and_edges() {
-        for n in [1u64, 7, 1000, 500_000] {
-            for c in [0.9f64, 0.99, 0.999] {
-                let want = 1.0 - (1.0 - c).powf(1.0 / n as f64);
-                let got = clopper_pearson_upper(n, 0, c);
-                assert!((got - want).abs() <= 1e-10 * want, "{n} {c}: {got} {want}");
-            }
-        }
-        assert_eq!(clopper_pearson_upper(10, 10, 0.99), 1.0);
-        assert_eq!(clopper_pearson_upper(0, 0, 0.99), 1.0);
-        assert!(clopper_pearson_upper(10, 1, 1.0).is_nan());
-        // Monotone in k.
-        let b: Vec<f64> = (0..20)
-            .map(|k| clopper_pearson_upper(100, k, 0.99))
-            .collect();
-        assert!(b.windows(2).all(|w| w[0] < w[1]), "{b:?}");
-    }
-
-    /// Coverage: over 4000 seeded binomial draws, the bound is below the true p in at most
-    /// a β share of them (plus Monte Carlo slack).
-    #[test]
-    fn covers_the_true_probability() {
-        for (p, n, c) in [(0.02, 200u64, 0.95), (0.001, 3000, 0.9), (0.3, 40, 0.99)] {
-            let draws = 4000u64;
-            let mut misses = 0;
-            for d in 0..draws {
-                let k = (0..n)
-                    .filter(|&i| crate::rng::uniform(91, d, i) < p)
-                    .count() as u64;
-                misses += (clopper_pearson_upper(n, k, c) < p) as u64;
-            }
-            let rate = misses as f64 / draws as f64;
-            let beta = 1.0 - c;
-            // 4 standard deviations of the Monte Carlo estimate.
-            let slack = 4.0 * (beta * (1.0 - beta) / draws as f64).sqrt();
-            assert!(
-                rate <= beta + slack,
-                "p {p} n {n}: miss rate {rate} > β {beta}"
-            );
-        }
-    }
-
-    /// The seed is a function of the model's hash and the user seed, different for another
-    /// model or another user seed; a draw containing a training state is refused, naming it.
-    #[test]
-    fn seeds_follow_the_model_and_training_states_are_refused() {
-        let a = statistical_seed("abc", DEFAULT_SEED);
-        assert_eq!(a, statistical_seed("abc", DEFAULT_SEED));
-        assert_ne!(a, statistical_seed("abd", DEFAULT_SEED));
-        assert_ne!(a, statistical_seed("abc", DEFAULT_SEED + 1));
-        let cfg = ProblemConfig::default();
-        let opts = StatisticalOptions {
-            samples: 5,
-            ..Default::default()
-        };
-        let sc = sampling_problem(&cfg, &opts, a);
-        assert_eq!((sc.sampling.seed, sc.sampling.n), (a, 5));
-        let drawn = [vec![0.5, 0.25], vec![0.1, 0.2]];
-        let it = || drawn.iter().map(|x| x.as_slice());
-        assert!(check_fresh(it(), &[vec![0.3, 0.25]], a).is_ok());
-        let e = check_fresh(it(), &[vec![0.3, 0.25], vec![0.1, 0.2]], a).unwrap_err();
-        assert!(matches!(
-            e,
-            StatisticalError::TrainingState { index: 1, .. }
-        ));
-        assert!(e.to_string().contains("[0.1, 0.2]"), "{e}");
-    }
-
-    #[test]
-    fn eps_for_probability_picks_the_order_statistic() {
-        // 1000 errors 0.001..1.0; n = 1000 at 99 %: k = 0 gives 4.6e-3.
-        let errors: Vec<f64> = (1..=1000).map(|i| i as f64 / 1000.0).collect();
-        assert_eq!(eps_for_probability(&errors, 1e-3, 0.99), None);
-        let p = clopper_pearson_upper(1000, 0, 0.99);
-        assert_eq!(eps_for_probability(&errors, p, 0.99), Some(1.0));
-        let p5 = clopper_pearson_upper(1000, 5, 0.99);
-        let e = eps_for_probability(&errors, p5, 0.99).unwrap();
-        // Exceedances of e are exactly 5, and its bound is the target.
-        assert_eq!(errors.iter().filter(|v| **v > e).count(), 5);
-        let s = from_errors(&errors, e, 0.99, 0, p5);
-        assert_eq!(s.exceedances, 5);
-        assert!(s.p_exceed_upper <= p5);
-        // An unlabelled state counts as an exceedance, at any ε.
-        let mut with_nan = errors.clone();
-        with_nan[0] = f64::NAN;
-        let s = from_errors(&with_nan, 10.0, 0.99, 0, 0.5);
-        assert_eq!((s.exceedances, s.unlabelled), (1, 1));
-        assert_eq!(s.max_error, 1.0);
-    }
-}
+mod tests;

@@ -390,4 +390,31 @@ pub(super) fn print_statistical(s: &Statistical) {
             s.p_target, s.samples
         ),
     }
+    if let (Some(g), Some(u)) = (&s.given_labelled, &s.unlabelled_share) {
+        if u.unlabelled > 0 {
+            println!(
+                "    given labelled   P(error > eps | MPC labels x) ≤ {:.3e} ({} exceedances in \
+                 {} labelled states; unlabelled states are not exceedances here)",
+                g.p_exceed_upper, g.exceedances, g.samples
+            );
+            match g.eps_at_p_target {
+                Some(e) => println!(
+                    "    eps at P ≤ {:.1e} given labelled  {e:.6}   (statistical, confidence {})",
+                    s.p_target, s.confidence
+                ),
+                None => println!(
+                    "    eps at P ≤ {:.1e} given labelled  not reachable with {} states",
+                    s.p_target, g.samples
+                ),
+            }
+            let place = u.bounding_box.as_ref().map_or(String::new(), |(lo, hi)| {
+                format!(", all inside the box {lo:?} … {hi:?}")
+            });
+            println!(
+                "    unlabelled       P(MPC leaves x unlabelled) ≤ {:.3e} ({} of {} states{place}; \
+                 Clopper–Pearson, confidence {})",
+                u.p_upper, u.unlabelled, u.samples, s.confidence
+            );
+        }
+    }
 }

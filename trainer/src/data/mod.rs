@@ -5,6 +5,7 @@
 //! - [`dataset`]: labelling a plan with the MPC law (parallel, resumable, sharded), the
 //!   dataset file, its CSV and the merge of shards.
 //! - [`import`]: a dataset from another solver's CSV, checked and re-solved in part.
+//! - [`unlabelled`]: where a dataset's states have no label (the feasibility pre-scan).
 //!
 //! Imports `problem` and `mpc`.
 
@@ -12,3 +13,4 @@ pub mod dataset;
 pub mod import;
 pub mod sampling;
 pub mod states;
+pub mod unlabelled;

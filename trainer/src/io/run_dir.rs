@@ -29,6 +29,9 @@ macro_rules! run_files {
 run_files! {
     /// The problem file the run was made from (`problem.toml`).
     PROBLEM, problem = "problem.toml";
+    /// Where the sampling plan's states have no MPC label (`infeasible.json`; written only
+    /// when some have none).
+    INFEASIBLE, infeasible = "infeasible.json";
     /// The labelled dataset of the sampling plan (`dataset.bin`).
     DATASET, dataset = "dataset.bin";
     /// The dataset's CSV export (`dataset.csv`).

@@ -172,10 +172,23 @@ fn sample(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     };
     let ds = generate(env.cfg, &d.dataset(), &g).map_err(|e| fail(Stage::Sample, e))?;
     let c = ds.counts();
-    Ok(format!(
+    let mut line = format!(
         "{} states: {} converged, {} soft, {} infeasible, {} failed, {} degenerate",
         c.total, c.converged, c.soft, c.infeasible, c.failed, c.degenerate
-    ))
+    );
+    // The feasibility pre-scan: where the plan's states have no label (the later stages
+    // use the labelled ones).
+    let un = crate::data::unlabelled::Unlabelled::of(&ds);
+    if let Some((lo, hi)) = &un.bounding_box {
+        let text = serde_json::to_string_pretty(&un).map_err(|e| fail(Stage::Sample, e))?;
+        write_atomic(&d.infeasible(), text.as_bytes()).map_err(|e| fail(Stage::Sample, e))?;
+        line += &format!(
+            "; {} unlabelled, inside {lo:?} … {hi:?} (infeasible.json; later stages use the \
+             labelled states)",
+            un.unlabelled
+        );
+    }
+    Ok(line)
 }
 
 // ---- validate: MPC labels of random states (R², L_MPC estimate) ------------------------
@@ -420,13 +433,32 @@ fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let text = serde_json::to_string(&cl).map_err(|e| fail(Stage::ClosedLoop, e))?;
     write_atomic(&d.closed_loop(), text.as_bytes()).map_err(|e| fail(Stage::ClosedLoop, e))?;
     let first = |k: &str| cl.get(k).and_then(|v| v.first()).cloned();
+    // Runs of a controller (its nominal, noise and mismatch runs) that stopped as diverged.
+    let diverged = |k: &str| {
+        let runs = cl
+            .iter()
+            .filter(|(name, _)| *name == k || name.starts_with(&format!("{k}_")))
+            .flat_map(|(_, v)| v);
+        let (n, d) = runs.fold((0, 0), |(n, d), r| {
+            (n + 1, d + usize::from(!r.status.is_completed()))
+        });
+        (d, n)
+    };
+    let any_diverged = ["mpc", "nominal", "regularized"]
+        .iter()
+        .any(|k| diverged(k).0 > 0);
     let mut s = String::new();
     for k in ["mpc", "nominal", "regularized"] {
         if let Some(r) = first(k) {
             s += &format!(
-                "{k}: {:.1} % violating, max {:.3}, divergence {:.3}; ",
+                "{k}: {:.1} % violating, max {:.3}, divergence {:.3}",
                 r.violation_percent, r.max_violation, r.max_input_divergence
             );
+            if any_diverged {
+                let (d, n) = diverged(k);
+                s += &format!(", {d} of {n} runs diverged");
+            }
+            s += "; ";
         }
     }
     Ok(s)

@@ -4,6 +4,13 @@
 use super::{invalid, ConfigError, Schedule, TrainSettings};
 use serde::{Deserialize, Serialize};
 
+/// The default of [`RefineSettings::min_cell`]: 1/64 of X per axis.
+pub const DEFAULT_MIN_CELL: f64 = 1.0 / 64.0;
+
+fn is_default_min_cell(v: &f64) -> bool {
+    *v == DEFAULT_MIN_CELL
+}
+
 /// Adaptive refinement settings (`[refine]`, used by `trainer refine`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -46,6 +53,14 @@ pub struct RefineSettings {
     /// Cells narrower than this fraction of the domain on every axis are not split
     /// (default 1e-5).
     pub min_width: f64,
+    /// Smallest cell around a state the MPC leaves unlabelled, as a fraction of X per axis
+    /// (default 1/64 = 0.015625): a cell with an unlabelled corner is split (after the
+    /// others, with what budget remains) until it is no wider than this on every axis, then
+    /// excluded from the certified domain — listed in the certificate with its box and
+    /// unlabelled states, flagged by the exported controller — so that ε is finite over
+    /// the rest. Not serialised at its default (hashes of existing problems unchanged).
+    #[serde(skip_serializing_if = "is_default_min_cell")]
+    pub min_cell: f64,
     /// Restrict the certified domain to the MPC's feasible set (default false): a leaf cell
     /// whose corners are all hard-infeasible (the OCP's soft fallback needed slack, or no
     /// label for infeasibility) is excluded — not bounded, not split, not trained on — and
@@ -107,6 +122,7 @@ impl Default for RefineSettings {
             emphasis_at: 0.5,
             emphasis: 4,
             min_width: 1e-5,
+            min_cell: DEFAULT_MIN_CELL,
             exclude_infeasible: false,
             training: TrainSettings {
                 hidden: vec![32, 32],
@@ -221,6 +237,12 @@ impl RefineSettings {
         }
         if !(self.min_width.is_finite() && self.min_width > 0.0 && self.min_width < 1.0) {
             return Err(invalid("refine.min_width", "must be in (0, 1)"));
+        }
+        if !(self.min_cell.is_finite() && self.min_cell > 0.0 && self.min_cell <= 1.0) {
+            return Err(invalid(
+                "refine.min_cell",
+                format!("must be in (0, 1], got {}", self.min_cell),
+            ));
         }
         if !(self.emphasis_at.is_finite() && self.emphasis_at >= 0.0) || self.emphasis == 0 {
             return Err(invalid(

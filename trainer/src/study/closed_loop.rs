@@ -18,6 +18,12 @@
 //! Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref), the settling step (first k
 //! after which ‖x − x_ref‖∞ stays ≤ 0.05) and the final offset |x_steps − x_ref| per state
 //! (x_ref, u_ref: the OCP's setpoint, the origin unless `ocp.x_ref`, `ocp.u_ref` say).
+//!
+//! A run that diverges stops with status `diverged` ([`RunStatus`]): when the plant's next
+//! state is not finite, or leaves X widened by [`DIVERGED_MARGIN`] × its width on some axis
+//! (x_i ∉ [lo_i − m·w_i, hi_i + m·w_i], w = hi − lo), or the cost, a constraint value or the
+//! network's output is not finite. Every number a run records is finite, so its JSON holds
+//! no `null` (serde_json writes NaN and ±∞ as `null`).
 
 use crate::learn::mlp::Mlp;
 use crate::mpc::law::MpcLaw;
@@ -30,6 +36,31 @@ use serde::{Deserialize, Serialize};
 
 /// Violations smaller than this do not count (solver tolerance).
 pub const VIOLATION_TOL: f64 = 1e-6;
+
+/// A run whose state leaves X ⊕ [−m·w, m·w] (w: X's width per axis, m this margin)
+/// stops as `diverged`: it has left the region the controller was made for by a whole
+/// width of X, the start of a runaway (e.g. a reactor's temperature growing without bound).
+pub const DIVERGED_MARGIN: f64 = 1.0;
+
+/// How a closed-loop run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    /// All steps simulated (not written: files of completed runs are unchanged).
+    #[default]
+    Completed,
+    /// Stopped early: the state left X by more than [`DIVERGED_MARGIN`] of its width, or a
+    /// state, the cost, a constraint value or the network's output was not finite
+    /// ([`Run::stopped`] says which, and where).
+    Diverged,
+}
+
+impl RunStatus {
+    /// Whether the run completed (then `status` is not serialised).
+    pub fn is_completed(&self) -> bool {
+        *self == RunStatus::Completed
+    }
+}
 
 /// A controller under test.
 pub enum Controller<'a> {
@@ -174,7 +205,9 @@ pub struct Run {
     pub divergence: Vec<f64>,
     /// Σ (x_k − x_ref)ᵀQ(x_k − x_ref) + (u_k − u_ref)ᵀR(u_k − u_ref).
     pub cost: f64,
-    /// First step after which ‖x − x_ref‖∞ ≤ 0.05 for good (None: never).
+    /// First step after which ‖x − x_ref‖∞ ≤ 0.05 for good (None: never; then not written,
+    /// so that the JSON holds no `null`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settling_step: Option<usize>,
     /// |x_steps − x_ref| per state: the offset from the setpoint where the run ends (a
     /// steady-state offset if the run has settled). Empty in files written before it existed.
@@ -189,18 +222,24 @@ pub struct Run {
     /// and, through the MPC solved for the divergence, for networks).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub mpc_soft_steps: usize,
-    /// Set when the run ended early because the plant's next state (or the cost) was not
-    /// finite: the run stops at that step with a defined status instead of carrying NaN
-    /// along (and into JSON). Not written for a run that completed.
+    /// Set when the run ended early because it diverged (see [`RunStatus::Diverged`]): the
+    /// run stops at that step with a defined status instead of carrying NaN along (and
+    /// into JSON). Not written for a run that completed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopped: Option<Stopped>,
+    /// `diverged` when the run stopped early ([`Run::stopped`] says why); not written for
+    /// a completed run.
+    #[serde(default, skip_serializing_if = "RunStatus::is_completed")]
+    pub status: RunStatus,
 }
 
 /// Why a closed-loop run ended before its last step.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Stopped {
-    /// The step k whose successor x_{k+1} (or whose cost) was not finite; the run holds
-    /// x_0..x_k and u_0..u_{k−1}, and step k counts as a violating step.
+    /// The step k at which the run diverged (its successor x_{k+1}, its cost or a
+    /// constraint value not finite, x_{k+1} beyond X's margin, or the network's output at
+    /// x_k not finite); the run holds x_0..x_k and u_0..u_{k−1}, and step k counts as a
+    /// violating step.
     pub step: usize,
     /// What was not finite, in words.
     pub reason: String,
@@ -308,6 +347,14 @@ pub fn simulate(
         mpc_failures: 0,
         mpc_soft_steps: 0,
         stopped: None,
+        status: RunStatus::Completed,
+    };
+    let (dlo, dhi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let outside = |v: &[f64]| {
+        (0..nx).find(|&i| {
+            let m = DIVERGED_MARGIN * (dhi[i] - dlo[i]);
+            !(v[i] >= dlo[i] - m && v[i] <= dhi[i] + m)
+        })
     };
     let constraints = cfg.constraint_set().ok().flatten();
     let mut warm: Option<PrimalDual> = None;
@@ -321,6 +368,7 @@ pub fn simulate(
                     * (2.0 * uniform(s.seed, k as u64, i as u64) - 1.0)
             })
             .collect();
+        let mut net_reason = None;
         let mut u = match ctrl {
             Controller::Mpc => {
                 let (l, sol, soft) = law.solve_along(&y, warm.as_ref(), warm_soft.as_ref());
@@ -364,16 +412,28 @@ pub fn simulate(
                             .map(|(a, b)| (a - b).powi(2))
                             .sum::<f64>()
                             .sqrt();
-                    // A non-finite output (diverged net) is an infinite divergence.
-                    let d = if d.is_finite() { d } else { f64::INFINITY };
-                    run.divergence.push(d);
-                    run.max_input_divergence = run.max_input_divergence.max(d);
+                    if d.is_finite() {
+                        run.divergence.push(d);
+                        run.max_input_divergence = run.max_input_divergence.max(d);
+                    } else {
+                        // A non-finite output (diverged net) ends the run.
+                        net_reason = Some(format!(
+                            "the network's output {u:?} at x = {y:?} is not finite"
+                        ));
+                    }
                 } else {
                     run.mpc_failures += 1;
                 }
                 u
             }
         };
+        if let Some(reason) = net_reason {
+            run.violation_steps += 1;
+            run.steps = k;
+            run.stopped = Some(Stopped { step: k, reason });
+            run.status = RunStatus::Diverged;
+            break;
+        }
         if s.disturbance != Disturbance::None {
             let e = s.disturbance.at(&model, cfg, k, s.seed, &x, &u);
             for (v, e) in u.iter_mut().zip(e) {
@@ -409,18 +469,36 @@ pub fn simulate(
                 "the closed-loop cost overflowed at x = {x:?}, u = {u:?}"
             ))
         } else {
-            None
+            outside(&next).map(|i| {
+                format!(
+                    "state {} = {} left X = [{}, {}] by more than {DIVERGED_MARGIN} × its width \
+                     (from x = {x:?}, u = {u:?})",
+                    i + 1,
+                    next[i],
+                    dlo[i],
+                    dhi[i]
+                )
+            })
         };
+        let viol = match reason {
+            Some(_) => f64::INFINITY,
+            None => step_violation(cfg, constraints.as_ref(), k, &x, &u, &next),
+        };
+        let reason = reason.or_else(|| {
+            (!viol.is_finite())
+                .then(|| format!("a constraint value at x = {x:?}, u = {u:?} is not finite"))
+        });
         if let Some(reason) = reason {
-            // A NaN or ±∞ state ends the run: the step counts as violating (a state that
-            // is not a number satisfies no bound), the recorded values stay finite.
+            // A diverged run ends here: the step counts as violating (a state that is not
+            // a number, or far outside X, satisfies no bound), the recorded values stay
+            // finite.
             run.cost = cost_before;
             run.violation_steps += 1;
             run.steps = k;
             run.stopped = Some(Stopped { step: k, reason });
+            run.status = RunStatus::Diverged;
             break;
         }
-        let viol = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
         x.copy_from_slice(&next);
         if viol > VIOLATION_TOL {
             run.violation_steps += 1;

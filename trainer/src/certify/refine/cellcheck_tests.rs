@@ -65,7 +65,10 @@ fn bound(st: &mut RefineState, lat: &Lattice, rs: &RefineSettings, m: &Mlp) {
         &local_settings(rs),
         rs.centre_check,
         None,
-        false,
+        &super::Exclusion {
+            infeasible: false,
+            min_size: vec![0; 2],
+        },
     );
 }
 

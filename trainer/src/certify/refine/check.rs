@@ -111,6 +111,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
+    let ex = Exclusion::new(rs, &lat.max);
     let st = &r.state;
     let mlp = &r.model.mlp;
     let band = cfg.ocp.u_bounds(0);
@@ -153,7 +154,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     .collect();
                 let (l, _) = law.solve(&x, None);
                 let leaf = leaf_of(st, &lat, &counts, &x);
-                if rs.exclude_infeasible && st.excluded(leaf) {
+                if st.excluded_by(leaf, &ex) {
                     a.excluded += 1;
                     if l.status == SqpStatus::Converged {
                         a.feasible_excluded += 1;

@@ -46,7 +46,7 @@ use crate::certify::Model;
 use crate::data::dataset::DatasetError;
 use crate::mpc::law::{Label, MpcLaw};
 use crate::mpc::sqp::SqpStatus;
-use crate::problem::ProblemConfig;
+use crate::problem::{ProblemConfig, RefineSettings};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -141,6 +141,39 @@ impl Point {
     }
 }
 
+/// Which leaf cells leave the certified domain: with `infeasible`
+/// (`refine.exclude_infeasible`) those whose corners are all hard-infeasible
+/// ([`RefineState::excluded`]); always those with a corner the MPC left unlabelled once they
+/// are no larger than `min_size` ([`RefineState::unlabelled_small`], `refine.min_cell`): a
+/// cell around a state without a label can never get a finite bound, so it is split down to
+/// that size and then excluded, and ε is certified over the other cells.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exclusion {
+    /// `refine.exclude_infeasible`.
+    pub infeasible: bool,
+    /// Per axis: the largest lattice size of an excluded cell with an unlabelled corner
+    /// (`refine.min_cell` × the lattice's extent, at least one lattice step).
+    pub min_size: Vec<u64>,
+}
+
+impl Exclusion {
+    /// The exclusion of the settings `rs` on a lattice of extent `lat_max` per axis.
+    pub fn new(rs: &RefineSettings, lat_max: &[u64]) -> Self {
+        Exclusion {
+            infeasible: rs.exclude_infeasible,
+            min_size: lat_max
+                .iter()
+                .map(|&m| ((rs.min_cell * m as f64).floor() as u64).max(1))
+                .collect(),
+        }
+    }
+
+    /// Whether any leaf can be excluded under these settings in `st`.
+    pub fn any(&self, st: &RefineState) -> bool {
+        !st.excluded_leaves_by(self).is_empty()
+    }
+}
+
 /// A node of the k-d tree of cells.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Node {
@@ -213,6 +246,27 @@ impl RefineState {
                 .corners
                 .iter()
                 .all(|&c| self.points[c].hard_infeasible())
+    }
+
+    /// Whether leaf `n` has a corner the MPC left unlabelled and is no larger than
+    /// `min_size` (lattice units) on every axis: split as far as [`Exclusion`] allows.
+    pub fn unlabelled_small(&self, n: usize, min_size: &[u64]) -> bool {
+        let node = &self.nodes[n];
+        node.split.is_none()
+            && node.size.iter().zip(min_size).all(|(s, m)| s <= m)
+            && node.corners.iter().any(|&c| !self.points[c].labelled())
+    }
+
+    /// Whether leaf `n` is outside the certified domain under `ex` ([`Exclusion`]).
+    pub fn excluded_by(&self, n: usize, ex: &Exclusion) -> bool {
+        (ex.infeasible && self.excluded(n)) || self.unlabelled_small(n, &ex.min_size)
+    }
+
+    /// The leaves outside the certified domain under `ex`, in node order.
+    pub fn excluded_leaves_by(&self, ex: &Exclusion) -> Vec<usize> {
+        (0..self.nodes.len())
+            .filter(|&n| self.excluded_by(n, ex))
+            .collect()
     }
 
     /// The leaves excluded from the certified domain (empty when `exclude` is off), in node

@@ -60,19 +60,19 @@ pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
 
 /// The excluded set of a refinement as merged lattice boxes (lower key, size): maximal
 /// subtrees whose leaves are all excluded, then pairs of boxes that share a whole face
-/// merged until none does. Empty without `exclude`.
-pub(super) fn excluded_lattice_boxes(st: &RefineState, exclude: bool) -> Vec<(Vec<u64>, Vec<u64>)> {
-    if !exclude {
-        return Vec::new();
-    }
+/// merged until none does. Empty when no leaf is excluded under `ex`.
+pub(super) fn excluded_lattice_boxes(
+    st: &RefineState,
+    ex: &Exclusion,
+) -> Vec<(Vec<u64>, Vec<u64>)> {
     // Whole excluded subtrees, from the roots down.
-    fn all_excluded(st: &RefineState, n: usize, memo: &mut [Option<bool>]) -> bool {
+    fn all_excluded(st: &RefineState, ex: &Exclusion, n: usize, memo: &mut [Option<bool>]) -> bool {
         if let Some(v) = memo[n] {
             return v;
         }
         let v = match st.nodes[n].split {
-            Some((a, b, _)) => all_excluded(st, a, memo) & all_excluded(st, b, memo),
-            None => st.excluded(n),
+            Some((a, b, _)) => all_excluded(st, ex, a, memo) & all_excluded(st, ex, b, memo),
+            None => st.excluded_by(n, ex),
         };
         memo[n] = Some(v);
         v
@@ -81,7 +81,7 @@ pub(super) fn excluded_lattice_boxes(st: &RefineState, exclude: bool) -> Vec<(Ve
     let mut boxes = Vec::new();
     let mut stack: Vec<usize> = st.roots.iter().rev().copied().collect();
     while let Some(n) = stack.pop() {
-        if all_excluded(st, n, &mut memo) {
+        if all_excluded(st, ex, n, &mut memo) {
             boxes.push((st.nodes[n].lo.clone(), st.nodes[n].size.clone()));
         } else if let Some((a, b, _)) = st.nodes[n].split {
             stack.push(b);
@@ -126,15 +126,22 @@ fn excluded_summary(
     rs: &RefineSettings,
     st: &RefineState,
 ) -> Option<Excluded> {
-    if !rs.exclude_infeasible {
-        return None;
-    }
     let nx = cfg.system.nx();
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(nx));
-    let leaves = st.excluded_leaves(true);
+    let ex = Exclusion::new(rs, &lat.max);
+    let leaves = st.excluded_leaves_by(&ex);
     if leaves.is_empty() {
         return None;
     }
+    // The unlabelled states at the corners of excluded leaves, once each, in point order.
+    let mut unlabelled: Vec<usize> = leaves
+        .iter()
+        .flat_map(|&n| st.nodes[n].corners.iter().copied())
+        .filter(|&c| !st.points[c].labelled())
+        .collect();
+    unlabelled.sort_unstable();
+    unlabelled.dedup();
+    let unlabelled_states = unlabelled.iter().map(|&c| st.points[c].x.clone()).collect();
     let volume = |size: &[u64]| -> f64 {
         size.iter()
             .zip(&lat.max)
@@ -142,7 +149,7 @@ fn excluded_summary(
             .product()
     };
     let volume_fraction = leaves.iter().map(|&n| volume(&st.nodes[n].size)).sum();
-    let boxes = excluded_lattice_boxes(st, true)
+    let boxes = excluded_lattice_boxes(st, &ex)
         .into_iter()
         .map(|(lo, size)| {
             let hi: Vec<u64> = lo.iter().zip(&size).map(|(a, s)| a + s).collect();
@@ -153,13 +160,23 @@ fn excluded_summary(
         cells: leaves.len(),
         volume_fraction,
         boxes,
-        note: "A leaf cell is excluded when the hard OCP is infeasible at every corner (the \
-               soft fallback needed slack, or no label): taken to lie outside the MPC's \
-               feasible set — an estimate from its corners, not a proof; the feasible set \
-               may reach into an excluded cell between its corners (`refine --check` counts \
-               fresh feasible states found there). ε holds on X minus these boxes; the \
-               exported controller flags states inside them (EXCLUDED)."
-            .into(),
+        unlabelled_states,
+        note: format!(
+            "A leaf cell is excluded when a corner has no MPC label (the solver found no \
+             solution there) and the cell has been split down to refine.min_cell = {} of X \
+             per axis{}: no bound can be finite there. Whether a cell is outside the MPC's \
+             feasible set is an estimate from its corners, not a proof; the feasible set may \
+             reach into an excluded cell between its corners (`refine --check` counts fresh \
+             feasible states found there). ε holds on X minus these boxes; the exported \
+             controller flags states inside them (EXCLUDED).",
+            rs.min_cell,
+            if rs.exclude_infeasible {
+                ", or (refine.exclude_infeasible) when the hard OCP is infeasible at every \
+                 corner (the soft fallback needed slack, or no label)"
+            } else {
+                ""
+            }
+        ),
     })
 }
 
@@ -239,7 +256,14 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     } else {
         (naive, LnnMethod::Naive)
     };
-    let set = train_set(st, nx, cfg.system.nu(), &[], 1, rs.exclude_infeasible);
+    let set = train_set(
+        st,
+        nx,
+        cfg.system.nu(),
+        &[],
+        1,
+        &Exclusion::new(rs, &Lattice::new(lo, hi, &rs.initial_counts(nx)).max),
+    );
     let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
     let l_mpc = sl.max(q);
     let lat = Lattice::new(lo, hi, &rs.initial_counts(nx));

@@ -79,8 +79,8 @@ pub(super) fn local_settings(rs: &RefineSettings) -> LocalSettings {
 }
 
 /// The training set: every labelled point, then the `extra` points `reps − 1` more times.
-/// With `exclude` (`refine.exclude_infeasible`) the data is restricted to the certified
-/// domain: a hard-infeasible point is kept only as a corner of a leaf that is not
+/// With `ex.infeasible` (`refine.exclude_infeasible`) the data is restricted to the
+/// certified domain: a hard-infeasible point is kept only as a corner of a leaf that is not
 /// excluded (where its soft label bounds the cell).
 pub(super) fn train_set(
     st: &RefineState,
@@ -88,14 +88,14 @@ pub(super) fn train_set(
     nu: usize,
     extra: &[usize],
     reps: usize,
-    exclude: bool,
+    ex: &Exclusion,
 ) -> TrainSet {
     let mut s = TrainSet {
         nx,
         nu,
         ..Default::default()
     };
-    let keep = kept_points(st, exclude);
+    let keep = kept_points(st, ex);
     let mut push = |p: &Point| {
         s.x.extend(&p.x);
         s.u.extend(&p.u);
@@ -129,14 +129,15 @@ pub(super) fn certified_all(bounds: &[(usize, CellBound)], target: f64) -> bool 
     !bounds.is_empty() && bounds.iter().all(|(_, b)| b.eps <= target)
 }
 
-/// The bounding box of the leaves not excluded, when `exclude` is on and some leaf is.
-fn certified_box(st: &RefineState, lat: &Lattice, exclude: bool) -> Option<(Vec<f64>, Vec<f64>)> {
-    if !exclude {
+/// The bounding box of the leaves not excluded, when `exclude_infeasible` is on or some
+/// leaf is excluded.
+fn certified_box(st: &RefineState, lat: &Lattice, ex: &Exclusion) -> Option<(Vec<f64>, Vec<f64>)> {
+    if !ex.infeasible && !ex.any(st) {
         return None;
     }
     let mut b: Option<(Vec<u64>, Vec<u64>)> = None;
     for (n, node) in st.nodes.iter().enumerate() {
-        if node.split.is_some() || st.excluded(n) {
+        if node.split.is_some() || st.excluded_by(n, ex) {
             continue;
         }
         let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
@@ -152,14 +153,15 @@ fn certified_box(st: &RefineState, lat: &Lattice, exclude: bool) -> Option<(Vec<
 }
 
 /// Per point: whether it belongs to the data of the certified domain (every point without
-/// `exclude`; with it, the hard-feasible points and the corners of leaves not excluded).
-pub(super) fn kept_points(st: &RefineState, exclude: bool) -> Vec<bool> {
-    if !exclude {
+/// `exclude_infeasible`; with it, the hard-feasible points and the corners of leaves not
+/// excluded). An unlabelled point is never trained on either way.
+pub(super) fn kept_points(st: &RefineState, ex: &Exclusion) -> Vec<bool> {
+    if !ex.infeasible {
         return vec![true; st.points.len()];
     }
     let mut keep: Vec<bool> = st.points.iter().map(|p| !p.hard_infeasible()).collect();
     for (n, node) in st.nodes.iter().enumerate() {
-        if node.split.is_none() && !st.excluded(n) {
+        if node.split.is_none() && !st.excluded_by(n, ex) {
             for &c in &node.corners {
                 keep[c] = true;
             }
@@ -171,9 +173,10 @@ pub(super) fn kept_points(st: &RefineState, exclude: bool) -> Vec<bool> {
 /// Bounds every leaf; returns (leaf, bound) in leaf order. Where the MPC is a QP (`qp`: the
 /// certifier and the target ε), a cell whose critical-region proof succeeds gets the exact
 /// bound ([`exact_cell_bound`]) if it meets the target or beats the estimate, the others
-/// the estimate ([`cell_bound`]). With `exclude` (`refine.exclude_infeasible`), the
-/// excluded leaves ([`RefineState::excluded`]) are left out: they are not part of the
-/// certified domain.
+/// the estimate ([`cell_bound`]). The excluded leaves ([`RefineState::excluded_by`]: all
+/// corners hard-infeasible with `refine.exclude_infeasible`, an unlabelled corner at the
+/// smallest size `refine.min_cell`) are left out: they are not part of the certified
+/// domain.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn bound_leaves(
     st: &RefineState,
@@ -183,7 +186,7 @@ pub(super) fn bound_leaves(
     ls: &LocalSettings,
     centre_check: bool,
     qp: Option<(&QpCertifier, f64)>,
-    exclude: bool,
+    ex: &Exclusion,
 ) -> Vec<(usize, CellBound)> {
     let idx = region::index(st);
     let target = qp.map_or(f64::INFINITY, |(_, t)| t);
@@ -207,7 +210,7 @@ pub(super) fn bound_leaves(
         })
         .collect();
     let leaves: Vec<usize> = (0..st.nodes.len())
-        .filter(|&i| st.nodes[i].split.is_none() && !(exclude && st.excluded(i)))
+        .filter(|&i| st.nodes[i].split.is_none() && !st.excluded_by(i, ex))
         .collect();
     leaves
         .par_iter()
@@ -293,6 +296,7 @@ pub fn refine(
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
+    let ex = Exclusion::new(rs, &lat.max);
     let mut hash = match &opts.fixed {
         // A fixed net: a checkpoint of another net (or of a training run) does not match.
         Some(m) => crate::io::sha256_hex(
@@ -358,7 +362,7 @@ pub fn refine(
                     &ls,
                     centre_check,
                     Some((q, rs.target_eps)),
-                    rs.exclude_infeasible,
+                    &ex,
                 );
             }
             return Ok(Refined { met, state, model });
@@ -450,16 +454,16 @@ pub fn refine(
                     }
                 }
             }
-            let set = train_set(&st, nx, nu, &hard, rs.emphasis, rs.exclude_infeasible);
+            let set = train_set(&st, nx, nu, &hard, rs.emphasis, &ex);
             // The points before the repeated ones (those the checkpoints are measured on).
-            let keep = kept_points(&st, rs.exclude_infeasible);
+            let keep = kept_points(&st, &ex);
             let unique = (st.points.iter().zip(&keep))
                 .filter(|(p, &k)| k && p.labelled())
                 .count();
             // The input scaling of a new net (a warm start keeps its own): X, or with
             // exclusions the bounding box of the certified domain (the net then resolves
             // the part of X it is certified on).
-            let scale_box = certified_box(&st, &lat, rs.exclude_infeasible)
+            let scale_box = certified_box(&st, &lat, &ex)
                 .unwrap_or_else(|| (cfg.domain.lo.clone(), cfg.domain.hi.clone()));
             let ts = match &st.model {
                 Some(_) => TrainSettings {
@@ -503,7 +507,7 @@ pub fn refine(
             &ls,
             centre_check,
             qp.as_ref().map(|q| (q, rs.target_eps)),
-            rs.exclude_infeasible,
+            &ex,
         );
         let eps = max_eps(&st.bounds);
         let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
@@ -566,7 +570,11 @@ pub fn refine(
                 // Axis: the largest remainder term; ties and infinite terms: longest side
                 // relative to X.
                 let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-                let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width;
+                // A cell with an unlabelled corner is split down to `refine.min_cell`
+                // only: at that size it is excluded (`Exclusion`), not split further.
+                let above_min = |k: usize| b.corner.is_finite() || node.size[k] > ex.min_size[k];
+                let splittable =
+                    |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width && above_min(k);
                 let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
                 let Some(&first) = cand.first() else {
                     continue;
@@ -614,7 +622,7 @@ pub fn refine(
                     &ls,
                     centre_check,
                     qp.as_ref().map(|q| (q, rs.target_eps)),
-                    rs.exclude_infeasible,
+                    &ex,
                 );
                 let e = max_eps(&b);
                 if e < eps {

@@ -303,7 +303,12 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
         assert_eq!(st.bounds.iter().any(|(l, _)| *l == n), !all_infeasible);
     }
     // Training data: no point that is only a corner of excluded leaves.
-    let keep = super::rounds::kept_points(st, true);
+    // (min_size 0: no exclusion for unlabelled corners, only the infeasible rule.)
+    let ex = super::Exclusion {
+        infeasible: true,
+        min_size: vec![0; st.nodes[0].lo.len()],
+    };
+    let keep = super::rounds::kept_points(st, &ex);
     for (i, p) in st.points.iter().enumerate() {
         let in_included = leaves
             .iter()
@@ -316,7 +321,7 @@ fn infeasible_cells_are_excluded_and_listed_exactly() {
         }
     }
     // The merged boxes: disjoint, inside X, and their volume is the excluded leaves'.
-    let boxes = super::outputs::excluded_lattice_boxes(st, true);
+    let boxes = super::outputs::excluded_lattice_boxes(st, &ex);
     let vol = |s: &[u64]| s.iter().map(|&v| v as f64).product::<f64>();
     let leaf_vol: f64 = excluded.iter().map(|&n| vol(&st.nodes[n].size)).sum();
     let box_vol: f64 = boxes.iter().map(|(_, s)| vol(s)).sum();
@@ -366,4 +371,67 @@ fn no_bounded_leaf_certifies_nothing() {
     use super::rounds::{certified_all, max_eps};
     assert_eq!(max_eps(&[]), f64::INFINITY);
     assert!(!certified_all(&[], 1.0));
+}
+
+/// A cell with a corner the MPC cannot label is split down to `refine.min_cell` and then
+/// excluded: it leaves the certified domain (not bounded), the certificate lists its box and
+/// names the unlabelled states, and the certified ε over the other cells is finite (before,
+/// such cells were split down to `min_width` and ε stayed ∞). The stiff spring without its
+/// soft fallback, as above; min_cell = 1/8 of X, i.e. half an initial cell per axis.
+#[test]
+fn unlabelled_corners_are_excluded_at_the_smallest_cell_and_eps_is_finite() {
+    let mut cfg = stiff_spring();
+    cfg.solver.soft_fallback = false;
+    let rs = crate::problem::RefineSettings {
+        min_cell: 0.125,
+        ..quick_refine([5, 5], 600, 8, 0.5)
+    };
+    let r = refine(&cfg, &rs, None, &RefineOptions::default()).unwrap();
+    let st = &r.state;
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &[5, 5]);
+    let ex = Exclusion::new(&rs, &lat.max);
+    assert_eq!(ex.min_size, vec![lat.max[0] / 8, lat.max[1] / 8]);
+    let unlabelled = |c: usize| st.points[c].status.is_some() && !st.points[c].labelled();
+    let excluded = st.excluded_leaves_by(&ex);
+    assert!(
+        !excluded.is_empty(),
+        "no cell excluded: the test shows nothing"
+    );
+    for &n in &excluded {
+        let node = &st.nodes[n];
+        assert!(node.corners.iter().any(|&c| unlabelled(c)));
+        assert!(node.size.iter().zip(&ex.min_size).all(|(s, m)| s <= m));
+        assert!(
+            !st.bounds.iter().any(|(l, _)| *l == n),
+            "excluded leaf {n} bounded"
+        );
+    }
+    // Every bounded leaf has labelled corners (an unlabelled corner is excluded or split).
+    for (n, b) in &st.bounds {
+        assert!(
+            !st.nodes[*n].corners.iter().any(|&c| unlabelled(c)),
+            "{b:?}"
+        );
+    }
+    let eps = super::rounds::max_eps(&st.bounds);
+    assert!(eps.is_finite(), "certified ε {eps}");
+    // The certificate: ε finite, the excluded boxes and the unlabelled states named.
+    let cert = super::outputs::certificate(&cfg, &rs, &r);
+    assert!(cert.base.eps.is_finite(), "certificate ε {}", cert.base.eps);
+    let e = cert.local.excluded.as_ref().expect("excluded block");
+    assert_eq!(e.cells, excluded.len());
+    assert!(!e.boxes.is_empty() && e.note.contains("min_cell"));
+    assert!(!e.unlabelled_states.is_empty());
+    for x in &e.unlabelled_states {
+        let i = st
+            .points
+            .iter()
+            .position(|p| &p.x == x)
+            .expect("a refinement point");
+        assert!(unlabelled(i), "{x:?} is labelled");
+        assert!(
+            super::super::statistical::in_any_box(x, &e.boxes),
+            "{x:?} outside the boxes"
+        );
+    }
 }

@@ -13,6 +13,13 @@
 //! states that happened to work. (`max_iterations` and `infeasible` states stay allowed: the
 //! covering radius is then computed over the labelled states only.) A labelled record with a
 //! non-finite value can only come from a file written before the gate existed.
+//!
+//! [`Dataset::check_labels_for`] refines the refusal with the problem at hand: a
+//! `numerical_failure` state is refused only where the plant's own arithmetic fails —
+//! F(x, u) not finite for u at U's lower corner, upper corner or centre. Where F is finite
+//! at the state, the breakdown happened along the solver's iterates (as in a region where
+//! the plant runs away and the OCP has no solution): κ is as undefined there as at an
+//! `infeasible` state, and the state is treated like one — unlabelled, left out, reported.
 
 use super::{Dataset, Record};
 use crate::mpc::finite::Failure;
@@ -119,6 +126,55 @@ impl Dataset {
             });
         }
         Ok(labelled)
+    }
+
+    /// The gate with the problem (module doc): a `numerical_failure` record is refused only
+    /// where the plant step F(x, u) of `cfg` is not finite at its state for u at U's
+    /// corners or centre; the others count as unlabelled. Returns the labelled count.
+    pub fn check_labels_for(&self, cfg: &ProblemConfig) -> Result<usize, LabelsError> {
+        let model = crate::problem::model::Discrete::new(
+            cfg.system.clone(),
+            cfg.ocp.ts,
+            cfg.ocp.rk4_substeps,
+        );
+        let (lo, hi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
+        let mid: Vec<f64> = lo.iter().zip(hi).map(|(a, b)| 0.5 * (a + b)).collect();
+        let nx = cfg.system.nx();
+        let mut next = vec![0.0; nx];
+        let mut plant_fails = |x: &[f64]| {
+            [lo.as_slice(), hi.as_slice(), mid.as_slice()]
+                .iter()
+                .filter(|u| u.iter().all(|v| v.is_finite()))
+                .any(|u| {
+                    model.step(x, u, &mut next);
+                    next.iter().any(|v| !v.is_finite())
+                })
+        };
+        let mut refused = self.clone();
+        refused.records.retain(|r| {
+            r.status != SqpStatus::NumericalFailure || r.x.len() != nx || plant_fails(&r.x)
+        });
+        let dropped = self.records.len() - refused.records.len();
+        match refused.check_labels() {
+            Err(LabelsError::NumericalFailures {
+                count, index, x, ..
+            }) => Err(LabelsError::NumericalFailures {
+                count,
+                total: self.records.len(),
+                index,
+                x,
+            }),
+            Err(LabelsError::NoLabels {
+                total,
+                failed,
+                unlabelled,
+            }) => Err(LabelsError::NoLabels {
+                total: total + dropped,
+                failed: failed + dropped,
+                unlabelled,
+            }),
+            other => other,
+        }
     }
 
     /// The first `numerical_failure` record and why it has no label: the failure of a cold
