@@ -8,7 +8,7 @@
 
 use crate::problem::rows;
 use crate::{ampc_err, ampc_msg};
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
+use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike2, PyArrayMethods};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
@@ -49,7 +49,7 @@ impl Controller {
     fn eval<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray2<'py, f64>,
+        x: PyArrayLike2<'py, f64, AllowTypeChange>,
     ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>)> {
         let (nx, nu) = (self.ctrl.nx(), self.ctrl.nu());
         let xs = rows(&x, nx, "X")?;

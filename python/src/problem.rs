@@ -4,8 +4,12 @@
 //! `MpcLaw` per worker); and the plant's discrete step x⁺ = F(x, u) (RK4, as the OCP uses it).
 
 use crate::{ampc_err, ampc_msg};
-use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArray2, PyArray3, PyArrayLike1, PyArrayLike2, PyArrayMethods,
+    PyReadonlyArray2,
+};
 use pyo3::prelude::*;
+use pyo3::types::PyTuple;
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -118,22 +122,22 @@ impl Problem {
     /// `(U (n, nu), dU_dX (n, nu, nx), status)` — `trainer solve`'s columns, with its status
     /// names (`converged`, `soft`, `infeasible`, `max_iterations`, `numerical_failure`);
     /// NaN where a state has no label. Runs on all cores with the GIL released.
-    #[allow(clippy::type_complexity)]
+    /// With `with_cost`, a fourth entry: the optimal cost per state (n,), `trainer solve`'s
+    /// `cost` column (the k = 0 state term included; NaN when unlabelled).
+    #[pyo3(signature = (x, with_cost = false))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<(
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray3<f64>>,
-        Vec<&'static str>,
-    )> {
+        x: PyArrayLike2<'py, f64, AllowTypeChange>,
+        with_cost: bool,
+    ) -> PyResult<Bound<'py, PyTuple>> {
         let (nx, nu) = (self.nx(), self.nu());
         let xs = rows(&x, nx, "X")?;
         let n = xs.len() / nx.max(1);
         let u = PyArray2::<f64>::zeros(py, [n, nu], false);
         let du = PyArray3::<f64>::zeros(py, [n, nu, nx], false);
         let mut status = vec![""; n];
+        let mut cost = vec![f64::NAN; n];
         {
             let mut uw = u.readwrite();
             let mut dw = du.readwrite();
@@ -146,20 +150,25 @@ impl Problem {
                     xs.par_chunks(nx)
                         .zip(us.par_chunks_mut(nu))
                         .zip(ds.par_chunks_mut(nu * nx))
-                        .zip(status.par_iter_mut())
+                        .zip(status.par_iter_mut().zip(cost.par_iter_mut()))
                         .for_each_init(
                             || MpcLaw::new(cfg),
-                            |law, (((x, u), du), s)| {
+                            |law, (((x, u), du), (s, c))| {
                                 let l = law.solve(x, None).0;
                                 u.copy_from_slice(&l.u);
                                 du.copy_from_slice(&l.du_dx);
                                 *s = l.status.as_str();
+                                *c = l.cost;
                             },
                         )
                 });
             }
         }
-        Ok((u, du, status))
+        let mut out = vec![u.into_any(), du.into_any(), status.into_pyobject(py)?];
+        if with_cost {
+            out.push(PyArray1::from_vec(py, cost).into_any());
+        }
+        PyTuple::new(py, out)
     }
 
     /// The plant's discrete step x⁺ = F(x, u) (RK4 over `ocp.ts` with `ocp.rk4_substeps`,
@@ -167,8 +176,8 @@ impl Problem {
     fn step<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
-        u: PyReadonlyArray1<'py, f64>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+        u: PyArrayLike1<'py, f64, AllowTypeChange>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (nx, nu) = (self.nx(), self.nu());
         let (x, u) = (x.as_array().to_vec(), u.as_array().to_vec());
