@@ -32,9 +32,14 @@ echo "wheel built and installed in $(($(date +%s) - build_start)) s"
 # Imported from the installed wheel, not from the source folder.
 (cd "$work" && "$py" -c "import ampc, sys; print('ampc from', ampc.__file__)")
 
-# The trainer binary the tests compare with (built by the workspace's tests already).
-cargo build -p trainer --quiet
-trainer="${CARGO_TARGET_DIR:-$PWD/target}/debug/trainer"
+# The trainer binary the tests compare with: AMPC_TRAINER, else the workspace's debug build
+# (which `cargo test --workspace` has just built; a no-op then).
+if [ -n "${AMPC_TRAINER:-}" ]; then
+  trainer=$AMPC_TRAINER
+else
+  cargo build -p trainer --quiet
+  trainer="${CARGO_TARGET_DIR:-$PWD/target}/debug/trainer"
+fi
 [ -x "$trainer" ] || fail "no trainer binary at $trainer"
 
 echo "== python: pytest"

@@ -12,6 +12,9 @@ use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike2, PyArrayMethods};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
+/// `eval`'s result: u (n, nu) and the flags (n,).
+type UAndFlags<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>);
+
 /// The deployed controller of a model file under its certificate.
 #[pyclass(module = "ampc._ampc", frozen)]
 pub struct Controller {
@@ -50,7 +53,7 @@ impl Controller {
         &self,
         py: Python<'py>,
         x: PyArrayLike2<'py, f64, AllowTypeChange>,
-    ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>)> {
+    ) -> PyResult<UAndFlags<'py>> {
         let (nx, nu) = (self.ctrl.nx(), self.ctrl.nu());
         let xs = rows(&x, nx, "X")?;
         let n = xs.len() / nx.max(1);

@@ -6,7 +6,7 @@
 use crate::{ampc_err, ampc_msg};
 use numpy::{
     AllowTypeChange, PyArray1, PyArray2, PyArray3, PyArrayLike1, PyArrayLike2, PyArrayMethods,
-    PyReadonlyArray2,
+    PyReadonlyArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
@@ -38,9 +38,11 @@ pub(crate) fn rows<'a>(
             shape[0], shape[1]
         )));
     }
+    // `as_slice` also accepts a Fortran-ordered array (its memory is column-major): only a
+    // C-ordered one is read in place.
     Ok(match x.as_slice() {
-        Ok(s) => Cow::Borrowed(s),
-        Err(_) => Cow::Owned(x.as_array().iter().copied().collect()),
+        Ok(s) if x.is_c_contiguous() => Cow::Borrowed(s),
+        _ => Cow::Owned(x.as_array().iter().copied().collect()),
     })
 }
 
@@ -61,7 +63,7 @@ impl Problem {
 
     /// Parses and validates a problem file's text; `origin` names it in errors.
     #[staticmethod]
-    #[pyo3(signature = (text, origin = "the problem text given to Problem.from_toml"))]
+    #[pyo3(signature = (text, origin = "(the text given to Problem.from_toml)"))]
     fn from_toml(text: String, origin: &str) -> PyResult<Self> {
         let cfg = ProblemConfig::from_toml_str(&text, origin).map_err(|e| ampc_err(&e))?;
         Ok(Problem {
