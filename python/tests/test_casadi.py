@@ -139,3 +139,17 @@ def test_conversion_keeps_values():
     k4 = f(x0 + TS * k3, u0, p)
     ref = np.array(x0 + TS / 6 * (k1 + 2 * k2 + 2 * k3 + k4)).ravel()
     np.testing.assert_allclose(problem.step(x0, u0), ref, rtol=1e-13)
+
+
+def test_do_mpc_struct_symbols():
+    """do-mpc keeps a model's variables in casadi.tools structures (`model.x`, `model.u`):
+    their entries' names are the states' and inputs' names."""
+    from casadi.tools import entry, struct_symSX
+
+    x = struct_symSX([entry("pos"), entry("vel")])
+    u = struct_symSX([entry("force")])
+    rhs = ca.vertcat(x["vel"], u["force"] - 2.0 * ca.sin(x["pos"]))
+    f = ca.Function("f", [x, u], [rhs])
+    system = ampc.from_casadi(f, x, u)
+    assert 'states = ["pos", "vel"]' in system and 'inputs = ["force"]' in system
+    assert '"force - (2*sin(pos))"' in system, system  # CasADi's 2·v is OP_TWICE
