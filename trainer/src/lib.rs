@@ -24,8 +24,9 @@
 //! plants through [`Dynamics`]), the data and model types ([`Dataset`], [`Model`],
 //! [`CertificateFile`]), the stage functions [`sample`], [`train`], [`certify`] and
 //! [`export`] (the computations of the subcommands of the same names, `pipeline::api`),
-//! and [`run`] (the whole pipeline with its run directory, as `trainer run`). From a problem
-//! file's text to a certificate and the device's weights:
+//! and [`run`] (the whole pipeline with its run directory, as `trainer run`); [`Controller`]
+//! is the exported controller of a model file, state by state as `trainer eval` computes
+//! it. From a problem file's text to a certificate and the device's weights:
 //!
 //! ```
 //! let text = r#"
@@ -97,6 +98,7 @@ pub use certify::certificate::Certificate;
 pub use certify::file::CertificateFile;
 pub use certify::Model;
 pub use data::dataset::Dataset;
+pub use deploy::controller::{Controller, ControllerError};
 pub use deploy::export::ExportReport;
 pub use mpc::law::MpcLaw;
 pub use pipeline::api::{certify, export, sample, train, ApiError};

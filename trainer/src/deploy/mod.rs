@@ -8,7 +8,11 @@
 //! - [`onnx`]: the same net as an ONNX model with the certificate in its metadata, and the
 //!   import of a dense MLP from an ONNX file trained elsewhere.
 //!
+//! - [`controller`]: the deployed controller of a model file as a library object (what
+//!   `trainer eval` computes per state).
+//!
 //! Imports `problem`, `learn` and `certify`.
 
+pub mod controller;
 pub mod export;
 pub mod onnx;
