@@ -369,8 +369,6 @@ const MAX_FN_LINES: usize = 150;
 const LONG_FN_ALLOWED: &[(&str, &str)] = &[
     ("certify/refine/rounds.rs", "refine"),
     ("certify/refine/check.rs", "check"),
-    ("certify/refine/outputs.rs", "certificate"),
-    ("study/closed_loop.rs", "simulate"),
 ];
 
 /// The functions of `text` over `max` lines: (name, 1-based `fn` line, lines). A function

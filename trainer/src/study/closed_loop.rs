@@ -315,6 +315,40 @@ pub fn step_violation(
     viol
 }
 
+/// Adds the stage cost (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref) to `cost`, term by
+/// term in row-major order.
+fn add_stage_cost(
+    cost: &mut f64,
+    (x, x_ref, q): (&[f64], &[f64], &nalgebra::DMatrix<f64>),
+    (u, u_ref, r): (&[f64], &[f64], &nalgebra::DMatrix<f64>),
+) {
+    for i in 0..x.len() {
+        for j in 0..x.len() {
+            *cost += (x[i] - x_ref[i]) * q[(i, j)] * (x[j] - x_ref[j]);
+        }
+    }
+    for i in 0..u.len() {
+        for j in 0..u.len() {
+            *cost += (u[i] - u_ref[i]) * r[(i, j)] * (u[j] - u_ref[j]);
+        }
+    }
+}
+
+/// Why a run diverges at this step, if it does by a non-finite next state or cost.
+fn divergence(next: &[f64], cost: f64, x: &[f64], u: &[f64]) -> Option<String> {
+    if next.iter().any(|v| !v.is_finite()) {
+        Some(format!(
+            "the plant's next state from x = {x:?}, u = {u:?} is not finite (NaN or ±∞)"
+        ))
+    } else if !cost.is_finite() {
+        Some(format!(
+            "the closed-loop cost overflowed at x = {x:?}, u = {u:?}"
+        ))
+    } else {
+        None
+    }
+}
+
 /// Simulates `ctrl` from `x0`. `law` is used for the MPC and for the input divergence.
 pub fn simulate(
     cfg: &ProblemConfig,
@@ -449,26 +483,9 @@ pub fn simulate(
         }
         last_u = u.clone();
         let cost_before = run.cost;
-        for i in 0..nx {
-            for j in 0..nx {
-                run.cost += (x[i] - x_ref[i]) * q[(i, j)] * (x[j] - x_ref[j]);
-            }
-        }
-        for i in 0..nu {
-            for j in 0..nu {
-                run.cost += (u[i] - u_ref[i]) * r[(i, j)] * (u[j] - u_ref[j]);
-            }
-        }
+        add_stage_cost(&mut run.cost, (&x, &x_ref, &q), (&u, &u_ref, &r));
         model.step(&x, &u, &mut next);
-        let reason = if next.iter().any(|v| !v.is_finite()) {
-            Some(format!(
-                "the plant's next state from x = {x:?}, u = {u:?} is not finite (NaN or ±∞)"
-            ))
-        } else if !run.cost.is_finite() {
-            Some(format!(
-                "the closed-loop cost overflowed at x = {x:?}, u = {u:?}"
-            ))
-        } else {
+        let reason = divergence(&next, run.cost, &x, &u).or_else(|| {
             outside(&next).map(|i| {
                 format!(
                     "state {} = {} left X = [{}, {}] by more than {DIVERGED_MARGIN} × its width \
@@ -479,7 +496,7 @@ pub fn simulate(
                     dhi[i]
                 )
             })
-        };
+        });
         let viol = match reason {
             Some(_) => f64::INFINITY,
             None => step_violation(cfg, constraints.as_ref(), k, &x, &u, &next),

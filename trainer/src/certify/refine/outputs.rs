@@ -236,6 +236,44 @@ pub fn check_summary(c: &Check) -> CheckSummary {
     }
 }
 
+/// The largest half-diagonal of a bounded cell: every state is within it of a corner.
+fn largest_half_diagonal(st: &RefineState, lat: &Lattice, nx: usize) -> f64 {
+    st.bounds
+        .iter()
+        .map(|(n, _)| {
+            let node = &st.nodes[*n];
+            (0..nx)
+                .map(|k| (0.5 * node.size[k] as f64 * lat.step[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The cell with the largest bound (ties: the lowest node) as (lower, upper corner), and
+/// which term binds there: `corner`, `second_order` or `first_order`.
+fn binding_cell(st: &RefineState, lat: &Lattice) -> (String, (Vec<f64>, Vec<f64>)) {
+    let worst = st
+        .bounds
+        .iter()
+        .max_by(|a, b| a.1.eps.total_cmp(&b.1.eps).then(b.0.cmp(&a.0)));
+    match worst {
+        Some((n, b)) => {
+            let node = &st.nodes[*n];
+            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+            let what = if b.corner >= b.remainder {
+                "corner"
+            } else if b.form == Form::SecondOrder {
+                "second_order"
+            } else {
+                "first_order"
+            };
+            (what.to_string(), (lat.x(&node.lo), lat.x(&hi_key)))
+        }
+        None => (String::new(), (vec![], vec![])),
+    }
+}
+
 /// Builds the certificate of a finished refinement.
 pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> LocalCertificate {
     use crate::certify::certificate::{requirement, Certificate, LnnMethod};
@@ -267,37 +305,9 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
     let l_mpc = sl.max(q);
     let lat = Lattice::new(lo, hi, &rs.initial_counts(nx));
-    let radius = st
-        .bounds
-        .iter()
-        .map(|(n, _)| {
-            let node = &st.nodes[*n];
-            (0..nx)
-                .map(|k| (0.5 * node.size[k] as f64 * lat.step[k]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-        .fold(0.0, f64::max);
+    let radius = largest_half_diagonal(st, &lat, nx);
     let req = requirement(eps, eps_d, l_mpc, l_nn, lo, hi);
-    let worst = st
-        .bounds
-        .iter()
-        .max_by(|a, b| a.1.eps.total_cmp(&b.1.eps).then(b.0.cmp(&a.0)));
-    let (binding, worst_cell) = match worst {
-        Some((n, b)) => {
-            let node = &st.nodes[*n];
-            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
-            let what = if b.corner >= b.remainder {
-                "corner"
-            } else if b.form == Form::SecondOrder {
-                "second_order"
-            } else {
-                "first_order"
-            };
-            (what.to_string(), (lat.x(&node.lo), lat.x(&hi_key)))
-        }
-        None => (String::new(), (vec![], vec![])),
-    };
+    let (binding, worst_cell) = binding_cell(st, &lat);
     let solves = st.points.len();
     let qp = crate::certify::critical::QpCertifier::detect(cfg).is_ok();
     let n_exact = st.bounds.iter().filter(|(_, b)| b.exact).count();
