@@ -121,22 +121,6 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let centre_check =
         rs.centre_check && crate::certify::critical::QpCertifier::detect(cfg).is_err();
     let idx = super::region::index(st);
-    #[derive(Default, Clone)]
-    struct Acc {
-        labelled: usize,
-        max: f64,
-        over_eps: usize,
-        over_cell: usize,
-        cell_ratio: f64,
-        rem_use: f64,
-        misses: usize,
-        checks: usize,
-        excess: f64,
-        offenders: Vec<(Vec<f64>, f64, f64, usize)>,
-        excluded: usize,
-        feasible_excluded: usize,
-        feasible_leaves: Vec<usize>,
-    }
     let acc = (0..n)
         .into_par_iter()
         .fold_chunks(
@@ -185,65 +169,15 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     }
                     a.cell_ratio = a.cell_ratio.max(e / ec);
                     if l.status == SqpStatus::Converged && l.degeneracy.is_none() {
-                        let node = &st.nodes[leaf];
-                        let corners: Vec<Corner> = node
-                            .corners
-                            .iter()
-                            .map(|&c| super::region::corner(&st.points[c]))
-                            .collect();
-                        let centre = super::region::centre(st, &idx, node, centre_check);
-                        let reg = super::region::regional(st, &idx, &lat, node, ls.floor);
-                        for r in 0..nu {
-                            for k in 0..nx {
-                                let wk = node.size[k] as f64 * lat.step[k];
-                                let (kr, _) = crate::certify::local::mpc_slope_estimate(
-                                    &corners,
-                                    centre.as_ref(),
-                                    &reg,
-                                    wk,
-                                    nx,
-                                    r,
-                                    k,
-                                    &ls,
-                                );
-                                a.checks += 1;
-                                let g = l.du_dx[r * nx + k];
-                                if !kr.contains(g) {
-                                    a.misses += 1;
-                                    let out = (kr.lo - g).max(g - kr.hi);
-                                    a.excess = a.excess.max(out);
-                                }
-                            }
-                        }
+                        let cell = (&lat, &idx, &ls, centre_check);
+                        slope_check(st, cell, leaf, &l.du_dx, (nx, nu), &mut a);
                     }
                 }
                 (Some(law), ws, a)
             },
         )
         .map(|(_, _, a)| a)
-        .reduce(Acc::default, |mut x, y| Acc {
-            offenders: {
-                x.offenders.extend(y.offenders);
-                x.offenders.truncate(20);
-                x.offenders
-            },
-            labelled: x.labelled + y.labelled,
-            max: x.max.max(y.max),
-            over_eps: x.over_eps + y.over_eps,
-            over_cell: x.over_cell + y.over_cell,
-            cell_ratio: x.cell_ratio.max(y.cell_ratio),
-            rem_use: x.rem_use.max(y.rem_use),
-            misses: x.misses + y.misses,
-            checks: x.checks + y.checks,
-            excess: x.excess.max(y.excess),
-            excluded: x.excluded + y.excluded,
-            feasible_excluded: x.feasible_excluded + y.feasible_excluded,
-            feasible_leaves: {
-                let mut v = x.feasible_leaves;
-                v.extend(y.feasible_leaves);
-                v
-            },
-        });
+        .reduce(Acc::default, Acc::merge);
     let per_cell = super::cellcheck::per_cell(
         &super::cellcheck::Setup {
             st,
@@ -298,6 +232,100 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             })
             .collect(),
         seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// The check's running totals over its states (merged across threads in state order).
+#[derive(Default, Clone)]
+struct Acc {
+    labelled: usize,
+    max: f64,
+    over_eps: usize,
+    over_cell: usize,
+    cell_ratio: f64,
+    rem_use: f64,
+    misses: usize,
+    checks: usize,
+    excess: f64,
+    offenders: Vec<(Vec<f64>, f64, f64, usize)>,
+    excluded: usize,
+    feasible_excluded: usize,
+    feasible_leaves: Vec<usize>,
+}
+
+impl Acc {
+    /// `x` then `y`: sums, maxima, the first 20 offenders, the leaves in order.
+    fn merge(mut x: Acc, y: Acc) -> Acc {
+        Acc {
+            offenders: {
+                x.offenders.extend(y.offenders);
+                x.offenders.truncate(20);
+                x.offenders
+            },
+            labelled: x.labelled + y.labelled,
+            max: x.max.max(y.max),
+            over_eps: x.over_eps + y.over_eps,
+            over_cell: x.over_cell + y.over_cell,
+            cell_ratio: x.cell_ratio.max(y.cell_ratio),
+            rem_use: x.rem_use.max(y.rem_use),
+            misses: x.misses + y.misses,
+            checks: x.checks + y.checks,
+            excess: x.excess.max(y.excess),
+            excluded: x.excluded + y.excluded,
+            feasible_excluded: x.feasible_excluded + y.feasible_excluded,
+            feasible_leaves: {
+                let mut v = x.feasible_leaves;
+                v.extend(y.feasible_leaves);
+                v
+            },
+        }
+    }
+}
+
+/// Checks the solved ∂κ/∂x (`du_dx`, row-major nu×nx) at a state of cell `leaf` against the
+/// cell's estimated slope range of every entry; counts checks, misses and the largest excess.
+fn slope_check(
+    st: &RefineState,
+    (lat, idx, ls, centre_check): (
+        &Lattice,
+        &HashMap<Vec<u64>, usize>,
+        &crate::certify::local::LocalSettings,
+        bool,
+    ),
+    leaf: usize,
+    du_dx: &[f64],
+    (nx, nu): (usize, usize),
+    a: &mut Acc,
+) {
+    let node = &st.nodes[leaf];
+    let corners: Vec<Corner> = node
+        .corners
+        .iter()
+        .map(|&c| super::region::corner(&st.points[c]))
+        .collect();
+    let centre = super::region::centre(st, idx, node, centre_check);
+    let reg = super::region::regional(st, idx, lat, node, ls.floor);
+    for r in 0..nu {
+        for k in 0..nx {
+            let wk = node.size[k] as f64 * lat.step[k];
+            let (kr, _) = crate::certify::local::mpc_slope_estimate(
+                &corners,
+                centre.as_ref(),
+                &reg,
+                wk,
+                nx,
+                r,
+                k,
+                ls,
+            );
+            a.checks += 1;
+            let g = du_dx[r * nx + k];
+            if !kr.contains(g) {
+                a.misses += 1;
+                let out = (kr.lo - g).max(g - kr.hi);
+                a.excess = a.excess.max(out);
+            }
+        }
     }
 }
 
