@@ -30,6 +30,7 @@ mod feedback;
 mod outputs;
 mod region;
 mod rounds;
+mod start;
 
 pub use crate::certify::local_summary::{Excluded, LocalSummary};
 pub use cellcheck::{CellCheck, OffendingCell};

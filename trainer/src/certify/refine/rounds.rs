@@ -3,12 +3,12 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
+use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
 use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
 use crate::certify::netbounds::NetBounder;
 use crate::certify::Model;
-use crate::data::dataset::DatasetError;
 use crate::io::write_atomic;
 use crate::learn::mlp::{Mlp, Workspace};
 use crate::learn::setpoint::Hold;
@@ -42,32 +42,6 @@ pub struct Refined {
     pub model: Model,
     /// Whether every cell meets the target.
     pub met: bool,
-}
-
-/// What a checkpoint must match: the labels (problem), the domain, the initial grid, the
-/// network's shape, the safety factor, the regional floor and the centre check (the
-/// certificate's meaning). Target, budget,
-/// rounds and training rates may change on resume (e.g. a larger budget continues a run).
-fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    h.update(cfg.problem_hash());
-    let nx = cfg.system.nx();
-    let key = (
-        &cfg.domain,
-        rs.initial_counts(nx),
-        &rs.training.hidden,
-        rs.training.activation,
-        rs.safety.to_bits(),
-        rs.floor.to_bits(),
-        rs.centre_check,
-    );
-    h.update(postcard::to_allocvec(&key).unwrap_or_default());
-    if rs.exclude_infeasible {
-        // Appended only when on: checkpoints of runs without exclusion keep their hash.
-        h.update(b"exclude_infeasible");
-    }
-    crate::io::hex(&h.finalize())
 }
 
 /// The local certificate's settings of a refinement.
@@ -293,22 +267,11 @@ pub fn refine(
     checkpoint: Option<&Path>,
     opts: &RefineOptions,
 ) -> Result<Refined, RefineError> {
-    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let nx = cfg.system.nx();
     let counts = rs.initial_counts(nx);
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &counts);
     let ex = Exclusion::new(rs, &lat.max);
-    let mut hash = match &opts.fixed {
-        // A fixed net: a checkpoint of another net (or of a training run) does not match.
-        Some(m) => crate::io::sha256_hex(
-            format!("{}|fixed:{}", settings_hash(cfg, rs), m.content_hash()).as_bytes(),
-        ),
-        None => settings_hash(cfg, rs),
-    };
-    if let Some(d) = &opts.initial_labels {
-        hash = crate::io::sha256_hex(
-            format!("{hash}{}", crate::io::sha256_hex(&d.to_bytes())).as_bytes(),
-        );
-    }
+    let hash = run_hash(cfg, rs, opts);
     let band = cfg.ocp.u_bounds(0);
     let ls = local_settings(rs);
     // Where the MPC is a QP, cells are proven exact and refinement goes on until all are.
@@ -325,24 +288,7 @@ pub fn refine(
         lat: lat.clone(),
         index: HashMap::new(),
     };
-    let resumed = match checkpoint.filter(|p| p.exists()) {
-        Some(p) => {
-            let bytes = std::fs::read(p).map_err(|e| DatasetError::Io {
-                path: p.display().to_string(),
-                source: e,
-            })?;
-            let st = RefineState::from_bytes(&bytes, p)?;
-            if st.hash != hash {
-                return Err(RefineError::Mismatch {
-                    path: p.to_path_buf(),
-                });
-            }
-            let roots = counts.iter().map(|c| c - 1).product();
-            st.check_consistent(&lat.max, roots, cfg.system.nu(), p)?;
-            Some(st)
-        }
-        None => None,
-    };
+    let resumed = resume(checkpoint, &hash, &counts, &lat, cfg.system.nu())?;
     let mut pending = Vec::new();
     if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
         // A finished run: return its result unless the settings now allow more (a lower
@@ -369,41 +315,9 @@ pub fn refine(
         }
     }
     let mut st = match resumed {
-        Some(st) => {
-            for (i, p) in st.points.iter().enumerate() {
-                ctx.index.insert(p.key.clone(), i);
-                // Points created by the last checkpointed round's splits, not yet solved.
-                if p.status.is_none() {
-                    pending.push(i);
-                }
-            }
-            st
-        }
+        Some(st) => reindex(&mut ctx, st, &mut pending),
         None => {
-            let mut st = RefineState {
-                hash: hash.clone(),
-                points: Vec::new(),
-                nodes: Vec::new(),
-                roots: Vec::new(),
-                model: None,
-                best: None,
-                log: Vec::new(),
-                bounds: Vec::new(),
-                finished: false,
-                jumps: Vec::new(),
-            };
-            // The initial grid's cells.
-            let cells: Vec<usize> = counts.iter().map(|c| c - 1).collect();
-            let total: usize = cells.iter().product();
-            for mut r in 0..total {
-                let mut lo = vec![0u64; nx];
-                for k in (0..nx).rev() {
-                    lo[k] = ((r % cells[k]) as u64) << LEVELS;
-                    r /= cells[k];
-                }
-                let n = ctx.node(&mut st, lo, vec![1u64 << LEVELS; nx], &mut pending);
-                st.roots.push(n);
-            }
+            let mut st = initial_grid(&mut ctx, &hash, &counts, &mut pending);
             if let Some(d) = &opts.initial_labels {
                 pending = take_labels(cfg, &counts, &mut st.points, &pending, d);
             }
@@ -414,6 +328,11 @@ pub fn refine(
         // The given net (with its source hash, which a checkpoint does not store).
         st.model = Some(m.clone());
     }
+    // The cells' bounds under a net (a QP's cells proven exact where the proof succeeds).
+    let bound = |st: &RefineState, mlp: &crate::learn::mlp::Mlp| {
+        let q = qp.as_ref().map(|q| (q, rs.target_eps));
+        bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex)
+    };
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -438,100 +357,12 @@ pub fn refine(
             .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
         let retrain = opts.fixed.is_none() && (st.model.is_none() || fit_bound);
         if retrain {
-            // Emphasis: points with a large error under the current net.
-            let mut hard = Vec::new();
-            if let Some(m) = &st.model {
-                let mut ws = Workspace::default();
-                let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
-                for (i, p) in st.points.iter().enumerate().filter(|(_, p)| p.labelled()) {
-                    m.mlp.eval(&p.x, &mut u, &mut j, &mut ws);
-                    let e = (0..nu)
-                        .map(|r| (p.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
-                    if e > rs.emphasis_at * rs.target_eps {
-                        hard.push(i);
-                    }
-                }
-            }
-            let set = train_set(&st, nx, nu, &hard, rs.emphasis, &ex);
-            // The points before the repeated ones (those the checkpoints are measured on).
-            let keep = kept_points(&st, &ex);
-            let unique = (st.points.iter().zip(&keep))
-                .filter(|(p, &k)| k && p.labelled())
-                .count();
-            // The input scaling of a new net (a warm start keeps its own): X, or with
-            // exclusions the bounding box of the certified domain (the net then resolves
-            // the part of X it is certified on).
-            let scale_box = certified_box(&st, &lat, &ex)
-                .unwrap_or_else(|| (cfg.domain.lo.clone(), cfg.domain.hi.clone()));
-            let ts = match &st.model {
-                Some(_) => TrainSettings {
-                    epochs: rs.round_epochs,
-                    learning_rate: rs.round_learning_rate,
-                    ..rs.training.clone()
-                },
-                None => rs.training.clone(),
-            };
-            st.model = Some(train_from(
-                st.model.as_ref().map(|m| m.mlp.clone()),
-                &ts,
-                &TrainOptions {
-                    nominal: false,
-                    progress: None,
-                    hold: hold.clone(),
-                    // A warm start returns its best checkpoint by the clamped errors
-                    // above the retraining level on the data (the starting net included).
-                    keep_best: st.model.as_ref().map(|_| KeepBest {
-                        every: 10,
-                        lo: band.0.to_vec(),
-                        hi: band.1.to_vec(),
-                        points: unique,
-                        threshold: rs.retrain_at * rs.target_eps,
-                    }),
-                },
-                &set,
-                &TrainSet::default(),
-                (&scale_box.0, &scale_box.1),
-                band,
-                &cfg.problem_hash(),
-                &hash,
-            ));
+            st.model = Some(retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash));
         }
         let model = st.model.clone().expect("trained above");
-        st.bounds = bound_leaves(
-            &st,
-            &lat,
-            &model.mlp,
-            band,
-            &ls,
-            centre_check,
-            qp.as_ref().map(|q| (q, rs.target_eps)),
-            &ex,
-        );
-        let eps = max_eps(&st.bounds);
-        let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
-        let ok = st
-            .bounds
-            .iter()
-            .filter(|(_, b)| b.eps <= rs.target_eps)
-            .count();
-        let second = st
-            .bounds
-            .iter()
-            .filter(|(_, b)| b.form == Form::SecondOrder)
-            .count();
-        let solves = st.points.len();
-        let log = RoundLog {
-            round,
-            solves,
-            cells: st.bounds.len(),
-            cells_ok: ok,
-            eps,
-            eps_d,
-            second_order: second,
-            seconds: t0.elapsed().as_secs_f64(),
-        };
+        st.bounds = bound(&st, &model.mlp);
+        let log = round_log(&st, round, rs.target_eps, t0);
+        let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
         if st.best.as_ref().is_none_or(|(e, _)| eps < *e) {
             st.best = Some((eps, model.clone()));
@@ -544,86 +375,16 @@ pub fn refine(
         let met = !st.bounds.is_empty()
             && ok == st.bounds.len()
             && !st.bounds.iter().any(|(_, b)| unproven(b));
-        // Split the failing cells, worst first, within the budget: those above the target
-        // first; unproven cells of a QP only once every cell meets the target (so proving
-        // never costs the budget the target needs).
-        let above = st.bounds.iter().any(|(_, b)| b.eps > rs.target_eps);
-        let mut bad: Vec<(usize, CellBound)> = st
-            .bounds
-            .iter()
-            .filter(|(_, b)| b.eps > rs.target_eps || (!above && unproven(b)))
-            .cloned()
-            .collect();
-        bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
-        let mut split_any = false;
-        if !met && round + 1 < rs.max_rounds {
-            // Cells with a corner the MPC could not label (ε_C = ∞) are split after the
-            // others, with what budget remains, once per round each, along their longest
-            // side relative to X: the uncertified region around a failed state halves
-            // every round instead of staying a whole cell, and the new corners are solved
-            // (and retried, warm-started from their labelled neighbours) like any other.
-            let (failed, mut bad): (Vec<_>, Vec<_>) =
-                bad.into_iter().partition(|(_, b)| !b.corner.is_finite());
-            bad.extend(failed);
-            for (n, b) in bad {
-                let node = st.nodes[n].clone();
-                // Axis: the largest remainder term; ties and infinite terms: longest side
-                // relative to X.
-                let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-                // A cell with an unlabelled corner is split down to `refine.min_cell`
-                // only: at that size it is excluded (`Exclusion`), not split further.
-                let above_min = |k: usize| b.corner.is_finite() || node.size[k] > ex.min_size[k];
-                let splittable =
-                    |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width && above_min(k);
-                let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
-                let Some(&first) = cand.first() else {
-                    continue;
-                };
-                // Axis: the largest remainder term; ties and infinite terms: longest side
-                // relative to X. Where the fit at the corners dominates: the longest side
-                // (more data there).
-                let mut axis = first;
-                for &k in &cand[1..] {
-                    let (tk, ta) = (b.axis_terms[k], b.axis_terms[axis]);
-                    if tk > ta || (tk == ta && rel(k) > rel(axis)) {
-                        axis = k;
-                    }
-                }
-                if b.remainder < 0.25 * b.corner
-                    || !b.axis_terms[axis].is_finite()
-                    || b.eps <= rs.target_eps
-                {
-                    axis = cand
-                        .iter()
-                        .copied()
-                        .max_by(|&a, &c| rel(a).total_cmp(&rel(c)).then(c.cmp(&a)))
-                        .unwrap_or(first);
-                }
-                // New points are pushed onto `st.points` as they are created.
-                let needed = 1usize << (nx - 1);
-                if st.points.len() + needed > rs.budget {
-                    break;
-                }
-                ctx.split(&mut st, n, axis, &mut pending);
-                split_any = true;
-            }
-        }
+        let split_any = !met
+            && round + 1 < rs.max_rounds
+            && split_failing(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven);
         let done = met || !split_any;
         let mut model = model;
         if done && !met {
             // Not met: the best model so far, bounded on the final (finer) tree, may do
             // better than the last one.
             if let Some((_, best)) = st.best.clone() {
-                let b = bound_leaves(
-                    &st,
-                    &lat,
-                    &best.mlp,
-                    band,
-                    &ls,
-                    centre_check,
-                    qp.as_ref().map(|q| (q, rs.target_eps)),
-                    &ex,
-                );
+                let b = bound(&st, &best.mlp);
                 let e = max_eps(&b);
                 if e < eps {
                     st.bounds = b;
@@ -648,4 +409,191 @@ pub fn refine(
             });
         }
     }
+}
+
+/// The labelled points whose clamped error under the current net exceeds `level` (the
+/// training emphasis); none before a net exists.
+fn hard_points(
+    st: &RefineState,
+    band: (&[f64], &[f64]),
+    (nx, nu): (usize, usize),
+    level: f64,
+) -> Vec<usize> {
+    let mut hard = Vec::new();
+    if let Some(m) = &st.model {
+        let mut ws = Workspace::default();
+        let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
+        for (i, p) in st.points.iter().enumerate().filter(|(_, p)| p.labelled()) {
+            m.mlp.eval(&p.x, &mut u, &mut j, &mut ws);
+            let e = (0..nu)
+                .map(|r| (p.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if e > level {
+                hard.push(i);
+            }
+        }
+    }
+    hard
+}
+
+/// The axis along which a failing cell is split, `None` when no side may be split (at
+/// `refine.min_width`, or a cell with an unlabelled corner at `refine.min_cell`).
+fn split_axis(
+    node: &Node,
+    b: &CellBound,
+    lat: &Lattice,
+    ex: &Exclusion,
+    rs: &RefineSettings,
+) -> Option<usize> {
+    let nx = node.size.len();
+    let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
+    // A cell with an unlabelled corner is split down to `refine.min_cell` only: at that
+    // size it is excluded (`Exclusion`), not split further.
+    let above_min = |k: usize| b.corner.is_finite() || node.size[k] > ex.min_size[k];
+    let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width && above_min(k);
+    let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
+    let &first = cand.first()?;
+    // Axis: the largest remainder term; ties and infinite terms: longest side relative to
+    // X. Where the fit at the corners dominates: the longest side (more data there).
+    let mut axis = first;
+    for &k in &cand[1..] {
+        let (tk, ta) = (b.axis_terms[k], b.axis_terms[axis]);
+        if tk > ta || (tk == ta && rel(k) > rel(axis)) {
+            axis = k;
+        }
+    }
+    if b.remainder < 0.25 * b.corner || !b.axis_terms[axis].is_finite() || b.eps <= rs.target_eps {
+        axis = cand
+            .iter()
+            .copied()
+            .max_by(|&a, &c| rel(a).total_cmp(&rel(c)).then(c.cmp(&a)))
+            .unwrap_or(first);
+    }
+    Some(axis)
+}
+
+/// The round's net, trained on the labelled points (a warm start from the current net for
+/// `round_epochs` with its best checkpoint kept, or a new net with `refine.training`), the
+/// points with a large error repeated `refine.emphasis` times.
+fn retrain_net(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    st: &RefineState,
+    (lat, ex): (&Lattice, &Exclusion),
+    band: (&[f64], &[f64]),
+    hold: &Option<Hold>,
+    hash: &str,
+) -> Model {
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    // Emphasis: points with a large error under the current net.
+    let hard = hard_points(st, band, (nx, nu), rs.emphasis_at * rs.target_eps);
+    let set = train_set(st, nx, nu, &hard, rs.emphasis, ex);
+    // The points before the repeated ones (those the checkpoints are measured on).
+    let keep = kept_points(st, ex);
+    let unique = (st.points.iter().zip(&keep))
+        .filter(|(p, &k)| k && p.labelled())
+        .count();
+    // The input scaling of a new net (a warm start keeps its own): X, or with
+    // exclusions the bounding box of the certified domain (the net then resolves
+    // the part of X it is certified on).
+    let scale_box = certified_box(st, lat, ex)
+        .unwrap_or_else(|| (cfg.domain.lo.clone(), cfg.domain.hi.clone()));
+    let ts = match &st.model {
+        Some(_) => TrainSettings {
+            epochs: rs.round_epochs,
+            learning_rate: rs.round_learning_rate,
+            ..rs.training.clone()
+        },
+        None => rs.training.clone(),
+    };
+    train_from(
+        st.model.as_ref().map(|m| m.mlp.clone()),
+        &ts,
+        &TrainOptions {
+            nominal: false,
+            progress: None,
+            hold: hold.clone(),
+            // A warm start returns its best checkpoint by the clamped errors
+            // above the retraining level on the data (the starting net included).
+            keep_best: st.model.as_ref().map(|_| KeepBest {
+                every: 10,
+                lo: band.0.to_vec(),
+                hi: band.1.to_vec(),
+                points: unique,
+                threshold: rs.retrain_at * rs.target_eps,
+            }),
+        },
+        &set,
+        &TrainSet::default(),
+        (&scale_box.0, &scale_box.1),
+        band,
+        &cfg.problem_hash(),
+        hash,
+    )
+}
+
+/// The round's log line from its cell bounds: cells, cells meeting `target`, ε, ε_D, cells
+/// using the second-order form, solves and seconds since `t0`.
+fn round_log(st: &RefineState, round: usize, target: f64, t0: Instant) -> RoundLog {
+    let eps = max_eps(&st.bounds);
+    let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
+    let ok = st.bounds.iter().filter(|(_, b)| b.eps <= target).count();
+    let second = st
+        .bounds
+        .iter()
+        .filter(|(_, b)| b.form == Form::SecondOrder)
+        .count();
+    RoundLog {
+        round,
+        solves: st.points.len(),
+        cells: st.bounds.len(),
+        cells_ok: ok,
+        eps,
+        eps_d,
+        second_order: second,
+        seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// Splits the failing cells, worst first, within the budget: those above the target first;
+/// unproven cells of a QP (`unproven`) only once every cell meets the target (so proving
+/// never costs the budget the target needs). Cells with a corner the MPC could not label
+/// (ε_C = ∞) are split after the others, with what budget remains, once per round each:
+/// the uncertified region around a failed state halves every round instead of staying a
+/// whole cell, and the new corners are solved (and retried, warm-started from their
+/// labelled neighbours) like any other. Returns whether any cell was split.
+fn split_failing(
+    ctx: &mut Ctx,
+    st: &mut RefineState,
+    pending: &mut Vec<usize>,
+    (ex, rs): (&Exclusion, &RefineSettings),
+    unproven: &dyn Fn(&CellBound) -> bool,
+) -> bool {
+    let nx = ctx.lat.max.len();
+    let above = st.bounds.iter().any(|(_, b)| b.eps > rs.target_eps);
+    let mut bad: Vec<(usize, CellBound)> = st
+        .bounds
+        .iter()
+        .filter(|(_, b)| b.eps > rs.target_eps || (!above && unproven(b)))
+        .cloned()
+        .collect();
+    bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
+    let (failed, mut bad): (Vec<_>, Vec<_>) =
+        bad.into_iter().partition(|(_, b)| !b.corner.is_finite());
+    bad.extend(failed);
+    let mut split_any = false;
+    for (n, b) in bad {
+        let Some(axis) = split_axis(&st.nodes[n], &b, &ctx.lat, ex, rs) else {
+            continue;
+        };
+        // New points are pushed onto `st.points` as they are created.
+        let needed = 1usize << (nx - 1);
+        if st.points.len() + needed > rs.budget {
+            break;
+        }
+        ctx.split(st, n, axis, pending);
+        split_any = true;
+    }
+    split_any
 }
