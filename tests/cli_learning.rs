@@ -134,8 +134,18 @@ fn train_certify_eval() {
         "ε_D {eps_d} recomputed vs {} certified",
         f("eps_d")
     );
-    // 11 × 6 grid on [−4, 4] × [−1, 1]: r = ½·√(0.8² + 0.4²).
-    assert!((f("covering_radius") - 0.5 * (0.8f64.powi(2) + 0.4f64.powi(2)).sqrt()).abs() < 1e-12);
+    // 11 × 6 grid on [−4, 4] × [−1, 1], spacings 0.8 and 0.4, measured in the certificate's
+    // norm: the default state scales are the domain's half-widths 4 and 1, so
+    // r = ½·√((0.8/4)² + (0.4/1)²).
+    let xs: Vec<f64> = v["norm"]["x_scale"]
+        .as_array()
+        .expect("the certificate states its norm")
+        .iter()
+        .map(|s| s.as_f64().unwrap())
+        .collect();
+    assert_eq!(xs, [4.0, 1.0]);
+    let r = 0.5 * ((0.8f64 / 4.0).powi(2) + (0.4f64 / 1.0).powi(2)).sqrt();
+    assert!((f("covering_radius") - r).abs() < 1e-12, "{}", f("covering_radius"));
     assert_eq!(v["l_mpc_is_estimate"], serde_json::Value::Bool(true));
     let req = &v["requirement"];
     let delta = req["delta"].as_f64().unwrap();
