@@ -145,7 +145,11 @@ fn train_certify_eval() {
         .collect();
     assert_eq!(xs, [4.0, 1.0]);
     let r = 0.5 * ((0.8f64 / 4.0).powi(2) + (0.4f64 / 1.0).powi(2)).sqrt();
-    assert!((f("covering_radius") - r).abs() < 1e-12, "{}", f("covering_radius"));
+    assert!(
+        (f("covering_radius") - r).abs() < 1e-12,
+        "{}",
+        f("covering_radius")
+    );
     assert_eq!(v["l_mpc_is_estimate"], serde_json::Value::Bool(true));
     let req = &v["requirement"];
     let delta = req["delta"].as_f64().unwrap();

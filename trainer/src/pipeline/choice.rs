@@ -2,13 +2,15 @@
 //! strongest guarantee reached, then the better fit.
 //!
 //! ```text
-//! key(net) = (vacuous(ε), tier, ε if not vacuous, validation mean error),
+//! key(net) = (vacuous(ε), tier, ε, validation mean error),
 //! exported = argmin key  (lexicographic; ties keep the regularized net)
 //! ```
 //!
-//! ε is vacuous when it is at least the diagonal of U (`study::report::judge`): both nets
-//! then carry no useful bound and the fit decides. The tier orders sound < statistical <
-//! estimated. The reason is written into `export_report.json` (`net`, `net_reason`) and
+//! ε is vacuous when it is at least the diagonal of U (`study::report::judge`); a net with a
+//! non-vacuous bound wins, then the stronger tier (sound < statistical < estimated), then the
+//! smaller ε — also between two vacuous bounds, where the smaller one still bounds the
+//! error more tightly (the paper's pendulum: Theorem 1 is vacuous for both nets, the
+//! regularized net's ε is the smaller) — and only at equal ε the fit. The reason is written into `export_report.json` (`net`, `net_reason`) and
 //! the report's verdict.
 
 use crate::certify::file::CertificateFile;
@@ -22,7 +24,8 @@ pub(super) fn choose(
 ) -> (&'static str, String) {
     let describe = |(m, f): (&Model, &CertificateFile)| {
         let c = &f.base;
-        let vacuous = judge(c.eps, &c.u_lo, &c.u_hi).1 == "vacuous" || !c.eps.is_finite();
+        let vacuous =
+            judge(c.eps_physical(), &c.u_lo, &c.u_hi).1 == "vacuous" || !c.eps.is_finite();
         let fit = m.validation_stats.mean;
         (
             vacuous,
@@ -34,8 +37,8 @@ pub(super) fn choose(
     };
     let (nv, nt, ne, nf, nr) = describe(nominal);
     let (rv, rt, re, rf, rr) = describe(regularized);
-    let n_key = (nv, nt, if nv { 0.0 } else { ne }, nf);
-    let r_key = (rv, rt, if rv { 0.0 } else { re }, rf);
+    let n_key = (nv, nt, ne, nf);
+    let r_key = (rv, rt, re, rf);
     let better = |a: (bool, _, f64, f64), b: (bool, _, f64, f64)| -> bool {
         (a.0, a.1)
             .cmp(&(b.0, b.1))
@@ -54,9 +57,9 @@ pub(super) fn choose(
     let (n_s, r_s) = (line(nv, nt, ne, nr), line(rv, rt, re, rr));
     let why = match (nv, rv) {
         (false, true) | (true, false) => "only it has a non-vacuous bound",
-        (true, true) => "both bounds are vacuous, so the better fit (validation mean error)",
-        (false, false) if nt != rt => "the stronger tier",
-        (false, false) => "the smaller ε",
+        _ if nt != rt => "the stronger tier",
+        _ if ne != re => "the smaller ε",
+        _ => "equal bounds, so the better fit (validation mean error)",
     };
     if better(n_key, r_key) {
         (

@@ -349,6 +349,73 @@ fn divergence(next: &[f64], cost: f64, x: &[f64], u: &[f64]) -> Option<String> {
     }
 }
 
+/// The MPC's input at `y`, warm-started along the run (soft solves counted); `None` when
+/// it has no label there.
+fn reference(
+    law: &mut MpcLaw,
+    y: &[f64],
+    (warm, warm_soft): (&mut Option<PrimalDual>, &mut Option<PrimalDual>),
+    run: &mut Run,
+) -> Option<Vec<f64>> {
+    let (l, sol, soft) = law.solve_along(y, warm.as_ref(), warm_soft.as_ref());
+    *warm_soft = soft.or(warm_soft.take());
+    if l.status == crate::mpc::sqp::SqpStatus::Soft {
+        run.mpc_soft_steps += 1;
+    }
+    if l.status.is_labelled() {
+        *warm = sol.or(warm.take());
+        Some(l.u)
+    } else {
+        None
+    }
+}
+
+/// The network's output at `y`, clamped to `clamp` where finite; notes when it leaves
+/// U ⊕ [−ε, ε].
+fn net_output(
+    m: &Mlp,
+    eps: f64,
+    clamp: Option<(&[f64], &[f64])>,
+    y: &[f64],
+    (ulo, uhi): (&[f64], &[f64]),
+    run: &mut Run,
+) -> Vec<f64> {
+    let mut u = m.predict(y);
+    if u.iter()
+        .zip(ulo.iter().zip(uhi))
+        .any(|(v, (l, h))| !(*v >= l - eps && *v <= h + eps))
+    {
+        run.left_band = true;
+    }
+    if let Some((lo, hi)) = clamp {
+        for ((v, l), h) in u.iter_mut().zip(lo).zip(hi) {
+            if v.is_finite() {
+                *v = v.clamp(*l, *h);
+            }
+        }
+    }
+    u
+}
+
+/// Records ‖κ(y) − u‖₂; a non-finite one (a diverged net) is the reason the run ends.
+fn record_divergence(run: &mut Run, kappa: &[f64], u: &[f64], y: &[f64]) -> Option<String> {
+    let d = kappa
+        .iter()
+        .zip(u)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if d.is_finite() {
+        run.divergence.push(d);
+        run.max_input_divergence = run.max_input_divergence.max(d);
+        None
+    } else {
+        Some(format!(
+            "the network's output {u:?} at x = {y:?} is not finite"
+        ))
+    }
+}
+
 /// Simulates `ctrl` from `x0`. `law` is used for the MPC and for the input divergence.
 pub fn simulate(
     cfg: &ProblemConfig,
@@ -404,59 +471,18 @@ pub fn simulate(
             .collect();
         let mut net_reason = None;
         let mut u = match ctrl {
-            Controller::Mpc => {
-                let (l, sol, soft) = law.solve_along(&y, warm.as_ref(), warm_soft.as_ref());
-                warm_soft = soft.or(warm_soft);
-                if l.status == crate::mpc::sqp::SqpStatus::Soft {
-                    run.mpc_soft_steps += 1;
-                }
-                if l.status.is_labelled() {
-                    warm = sol.or(warm);
-                    l.u
-                } else {
+            Controller::Mpc => match reference(law, &y, (&mut warm, &mut warm_soft), &mut run) {
+                Some(u) => u,
+                None => {
                     run.mpc_failures += 1;
                     last_u.clone()
                 }
-            }
+            },
             Controller::Net(m, eps, clamp) => {
-                let mut u = m.predict(&y);
-                if u.iter()
-                    .zip(ulo.iter().zip(uhi))
-                    .any(|(v, (l, h))| !(*v >= l - eps && *v <= h + eps))
-                {
-                    run.left_band = true;
-                }
-                if let Some((lo, hi)) = clamp {
-                    for ((v, l), h) in u.iter_mut().zip(*lo).zip(*hi) {
-                        if v.is_finite() {
-                            *v = v.clamp(*l, *h);
-                        }
-                    }
-                }
-                let (l, sol, soft) = law.solve_along(&y, warm.as_ref(), warm_soft.as_ref());
-                warm_soft = soft.or(warm_soft);
-                if l.status == crate::mpc::sqp::SqpStatus::Soft {
-                    run.mpc_soft_steps += 1;
-                }
-                if l.status.is_labelled() {
-                    warm = sol.or(warm);
-                    let d =
-                        l.u.iter()
-                            .zip(&u)
-                            .map(|(a, b)| (a - b).powi(2))
-                            .sum::<f64>()
-                            .sqrt();
-                    if d.is_finite() {
-                        run.divergence.push(d);
-                        run.max_input_divergence = run.max_input_divergence.max(d);
-                    } else {
-                        // A non-finite output (diverged net) ends the run.
-                        net_reason = Some(format!(
-                            "the network's output {u:?} at x = {y:?} is not finite"
-                        ));
-                    }
-                } else {
-                    run.mpc_failures += 1;
+                let u = net_output(m, *eps, *clamp, &y, (ulo, uhi), &mut run);
+                match reference(law, &y, (&mut warm, &mut warm_soft), &mut run) {
+                    Some(k) => net_reason = record_divergence(&mut run, &k, &u, &y),
+                    None => run.mpc_failures += 1,
                 }
                 u
             }

@@ -63,6 +63,12 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         .and_then(|s| s.split('[').nth(1))
         .map(|s| format!(" {}", s.trim_end_matches(']')))
         .unwrap_or_default();
+    // A scaled norm's ε is a number without unit (its physical bounds are in the note).
+    let unit = if c.norm().is_unit() {
+        unit
+    } else {
+        String::new()
+    };
     // Against U in physical units (ε itself for the unscaled norm).
     let (ratio, word) = judge(c.eps_physical(), &c.u_lo, &c.u_hi);
     let range = boxed(&c.u_lo, &c.u_hi);
