@@ -63,6 +63,16 @@ pub(super) fn execute(
             out.display(),
             dataset::csv_path(out).display()
         );
+        // Where `solver.starts` reached different local optima (the label: the lowest
+        // cost, ties to the warm start — continuation from the previous state).
+        if !d.disagree.is_empty() {
+            eprintln!(
+                "{} states where the starts disagree (different local optima; labelled by the \
+                 lowest cost, ties to the warm start): first {:?}",
+                d.disagree.len(),
+                &d.disagree[..d.disagree.len().min(8)]
+            );
+        }
         // Why the first numerical failure has no label (re-solved once: the record does
         // not store it).
         if let Some((index, x, failure)) = d.first_failure(&cfg) {

@@ -36,10 +36,14 @@ pub(super) fn execute(config: Option<&Path>, states: &Path, out: &Path) -> Resul
     let cfg = load_config(config)?;
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let xs = read_states(states, nx, Some(&cfg))?;
-    // Each state is solved from a cold start: the answer does not depend on the order.
+    // Each state is solved from a cold start (and the other `solver.starts`): the answer
+    // does not depend on the order.
     let labels: Vec<_> = xs
         .par_iter()
-        .map_init(|| MpcLaw::new(&cfg), |law, x| law.solve(x, None).0)
+        .map_init(
+            || MpcLaw::new(&cfg),
+            |law, x| law.solve_starts(x, None, None).0,
+        )
         .collect();
     let mut head = jacobian_header(nx, nu);
     head.extend(["cost", "status", "iterations"].map(String::from));

@@ -56,6 +56,11 @@ impl Sampler {
         }
     }
 
+    /// The domain's widths hi − lo per coordinate (the scale of distances between states).
+    pub fn widths(&self) -> Vec<f64> {
+        self.hi.iter().zip(&self.lo).map(|(h, l)| h - l).collect()
+    }
+
     /// Whether there are no states.
     pub fn is_empty(&self) -> bool {
         self.len() == 0

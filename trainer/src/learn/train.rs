@@ -394,6 +394,7 @@ mod tests {
             },
             records: recs,
             labels: None,
+            disagree: Vec::new(),
         };
         let set = TrainSet::from_dataset(&d);
         let val = label_random_states(&cfg, 40, 1);

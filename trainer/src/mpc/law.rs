@@ -22,6 +22,8 @@
 //! The ladder runs only where the plain solve found no label, so every state labelled without
 //! it keeps its label bit for bit.
 
+pub mod starts;
+
 use crate::mpc::finite::{check_label, nan_max, Failure, LabelParts, Quantity};
 use crate::mpc::sensitivity::{sensitivity, Degeneracy};
 use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
@@ -87,6 +89,9 @@ pub struct Label {
     pub active: Vec<usize>,
     /// The retry that labelled the state (`None`: the plain solve did, or no label).
     pub retry: Option<Retry>,
+    /// Distinct hard optima the starts reached ([`starts`]; 0 when none was set, e.g. a
+    /// single start): 2 or more means the starts disagree.
+    pub optima: u32,
 }
 
 impl Label {
@@ -107,6 +112,10 @@ pub struct MpcLaw {
     soft_warm: Option<PrimalDual>,
     /// The soft optimum that labelled the state of the current call, if any.
     soft_solution: Option<PrimalDual>,
+    /// The initial guesses of a label ([`starts`]).
+    starts: Vec<crate::problem::solver::Start>,
+    /// The LQR gains of the `lqr` start (computed on first use; inner `None`: none exist).
+    lqr: Option<Option<Vec<nalgebra::DMatrix<f64>>>>,
 }
 
 impl MpcLaw {
@@ -119,12 +128,21 @@ impl MpcLaw {
     /// assert!(label.u[0].abs() < 1e-9);
     /// ```
     pub fn new(cfg: &ProblemConfig) -> Self {
+        let hard = SqpSolver::new(cfg, false);
+        let convex = cfg.system.is_affine() && !hard.ocp.has_nonlinear_rows();
+        let starts = match &cfg.solver.starts {
+            _ if convex => vec![crate::problem::solver::Start::Warm],
+            Some(s) => s.clone(),
+            None => crate::problem::solver::default_starts(false),
+        };
         MpcLaw {
             cfg: cfg.clone(),
-            hard: SqpSolver::new(cfg, false),
+            hard,
             soft: None,
             soft_warm: None,
             soft_solution: None,
+            starts,
+            lqr: None,
         }
     }
 
@@ -171,6 +189,7 @@ impl MpcLaw {
                 .fold(0.0, |m, v| nan_max(m, *v)),
             active: sens.active,
             retry: None,
+            optima: 0,
         }
     }
 
@@ -200,13 +219,28 @@ impl MpcLaw {
             max_slack: f64::NAN,
             active: Vec::new(),
             retry: None,
+            optima: 0,
         }
     }
 
-    /// Solves OCP(xs). `warm` is a neighbour's hard solution (same problem). Returns the
-    /// label and, for converged hard solves, the solution (to warm-start neighbours).
-    /// States the plain solve leaves without a label climb the retry ladder (module doc).
+    /// The MPC law at `xs`: OCP(xs) solved from every start of [`starts`](Self::starts), the
+    /// lowest-cost hard optimum kept ([`starts`] module; [`solve_single`](Self::solve_single)
+    /// alone for a convex OCP or `starts = ["warm"]`). `warm` is a neighbour's hard solution
+    /// (same problem). Returns the label and, for converged hard solves, the solution (to
+    /// warm-start neighbours).
     pub fn solve(&mut self, xs: &[f64], warm: Option<&PrimalDual>) -> (Label, Option<PrimalDual>) {
+        self.solve_starts(xs, warm, None)
+    }
+
+    /// Solves OCP(xs) from one start, the `warm` one: `warm` is a neighbour's hard solution
+    /// (same problem), else the cold guess. Returns the label and, for converged hard solves,
+    /// the solution (to warm-start neighbours). States the plain solve leaves without a label
+    /// climb the retry ladder (module doc).
+    pub fn solve_single(
+        &mut self,
+        xs: &[f64],
+        warm: Option<&PrimalDual>,
+    ) -> (Label, Option<PrimalDual>) {
         let (label, sol) = self.solve_plain(xs, warm);
         if !matches!(
             label.status,
@@ -662,7 +696,7 @@ mod tests {
                 .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(41, i, k as u64))
                 .collect();
             let (a, pa) = law.solve_plain(&xs, None);
-            let (b, pb) = law.solve(&xs, None);
+            let (b, pb) = law.solve_single(&xs, None);
             if a.status.is_labelled() {
                 assert_eq!(a, b, "{xs:?}");
                 assert_eq!(pa, pb, "{xs:?}");

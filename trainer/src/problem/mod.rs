@@ -34,7 +34,7 @@ pub use ocp::{MatrixSpec, OcpSettings, StageBounds};
 pub use refine::{CheckSettings, RefineSettings};
 pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
-pub use solver::{QpSolverKind, SolverSettings};
+pub use solver::{default_starts, QpSolverKind, SolverSettings, Start};
 pub use study::{ClosedLoopSettings, Mismatch, MismatchScenario, PlotSettings};
 pub use training::{Activation, Precision, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;

@@ -1,5 +1,5 @@
-//! `[solver]`: the SQP's tolerances, iteration limit, soft-constraint fallback and QP
-//! backend.
+//! `[solver]`: the SQP's tolerances, iteration limit, soft-constraint fallback, QP
+//! backend and the initial guesses a label is solved from (`starts`).
 
 use serde::{Deserialize, Serialize};
 
@@ -24,6 +24,63 @@ pub struct SolverSettings {
     /// QP subproblem solver: `"structured"` (default; interior point on the banded OCP
     /// structure, cost linear in N, clarabel as fallback) or `"clarabel"` (reference).
     pub qp: QpSolverKind,
+    /// Initial guesses of the hard problem, the lowest-cost hard optimum kept
+    /// (`crate::mpc::law` `starts` module). `None` (key absent): the default of the
+    /// problem, [`default_starts`] — `["warm"]` for a convex OCP, more for a non-convex one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub starts: Option<Vec<Start>>,
+}
+
+/// One initial guess of the hard problem (`solver.starts`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// Today's solve: from the previous state's solution in the chunk (when
+    /// `solver.warm_start`), else cold (the setpoint input rolled out), retried cold, soft
+    /// fallback and retry ladder.
+    Warm,
+    /// Inputs u_ref (clamped to the bounds), states x_ref: the setpoint everywhere.
+    Zero,
+    /// Inputs u_ref (clamped), every state x₀ (IPOPT's usual guess).
+    #[serde(rename = "repeat_x0")]
+    RepeatX0,
+    /// The finite-horizon LQR of the linearisation at the setpoint (weights Q, R, terminal
+    /// P), rolled out from x₀ with clamped inputs.
+    Lqr,
+    /// The solution of the nearest already labelled state of the chunk.
+    Neighbour,
+    /// Every input at its lower bound, rolled out from x₀ (one bang-bang direction).
+    #[serde(rename = "u_lo")]
+    ULo,
+    /// Every input at its upper bound, rolled out from x₀ (the other direction).
+    #[serde(rename = "u_hi")]
+    UHi,
+}
+
+impl Start {
+    /// The name in problem files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Start::Warm => "warm",
+            Start::Zero => "zero",
+            Start::RepeatX0 => "repeat_x0",
+            Start::Lqr => "lqr",
+            Start::Neighbour => "neighbour",
+            Start::ULo => "u_lo",
+            Start::UHi => "u_hi",
+        }
+    }
+}
+
+/// The starts used when `solver.starts` is absent: `["warm"]` for a convex OCP (affine
+/// dynamics, no nonlinear constraint: one optimum, one start), and for a non-convex one
+/// `["warm", "repeat_x0", "lqr"]`.
+pub fn default_starts(convex: bool) -> Vec<Start> {
+    if convex {
+        vec![Start::Warm]
+    } else {
+        vec![Start::Warm, Start::RepeatX0, Start::Lqr]
+    }
 }
 
 impl Default for SolverSettings {
@@ -37,6 +94,7 @@ impl Default for SolverSettings {
             degeneracy_tol: 1e-7,
             warm_start: true,
             qp: QpSolverKind::default(),
+            starts: None,
         }
     }
 }

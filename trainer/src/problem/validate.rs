@@ -362,6 +362,19 @@ impl SolverSettings {
         if !(s.degeneracy_tol.is_finite() && s.degeneracy_tol > 0.0) {
             return Err(invalid("solver.degeneracy_tol", "must be finite and > 0"));
         }
+        if let Some(starts) = &s.starts {
+            if starts.is_empty() {
+                return Err(invalid("solver.starts", "must name at least one start"));
+            }
+            for (i, a) in starts.iter().enumerate() {
+                if starts[..i].contains(a) {
+                    return Err(invalid(
+                        "solver.starts",
+                        format!("names \"{}\" twice", a.as_str()),
+                    ));
+                }
+            }
+        }
         Ok(())
     }
 }

@@ -55,6 +55,7 @@ pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
         },
         records,
         labels: None,
+        disagree: Vec::new(),
     }
 }
 

@@ -5,7 +5,9 @@
 //! file    = frame(opening) frame(batch)*
 //! frame   = len: u64 LE ‖ seal(postcard(payload))        (seal: payload ‖ SHA-256)
 //! opening = (CHECKPOINT_MAGIC, CHECKPOINT_VERSION, Header)
-//! batch   = Vec<Record>                                   (the records of one batch of chunks)
+//! batch   = Vec<Record> ‖ Vec<u64>                        (the records of one batch of chunks,
+//!                                                          then the indices among them where the
+//!                                                          starts disagree; absent in older files)
 //! ```
 //! The first frame and the first batch are written together atomically (so the file exists
 //! only with work in it); every later batch is appended and synced. A reader keeps the frames
@@ -40,11 +42,40 @@ pub fn encode(header: &Header, records: &[Record]) -> Vec<u8> {
 
 /// Writes a new checkpoint holding `records` (atomically).
 pub fn create(path: &Path, header: &Header, records: &[Record]) -> Result<(), DatasetError> {
-    Ok(write_atomic(path, &encode(header, records))?)
+    create_with(path, header, records, &[])
+}
+
+/// [`create`] with the indices where the starts disagree.
+pub fn create_with(
+    path: &Path,
+    header: &Header,
+    records: &[Record],
+    disagree: &[u64],
+) -> Result<(), DatasetError> {
+    let mut out = frame(
+        postcard::to_allocvec(&(CHECKPOINT_MAGIC, CHECKPOINT_VERSION, header)).unwrap_or_default(),
+    );
+    out.extend(frame(batch(records, disagree)));
+    Ok(write_atomic(path, &out)?)
+}
+
+/// A batch frame's payload: the records, then the disagreeing indices when there are any
+/// (so a batch without is byte for byte the older format).
+fn batch(records: &[Record], disagree: &[u64]) -> Vec<u8> {
+    let mut p = postcard::to_allocvec(records).unwrap_or_default();
+    if !disagree.is_empty() {
+        p.extend(postcard::to_allocvec(disagree).unwrap_or_default());
+    }
+    p
 }
 
 /// Appends one batch of records to the checkpoint and syncs it.
 pub fn append(path: &Path, records: &[Record]) -> Result<(), DatasetError> {
+    append_with(path, records, &[])
+}
+
+/// [`append`] with the indices where the starts disagree.
+pub fn append_with(path: &Path, records: &[Record], disagree: &[u64]) -> Result<(), DatasetError> {
     let io = |source| DatasetError::Io {
         path: path.display().to_string(),
         source,
@@ -53,8 +84,7 @@ pub fn append(path: &Path, records: &[Record]) -> Result<(), DatasetError> {
         .append(true)
         .open(path)
         .map_err(io)?;
-    f.write_all(&frame(postcard::to_allocvec(records).unwrap_or_default()))
-        .map_err(io)?;
+    f.write_all(&frame(batch(records, disagree))).map_err(io)?;
     f.sync_data().map_err(io)
 }
 
@@ -62,20 +92,36 @@ pub fn append(path: &Path, records: &[Record]) -> Result<(), DatasetError> {
 /// damaged one; `None` if the opening frame itself is unreadable (not a checkpoint of this
 /// format).
 pub fn read(bytes: &[u8]) -> Option<(Header, Vec<Record>)> {
+    read_with(bytes).map(|(h, r, _)| (h, r))
+}
+
+/// [`read`] with the indices where the starts disagree.
+pub fn read_with(bytes: &[u8]) -> Option<(Header, Vec<Record>, Vec<u64>)> {
     let mut frames = Frames { rest: bytes };
     let (magic, version, header): ([u8; 8], u32, Header) =
         postcard::from_bytes(frames.next()?).ok()?;
     if magic != CHECKPOINT_MAGIC || version != CHECKPOINT_VERSION {
         return None;
     }
-    let mut records = Vec::new();
+    let (mut records, mut disagree) = (Vec::new(), Vec::new());
     for f in frames {
-        match postcard::from_bytes::<Vec<Record>>(f) {
-            Ok(batch) => records.extend(batch),
+        match postcard::take_from_bytes::<Vec<Record>>(f) {
+            Ok((batch, rest)) => {
+                let d = if rest.is_empty() {
+                    Vec::new()
+                } else {
+                    match postcard::from_bytes::<Vec<u64>>(rest) {
+                        Ok(d) => d,
+                        Err(_) => break,
+                    }
+                };
+                records.extend(batch);
+                disagree.extend(d);
+            }
             Err(_) => break,
         }
     }
-    Some((header, records))
+    Some((header, records, disagree))
 }
 
 /// Reads the checkpoint file at `path` (see [`read`]).

@@ -231,6 +231,7 @@ mod tests {
                 })
                 .collect(),
             labels: None,
+            disagree: Vec::new(),
         }
     }
 

@@ -12,7 +12,10 @@
 //! imported from another solver (`trainer import`) is version [`IMPORTED_FORMAT_VERSION`]:
 //! the same bytes followed by the postcard encoding of its
 //! [`ImportedLabels`], then the SHA-256 of it all; ampc's
-//! own datasets stay version 2, byte for byte, and both versions are read
+//! own datasets stay version 2, byte for byte, unless their starts disagreed somewhere
+//! (`solver.starts`, `crate::mpc::law::starts`): then version [`STARTS_FORMAT_VERSION`], the
+//! same bytes followed by the postcard encoding of the ascending indices where they did
+//! ([`Dataset::disagree`]); all versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
 //! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
@@ -42,6 +45,9 @@ pub const FORMAT_VERSION: u32 = 2;
 /// Format version of a dataset whose labels were imported: version 2 plus its
 /// [`ImportedLabels`] after the records.
 pub const IMPORTED_FORMAT_VERSION: u32 = 3;
+/// Format version of a dataset of ampc's solver with states where the starts disagree:
+/// version 2 plus the list of those indices ([`Dataset::disagree`]).
+pub const STARTS_FORMAT_VERSION: u32 = 4;
 /// Magic bytes at the start of a dataset file.
 pub const MAGIC: [u8; 8] = *b"AMPCDSET";
 /// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
@@ -206,6 +212,20 @@ pub struct Dataset {
     /// after the records in format version [`IMPORTED_FORMAT_VERSION`] only.
     #[serde(skip)]
     pub labels: Option<ImportedLabels>,
+    /// Ascending indices of the states where the starts reached different hard optima (cost
+    /// and u₀ apart, `crate::mpc::law::starts`); the label is the lowest-cost one. Stored
+    /// after the records in format version [`STARTS_FORMAT_VERSION`] only (non-empty).
+    #[serde(skip)]
+    pub disagree: Vec<u64>,
+}
+
+/// The format version of ampc's own dataset with these disagreeing indices.
+pub fn own_version(disagree: &[u64]) -> u32 {
+    if disagree.is_empty() {
+        FORMAT_VERSION
+    } else {
+        STARTS_FORMAT_VERSION
+    }
 }
 
 /// Counts by status, for reports.
@@ -268,7 +288,7 @@ impl Dataset {
             &MAGIC,
             "dataset",
             |d: &Dataset| match d.version {
-                IMPORTED_FORMAT_VERSION => FORMAT_VERSION,
+                IMPORTED_FORMAT_VERSION | STARTS_FORMAT_VERSION => FORMAT_VERSION,
                 v => v,
             },
             FORMAT_VERSION,
@@ -283,6 +303,16 @@ impl Dataset {
                     source,
                 })?;
             d.labels = Some(labels);
+        }
+        if d.version == STARTS_FORMAT_VERSION {
+            let body = crate::io::unseal(bytes).unwrap_or_default();
+            d.disagree = postcard::take_from_bytes::<Dataset>(body)
+                .and_then(|(_, rest)| postcard::from_bytes::<Vec<u64>>(rest))
+                .map_err(|source| DatasetError::Decode {
+                    path: origin.to_string(),
+                    part: "dataset without its list of disagreeing starts",
+                    source,
+                })?;
         }
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
         for (i, r) in d.records.iter().enumerate() {
@@ -308,6 +338,9 @@ impl Dataset {
         let mut body = postcard::to_allocvec(self).unwrap_or_default();
         if let Some(l) = &self.labels {
             body.extend(postcard::to_allocvec(l).unwrap_or_default());
+        }
+        if self.version == STARTS_FORMAT_VERSION {
+            body.extend(postcard::to_allocvec(&self.disagree).unwrap_or_default());
         }
         crate::io::seal(body)
     }
@@ -369,7 +402,8 @@ pub fn csv_path(out: &Path) -> PathBuf {
     out.with_extension("csv")
 }
 
-/// Labels one chunk of the plan: indices `[start, end)`, solved in order, warm-started.
+/// Labels one chunk of the plan: indices `[start, end)`, solved in order, warm-started
+/// (and from the other `solver.starts`).
 pub fn label_chunk(
     law: &mut MpcLaw,
     sampler: &Sampler,
@@ -377,17 +411,41 @@ pub fn label_chunk(
     end: usize,
     warm_start: bool,
 ) -> Vec<Record> {
+    label_chunk_with(law, sampler, start, end, warm_start).0
+}
+
+/// [`label_chunk`] with the indices where the starts disagree.
+pub fn label_chunk_with(
+    law: &mut MpcLaw,
+    sampler: &Sampler,
+    start: usize,
+    end: usize,
+    warm_start: bool,
+) -> (Vec<Record>, Vec<u64>) {
     let nx = law.hard_solver().ocp.nx;
     let mut x = vec![0.0; nx];
     let mut prev: Option<PrimalDual> = None;
     let mut out = Vec::with_capacity(end - start);
+    // The chunk's labelled states and solutions, for the `neighbour` start.
+    let keep = law.starts().contains(&crate::problem::Start::Neighbour);
+    let mut done: Vec<(Vec<f64>, PrimalDual)> = Vec::new();
+    let scale = sampler.widths();
+    let mut disagree = Vec::new();
     for i in start..end {
         sampler.point(i, &mut x);
-        let (label, sol) = law.solve(&x, if warm_start { prev.as_ref() } else { None });
+        let near = crate::mpc::law::starts::nearest(&done, &x, &scale);
+        let warm = if warm_start { prev.as_ref() } else { None };
+        let (label, sol) = law.solve_starts(&x, warm, near);
+        if let (true, Some(p)) = (keep, &sol) {
+            done.push((x.clone(), p.clone()));
+        }
         prev = sol.or(prev);
+        if label.optima > 1 {
+            disagree.push(i as u64);
+        }
         out.push(Record::from_label(i as u64, label));
     }
-    out
+    (out, disagree)
 }
 
 /// Options of a generation run.
@@ -430,12 +488,13 @@ pub fn generate(
     let special = crate::io::is_special(out);
     let partial = partial_path(out);
     let mut records: Vec<Record> = Vec::new();
+    let mut disagree: Vec<u64> = Vec::new();
     if let Some(bytes) = (!special).then(|| std::fs::read(&partial).ok()).flatten() {
         // A checkpoint of another plan or of another format: start afresh; a damaged tail
         // costs its batches only.
-        if let Some((h, r)) = checkpoint::read(&bytes) {
+        if let Some((h, r, d)) = checkpoint::read_with(&bytes) {
             if h == header {
-                records = r;
+                (records, disagree) = (r, d);
             }
         }
     }
@@ -466,38 +525,49 @@ pub fn generate(
     let warm = cfg.solver.warm_start;
     let batch = (rayon::current_num_threads() * 8).max(8);
     for group in todo.chunks(batch) {
-        let new: Vec<Vec<Record>> = group
+        let new: Vec<(Vec<Record>, Vec<u64>)> = group
             .par_iter()
             .map_init(
                 || MpcLaw::new(cfg),
                 |law, &c| {
-                    let r =
-                        label_chunk(law, &sampler, c * CHUNK, ((c + 1) * CHUNK).min(total), warm);
-                    bar.inc(r.len() as u64);
+                    let r = label_chunk_with(
+                        law,
+                        &sampler,
+                        c * CHUNK,
+                        ((c + 1) * CHUNK).min(total),
+                        warm,
+                    );
+                    bar.inc(r.0.len() as u64);
                     r
                 },
             )
             .collect();
-        let new: Vec<Record> = new.into_iter().flatten().collect();
+        let (new, new_d): (Vec<Vec<Record>>, Vec<Vec<u64>>) = new.into_iter().unzip();
+        let (new, new_d): (Vec<Record>, Vec<u64>) = (new.concat(), new_d.concat());
         if special {
             records.extend(new);
+            disagree.extend(new_d);
         } else if fresh {
             records.extend(new);
-            checkpoint::create(&partial, &header, &records)?;
+            disagree.extend(new_d);
+            checkpoint::create_with(&partial, &header, &records, &disagree)?;
             fresh = false;
         } else {
-            checkpoint::append(&partial, &new)?;
+            checkpoint::append_with(&partial, &new, &new_d)?;
             records.extend(new);
+            disagree.extend(new_d);
         }
     }
     bar.finish_and_clear();
     records.sort_by_key(|r| r.index);
+    disagree.sort_unstable();
     let d = Dataset {
         magic: MAGIC,
-        version: FORMAT_VERSION,
+        version: own_version(&disagree),
         header,
         records,
         labels: None,
+        disagree,
     };
     // The dataset and its CSV as one set: a failure leaves the previous pair.
     if special {
@@ -572,12 +642,15 @@ pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
             base.total
         )));
     }
+    let mut disagree: Vec<u64> = inputs.iter().flat_map(|d| d.disagree.clone()).collect();
+    disagree.sort_unstable();
     Ok(Dataset {
         magic: MAGIC,
-        version: FORMAT_VERSION,
+        version: own_version(&disagree),
         header: base,
         records,
         labels: None,
+        disagree,
     })
 }
 

@@ -112,6 +112,7 @@ proptest! {
                 status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0,
             }).collect(),
             labels: None,
+            disagree: Vec::new(),
         };
         let mut b = d.to_bytes();
         for (i, v) in flips { let n = b.len(); b[i % n] = v; }
@@ -335,4 +336,59 @@ fn checkpoint_throughput_is_flat() {
         t6 / t4
     );
     let _ = std::fs::remove_file(&p);
+}
+
+/// The indices where starts disagree: a dataset without any stays version 2 byte for byte;
+/// with some it is version 4 and reads back with them (also through a checkpoint and a
+/// shard merge), and an older version-2 file still reads (with none).
+#[test]
+fn disagreeing_starts_are_stored_and_read_back() {
+    let out = tmp("disagree");
+    let d = generate(&small_cfg(), &out, &GenerateOptions::default()).unwrap();
+    assert_eq!(d.version, FORMAT_VERSION);
+    assert!(d.disagree.is_empty());
+    let mut e = d.clone();
+    e.disagree = vec![3, 17];
+    e.version = own_version(&e.disagree);
+    assert_eq!(e.version, STARTS_FORMAT_VERSION);
+    let bytes = e.to_bytes();
+    let back = Dataset::from_bytes(&bytes, "e").unwrap();
+    assert_eq!(back, e);
+    assert_eq!(back.disagree, vec![3, 17]);
+    // The version-2 bytes are the same as before the field existed: read with none.
+    assert_eq!(
+        Dataset::from_bytes(&d.to_bytes(), "d").unwrap().disagree,
+        Vec::<u64>::new()
+    );
+    // A version-4 file cut after its records (no list) is an error naming it.
+    let body = crate::io::unseal(&bytes).unwrap();
+    let cut = postcard::take_from_bytes::<Dataset>(body).unwrap().1.len();
+    let short = crate::io::seal(body[..body.len() - cut].to_vec());
+    let err = Dataset::from_bytes(&short, "short.bin")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("short.bin"), "{err}");
+    // The checkpoint keeps the list per batch; a batch without one reads as before.
+    let (a, b) = e.records.split_at(20);
+    let p = tmp("disagree-ck");
+    checkpoint::create_with(&p, &e.header, a, &[3, 17]).unwrap();
+    checkpoint::append(&p, b).unwrap();
+    let (_, r, dis) = checkpoint::read_with(&std::fs::read(&p).unwrap()).unwrap();
+    assert_eq!((r, dis), (e.records.clone(), vec![3, 17]));
+    // Shards merge their lists.
+    let mut shards = Vec::new();
+    for k in 0..2 {
+        let opts = GenerateOptions {
+            shard: Some(Shard { index: k, count: 2 }),
+            progress: false,
+        };
+        let mut s = generate(&small_cfg(), &tmp(&format!("dis-shard{k}")), &opts).unwrap();
+        s.disagree = if k == 0 { vec![3] } else { vec![17] };
+        s.version = own_version(&s.disagree);
+        shards.push(s);
+    }
+    let m = merge(&shards).unwrap();
+    assert_eq!(m.disagree, vec![3, 17]);
+    assert_eq!(m.version, STARTS_FORMAT_VERSION);
+    assert_eq!(m.records, e.records);
 }

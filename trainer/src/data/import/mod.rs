@@ -250,6 +250,7 @@ pub fn import(
         },
         records: t.records,
         labels: Some(labels),
+        disagree: Vec::new(),
     })
 }
 

@@ -1,0 +1,387 @@
+//! Multi-start labels: the hard OCP at x_s solved from each initial guess of
+//! `solver.starts`, and the label of the lowest-cost hard optimum kept:
+//! ```text
+//! κ(x_s) = u₀ of z*_s*,   s* = the first s in starts with J(z*_s) < J(z*_t) − τ·max(1, |J(z*_t)|)
+//!                              for no earlier t        (τ = TIE_TOL; z*_s converged hard KKT points)
+//! ```
+//! The SQP is a local solver: on a non-convex OCP (nonlinear dynamics or nonlinear
+//! constraints) different guesses can end in different local optima, and the label should
+//! come from the best one found. A convex OCP (affine dynamics, no nonlinear constraint,
+//! positive definite weights) has one optimum, so it is solved from one start whatever
+//! `starts` lists ([`MpcLaw::starts`]).
+//!
+//! **Branch.** The list order breaks ties (costs within [`TIE_TOL`]): the default lists
+//! `warm` first, so among equal costs the label continues the branch of the nearest labelled
+//! neighbour (the previous state of the chunk) — a set-valued law resolved by continuation.
+//!
+//! **Disagreement.** Two hard optima are distinct when their costs differ by more than
+//! [`OPTIMA_TOL`]·max(1, |J|) and their u₀ by more than [`OPTIMA_TOL`]·max(1, |u₀|);
+//! [`Label::optima`] counts the distinct optima the starts reached (2 or more: the starts
+//! disagree). Only the `warm` start climbs the retry ladder and has the soft fallback; the
+//! other starts are one plain hard SQP solve each. If no start reaches a hard optimum the
+//! label is that of `warm` ([`MpcLaw::solve_single`], today's solve; run even when not
+//! listed). [`MpcLaw::solve`] is this law (without the `neighbour` start, which needs the
+//! labelled states of a chunk).
+
+use super::{Label, MpcLaw};
+use crate::mpc::sqp::{PrimalDual, SqpStatus};
+use crate::problem::solver::Start;
+use nalgebra::DMatrix;
+
+/// Relative cost difference below which two starts tie (the earlier one is kept).
+pub const TIE_TOL: f64 = 1e-9;
+/// Relative cost and u₀ difference above which two hard optima are distinct.
+pub const OPTIMA_TOL: f64 = 1e-6;
+
+/// The solution of the state of `done` nearest to `xs` in the distance scaled by `scale`
+/// (per coordinate; the domain's widths), the earliest on ties.
+pub fn nearest<'a>(
+    done: &'a [(Vec<f64>, PrimalDual)],
+    xs: &[f64],
+    scale: &[f64],
+) -> Option<&'a PrimalDual> {
+    let d = |x: &[f64]| -> f64 {
+        x.iter()
+            .zip(xs)
+            .zip(scale)
+            .map(|((a, b), s)| {
+                let s = if s.is_finite() && *s > 0.0 { *s } else { 1.0 };
+                ((a - b) / s).powi(2)
+            })
+            .sum()
+    };
+    let mut best: Option<(f64, &PrimalDual)> = None;
+    for (x, p) in done {
+        let v = d(x);
+        if best.is_none_or(|(b, _)| v < b) {
+            best = Some((v, p));
+        }
+    }
+    best.map(|(_, p)| p)
+}
+
+/// Whether two hard optima (cost, u₀) are distinct ([`OPTIMA_TOL`]).
+fn distinct(a: (f64, &[f64]), b: (f64, &[f64])) -> bool {
+    let dc = (a.0 - b.0).abs() > OPTIMA_TOL * a.0.abs().max(b.0.abs()).max(1.0);
+    let du =
+        a.1.iter()
+            .zip(b.1)
+            .any(|(x, y)| (x - y).abs() > OPTIMA_TOL * x.abs().max(y.abs()).max(1.0));
+    dc && du
+}
+
+impl MpcLaw {
+    /// The starts this law solves from: `solver.starts` (or the problem's default,
+    /// [`crate::problem::solver::default_starts`]) for a non-convex OCP, `["warm"]` for a
+    /// convex one.
+    pub fn starts(&self) -> &[Start] {
+        &self.starts
+    }
+
+    /// Whether the hard OCP is convex: affine dynamics and no nonlinear constraint rows
+    /// (the quadratic cost's weights are positive (semi)definite by validation).
+    pub fn is_convex(&self) -> bool {
+        self.cfg.system.is_affine() && !self.hard.ocp.has_nonlinear_rows()
+    }
+
+    /// The label of `xs` from every start (module doc). `warm` is the previous state's hard
+    /// solution (the `warm` start, as in [`solve_single`](Self::solve_single)), `near` the nearest labelled
+    /// state's (the `neighbour` start; skipped when absent). Returns the label and its hard
+    /// solution (to warm-start the next state).
+    pub fn solve_starts(
+        &mut self,
+        xs: &[f64],
+        warm: Option<&PrimalDual>,
+        near: Option<&PrimalDual>,
+    ) -> (Label, Option<PrimalDual>) {
+        if self.starts.len() <= 1 && self.starts.first().is_none_or(|s| *s == Start::Warm) {
+            return self.solve_single(xs, warm);
+        }
+        let nx = self.hard.ocp.nx;
+        let valid = xs.len() == nx && xs.iter().all(|v| v.is_finite());
+        let mut best: Option<(Label, Option<PrimalDual>)> = None;
+        let mut fallback: Option<(Label, Option<PrimalDual>)> = None;
+        let mut optima: Vec<(f64, Vec<f64>)> = Vec::new();
+        let mut spent = 0;
+        for s in self.starts.clone() {
+            let (l, p) = if s == Start::Warm {
+                self.solve_single(xs, warm)
+            } else {
+                let Some(guess) = valid.then(|| self.guess(s, xs, near)).flatten() else {
+                    continue;
+                };
+                let r = self.hard.solve(xs, guess);
+                spent += r.info.iterations;
+                if r.status != SqpStatus::Converged {
+                    continue;
+                }
+                self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged)
+            };
+            if s == Start::Warm {
+                spent += l.info.iterations;
+            }
+            if l.status != SqpStatus::Converged {
+                if s == Start::Warm {
+                    fallback = Some((l, p));
+                }
+                continue;
+            }
+            if optima
+                .iter()
+                .all(|(c, u)| distinct((*c, u), (l.cost, &l.u)))
+            {
+                optima.push((l.cost, l.u.clone()));
+            }
+            let better = best
+                .as_ref()
+                .is_none_or(|(b, _)| l.cost < b.cost - TIE_TOL * b.cost.abs().max(1.0));
+            if better {
+                best = Some((l, p));
+            }
+        }
+        let (mut l, p) = match (best, fallback) {
+            (Some(b), _) => b,
+            (None, Some(f)) => f,
+            (None, None) => {
+                let (l, p) = self.solve_single(xs, warm);
+                spent += l.info.iterations;
+                (l, p)
+            }
+        };
+        l.optima = optima.len() as u32;
+        l.info.iterations = spent;
+        (l, p)
+    }
+
+    /// The initial guess of start `s` at `xs` (`None`: the start does not apply, e.g. no
+    /// neighbour yet, or no LQR gain).
+    fn guess(&mut self, s: Start, xs: &[f64], near: Option<&PrimalDual>) -> Option<PrimalDual> {
+        let ocp = &self.hard.ocp;
+        let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+        let u_set: Vec<f64> = (0..nu)
+            .map(|j| ocp.u_ref[j].clamp(self.cfg.ocp.u_lo[j], self.cfg.ocp.u_hi[j]))
+            .collect();
+        let mut z = vec![0.0; ocp.n_var];
+        match s {
+            Start::Warm => return None,
+            Start::Neighbour => {
+                let mut p = near?.clone();
+                p.z[..nx].copy_from_slice(xs);
+                return Some(p);
+            }
+            Start::Zero | Start::RepeatX0 => {
+                for k in 0..=n {
+                    let x = if k == 0 || s == Start::RepeatX0 {
+                        xs
+                    } else {
+                        &ocp.x_ref[..]
+                    };
+                    z[ocp.ix(k)..ocp.ix(k) + nx].copy_from_slice(x);
+                    if k < n {
+                        z[ocp.iu(k)..ocp.iu(k) + nu].copy_from_slice(&u_set);
+                    }
+                }
+            }
+            Start::ULo | Start::UHi => {
+                let u: Vec<f64> = match s {
+                    Start::ULo => self.cfg.ocp.u_lo.clone(),
+                    _ => self.cfg.ocp.u_hi.clone(),
+                };
+                if u.iter().any(|v| !v.is_finite()) {
+                    return None;
+                }
+                self.rollout(xs, &mut z, |_, _, out| out.copy_from_slice(&u));
+            }
+            Start::Lqr => {
+                if self.lqr.is_none() {
+                    self.lqr = Some(self.lqr_gains());
+                }
+                let gains = self.lqr.clone().flatten()?;
+                let (xr, ur) = (ocp.x_ref.clone(), ocp.u_ref.clone());
+                self.rollout(xs, &mut z, |k, x, u| {
+                    for (j, uj) in u.iter_mut().enumerate() {
+                        *uj = ur[j];
+                        for (i, (xi, ri)) in x.iter().zip(&xr).enumerate() {
+                            *uj -= gains[k][(j, i)] * (xi - ri);
+                        }
+                    }
+                });
+            }
+        }
+        Some(PrimalDual {
+            z,
+            lam: vec![0.0; self.hard.ocp.n_eq],
+            nu: vec![0.0; self.hard.ocp.rows.len()],
+        })
+    }
+
+    /// Fills `z` with the rollout from `xs` of the input `law(k, x_k, u_k)`, clamped to the
+    /// input bounds (states clamped to the state bounds, a non-finite step keeps x_k).
+    fn rollout(&self, xs: &[f64], z: &mut [f64], law: impl Fn(usize, &[f64], &mut [f64])) {
+        let ocp = &self.hard.ocp;
+        let (nx, nu) = (ocp.nx, ocp.nu);
+        let (mut x, mut xn, mut u) = (xs.to_vec(), vec![0.0; nx], vec![0.0; nu]);
+        z[..nx].copy_from_slice(xs);
+        for k in 0..ocp.horizon {
+            law(k, &x, &mut u);
+            let iu = ocp.iu(k);
+            for j in 0..nu {
+                let v = if u[j].is_finite() { u[j] } else { 0.0 };
+                z[iu + j] = v.clamp(self.cfg.ocp.u_lo[j], self.cfg.ocp.u_hi[j]);
+            }
+            ocp.model.step(&x, &z[iu..iu + nu], &mut xn);
+            let ix = ocp.ix(k + 1);
+            for i in 0..nx {
+                let v = if xn[i].is_finite() { xn[i] } else { x[i] };
+                x[i] = v.clamp(self.cfg.ocp.x_lo[i], self.cfg.ocp.x_hi[i]);
+                z[ix + i] = x[i];
+            }
+        }
+    }
+
+    /// The finite-horizon LQR gains K_0..K_{N−1} of the linearisation (A, B) at the setpoint:
+    /// P_N = P, K_k = (R + BᵀP_{k+1}B)⁻¹BᵀP_{k+1}A, P_k = Q + AᵀP_{k+1}(A − BK_k).
+    /// `None` if the linearisation is not finite or R + BᵀPB is singular.
+    fn lqr_gains(&self) -> Option<Vec<DMatrix<f64>>> {
+        let ocp = &self.hard.ocp;
+        let (nx, nu) = (ocp.nx, ocp.nu);
+        let (mut f, mut jx, mut ju) = (vec![0.0; nx], vec![0.0; nx * nx], vec![0.0; nx * nu]);
+        ocp.model
+            .linearize(&ocp.x_ref, &ocp.u_ref, &mut f, &mut jx, &mut ju);
+        if jx.iter().chain(&ju).any(|v| !v.is_finite()) {
+            return None;
+        }
+        let a = DMatrix::from_row_slice(nx, nx, &jx);
+        let b = DMatrix::from_row_slice(nx, nu, &ju);
+        let (q, r) = (self.cfg.q(), self.cfg.r());
+        let mut p = self.cfg.p();
+        let mut gains = vec![DMatrix::zeros(nu, nx); ocp.horizon];
+        for k in (0..ocp.horizon).rev() {
+            let bp = b.transpose() * &p;
+            let k_gain = (&r + &bp * &b).try_inverse()? * (&bp * &a);
+            p = &q + a.transpose() * &p * (&a - &b * &k_gain);
+            p = (&p + p.transpose()) * 0.5;
+            if k_gain.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            gains[k] = k_gain;
+        }
+        Some(gains)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::problem::ProblemConfig;
+
+    fn swingup() -> ProblemConfig {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/reference/cartpole_swingup.toml"
+        );
+        ProblemConfig::load(std::path::Path::new(path)).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// States of the acados cart-pole swing-up (`tests/reference/cartpole_swingup.toml`;
+    /// `ipopt_compare.py --n 60 --seed 7`, states 6 and 29) where the single (cold) start
+    /// ends in a local optimum of much higher cost than IPOPT's (tol 1e-10, started from
+    /// u = 0 and x₀ repeated; the costs below), and the default starts reach IPOPT's
+    /// optimum: the label's cost is ≤ IPOPT's (1e-7 relative), the starts disagree, and the
+    /// label is a converged hard KKT point with a finite sensitivity.
+    #[test]
+    fn starts_reach_ipopts_optimum_where_one_start_does_not() {
+        let cfg = swingup();
+        let cases = [
+            (
+                [
+                    -0.9286394424528077,
+                    0.09354921677031136,
+                    -0.1351758986988436,
+                    3.337342185542818,
+                ],
+                1774.41348658631,
+            ),
+            (
+                [
+                    0.6210536606344903,
+                    -2.2822787743870934,
+                    -0.3243853963472594,
+                    2.522050223960365,
+                ],
+                1020.3917968530036,
+            ),
+        ];
+        let mut law = MpcLaw::new(&cfg);
+        assert!(!law.is_convex());
+        assert!(law.starts().len() > 1, "{:?}", law.starts());
+        for (x, ipopt) in cases {
+            let (single, _) = law.solve_single(&x, None);
+            let (l, sol) = law.solve(&x, None);
+            eprintln!(
+                "{x:?}: single {} starts {} IPOPT {ipopt}",
+                single.cost, l.cost
+            );
+            assert_eq!(single.status, SqpStatus::Converged);
+            assert!(single.cost > 1.5 * ipopt, "single start {}", single.cost);
+            assert_eq!(l.status, SqpStatus::Converged);
+            assert!(
+                l.cost <= ipopt * (1.0 + 1e-7),
+                "{} vs IPOPT {ipopt}",
+                l.cost
+            );
+            assert!(l.optima >= 2, "{}", l.optima);
+            let sol = sol.expect("a hard label returns its point");
+            let res = law.hard_solver().kkt_residual(&x, &sol);
+            assert!(res.max() <= cfg.solver.tol, "{res:?}");
+            assert!(l.du_dx.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    /// A convex OCP (the double integrator: affine plant, box constraints) is solved from one
+    /// start whatever `solver.starts` lists, bit for bit today's label; a non-convex one
+    /// honours the list, and `["warm"]` alone is today's solve.
+    #[test]
+    fn convex_problems_use_one_start_and_warm_alone_is_todays_solve() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
+        );
+        let mut cfg = ProblemConfig::load(std::path::Path::new(path)).unwrap();
+        cfg.solver.starts = Some(vec![Start::Warm, Start::Zero, Start::Lqr]);
+        let mut law = MpcLaw::new(&cfg);
+        assert!(law.is_convex());
+        assert_eq!(law.starts(), &[Start::Warm]);
+        let x = [0.7, -0.3];
+        assert_eq!(law.solve(&x, None), law.solve_single(&x, None));
+        let mut cfg = swingup();
+        cfg.solver.starts = Some(vec![Start::Warm]);
+        let mut law = MpcLaw::new(&cfg);
+        let x = [0.1, 2.0, 0.0, 0.0];
+        let (a, pa) = law.solve(&x, None);
+        let (b, pb) = law.solve_single(&x, None);
+        assert_eq!((a, pa), (b, pb));
+    }
+
+    /// `solver.starts` is validated: empty or repeated lists are errors naming the key.
+    #[test]
+    fn bad_start_lists_are_refused() {
+        let text = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/reference/cartpole_swingup.toml"
+        ))
+        .unwrap();
+        for (list, why) in [("[]", "at least one"), ("[\"zero\", \"zero\"]", "twice")] {
+            let t = text.replace(
+                "[sampling]",
+                &format!("[solver]\nstarts = {list}\n\n[sampling]"),
+            );
+            let e = ProblemConfig::from_toml_str(&t, "p.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("solver.starts") && e.contains(why), "{e}");
+        }
+        let t = text.replace("[sampling]", "[solver]\nstarts = [\"best\"]\n\n[sampling]");
+        assert!(ProblemConfig::from_toml_str(&t, "p.toml").is_err());
+    }
+}
