@@ -74,12 +74,14 @@ impl Start {
 
 /// The starts used when `solver.starts` is absent: `["warm"]` for a convex OCP (affine
 /// dynamics, no nonlinear constraint: one optimum, one start), and for a non-convex one
-/// `["warm", "repeat_x0", "lqr"]`.
+/// `["warm", "u_lo", "u_hi"]` — the two bang-bang rollouts reach the other swing direction
+/// of swing-up problems (BENCHMARKS.md, "Multi-start labels": the best of the 3-start lists
+/// measured, at about 1.5× the pendulum's labelling time).
 pub fn default_starts(convex: bool) -> Vec<Start> {
     if convex {
         vec![Start::Warm]
     } else {
-        vec![Start::Warm, Start::RepeatX0, Start::Lqr]
+        vec![Start::Warm, Start::ULo, Start::UHi]
     }
 }
 
