@@ -465,41 +465,6 @@ impl MpcLaw {
         Some((l, None, Retry::Soft))
     }
 
-    /// The hard problem at `xs` warm-started from the solution of the hard problem at a
-    /// neighbour `near` (solved here first), with the default then the conservative
-    /// globalisation: the retry for a state that stayed unlabelled after [`solve`](Self::solve)
-    /// once a neighbour has a label. `None` if either solve fails.
-    pub fn solve_from_neighbour(&mut self, xs: &[f64], near: &[f64]) -> Option<Label> {
-        let nx = self.hard.ocp.nx;
-        if xs.len() != nx || near.len() != nx || xs.iter().chain(near).any(|v| !v.is_finite()) {
-            return None;
-        }
-        let n = self.hard.solve(near, self.hard.cold_start(near));
-        if n.status != SqpStatus::Converged {
-            return None;
-        }
-        let mut spent = n.info.iterations;
-        for g in [Globalisation::Default, Globalisation::Conservative] {
-            let mut start = n.point.clone();
-            start.z[..nx].copy_from_slice(xs);
-            self.hard.set_globalisation(g);
-            let r = self.hard.solve(xs, start);
-            self.hard.set_globalisation(Globalisation::Default);
-            spent += r.info.iterations;
-            if r.status == SqpStatus::Converged {
-                let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
-                if !l.status.is_labelled() {
-                    // The gate refused the numbers (crate::mpc::finite).
-                    return None;
-                }
-                l.info.iterations = spent;
-                l.retry = Some(Retry::Neighbour);
-                return Some(l);
-            }
-        }
-        None
-    }
-
     /// The hard problem at x_c + θ(x_s − x_c), θ = 0 → 1, each solve warm-started from the
     /// last solved θ. Returns the solve at θ = 1, or `None` if a step below
     /// [`MIN_THETA_STEP`] fails or the solves run out.

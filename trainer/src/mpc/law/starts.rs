@@ -23,8 +23,8 @@
 //! listed). [`MpcLaw::solve`] is this law (without the `neighbour` start, which needs the
 //! labelled states of a chunk).
 
-use super::{Label, MpcLaw};
-use crate::mpc::sqp::{PrimalDual, SqpStatus};
+use super::{Label, MpcLaw, Retry};
+use crate::mpc::sqp::{Globalisation, PrimalDual, SqpStatus};
 use crate::problem::solver::Start;
 use nalgebra::DMatrix;
 
@@ -153,6 +153,41 @@ impl MpcLaw {
         l.optima = optima.len() as u32;
         l.info.iterations = spent;
         (l, p)
+    }
+
+    /// The hard problem at `xs` warm-started from the solution of the hard problem at a
+    /// neighbour `near` (solved here first), with the default then the conservative
+    /// globalisation: the retry for a state that stayed unlabelled after [`solve`](Self::solve)
+    /// once a neighbour has a label. `None` if either solve fails.
+    pub fn solve_from_neighbour(&mut self, xs: &[f64], near: &[f64]) -> Option<Label> {
+        let nx = self.hard.ocp.nx;
+        if xs.len() != nx || near.len() != nx || xs.iter().chain(near).any(|v| !v.is_finite()) {
+            return None;
+        }
+        let n = self.hard.solve(near, self.hard.cold_start(near));
+        if n.status != SqpStatus::Converged {
+            return None;
+        }
+        let mut spent = n.info.iterations;
+        for g in [Globalisation::Default, Globalisation::Conservative] {
+            let mut start = n.point.clone();
+            start.z[..nx].copy_from_slice(xs);
+            self.hard.set_globalisation(g);
+            let r = self.hard.solve(xs, start);
+            self.hard.set_globalisation(Globalisation::Default);
+            spent += r.info.iterations;
+            if r.status == SqpStatus::Converged {
+                let mut l = self.finish(&self.hard, xs, &r, SqpStatus::Converged);
+                if !l.status.is_labelled() {
+                    // The gate refused the numbers (crate::mpc::finite).
+                    return None;
+                }
+                l.info.iterations = spent;
+                l.retry = Some(Retry::Neighbour);
+                return Some(l);
+            }
+        }
+        None
     }
 
     /// The initial guess of start `s` at `xs` (`None`: the start does not apply, e.g. no
