@@ -104,7 +104,6 @@ impl MpcLaw {
         let mut best: Option<(Label, Option<PrimalDual>)> = None;
         let mut fallback: Option<(Label, Option<PrimalDual>)> = None;
         let mut optima: Vec<(f64, Vec<f64>)> = Vec::new();
-        let mut spent = 0;
         for s in self.starts.clone() {
             let (l, p) = if s == Start::Warm {
                 self.solve_single(xs, warm)
@@ -113,15 +112,11 @@ impl MpcLaw {
                     continue;
                 };
                 let r = self.hard.solve(xs, guess);
-                spent += r.info.iterations;
                 if r.status != SqpStatus::Converged {
                     continue;
                 }
                 self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged)
             };
-            if s == Start::Warm {
-                spent += l.info.iterations;
-            }
             if l.status != SqpStatus::Converged {
                 if s == Start::Warm {
                     fallback = Some((l, p));
@@ -144,14 +139,10 @@ impl MpcLaw {
         let (mut l, p) = match (best, fallback) {
             (Some(b), _) => b,
             (None, Some(f)) => f,
-            (None, None) => {
-                let (l, p) = self.solve_single(xs, warm);
-                spent += l.info.iterations;
-                (l, p)
-            }
+            (None, None) => self.solve_single(xs, warm),
         };
+        // (`info.iterations` stays that of the solve that produced the label.)
         l.optima = optima.len() as u32;
-        l.info.iterations = spent;
         (l, p)
     }
 
