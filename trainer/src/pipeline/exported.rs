@@ -45,11 +45,13 @@ pub(super) struct Exported {
 }
 
 /// Chooses the exported controller of the run `d` (module doc).
-pub(super) fn choose(stage: Stage, (d, cfg): (&RunDir, &ProblemConfig)) -> Result<Exported, PipelineError> {
+pub(super) fn choose(
+    stage: Stage,
+    (d, cfg): (&RunDir, &ProblemConfig),
+) -> Result<Exported, PipelineError> {
     let reg = tiers::read_candidate(stage, (d, cfg), tiers::Net::Regularized, None)?;
     let nom = tiers::read_candidate(stage, (d, cfg), tiers::Net::Nominal, None)?;
-    let (net, net_reason) =
-        super::choice::choose((&nom.model, &nom.file), (&reg.model, &reg.file));
+    let (net, net_reason) = super::choice::choose((&nom.model, &nom.file), (&reg.model, &reg.file));
     let t1 = if net == "nominal" { nom } else { reg };
     let refine: RefineOutcome = tiers::read_json(stage, &d.join(tiers::REFINE_JSON))?;
     let statistical: StatisticalOutcome =
@@ -57,12 +59,18 @@ pub(super) fn choose(stage: Stage, (d, cfg): (&RunDir, &ProblemConfig)) -> Resul
     let t1_line = t1.describe();
     let mut cands = vec![t1];
     if refine.ran {
-        cands.push(tiers::read_candidate(stage, (d, cfg), tiers::Net::Refined, None)?);
+        cands.push(tiers::read_candidate(
+            stage,
+            (d, cfg),
+            tiers::Net::Refined,
+            None,
+        )?);
     }
     if let Some((c, _)) = tiers::statistical_candidate(stage, (d, cfg))? {
         cands.push(c);
     }
-    let lines: Vec<(String, &'static str)> = cands.iter().map(|c| (c.describe(), c.source)).collect();
+    let lines: Vec<(String, &'static str)> =
+        cands.iter().map(|c| (c.describe(), c.source)).collect();
     let best = tiers::strongest(cands).ok_or_else(|| fail(stage, "no candidate band"))?;
     let em = export_model(cfg, &best, &statistical).map_err(|e| fail(stage, e))?;
     let verdict = verdict(cfg, d, (&best, &t1_line, &lines), (&refine, &statistical));
@@ -94,7 +102,10 @@ fn export_model(
     if best.source == "statistical" {
         let block = best.file.statistical.as_ref();
         // Conditional on an MPC label: the claim counts the labelled states it rests on.
-        let samples = match (st.conditional, block.and_then(|b| b.given_labelled.as_ref())) {
+        let samples = match (
+            st.conditional,
+            block.and_then(|b| b.given_labelled.as_ref()),
+        ) {
             (true, Some(g)) => g.samples,
             _ => st.samples,
         };
@@ -149,7 +160,9 @@ fn verdict(
     if refine.ran {
         if best.source != "local" {
             if let Some((l, _)) = lines.iter().find(|(_, s)| *s == "local") {
-                why.push(format!("{l}: a weaker tier or a larger ε than the band exported"));
+                why.push(format!(
+                    "{l}: a weaker tier or a larger ε than the band exported"
+                ));
             }
         }
     } else {
@@ -257,7 +270,11 @@ pub(super) fn closed_loop_statistical(env: &Env, d: &RunDir) -> Result<String, P
     let p = d.join(CLOSED_LOOP_STATISTICAL);
     let n = cfg.certify.closed_loop;
     let skip = if x.best.source != "statistical" {
-        Some(format!("the exported band is {} ({}), not statistical", x.best.tier.name(), x.best.source))
+        Some(format!(
+            "the exported band is {} ({}), not statistical",
+            x.best.tier.name(),
+            x.best.source
+        ))
     } else if n == 0 {
         Some("[certify] closed_loop = 0".to_string())
     } else {
@@ -282,7 +299,9 @@ pub(super) fn closed_loop_statistical(env: &Env, d: &RunDir) -> Result<String, P
     write_atomic(&p, text.as_bytes()).map_err(|e| fail(Stage::ClosedLoop, e))?;
     let (f, ff) = (
         s.failing.clone().unwrap_or_else(|| s.all.clone()),
-        s.failing_feasible.clone().unwrap_or_else(|| s.feasible_starts.clone()),
+        s.failing_feasible
+            .clone()
+            .unwrap_or_else(|| s.feasible_starts.clone()),
     );
     Ok(format!(
         "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}",

@@ -29,9 +29,9 @@
 
 pub(crate) mod api;
 mod choice;
+mod exported;
 pub mod manifest;
 pub mod robust;
-mod exported;
 mod stages;
 mod tiers;
 

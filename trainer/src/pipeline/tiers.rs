@@ -189,7 +189,8 @@ fn vacuous(c: &crate::certify::certificate::Certificate, eps: f64) -> bool {
     let mut shown = c.clone();
     shown.eps = eps;
     shown.epsilon_per_input = Vec::new();
-    !eps.is_finite() || crate::study::report::judge(shown.eps_physical(), &c.u_lo, &c.u_hi).1 == "vacuous"
+    !eps.is_finite()
+        || crate::study::report::judge(shown.eps_physical(), &c.u_lo, &c.u_hi).1 == "vacuous"
 }
 
 /// Reads the certificate candidate of `net` in the run `d` (verified against its model; the
@@ -261,7 +262,11 @@ fn write_json<T: Serialize>(stage: Stage, p: &std::path::Path, v: &T) -> Result<
 /// Why the refinement is skipped for these Theorem-1 candidates, or None to run it.
 pub(super) fn refine_skip(cfg: &ProblemConfig, t1: &[Candidate]) -> Option<String> {
     let nx = cfg.system.nx();
-    let best = t1.iter().map(|c| c.describe()).collect::<Vec<_>>().join("; ");
+    let best = t1
+        .iter()
+        .map(|c| c.describe())
+        .collect::<Vec<_>>()
+        .join("; ");
     match cfg.refine.enabled {
         RefineSwitch::Off => Some("[refine] enabled = \"off\"".into()),
         RefineSwitch::On => None,
@@ -308,14 +313,9 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         crate::certify::refine::pretty(&checked).as_bytes(),
     )
     .map_err(|e| fail(Stage::Refine, e))?;
-    let lc = crate::certify::refine::write_outputs(
-        cfg,
-        rs,
-        &r,
-        &rdir,
-        Some(&checked),
-        &|c| crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c),
-    )
+    let lc = crate::certify::refine::write_outputs(cfg, rs, &r, &rdir, Some(&checked), &|c| {
+        crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
+    })
     .map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
     let why = match cfg.refine.enabled {
         RefineSwitch::On => "[refine] enabled = \"on\"".to_string(),
@@ -379,8 +379,8 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
     } else {
         d.dataset()
     };
-    let data = crate::data::dataset::Dataset::load(&data_path)
-        .map_err(|e| fail(Stage::Statistical, e))?;
+    let data =
+        crate::data::dataset::Dataset::load(&data_path).map_err(|e| fail(Stage::Statistical, e))?;
     let training: Vec<Vec<f64>> = data.records.iter().map(|r| r.x.clone()).collect();
     let hash = best.model.content_hash();
     let tested = crate::certify::statistical::Tested {

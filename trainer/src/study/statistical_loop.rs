@@ -298,9 +298,8 @@ mod tests {
             let mut next = vec![0.0; 2];
             for _ in 0..3 {
                 plant.step(&x, &[0.0], &mut next);
-                bad |= (0..2).any(|j| {
-                    next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6
-                });
+                bad |= (0..2)
+                    .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
                 x.copy_from_slice(&next);
             }
             // The pendulum's setpoint is the origin.
@@ -308,7 +307,10 @@ mod tests {
             far += u64::from(d > CONVERGE_TOL);
             failing += u64::from(bad || d > CONVERGE_TOL);
         }
-        assert!(far > 0, "three steps of u = 0 leave most starts far from the origin");
+        assert!(
+            far > 0,
+            "three steps of u = 0 leave most starts far from the origin"
+        );
         assert_eq!(s.not_converged, far);
         let f = s.failing.as_ref().unwrap();
         assert_eq!((f.trajectories, f.violating), (30, failing));
