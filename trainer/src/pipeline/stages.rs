@@ -240,10 +240,15 @@ fn validate(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     };
     let vcfg = validation_config(env.cfg);
     let ds = generate(&vcfg, &d.validation(), &g).map_err(|e| fail(Stage::Validate, e))?;
-    Ok(format!(
-        "{} random validation states labelled",
-        ds.records.len()
-    ))
+    let labelled = ds.records.iter().filter(|r| r.is_labelled()).count();
+    let mut line = format!("{labelled} random validation states labelled");
+    if labelled < ds.records.len() {
+        line += &format!(
+            ", {} unlabelled (left out of R² and the estimates)",
+            ds.records.len() - labelled
+        );
+    }
+    Ok(line)
 }
 
 // ---- train: nominal and regularized nets from the same initial weights -----------------
@@ -296,9 +301,21 @@ fn train_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         .map_err(|e| fail(Stage::Train, e))?;
     r.save(&d.model_regularized())
         .map_err(|e| fail(Stage::Train, e))?;
+    let unlabelled = data.records.len() - set.len();
     Ok(format!(
-        "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}",
-        n.train_stats.max, n.validation_stats.r2, r.train_stats.max, r.validation_stats.r2
+        "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}{}",
+        n.train_stats.max,
+        n.validation_stats.r2,
+        r.train_stats.max,
+        r.validation_stats.r2,
+        if unlabelled > 0 {
+            format!(
+                " (on {} labelled states; {unlabelled} unlabelled left out)",
+                set.len()
+            )
+        } else {
+            String::new()
+        }
     ))
 }
 
