@@ -189,7 +189,7 @@ fn verdict(
              firmware example)"
         )
     } else if nx <= 3 && !refine.ran {
-        format!("`trainer refine {problem}` (local certificates over X: a worst-case bound)")
+        format!("`trainer refine --config {problem}` (local certificates over X: a worst-case bound)")
     } else if nx > 3 {
         format!(
             "`trainer certify --model {model} --data {data} --statistical 46050 --p-target \
@@ -198,7 +198,7 @@ fn verdict(
         )
     } else {
         format!(
-            "`trainer refine {problem} --check 2000` (more rounds or a smaller [refine] \
+            "`trainer refine --config {problem} --check 2000` (more rounds or a smaller [refine] \
              target_eps tighten the local bound)"
         )
     };
