@@ -3,7 +3,8 @@
 //! ```text
 //! refine       when Theorem 1 is vacuous for both nets (ε ≥ d_U) and nx ≤ 3 ([refine] enabled)
 //!              → refine/ (model.bin, certificate.json: the local bound max_C ε_C), refine.json
-//! statistical  the deployed controller of the best candidate so far, on n i.i.d. uniform
+//! statistical  the deployed controller of the best candidate so far (when every band is
+//!              vacuous: of the best-fitting net), on n i.i.d. uniform
 //!              states ([certify] statistical = n; 0 = off) → certificate_statistical.json
 //!              (that certificate with its "statistical" block), statistical.json
 //! ```
@@ -238,6 +239,19 @@ pub(super) fn certified_candidates(
     Ok(v)
 }
 
+/// The net whose deployed controller the statistical tier tests: the strongest candidate
+/// when its band is non-vacuous; when every band is vacuous (ε says nothing about the fit),
+/// the net with the smallest validation mean error — the statistical level is an observed
+/// error, which the better fit makes smaller.
+fn tested_candidate(v: Vec<Candidate>) -> Option<Candidate> {
+    if v.iter().any(|c| !c.vacuous) {
+        return strongest(v);
+    }
+    let fit = |c: &Candidate| c.model.validation_stats.mean;
+    v.into_iter()
+        .reduce(|best, c| if fit(&c) < fit(&best) { c } else { best })
+}
+
 /// The strongest of `v` (module doc; ties keep the earlier).
 pub(super) fn strongest(v: Vec<Candidate>) -> Option<Candidate> {
     v.into_iter()
@@ -369,7 +383,8 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         write_json(Stage::Statistical, &d.join(STATISTICAL_JSON), &out)?;
         return Ok("skipped: [certify] statistical = 0".into());
     }
-    let Some(best) = strongest(certified_candidates(Stage::Statistical, (d, cfg), true)?) else {
+    let Some(best) = tested_candidate(certified_candidates(Stage::Statistical, (d, cfg), true)?)
+    else {
         return Err(fail(Stage::Statistical, "no certified net to test"));
     };
     let dep = crate::deploy::export::Deployed::new(&cfg.name, &best.model, &best.file.base)
