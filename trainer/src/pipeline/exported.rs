@@ -189,7 +189,9 @@ fn verdict(
              firmware example)"
         )
     } else if nx <= 3 && !refine.ran {
-        format!("`trainer refine --config {problem}` (local certificates over X: a worst-case bound)")
+        format!(
+            "`trainer refine --config {problem}` (local certificates over X: a worst-case bound)"
+        )
     } else if nx > 3 {
         format!(
             "`trainer certify --model {model} --data {data} --statistical 46050 --p-target \

@@ -180,14 +180,14 @@ pub fn closed_loop_statistical(
         )
         .collect();
     let violates = |(v, _): (f64, f64)| v > VIOLATION_TOL;
-    let fails = |(v, d): (f64, f64)| v > VIOLATION_TOL || !(d <= CONVERGE_TOL);
+    let fails = |(v, d): (f64, f64)| v > VIOLATION_TOL || d > CONVERGE_TOL;
     let count = |rs: &mut dyn Iterator<Item = (f64, f64)>, f: &dyn Fn((f64, f64)) -> bool| {
         rs.filter(|r| f(*r)).count() as u64
     };
     let all = || results.iter().map(|(_, r)| *r);
     let feas = || results.iter().filter(|(f, _)| *f).map(|(_, r)| *r);
     let n_feas = feas().count() as u64;
-    let not_converged = count(&mut all(), &|(_, d)| !(d <= CONVERGE_TOL));
+    let not_converged = count(&mut all(), &|(_, d)| d > CONVERGE_TOL);
     ClosedLoopStatistical {
         all: Bound::new(n as u64, count(&mut all(), &violates), confidence),
         feasible_starts: Bound::new(n_feas, count(&mut feas(), &violates), confidence),
