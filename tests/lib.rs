@@ -73,13 +73,17 @@ pub fn trained_pendulum() -> &'static (trainer::deploy::export::ExportModel, Pat
     CELL.get_or_init(|| {
         let root =
             std::env::temp_dir().join(format!("ampc-trained-pendulum-{}", std::process::id()));
-        let cfg = trainer::problem::ProblemConfig::default();
+        // The committed demo controller is the paper's: Theorem 1's regularized net, without
+        // the tiers `trainer run` adds by default (refinement, statistical band).
+        let mut cfg = trainer::problem::ProblemConfig::default();
+        cfg.refine.enabled = trainer::problem::RefineSwitch::Off;
+        cfg.certify.statistical = 0;
         let opts = trainer::pipeline::RunOptions {
             root: root.clone(),
             until: Some(trainer::pipeline::Stage::Export),
             ..Default::default()
         };
-        trainer::pipeline::run(&cfg, trainer::problem::PENDULUM_TOML, &opts).expect("pipeline");
+        trainer::pipeline::run_problem(&cfg, &opts).expect("pipeline");
         let dir = root.join(&cfg.name);
         let m = trainer::certify::Model::load(&dir.join("model_regularized.bin")).expect("model");
         let (f, _) = trainer::certify::file::read_certificate(

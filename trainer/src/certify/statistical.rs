@@ -76,7 +76,8 @@ pub struct Statistical {
     #[serde(default)]
     pub function: String,
     /// The smallest ε whose bound at this confidence is ≤ `p_target` (None when n is too
-    /// small for `p_target`).
+    /// small for `p_target`; +∞ is written `"inf"`, see [`inf`]).
+    #[serde(with = "inf::option")]
     pub eps_at_p_target: Option<f64>,
     /// The probability target of `eps_at_p_target`.
     pub p_target: f64,
@@ -95,7 +96,11 @@ pub struct Statistical {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub epsilon_per_input: Vec<f64>,
     /// `eps_at_p_target` per input in physical units. Absent in older files.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "inf::option_vec"
+    )]
     pub eps_at_p_target_per_input: Option<Vec<f64>>,
     /// The bound conditional on the states the MPC labels (module doc; absent in files
     /// written before it existed).
@@ -129,7 +134,9 @@ pub struct GivenLabelled {
     pub exceedances: u64,
     /// Clopper–Pearson upper bound p̄(n_L, k_L) at the block's confidence.
     pub p_exceed_upper: f64,
-    /// The smallest ε whose conditional bound is ≤ `p_target` (None when n_L is too small).
+    /// The smallest ε whose conditional bound is ≤ `p_target` (None when n_L is too small;
+    /// +∞ is written `"inf"`).
+    #[serde(with = "inf::option")]
     pub eps_at_p_target: Option<f64>,
 }
 
@@ -575,5 +582,6 @@ pub fn certify_statistically(
     Ok(s)
 }
 
+pub mod inf;
 #[cfg(test)]
 mod tests;

@@ -37,8 +37,8 @@ pub(crate) struct Cli {
 #[derive(Subcommand)]
 enum Cmd {
     /// The whole pipeline: sample → validate → train (nominal + regularized) → certify →
-    /// export → closed loop → seeds → plots → report (Markdown + HTML), each stage skipped
-    /// when its inputs are unchanged.
+    /// refine → statistical → export → closed loop → seeds → plots → report (Markdown +
+    /// HTML), each stage skipped when its inputs are unchanged.
     Run(run::Args),
     /// Solve the OCP at the states of a CSV file (header x1,…,xn) and write u, ∂u/∂x, cost.
     Solve(solve::Args),

@@ -34,6 +34,9 @@ pub(super) struct Args {
     /// Also list each stage's input hashes and output files.
     #[arg(long, short)]
     verbose: bool,
+    /// Stop after this stage (a later `trainer run` resumes from there).
+    #[arg(long, value_parser = stage_parser())]
+    until: Option<Stage>,
 }
 
 impl Args {
@@ -45,7 +48,7 @@ impl Args {
             &self.force,
             self.quiet,
             self.verbose,
-            self.robust_eps,
+            (self.robust_eps, self.until),
         )
     }
 }
@@ -56,7 +59,7 @@ pub(super) fn execute(
     force: &[Stage],
     quiet: bool,
     verbose: bool,
-    robust_eps: Option<f64>,
+    (robust_eps, until): (Option<f64>, Option<Stage>),
 ) -> Result<()> {
     let (mut cfg, text) = read_problem(config)?;
     if let Some(e) = robust_eps {
@@ -75,7 +78,7 @@ pub(super) fn execute(
             (false, true) => Some(print_stage_verbose),
             (false, false) => Some(print_stage),
         },
-        until: None,
+        until,
     };
     trainer::pipeline::run(&cfg, &text, &opts)?;
     if !quiet {
@@ -86,7 +89,7 @@ pub(super) fn execute(
             out.join(&cfg.name).display()
         );
     }
-    if robust.enabled() {
+    if robust.enabled() && until.is_none() {
         cfg.robust = robust;
         robust_run(&cfg, &opts, out, quiet)?;
     }

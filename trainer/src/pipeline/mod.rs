@@ -4,9 +4,12 @@
 //! (`manifest_<stage>.json`: input hashes, settings, crate version, timing):
 //! `sample` (dataset.bin/.csv) → `validate` (validation.bin: MPC labels of random states)
 //! → `train` (model_nominal.bin, model_regularized.bin, same initial weights) → `certify`
-//! (certificate.json, certificate_nominal.json) → `export` (weights.rs, weights.bin,
-//! export_report.json: the net with the strongest guarantee, see `choice`, for controller-core) → `closed_loop`
-//! (closed_loop.json) → `seeds` (seeds.json: both nets retrained from other seeds' initial
+//! (certificate.json, certificate_nominal.json) → `refine` (refine.json, refine/: local
+//! certificates when Theorem 1 is vacuous and nx ≤ 3) → `statistical` (statistical.json,
+//! certificate_statistical.json: the deployed controller on i.i.d. states, see `tiers`) →
+//! `export` (weights.rs, weights.bin, export_report.json: the strongest non-vacuous band and
+//! its tier, see `tiers` and `choice`, for controller-core) → `closed_loop`
+//! (closed_loop.json, closed_loop_statistical.json) → `seeds` (seeds.json: both nets retrained from other seeds' initial
 //! weights and simulated from the reference initial state) → `plots` (plots/*.svg,
 //! plots/*.png) → `report` (report.md, report.html). A stage whose manifest matches its current inputs and whose
 //! outputs exist is skipped; `force` redoes named stages (and, through the changed hashes,
@@ -26,9 +29,11 @@
 
 pub(crate) mod api;
 mod choice;
+mod exported;
 pub mod manifest;
 pub mod robust;
 mod stages;
+mod tiers;
 
 use crate::io::{write_atomic, RunDir};
 use crate::problem::ProblemConfig;
@@ -50,7 +55,11 @@ pub enum Stage {
     Train,
     /// Theorem 1 for both nets.
     Certify,
-    /// The regularized net for controller-core.
+    /// Local certificates where Theorem 1 is vacuous and nx ≤ 3 (`[refine] enabled`).
+    Refine,
+    /// The statistical tier of the deployed controller (`[certify] statistical`).
+    Statistical,
+    /// The strongest non-vacuous band's net for controller-core.
     Export,
     /// MPC and both nets in the closed loop.
     ClosedLoop,
@@ -64,11 +73,13 @@ pub enum Stage {
 
 impl Stage {
     /// The stages in order.
-    pub const ALL: [Stage; 9] = [
+    pub const ALL: [Stage; 11] = [
         Stage::Sample,
         Stage::Validate,
         Stage::Train,
         Stage::Certify,
+        Stage::Refine,
+        Stage::Statistical,
         Stage::Export,
         Stage::ClosedLoop,
         Stage::Seeds,
@@ -83,6 +94,8 @@ impl Stage {
             Stage::Validate => "validate",
             Stage::Train => "train",
             Stage::Certify => "certify",
+            Stage::Refine => "refine",
+            Stage::Statistical => "statistical",
             Stage::Export => "export",
             Stage::ClosedLoop => "closed_loop",
             Stage::Seeds => "seeds",
@@ -93,8 +106,8 @@ impl Stage {
 }
 
 /// The names of the stages in order ([`Stage::ALL`]'s names).
-pub const STAGES: [&str; 9] = {
-    let mut names = [""; 9];
+pub const STAGES: [&str; 11] = {
+    let mut names = [""; 11];
     let mut i = 0;
     while i < names.len() {
         names[i] = Stage::ALL[i].name();

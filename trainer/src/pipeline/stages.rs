@@ -2,7 +2,8 @@
 //! (files of earlier stages and the settings it reads), the files it writes, and its body.
 //!
 //! ```text
-//! sample → validate → train → certify → export → closed_loop → seeds → plots → report
+//! sample → validate → train → certify → refine → statistical → export → closed_loop → seeds
+//!        → plots → report
 //! ```
 
 use super::manifest::{settings_hash, sha_file, Ctx};
@@ -46,7 +47,7 @@ pub(super) struct Step {
 }
 
 /// The stages in order ([`Stage::ALL`]).
-pub(super) const ALL: [Step; 9] = [
+pub(super) const ALL: [Step; 11] = [
     Step {
         stage: Stage::Sample,
         inputs: sample_inputs,
@@ -72,6 +73,18 @@ pub(super) const ALL: [Step; 9] = [
         body: certify_both,
     },
     Step {
+        stage: Stage::Refine,
+        inputs: refine_inputs,
+        outputs: || files(&[super::tiers::REFINE_JSON]),
+        body: super::tiers::refine,
+    },
+    Step {
+        stage: Stage::Statistical,
+        inputs: statistical_inputs,
+        outputs: || files(&[super::tiers::STATISTICAL_JSON]),
+        body: super::tiers::statistical,
+    },
+    Step {
         stage: Stage::Export,
         inputs: export_inputs,
         outputs: || {
@@ -81,12 +94,17 @@ pub(super) const ALL: [Step; 9] = [
                 RunDir::EXPORT_REPORT,
             ])
         },
-        body: export,
+        body: super::exported::export,
     },
     Step {
         stage: Stage::ClosedLoop,
         inputs: closed_loop_inputs,
-        outputs: || files(&[RunDir::CLOSED_LOOP]),
+        outputs: || {
+            files(&[
+                RunDir::CLOSED_LOOP,
+                super::exported::CLOSED_LOOP_STATISTICAL,
+            ])
+        },
         body: closed_loop_study,
     },
     Step {
@@ -222,10 +240,15 @@ fn validate(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     };
     let vcfg = validation_config(env.cfg);
     let ds = generate(&vcfg, &d.validation(), &g).map_err(|e| fail(Stage::Validate, e))?;
-    Ok(format!(
-        "{} random validation states labelled",
-        ds.records.len()
-    ))
+    let labelled = ds.records.iter().filter(|r| r.is_labelled()).count();
+    let mut line = format!("{labelled} random validation states labelled");
+    if labelled < ds.records.len() {
+        line += &format!(
+            ", {} unlabelled (left out of R² and the estimates)",
+            ds.records.len() - labelled
+        );
+    }
+    Ok(line)
 }
 
 // ---- train: nominal and regularized nets from the same initial weights -----------------
@@ -278,9 +301,21 @@ fn train_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         .map_err(|e| fail(Stage::Train, e))?;
     r.save(&d.model_regularized())
         .map_err(|e| fail(Stage::Train, e))?;
+    let unlabelled = data.records.len() - set.len();
     Ok(format!(
-        "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}",
-        n.train_stats.max, n.validation_stats.r2, r.train_stats.max, r.validation_stats.r2
+        "nominal ε_D {:.3}, R² {:.4}; regularized ε_D {:.3}, R² {:.4}{}",
+        n.train_stats.max,
+        n.validation_stats.r2,
+        r.train_stats.max,
+        r.validation_stats.r2,
+        if unlabelled > 0 {
+            format!(
+                " (on {} labelled states; {unlabelled} unlabelled left out)",
+                set.len()
+            )
+        } else {
+            String::new()
+        }
     ))
 }
 
@@ -352,53 +387,46 @@ fn export_inputs(cx: &Ctx, _: &ProblemConfig) -> Result<Inputs, PipelineError> {
             RunDir::CERTIFICATE,
             RunDir::MODEL_NOMINAL,
             RunDir::CERTIFICATE_NOMINAL,
+            super::tiers::REFINE_JSON,
+            super::tiers::STATISTICAL_JSON,
         ],
     )
 }
 
-fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
-    let read = |model: &str, cert: &str| -> Result<(Model, CertificateFile), PipelineError> {
-        let m = load_model(Stage::Export, &d.join(model))?;
-        let f = read_run_certificate(Stage::Export, (d, env.cfg), cert, &m)?;
-        Ok((m, f))
-    };
-    let nominal = read(RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL)?;
-    let regularized = read(RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE)?;
-    let (net, reason) =
-        super::choice::choose((&nominal.0, &nominal.1), (&regularized.0, &regularized.1));
-    let (m, file) = if net == "nominal" {
-        nominal
-    } else {
-        regularized
-    };
-    let c = &file.base;
-    let em = crate::deploy::export::ExportModel::from_trained(&env.cfg.name, &m, c)
-        .map_err(|e| fail(Stage::Export, e))?
-        .with_certificate_guarantee(&file.guarantee);
-    let r = crate::deploy::export::export_files(&em, &d.weights_rs(), &d.weights_bin())
-        .map_err(|e| fail(Stage::Export, e))?;
-    // The band the exported controller (libm tanh, the default) clamps to.
-    let (blo, bhi) = em.clamp_band(c.eps + r.f32_allowance[0]);
-    let f64s = |v: Vec<f32>| v.into_iter().map(f64::from).collect::<Vec<_>>();
-    let json = serde_json::json!({
-        "clamp_lo": f64s(blo),
-        "clamp_hi": f64s(bhi),
-        "f32_allowance_libm": r.f32_allowance[0],
-        "f32_allowance_fast_tanh": r.f32_allowance[1],
-        "f32_observed_libm": r.f32_observed[0],
-        "f32_observed_fast_tanh": r.f32_observed[1],
-        "samples": r.samples,
-        "eps_f64": c.eps,
-        "eps_device_libm": c.eps + r.f32_allowance[0],
-        "net": net,
-        "net_reason": reason,
-    });
-    write_atomic(&d.export_report(), json.to_string().as_bytes())
-        .map_err(|e| fail(Stage::Export, e))?;
-    Ok(format!(
-        "weights.rs + weights.bin of the {net} net; f32 allowance {:.3e} (observed {:.3e} on {} states)",
-        r.f32_allowance[0], r.f32_observed[0], r.samples
-    ))
+// ---- refine and statistical: the tiers after Theorem 1 (`tiers`) -----------------------
+
+fn refine_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        Stage::Refine,
+        &[
+            RunDir::MODEL_REGULARIZED,
+            RunDir::CERTIFICATE,
+            RunDir::MODEL_NOMINAL,
+            RunDir::CERTIFICATE_NOMINAL,
+        ],
+    )?;
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("refine".into(), settings_hash(&cfg.refine));
+    inputs.insert("enabled".into(), settings_hash(&cfg.refine.enabled));
+    Ok(inputs)
+}
+
+fn statistical_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> {
+    let mut inputs = hashes(
+        cx,
+        Stage::Statistical,
+        &[
+            RunDir::MODEL_REGULARIZED,
+            RunDir::CERTIFICATE,
+            RunDir::MODEL_NOMINAL,
+            RunDir::CERTIFICATE_NOMINAL,
+            super::tiers::REFINE_JSON,
+        ],
+    )?;
+    inputs.insert("problem".into(), cfg.problem_hash());
+    inputs.insert("certify".into(), settings_hash(&cfg.certify));
+    Ok(inputs)
 }
 
 // ---- closed_loop: MPC and both nets in the loop ----------------------------------------
@@ -412,10 +440,12 @@ fn closed_loop_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineE
             RunDir::MODEL_REGULARIZED,
             RunDir::CERTIFICATE,
             RunDir::CERTIFICATE_NOMINAL,
+            RunDir::EXPORT_REPORT,
         ],
     )?;
     inputs.insert("problem".into(), cfg.problem_hash());
     inputs.insert("settings".into(), settings_hash(&cfg.closed_loop));
+    inputs.insert("certify".into(), settings_hash(&cfg.certify));
     Ok(inputs)
 }
 
@@ -461,6 +491,7 @@ fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             s += "; ";
         }
     }
+    s += &super::exported::closed_loop_statistical(env, d)?;
     Ok(s)
 }
 

@@ -18,6 +18,7 @@
 //! Every later stage reads its settings from here; `problem` imports nothing of the crate
 //! but `io`.
 
+mod certify;
 pub(crate) mod limits;
 pub mod model;
 pub(crate) mod ocp;
@@ -30,8 +31,9 @@ pub(crate) mod study;
 pub(crate) mod training;
 mod validate;
 
+pub use certify::{CertifySettings, DEFAULT_STATISTICAL};
 pub use ocp::{MatrixSpec, OcpSettings, StageBounds};
-pub use refine::{CheckSettings, RefineSettings};
+pub use refine::{CheckSettings, RefineSettings, RefineSwitch};
 pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{default_starts, QpSolverKind, SolverSettings, Start};
@@ -164,6 +166,10 @@ pub struct ProblemConfig {
     /// Figures of the report.
     #[serde(default)]
     pub plots: PlotSettings,
+    /// The tiers `trainer run` adds after Theorem 1 (`[certify]`: statistical states and
+    /// closed loops; not serialised when it is the default).
+    #[serde(default, skip_serializing_if = "CertifySettings::is_default")]
+    pub certify: CertifySettings,
 }
 
 impl Default for ProblemConfig {

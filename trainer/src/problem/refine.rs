@@ -69,12 +69,36 @@ pub struct RefineSettings {
     /// states that are feasible yet fall in an excluded cell. A robust design with an
     /// enforced terminal region turns it on (`robust.terminal_constraint`).
     pub exclude_infeasible: bool,
+    /// Whether `trainer run` refines after Theorem 1 (default `"auto"`: when both nets'
+    /// Theorem-1 ε are vacuous and nx ≤ 3; `"on"`: always; `"off"`: never). Not serialised
+    /// at its default. `trainer refine` ignores it.
+    #[serde(skip_serializing_if = "RefineSwitch::is_auto")]
+    pub enabled: RefineSwitch,
     /// The network and its first training (defaults: 2-32-32-1 tanh, 600 epochs, batch 64,
     /// learning rate 3e-3 with cosine decay, λ = (1, 0.1, 0), saturation-aware loss). A
     /// `[refine.training]` table changes only the keys it names: the others keep these
     /// refine defaults (not those of `[training]`).
     #[serde(deserialize_with = "over_refine_defaults")]
     pub training: TrainSettings,
+}
+
+/// `[refine] enabled`: when `trainer run` refines (see [`RefineSettings::enabled`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RefineSwitch {
+    /// When Theorem 1 is vacuous for both nets and nx ≤ 3.
+    #[default]
+    Auto,
+    /// Always.
+    On,
+    /// Never.
+    Off,
+}
+
+impl RefineSwitch {
+    fn is_auto(&self) -> bool {
+        *self == RefineSwitch::Auto
+    }
 }
 
 /// `[refine.training]` read over the refine defaults: the keys given replace those of
@@ -124,6 +148,7 @@ impl Default for RefineSettings {
             min_width: 1e-5,
             min_cell: DEFAULT_MIN_CELL,
             exclude_infeasible: false,
+            enabled: RefineSwitch::Auto,
             training: TrainSettings {
                 hidden: vec![32, 32],
                 epochs: 600,

@@ -151,7 +151,7 @@ impl ProblemConfig {
     /// Checks every setting once; the error names the key at fault. The sections are
     /// checked in this order (the first fault is reported): name, system, OCP, constraints,
     /// domain, setpoint, solver, training, closed loop, robust design, plots, sampling,
-    /// refinement.
+    /// refinement, certify.
     pub fn validate(&self) -> Result<(), ConfigError> {
         crate::io::check_path_component(&self.name).map_err(|r| invalid("name", r))?;
         self.system.validate().map_err(|(k, r)| invalid(k, r))?;
@@ -170,6 +170,7 @@ impl ProblemConfig {
         self.plots.validate()?;
         self.sampling.validate(nx)?;
         self.refine.validate(nx)?;
+        self.certify.validate()?;
         Ok(())
     }
 

@@ -14,14 +14,18 @@
 //! lives in `deploy`, which the caller may use),
 //!
 //! and counts as violating if any step violates a state bound or a path constraint by more
-//! than [`VIOLATION_TOL`] ([`step_violation`], the closed-loop study's rule). With k
+//! than [`VIOLATION_TOL`] ([`step_violation`], the closed-loop study's rule), and as failing
+//! if it violates or does not converge: its last state is farther than [`CONVERGE_TOL`]
+//! from the setpoint in the scaled ∞-norm, max_i |x_N,i − x_ref,i| / s_x,i (s_x: `[ocp]
+//! x_scale`, default the half-widths of X). With k
 //! violating trajectories, the Clopper–Pearson upper bound p̄ on
 //! p = P(trajectory violates) at confidence 1 − β is
 //! [`clopper_pearson_upper`](crate::certify::statistical::clopper_pearson_upper)(n, k, 1 − β).
 //! It rests on the x₀ being i.i.d. uniform on X and on the plant model; nothing else. Starts
 //! where the MPC itself has no hard-feasible solution (its label is soft) violate for
 //! reasons no controller can remove, so the bound is also given over the feasible starts
-//! alone (the conditional distribution: still i.i.d.).
+//! alone (the conditional distribution: still i.i.d.). A start is feasible when the MPC's
+//! hard OCP converges there (`MpcLaw::solve`'s status `Converged`: an MPC label).
 
 use crate::certify::statistical::{clopper_pearson_upper, statistical_seed, TestedController};
 use crate::mpc::law::MpcLaw;
@@ -32,6 +36,10 @@ use crate::rng::uniform;
 use crate::study::closed_loop::{step_violation, VIOLATION_TOL};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+/// A trajectory converges when its last state is within this of x_ref in the scaled
+/// ∞-norm (5 % of each state's scale).
+pub const CONVERGE_TOL: f64 = 0.05;
 
 /// A Clopper–Pearson bound from n trials with k events.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -61,6 +69,16 @@ pub struct ClosedLoopStatistical {
     pub all: Bound,
     /// Over the initial states where the MPC is hard-feasible.
     pub feasible_starts: Bound,
+    /// "Violates a constraint or does not converge" over all initial states (`violating`
+    /// counts such failing trajectories). Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failing: Option<Bound>,
+    /// The same over the MPC-feasible initial states.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failing_feasible: Option<Bound>,
+    /// Trajectories whose last state is not within [`CONVERGE_TOL`] of x_ref (scaled).
+    #[serde(default)]
+    pub not_converged: u64,
     /// 1 − β.
     pub confidence: f64,
     /// Steps per trajectory.
@@ -86,7 +104,7 @@ fn trajectory(
     plant: &Discrete,
     controller: &dyn TestedController,
     x0: &[f64],
-) -> f64 {
+) -> (f64, f64) {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let constraints = cfg.constraint_set().ok().flatten();
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
@@ -110,7 +128,25 @@ fn trajectory(
         worst = worst.max(if v.is_nan() { f64::INFINITY } else { v });
         x.copy_from_slice(&next);
     }
-    worst
+    (worst, distance_to_setpoint(cfg, &x))
+}
+
+/// max_i |x_i − x_ref,i| / s_x,i (NaN → +∞): how far from the setpoint a trajectory ends.
+pub fn distance_to_setpoint(cfg: &ProblemConfig, x: &[f64]) -> f64 {
+    let scale = cfg.ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    let xr = cfg.ocp.x_ref.clone().unwrap_or_else(|| vec![0.0; x.len()]);
+    x.iter()
+        .zip(&xr)
+        .zip(&scale)
+        .map(|((v, r), s)| {
+            let d = (v - r).abs() / s;
+            if d.is_nan() {
+                f64::INFINITY
+            } else {
+                d
+            }
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Runs `n` trajectories of the deployed `controller` (of the model with content hash
@@ -127,7 +163,7 @@ pub fn closed_loop_statistical(
     let seed = statistical_seed(&format!("{model_hash}\0closed loop"), user_seed);
     let nx = cfg.system.nx();
     let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
-    let results: Vec<(bool, f64)> = (0..n as u64)
+    let results: Vec<(bool, (f64, f64))> = (0..n as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(cfg),
@@ -143,29 +179,35 @@ pub fn closed_loop_statistical(
             },
         )
         .collect();
-    let violates = |v: f64| v > VIOLATION_TOL;
-    let k_all = results.iter().filter(|(_, v)| violates(*v)).count() as u64;
-    let feas: Vec<f64> = results
-        .iter()
-        .filter(|(f, _)| *f)
-        .map(|(_, v)| *v)
-        .collect();
-    let k_feas = feas.iter().filter(|v| violates(**v)).count() as u64;
+    let violates = |(v, _): (f64, f64)| v > VIOLATION_TOL;
+    let fails = |(v, d): (f64, f64)| v > VIOLATION_TOL || d > CONVERGE_TOL;
+    let count = |rs: &mut dyn Iterator<Item = (f64, f64)>, f: &dyn Fn((f64, f64)) -> bool| {
+        rs.filter(|r| f(*r)).count() as u64
+    };
+    let all = || results.iter().map(|(_, r)| *r);
+    let feas = || results.iter().filter(|(f, _)| *f).map(|(_, r)| *r);
+    let n_feas = feas().count() as u64;
+    let not_converged = count(&mut all(), &|(_, d)| d > CONVERGE_TOL);
     ClosedLoopStatistical {
-        all: Bound::new(n as u64, k_all, confidence),
-        feasible_starts: Bound::new(feas.len() as u64, k_feas, confidence),
+        all: Bound::new(n as u64, count(&mut all(), &violates), confidence),
+        feasible_starts: Bound::new(n_feas, count(&mut feas(), &violates), confidence),
+        failing: Some(Bound::new(n as u64, count(&mut all(), &fails), confidence)),
+        failing_feasible: Some(Bound::new(n_feas, count(&mut feas(), &fails), confidence)),
+        not_converged,
         confidence,
         steps: cfg.closed_loop.steps,
         seed,
         user_seed,
         function: controller.describe(),
         // A NaN violation is already +∞ (trajectory); the fold cannot drop one.
-        max_violation: results.iter().map(|(_, v)| *v).fold(0.0, f64::max),
+        max_violation: all().map(|(v, _)| v).fold(0.0, f64::max),
         rests_on: format!(
             "initial states i.i.d. uniform on X (seed {seed}, from the model's hash and the \
              user seed {user_seed}); the nominal plant model; {}, then the actuator \
              saturation; {} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a \
-             state bound or path constraint",
+             state bound or path constraint; a run converges when its last state is within \
+             {CONVERGE_TOL} of x_ref in the scaled ∞-norm; a start is MPC-feasible when the \
+             hard OCP converges there",
             controller.describe(),
             cfg.closed_loop.steps
         ),
@@ -233,5 +275,49 @@ mod tests {
         // Another model: other initial states.
         let other = closed_loop_statistical(&cfg, &Constant(15.0), "other", 40, 7, 0.99);
         assert_ne!(other.seed, full.seed);
+    }
+
+    /// A run that stays inside the constraints but ends far from the setpoint fails: the
+    /// count of failing runs is checked against a hand-stepped simulation of each start.
+    #[test]
+    fn a_run_that_does_not_converge_fails() {
+        let mut cfg = ProblemConfig::default();
+        cfg.closed_loop.steps = 3;
+        let s = closed_loop_statistical(&cfg, &Constant(0.0), "model", 30, 3, 0.99);
+        let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+        let scale = cfg.ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+        let (mut failing, mut far) = (0, 0);
+        for i in 0..30u64 {
+            let mut x: Vec<f64> = (0..2)
+                .map(|j| {
+                    let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
+                    lo + (hi - lo) * uniform(s.seed, i, j as u64)
+                })
+                .collect();
+            let mut bad = false;
+            let mut next = vec![0.0; 2];
+            for _ in 0..3 {
+                plant.step(&x, &[0.0], &mut next);
+                bad |= (0..2)
+                    .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
+                x.copy_from_slice(&next);
+            }
+            // The pendulum's setpoint is the origin.
+            let d = (0..2).map(|j| x[j].abs() / scale[j]).fold(0.0, f64::max);
+            far += u64::from(d > CONVERGE_TOL);
+            failing += u64::from(bad || d > CONVERGE_TOL);
+        }
+        assert!(
+            far > 0,
+            "three steps of u = 0 leave most starts far from the origin"
+        );
+        assert_eq!(s.not_converged, far);
+        let f = s.failing.as_ref().unwrap();
+        assert_eq!((f.trajectories, f.violating), (30, failing));
+        assert!(f.violating > s.all.violating, "{s:?}");
+        assert!(f.p_violation_upper >= s.all.p_violation_upper);
+        let ff = s.failing_feasible.as_ref().unwrap();
+        assert_eq!(ff.trajectories, s.feasible_starts.trajectories);
+        assert!(ff.violating >= s.feasible_starts.violating);
     }
 }

@@ -164,6 +164,8 @@ struct Artifacts {
     seeds: Vec<[SeedRun; 2]>,
     /// `export_report.json`.
     export: serde_json::Value,
+    /// `closed_loop_statistical.json` (absent in runs before it existed).
+    cl_stat: Option<serde_json::Value>,
 }
 
 impl Artifacts {
@@ -199,6 +201,7 @@ impl Artifacts {
             cl: load(&dir.closed_loop())?,
             seeds: load(&dir.seeds())?,
             export: load(&dir.export_report())?,
+            cl_stat: load(&dir.join("closed_loop_statistical.json")).ok(),
         })
     }
 }

@@ -92,10 +92,17 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         format!("it rests on: {}", g.assumptions.join("; "))
     };
     let (blo, bhi) = exported_band(a);
-    vec![
-        Block::Heading(2, "Verdict".into()),
+    let source = a.export["source"].as_str().unwrap_or("theorem1");
+    let theorem1 = if source == "theorem1" {
+        format!("Theorem 1, the exported {net} net")
+    } else {
+        format!("Theorem 1 of the {net} net; the band exported is the {source} one above")
+    };
+    let mut blocks = vec![Block::Heading(2, "Verdict".into())];
+    blocks.extend(reached(a));
+    blocks.extend([
         Block::Para(format!(
-            "**ε = {}{unit}, {tier}** (Theorem 1, the exported {net} net): for every state in X = {}, the MPC's input and the network's differ by at most ε (on the device: ε + f32 allowance {} = {}{unit}). Tier **{tier}**: {rests_on}.",
+            "**ε = {}{unit}, {tier}** ({theorem1}): for every state in X = {}, the MPC's input and the network's differ by at most ε (on the device: ε + f32 allowance {} = {}{unit}). Tier **{tier}**: {rests_on}.",
             num(c.eps),
             boxed(&c.domain_lo, &c.domain_hi),
             num(allowance),
@@ -112,7 +119,61 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
             "The exported controller projects the state onto X and clamps its output to u ∈ {}.",
             boxed(&blo, &bhi)
         )),
-    ]
+    ]);
+    blocks
+}
+
+/// The guarantee reached, why not a stronger one and the next command (`export_report.json`'s
+/// `"verdict"`), and the closed loop's statistical statement; nothing for runs before them.
+fn reached(a: &Artifacts) -> Vec<Block> {
+    let v = &a.export["verdict"];
+    let Some(reached) = v["reached"].as_str() else {
+        return Vec::new();
+    };
+    let mut out = vec![Block::Para(format!("**Guarantee reached — {reached}.**"))];
+    let why: Vec<&str> = v["why_not_stronger"]
+        .as_array()
+        .map(|w| w.iter().filter_map(|s| s.as_str()).collect())
+        .unwrap_or_default();
+    if !why.is_empty() {
+        out.push(Block::Para(format!("Not stronger: {}.", why.join("; "))));
+    }
+    if let Some(cl) = &a.cl_stat {
+        out.push(Block::Para(closed_loop_statement(cl)));
+    }
+    if let Some(next) = v["next"].as_str() {
+        out.push(Block::Para(format!("Next: {next}.")));
+    }
+    out
+}
+
+/// `closed_loop_statistical.json` in words.
+fn closed_loop_statement(cl: &serde_json::Value) -> String {
+    if cl["ran"] == serde_json::Value::Bool(false) {
+        return format!(
+            "Closed loop, statistically: not run ({}).",
+            cl["reason"].as_str().unwrap_or("")
+        );
+    }
+    let b = |k: &str| {
+        let x = &cl[k];
+        (
+            x["p_violation_upper"].as_f64().unwrap_or(f64::NAN),
+            x["violating"].as_u64().unwrap_or(0),
+            x["trajectories"].as_u64().unwrap_or(0),
+        )
+    };
+    let (pf, kf, nf) = b("failing_feasible");
+    let (pa, ka, na) = b("failing");
+    format!(
+        "Closed loop, statistically (Clopper–Pearson, confidence {}): P(a run of the exported \
+         controller violates a constraint or does not converge) ≤ {pf:.3e} from i.i.d. \
+         uniform MPC-feasible starts ({kf} of {nf} runs of {} steps failed), ≤ {pa:.3e} from \
+         all starts ({ka} of {na}; {} did not converge).",
+        cl["confidence"].as_f64().unwrap_or(f64::NAN),
+        cl["steps"].as_u64().unwrap_or(0),
+        cl["not_converged"].as_u64().unwrap_or(0),
+    )
 }
 
 /// For a scaled norm: what ε measures and its bound per input in physical units (empty for
