@@ -88,6 +88,7 @@ pub(super) fn execute(
     fixed: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
+    let fixed_path = fixed;
     let fixed_model = fixed
         .map(|p| super::common::load_model(p).map(|m| (p, m)))
         .transpose()?;
@@ -109,10 +110,12 @@ pub(super) fn execute(
         .with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let stat = statistical.options(dir.join("statistical.bin"))?;
     let t0 = std::time::Instant::now();
+    let resume = resume_command(config, target_eps, budget, &dir, data, fixed_path);
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
         initial_labels,
         fixed,
+        on_result: Some(round_sink(&cfg, &dir, &resume, quiet)),
     };
     let (r, checked) = refine_and_check(&cfg, &opts, &dir.join("refine_state.bin"), check, quiet)?;
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
@@ -137,17 +140,107 @@ pub(super) fn execute(
             println!("robust design: {}", v.message);
         }
     }
+    let report = refine::RefineReport::new(&cfg, &rs, &r, r.stopped, resume);
+    refine::write_report(&dir, &report)?;
     if !r.met {
+        print_infinite(&report.infinite);
         bail!(
-            "target ε {} not met within {} solves / {} rounds: certified ε {:.4} (outputs in {})",
+            "target ε {} not met ({}; budget {} solves, {} rounds{}): certified ε {:.4} \
+             (outputs and {} in {}; resume: {})",
             rs.target_eps,
+            r.stopped.describe(),
             rs.budget,
             rs.max_rounds,
+            rs.max_seconds
+                .map_or(String::new(), |s| format!(", {s} s")),
             cert.base.eps,
-            dir.display()
+            refine::REPORT_FILE,
+            dir.display(),
+            report.resume
         );
     }
     Ok(())
+}
+
+/// The command that resumes this run from its checkpoint (the same problem, output
+/// directory and overrides).
+fn resume_command(
+    config: Option<&Path>,
+    target_eps: Option<f64>,
+    budget: Option<usize>,
+    dir: &Path,
+    data: Option<&Path>,
+    fixed: Option<&Path>,
+) -> String {
+    let mut c = String::from("trainer refine");
+    if let Some(p) = config {
+        c += &format!(" --config {}", p.display());
+    }
+    if let Some(p) = data {
+        c += &format!(" --data {}", p.display());
+    }
+    if let Some(p) = fixed {
+        c += &format!(" --certify-only --model {}", p.display());
+    }
+    if let Some(t) = target_eps {
+        c += &format!(" --target-eps {t}");
+    }
+    if let Some(b) = budget {
+        c += &format!(" --budget {b}");
+    }
+    c + &format!(" --out {}", dir.display())
+}
+
+/// The sink of each round's result: the best so far is written as the run's outputs
+/// (`certificate.json`, `model.bin`, …) with a `refine_report.json` saying the run is in
+/// progress, so a run stopped at any point leaves its best certificate; a round whose ε is
+/// infinite names the first cell at fault and its cause.
+fn round_sink(cfg: &ProblemConfig, dir: &Path, resume: &str, quiet: bool) -> refine::RoundSink {
+    let (cfg, dir, resume) = (cfg.clone(), dir.to_path_buf(), resume.to_string());
+    refine::RoundSink(std::sync::Arc::new(move |r: &Refined, best: bool| {
+        let rs = &cfg.refine;
+        if !best {
+            let inf = refine::infinite_causes(&cfg, rs, &r.state, 1);
+            if !quiet && !refine::rounds_eps(&r.state).is_finite() {
+                print_infinite(&inf);
+            }
+            return;
+        }
+        let written = refine::write_outputs(&cfg, rs, r, &dir, None, &|c| {
+            trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
+        })
+        .map_err(anyhow::Error::from)
+        .and_then(|_| {
+            let report =
+                refine::RefineReport::new(&cfg, rs, r, refine::StopReason::Running, resume.clone());
+            Ok(refine::write_report(&dir, &report)?)
+        });
+        if let Err(e) = written {
+            eprintln!("warning: the best certificate so far was not written: {e:#}");
+        }
+    }))
+}
+
+/// Names the cells whose ε_C is infinite (the first few) and why.
+fn print_infinite(cells: &[refine::InfiniteCell]) {
+    for c in cells.iter().take(3) {
+        let states: Vec<String> = c
+            .unlabelled
+            .iter()
+            .map(|(x, s)| format!("{x:?} ({s})"))
+            .collect();
+        eprintln!(
+            "ε_C = ∞ on cell {:?}–{:?}: {}{}",
+            c.cell.0,
+            c.cell.1,
+            c.cause,
+            if states.is_empty() {
+                String::new()
+            } else {
+                format!("; unlabelled: {}", states.join(", "))
+            }
+        );
+    }
 }
 
 /// The problem refined: `--config`, else the one stored in `--data`, else the one of

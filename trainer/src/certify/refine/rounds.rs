@@ -3,6 +3,7 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
+use super::progress::{RoundSink, StopReason};
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -31,6 +32,9 @@ pub struct RefineOptions {
     /// Certify this network as it is (`refine --certify-only`): no training, the rounds
     /// only split cells and solve their corners; the checkpoint is bound to its hash.
     pub fixed: Option<Model>,
+    /// Given each round's result and whether it is the best so far ([`RoundSink`]): the
+    /// caller writes the best out, so a stopped run leaves its best certificate.
+    pub on_result: Option<RoundSink>,
 }
 
 /// The result of a refinement run.
@@ -42,6 +46,8 @@ pub struct Refined {
     pub model: Model,
     /// Whether every cell meets the target.
     pub met: bool,
+    /// Why the run stopped ([`StopReason::Running`] for a result handed to [`RoundSink`]).
+    pub stopped: StopReason,
 }
 
 /// The local certificate's settings of a refinement.
@@ -311,7 +317,13 @@ pub fn refine(
                     &ex,
                 );
             }
-            return Ok(Refined { met, state, model });
+            let stopped = finished_reason(&state, rs, met);
+            return Ok(Refined {
+                met,
+                state,
+                model,
+                stopped,
+            });
         }
     }
     let mut st = match resumed {
@@ -333,6 +345,7 @@ pub fn refine(
         let q = qp.as_ref().map(|q| (q, rs.target_eps));
         bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex)
     };
+    let started = Instant::now();
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -364,8 +377,18 @@ pub fn refine(
         let log = round_log(&st, round, rs.target_eps, t0);
         let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
-        if st.best.as_ref().is_none_or(|(e, _)| eps < *e) {
+        let improved = st.best.as_ref().is_none_or(|(e, _)| eps < *e);
+        if improved {
             st.best = Some((eps, model.clone()));
+        }
+        if let Some(sink) = &opts.on_result {
+            let r = Refined {
+                met: certified_all(&st.bounds, rs.target_eps),
+                state: st.clone(),
+                model: opts.fixed.clone().unwrap_or_else(|| model.clone()),
+                stopped: StopReason::Running,
+            };
+            (sink.0)(&r, improved && eps.is_finite());
         }
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
@@ -375,10 +398,26 @@ pub fn refine(
         let met = !st.bounds.is_empty()
             && ok == st.bounds.len()
             && !st.bounds.iter().any(|(_, b)| unproven(b));
-        let split_any = !met
-            && round + 1 < rs.max_rounds
-            && split_failing(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven);
-        let done = met || !split_any;
+        let out_of_time = rs
+            .max_seconds
+            .is_some_and(|s| started.elapsed().as_secs_f64() >= s);
+        let stopped = if met {
+            Some(StopReason::TargetMet)
+        } else if round + 1 >= rs.max_rounds {
+            Some(StopReason::MaxRounds)
+        } else if out_of_time {
+            Some(StopReason::MaxSeconds)
+        } else if !split_failing(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven) {
+            let full = st.points.len() + (1usize << (nx - 1)) > rs.budget;
+            Some(if full {
+                StopReason::Budget
+            } else {
+                StopReason::NothingToSplit
+            })
+        } else {
+            None
+        };
+        let done = stopped.is_some();
         let mut model = model;
         if done && !met {
             // Not met: the best model so far, bounded on the final (finer) tree, may do
@@ -406,8 +445,24 @@ pub fn refine(
                 met,
                 state: st,
                 model: opts.fixed.clone().unwrap_or(model),
+                stopped: stopped.unwrap_or(StopReason::NothingToSplit),
             });
         }
+    }
+}
+
+/// Why a finished run read back from its checkpoint stopped (not stored: inferred from its
+/// state and the settings).
+fn finished_reason(st: &RefineState, rs: &RefineSettings, met: bool) -> StopReason {
+    let nx = st.nodes.first().map_or(1, |n| n.lo.len());
+    if met {
+        StopReason::TargetMet
+    } else if st.log.len() >= rs.max_rounds {
+        StopReason::MaxRounds
+    } else if st.points.len() + (1usize << (nx - 1)) > rs.budget {
+        StopReason::Budget
+    } else {
+        StopReason::NothingToSplit
     }
 }
 
