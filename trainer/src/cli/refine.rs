@@ -110,12 +110,21 @@ pub(super) fn execute(
         .with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let stat = statistical.options(dir.join("statistical.bin"))?;
     let t0 = std::time::Instant::now();
+    let name = cfg.name.clone();
     let resume = resume_command(config, target_eps, budget, &dir, data, fixed_path);
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
         initial_labels,
         fixed,
-        on_result: Some(round_sink(&cfg, &dir, &resume, quiet)),
+        on_result: Some(refine::writing_sink(
+            &cfg,
+            &dir,
+            &resume,
+            (BEST_AFTER_SECONDS, quiet),
+            std::sync::Arc::new(move |m, c| {
+                trainer::deploy::export::deployed_allowance(&name, m, c)
+            }),
+        )),
     };
     let (r, checked) = refine_and_check(&cfg, &opts, &dir.join("refine_state.bin"), check, quiet)?;
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
@@ -143,7 +152,7 @@ pub(super) fn execute(
     let report = refine::RefineReport::new(&cfg, &rs, &r, r.stopped, resume);
     refine::write_report(&dir, &report)?;
     if !r.met {
-        print_infinite(&report.infinite);
+        refine::print_infinite(&report.infinite);
         bail!(
             "target ε {} not met ({}; budget {} solves, {} rounds{}): certified ε {:.4} \
              (outputs and {} in {}; resume: {})",
@@ -151,8 +160,7 @@ pub(super) fn execute(
             r.stopped.describe(),
             rs.budget,
             rs.max_rounds,
-            rs.max_seconds
-                .map_or(String::new(), |s| format!(", {s} s")),
+            rs.max_seconds.map_or(String::new(), |s| format!(", {s} s")),
             cert.base.eps,
             refine::REPORT_FILE,
             dir.display(),
@@ -161,6 +169,10 @@ pub(super) fn execute(
     }
     Ok(())
 }
+
+/// Seconds of a run before its best certificate so far is first written out (a shorter run
+/// writes only its final outputs).
+const BEST_AFTER_SECONDS: f64 = 10.0;
 
 /// The command that resumes this run from its checkpoint (the same problem, output
 /// directory and overrides).
@@ -189,58 +201,6 @@ fn resume_command(
         c += &format!(" --budget {b}");
     }
     c + &format!(" --out {}", dir.display())
-}
-
-/// The sink of each round's result: the best so far is written as the run's outputs
-/// (`certificate.json`, `model.bin`, …) with a `refine_report.json` saying the run is in
-/// progress, so a run stopped at any point leaves its best certificate; a round whose ε is
-/// infinite names the first cell at fault and its cause.
-fn round_sink(cfg: &ProblemConfig, dir: &Path, resume: &str, quiet: bool) -> refine::RoundSink {
-    let (cfg, dir, resume) = (cfg.clone(), dir.to_path_buf(), resume.to_string());
-    refine::RoundSink(std::sync::Arc::new(move |r: &Refined, best: bool| {
-        let rs = &cfg.refine;
-        if !best {
-            let inf = refine::infinite_causes(&cfg, rs, &r.state, 1);
-            if !quiet && !refine::rounds_eps(&r.state).is_finite() {
-                print_infinite(&inf);
-            }
-            return;
-        }
-        let written = refine::write_outputs(&cfg, rs, r, &dir, None, &|c| {
-            trainer::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
-        })
-        .map_err(anyhow::Error::from)
-        .and_then(|_| {
-            let report =
-                refine::RefineReport::new(&cfg, rs, r, refine::StopReason::Running, resume.clone());
-            Ok(refine::write_report(&dir, &report)?)
-        });
-        if let Err(e) = written {
-            eprintln!("warning: the best certificate so far was not written: {e:#}");
-        }
-    }))
-}
-
-/// Names the cells whose ε_C is infinite (the first few) and why.
-fn print_infinite(cells: &[refine::InfiniteCell]) {
-    for c in cells.iter().take(3) {
-        let states: Vec<String> = c
-            .unlabelled
-            .iter()
-            .map(|(x, s)| format!("{x:?} ({s})"))
-            .collect();
-        eprintln!(
-            "ε_C = ∞ on cell {:?}–{:?}: {}{}",
-            c.cell.0,
-            c.cell.1,
-            c.cause,
-            if states.is_empty() {
-                String::new()
-            } else {
-                format!("; unlabelled: {}", states.join(", "))
-            }
-        );
-    }
 }
 
 /// The problem refined: `--config`, else the one stored in `--data`, else the one of

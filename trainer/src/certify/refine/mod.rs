@@ -42,7 +42,8 @@ pub use outputs::{
     CellView, LocalCertificate,
 };
 pub use progress::{
-    infinite_causes, rounds_eps, write_report, InfiniteCell, RefineReport, RoundSink, StopReason, REPORT_FILE,
+    infinite_causes, print_infinite, write_report, writing_sink, Allowance, InfiniteCell,
+    RefineReport, RoundSink, StopReason, REPORT_FILE,
 };
 pub use rounds::{refine, RefineOptions, Refined};
 

@@ -112,13 +112,13 @@ pub fn infinite_causes(
                  refine.min_cell = {} of X per axis, then excluded from the certified domain{}",
                 unlabelled.len(),
                 rs.min_cell,
-                if small {
-                    " (at that size now)"
-                } else {
-                    ""
-                }
+                if small { " (at that size now)" } else { "" }
             )
-        } else if st.jumps.iter().any(|x| super::region::contains(&lo, &hi, x)) {
+        } else if st
+            .jumps
+            .iter()
+            .any(|x| super::region::contains(&lo, &hi, x))
+        {
             "a jump of κ (two local optima) found by --check lies in the cell: never certified"
                 .into()
         } else if !b.corner.is_finite() {
@@ -202,11 +202,89 @@ impl RefineReport {
 pub const REPORT_FILE: &str = "refine_report.json";
 
 /// Writes `report` as `dir/refine_report.json` (atomically).
-pub fn write_report(dir: &std::path::Path, report: &RefineReport) -> Result<(), crate::io::FileError> {
+pub fn write_report(
+    dir: &std::path::Path,
+    report: &RefineReport,
+) -> Result<(), crate::io::FileError> {
     crate::io::write_atomic(&dir.join(REPORT_FILE), super::pretty(report).as_bytes())
 }
 
-/// The certified ε of a state's current bounds: max_C ε_C (∞ when no leaf is bounded).
-pub fn rounds_eps(st: &RefineState) -> f64 {
-    max_eps(&st.bounds)
+/// The f32 allowance of the deployed controller of a net under a certificate (`deploy`
+/// computes it; `certify` may not import `deploy`): see [`super::write_outputs`].
+pub type Allowance = Arc<
+    dyn Fn(&crate::certify::Model, &crate::certify::certificate::Certificate) -> Option<f64>
+        + Send
+        + Sync,
+>;
+
+/// A [`RoundSink`] that writes the best result so far into `dir` as the run's outputs
+/// ([`super::write_outputs`]: `certificate.json`, `model.bin`, dataset, cells, log) with a
+/// `refine_report.json` saying the run is in progress (`resume`: the command that resumes
+/// it). Writing costs a certificate (Lipschitz bounds, the f32 allowance), so it is paced:
+/// the first best after `after` seconds of the run, later ones once at least 5× the last
+/// write's duration has passed since it — at most ~20 % of the run's time; the run's final
+/// outputs are written by the caller. A round whose ε is infinite has its first cell at
+/// fault and its cause printed on stderr (unless `quiet`). Write errors are printed as
+/// warnings (the run goes on).
+pub fn writing_sink(
+    cfg: &ProblemConfig,
+    dir: &std::path::Path,
+    resume: &str,
+    (after, quiet): (f64, bool),
+    allowance: Allowance,
+) -> RoundSink {
+    let (cfg, dir, resume) = (cfg.clone(), dir.to_path_buf(), resume.to_string());
+    let started = std::time::Instant::now();
+    // (end of the last write, its duration)
+    let last = std::sync::Mutex::new(None::<(std::time::Instant, f64)>);
+    RoundSink(Arc::new(move |r: &Refined, best: bool| {
+        let rs = &cfg.refine;
+        if !quiet && !max_eps(&r.state.bounds).is_finite() {
+            print_infinite(&infinite_causes(&cfg, rs, &r.state, 1));
+        }
+        let Ok(mut last) = last.lock() else { return };
+        let due = match *last {
+            None => started.elapsed().as_secs_f64() >= after,
+            Some((t, d)) => t.elapsed().as_secs_f64() >= 5.0 * d,
+        };
+        if !best || !due {
+            return;
+        }
+        let t = std::time::Instant::now();
+        let written = super::write_outputs(&cfg, rs, r, &dir, None, &|c| allowance(&r.model, c))
+            .map_err(|e| e.to_string())
+            .and_then(|_| {
+                let report = RefineReport::new(&cfg, rs, r, StopReason::Running, resume.clone());
+                write_report(&dir, &report).map_err(|e| e.to_string())
+            });
+        if let Err(e) = written {
+            eprintln!(
+                "warning: the best certificate so far was not written to {}: {e}",
+                dir.display()
+            );
+        }
+        *last = Some((std::time::Instant::now(), t.elapsed().as_secs_f64()));
+    }))
+}
+
+/// Prints the cells whose ε_C is infinite (the first three) and why, on stderr.
+pub fn print_infinite(cells: &[InfiniteCell]) {
+    for c in cells.iter().take(3) {
+        let states: Vec<String> = c
+            .unlabelled
+            .iter()
+            .map(|(x, s)| format!("{x:?} ({s})"))
+            .collect();
+        eprintln!(
+            "ε_C = ∞ on cell {:?}–{:?}: {}{}",
+            c.cell.0,
+            c.cell.1,
+            c.cause,
+            if states.is_empty() {
+                String::new()
+            } else {
+                format!("; unlabelled: {}", states.join(", "))
+            }
+        );
+    }
 }
