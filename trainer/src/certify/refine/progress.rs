@@ -55,7 +55,10 @@ impl StopReason {
 /// so that a stopped or killed run leaves its best certificate. Errors are the sink's to
 /// report (the run goes on).
 #[derive(Clone)]
-pub struct RoundSink(pub Arc<dyn Fn(&Refined, bool) + Send + Sync>);
+pub struct RoundSink(pub Arc<RoundFn>);
+
+/// The function of a [`RoundSink`]: (the round's result, whether it is the best so far).
+pub type RoundFn = dyn Fn(&Refined, bool) + Send + Sync;
 
 impl std::fmt::Debug for RoundSink {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
