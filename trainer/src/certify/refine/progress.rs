@@ -5,7 +5,7 @@
 //! their cause). The report ([`RefineReport`], `refine_report.json`) says what was reached,
 //! the binding cell, why the run stopped and how to resume it.
 
-use super::rounds::{max_eps, Refined};
+use super::Refined;
 use super::{Exclusion, Lattice, RefineState};
 use crate::problem::{ProblemConfig, RefineSettings};
 use serde::{Deserialize, Serialize};
@@ -290,4 +290,12 @@ pub fn print_infinite(cells: &[InfiniteCell]) {
             }
         );
     }
+}
+
+/// max_C ε_C of `bounds` (∞ when none is bounded), as the rounds compute it.
+fn max_eps(bounds: &[(usize, crate::certify::local::CellBound)]) -> f64 {
+    if bounds.is_empty() {
+        return f64::INFINITY;
+    }
+    bounds.iter().map(|(_, b)| b.eps).fold(0.0, f64::max)
 }

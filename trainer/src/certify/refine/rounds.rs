@@ -361,15 +361,7 @@ pub fn refine(
             // Resumed or imported points: their active sets, for the proofs.
             fill_active(cfg, &mut st.points);
         }
-        // Retrain when a failing cell's corner (fit) error is a large part of the target:
-        // splitting cannot help there. Otherwise keep the net and only split (retraining
-        // would move every cell's bound).
-        let fit_bound = st
-            .bounds
-            .iter()
-            .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
-        let retrain = opts.fixed.is_none() && (st.model.is_none() || fit_bound);
-        if retrain {
+        if needs_retrain(&st, rs, opts) {
             st.model = Some(retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash));
         }
         let model = st.model.clone().expect("trained above");
@@ -378,18 +370,12 @@ pub fn refine(
         let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
         let improved = st.best.as_ref().is_none_or(|(e, _)| eps < *e);
-        if improved {
-            st.best = Some((eps, model.clone()));
-        }
-        if let Some(sink) = &opts.on_result {
-            let r = Refined {
-                met: certified_all(&st.bounds, rs.target_eps),
-                state: st.clone(),
-                model: opts.fixed.clone().unwrap_or_else(|| model.clone()),
-                stopped: StopReason::Running,
-            };
-            (sink.0)(&r, improved && eps.is_finite());
-        }
+        st.best = if improved {
+            Some((eps, model.clone()))
+        } else {
+            st.best.take()
+        };
+        report_round(opts, rs, &st, &model, improved && eps.is_finite());
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
         }
@@ -401,37 +387,17 @@ pub fn refine(
         let out_of_time = rs
             .max_seconds
             .is_some_and(|s| started.elapsed().as_secs_f64() >= s);
-        let stopped = if met {
-            Some(StopReason::TargetMet)
-        } else if round + 1 >= rs.max_rounds {
-            Some(StopReason::MaxRounds)
-        } else if out_of_time {
-            Some(StopReason::MaxSeconds)
-        } else if !split_failing(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven) {
-            let full = st.points.len() + (1usize << (nx - 1)) > rs.budget;
-            Some(if full {
-                StopReason::Budget
-            } else {
-                StopReason::NothingToSplit
-            })
-        } else {
-            None
+        let stopped = match (met, round + 1 >= rs.max_rounds, out_of_time) {
+            (true, _, _) => Some(StopReason::TargetMet),
+            (_, true, _) => Some(StopReason::MaxRounds),
+            (_, _, true) => Some(StopReason::MaxSeconds),
+            _ => split_or_stop(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven),
         };
         let done = stopped.is_some();
-        let mut model = model;
-        if done && !met {
-            // Not met: the best model so far, bounded on the final (finer) tree, may do
-            // better than the last one.
-            if let Some((_, best)) = st.best.clone() {
-                let b = bound(&st, &best.mlp);
-                let e = max_eps(&b);
-                if e < eps {
-                    st.bounds = b;
-                    model = best;
-                }
-            }
-            st.model = Some(model.clone());
-        }
+        let model = match done && !met {
+            true => keep_best(&mut st, model, eps, &bound),
+            false => model,
+        };
         st.finished = done;
         if let Some(p) = checkpoint {
             // The checkpoint holds the tree with the new (unlabelled) points: on resume,
@@ -440,15 +406,84 @@ pub fn refine(
             write_atomic(p, &bytes)?;
         }
         if done {
-            let met = certified_all(&st.bounds, rs.target_eps);
             return Ok(Refined {
-                met,
+                met: certified_all(&st.bounds, rs.target_eps),
                 state: st,
                 model: opts.fixed.clone().unwrap_or(model),
                 stopped: stopped.unwrap_or(StopReason::NothingToSplit),
             });
         }
     }
+}
+
+/// A run that ends without meeting the target: the best model so far, bounded on the final
+/// (finer) tree, may do better than the last one (of ε `eps`); the better one is kept (its
+/// bounds in `st`) and returned.
+fn keep_best(
+    st: &mut RefineState,
+    mut model: Model,
+    eps: f64,
+    bound: &dyn Fn(&RefineState, &Mlp) -> Vec<(usize, CellBound)>,
+) -> Model {
+    if let Some((_, best)) = st.best.clone() {
+        let b = bound(st, &best.mlp);
+        if max_eps(&b) < eps {
+            st.bounds = b;
+            model = best;
+        }
+    }
+    st.model = Some(model.clone());
+    model
+}
+
+/// Whether the round retrains: never for a fixed net; when there is no net yet or a failing
+/// cell's corner (fit) error is a large part of the target (splitting cannot help there).
+/// Otherwise the net is kept and cells are only split (retraining would move every bound).
+fn needs_retrain(st: &RefineState, rs: &RefineSettings, opts: &RefineOptions) -> bool {
+    let fit_bound = st
+        .bounds
+        .iter()
+        .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
+    opts.fixed.is_none() && (st.model.is_none() || fit_bound)
+}
+
+/// Hands the round's result to the sink of `opts` (if any); `best`: the best so far.
+fn report_round(
+    opts: &RefineOptions,
+    rs: &RefineSettings,
+    st: &RefineState,
+    model: &Model,
+    best: bool,
+) {
+    if let Some(sink) = &opts.on_result {
+        let r = Refined {
+            met: certified_all(&st.bounds, rs.target_eps),
+            state: st.clone(),
+            model: opts.fixed.clone().unwrap_or_else(|| model.clone()),
+            stopped: StopReason::Running,
+        };
+        (sink.0)(&r, best);
+    }
+}
+
+/// Splits the failing cells ([`split_failing`]); `None` if any was split, else why the run
+/// stops: the budget (no room for a split's new corners) or nothing left to split.
+fn split_or_stop(
+    ctx: &mut Ctx,
+    st: &mut RefineState,
+    pending: &mut Vec<usize>,
+    (ex, rs): (&Exclusion, &RefineSettings),
+    unproven: &dyn Fn(&CellBound) -> bool,
+) -> Option<StopReason> {
+    if split_failing(ctx, st, pending, (ex, rs), unproven) {
+        return None;
+    }
+    let nx = ctx.lat.max.len();
+    Some(if st.points.len() + (1usize << (nx - 1)) > rs.budget {
+        StopReason::Budget
+    } else {
+        StopReason::NothingToSplit
+    })
 }
 
 /// Why a finished run read back from its checkpoint stopped (not stored: inferred from its
