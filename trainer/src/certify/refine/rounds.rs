@@ -416,15 +416,13 @@ pub fn refine(
     }
 }
 
+/// The cells' bounds of a state under a net.
+type BoundFn<'a> = dyn Fn(&RefineState, &Mlp) -> Vec<(usize, CellBound)> + 'a;
+
 /// A run that ends without meeting the target: the best model so far, bounded on the final
 /// (finer) tree, may do better than the last one (of ε `eps`); the better one is kept (its
 /// bounds in `st`) and returned.
-fn keep_best(
-    st: &mut RefineState,
-    mut model: Model,
-    eps: f64,
-    bound: &dyn Fn(&RefineState, &Mlp) -> Vec<(usize, CellBound)>,
-) -> Model {
+fn keep_best(st: &mut RefineState, mut model: Model, eps: f64, bound: &BoundFn) -> Model {
     if let Some((_, best)) = st.best.clone() {
         let b = bound(st, &best.mlp);
         if max_eps(&b) < eps {
