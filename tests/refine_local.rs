@@ -289,3 +289,81 @@ fn a_corrupt_checkpoint_is_a_clear_error() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("refine.initial"));
 }
+
+/// A run stopped by its wall-clock budget (`[refine] max_seconds`, here spent by the first
+/// round) ends with its best certificate and a report: the model and certificate are
+/// usable by `trainer eval` / `trainer export`, `refine_report.json` says why the run
+/// stopped, where the worst cell is and how to resume, and the error names the reason.
+#[test]
+fn a_refine_stopped_by_its_time_budget_leaves_its_certificate_and_a_report() {
+    let dir = tempdir();
+    let d = dir.path();
+    let cfg = small_config(d);
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    let timed = d.join("timed.toml");
+    std::fs::write(
+        &timed,
+        text.replace(
+            "max_rounds = 30\n",
+            "max_rounds = 30\nmax_seconds = 0.001\n",
+        ),
+    )
+    .unwrap();
+    let out = d.join("r");
+    let o = trainer(&[
+        "refine",
+        "--config",
+        timed.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "the target is not met in one round"
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("refine.max_seconds") && err.contains("resume"),
+        "{err}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("refine_report.json")).unwrap()).unwrap();
+    assert_eq!(report["stopped"], "max_seconds", "{report}");
+    assert_eq!(report["rounds"], 1, "{report}");
+    assert!(report["eps"].as_f64().unwrap().is_finite());
+    assert!(report["binding_cell"][0].as_array().unwrap().len() == 2);
+    let resume = report["resume"].as_str().unwrap();
+    assert!(
+        resume.contains("--out") && resume.contains("timed.toml"),
+        "{resume}"
+    );
+    // The certificate file and the model agree and readers take them.
+    let cert: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("certificate.json")).unwrap()).unwrap();
+    assert_eq!(cert["eps"].as_f64(), report["eps"].as_f64());
+    let states = d.join("s.csv");
+    std::fs::write(&states, "x1,x2\n0.1,0.2\n-0.5,0.3\n").unwrap();
+    let model = out.join("model.bin");
+    ok(&trainer(&[
+        "eval",
+        "--model",
+        model.to_str().unwrap(),
+        "--states",
+        states.to_str().unwrap(),
+        "--out",
+        d.join("e.csv").to_str().unwrap(),
+    ]));
+    ok(&trainer(&[
+        "export",
+        "--model",
+        model.to_str().unwrap(),
+        "--certificate",
+        out.join("certificate.json").to_str().unwrap(),
+        "--rust",
+        d.join("w.rs").to_str().unwrap(),
+        "--postcard",
+        d.join("w.bin").to_str().unwrap(),
+    ]));
+}

@@ -88,6 +88,7 @@ pub(super) fn execute(
     fixed: Option<&Path>,
     quiet: bool,
 ) -> Result<()> {
+    let fixed_path = fixed;
     let fixed_model = fixed
         .map(|p| super::common::load_model(p).map(|m| (p, m)))
         .transpose()?;
@@ -109,10 +110,21 @@ pub(super) fn execute(
         .with_context(|| format!("cannot create output directory {}", dir.display()))?;
     let stat = statistical.options(dir.join("statistical.bin"))?;
     let t0 = std::time::Instant::now();
+    let name = cfg.name.clone();
+    let resume = resume_command(config, target_eps, budget, &dir, data, fixed_path);
     let opts = refine::RefineOptions {
         on_round: (!quiet).then_some(print_round as fn(&RoundLog, usize)),
         initial_labels,
         fixed,
+        on_result: Some(refine::writing_sink(
+            &cfg,
+            &dir,
+            &resume,
+            (BEST_AFTER_SECONDS, quiet),
+            std::sync::Arc::new(move |m, c| {
+                trainer::deploy::export::deployed_allowance(&name, m, c)
+            }),
+        )),
     };
     let (r, checked) = refine_and_check(&cfg, &opts, &dir.join("refine_state.bin"), check, quiet)?;
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
@@ -137,17 +149,58 @@ pub(super) fn execute(
             println!("robust design: {}", v.message);
         }
     }
+    let report = refine::RefineReport::new(&cfg, &rs, &r, r.stopped, resume);
+    refine::write_report(&dir, &report)?;
     if !r.met {
+        refine::print_infinite(&report.infinite);
         bail!(
-            "target ε {} not met within {} solves / {} rounds: certified ε {:.4} (outputs in {})",
+            "target ε {} not met ({}; budget {} solves, {} rounds{}): certified ε {:.4} \
+             (outputs and {} in {}; resume: {})",
             rs.target_eps,
+            r.stopped.describe(),
             rs.budget,
             rs.max_rounds,
+            rs.max_seconds.map_or(String::new(), |s| format!(", {s} s")),
             cert.base.eps,
-            dir.display()
+            refine::REPORT_FILE,
+            dir.display(),
+            report.resume
         );
     }
     Ok(())
+}
+
+/// Seconds of a run before its best certificate so far is first written out (a shorter run
+/// writes only its final outputs).
+const BEST_AFTER_SECONDS: f64 = 10.0;
+
+/// The command that resumes this run from its checkpoint (the same problem, output
+/// directory and overrides).
+fn resume_command(
+    config: Option<&Path>,
+    target_eps: Option<f64>,
+    budget: Option<usize>,
+    dir: &Path,
+    data: Option<&Path>,
+    fixed: Option<&Path>,
+) -> String {
+    let mut c = String::from("trainer refine");
+    if let Some(p) = config {
+        c += &format!(" --config {}", p.display());
+    }
+    if let Some(p) = data {
+        c += &format!(" --data {}", p.display());
+    }
+    if let Some(p) = fixed {
+        c += &format!(" --certify-only --model {}", p.display());
+    }
+    if let Some(t) = target_eps {
+        c += &format!(" --target-eps {t}");
+    }
+    if let Some(b) = budget {
+        c += &format!(" --budget {b}");
+    }
+    c + &format!(" --out {}", dir.display())
 }
 
 /// The problem refined: `--config`, else the one stored in `--data`, else the one of

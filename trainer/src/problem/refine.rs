@@ -24,6 +24,11 @@ pub struct RefineSettings {
     pub initial: Vec<usize>,
     /// Largest number of refinement rounds (default 80).
     pub max_rounds: usize,
+    /// Wall-clock budget in seconds (default: none). Checked after each round: once spent,
+    /// the run stops with its best certificate (resumable). The result then depends on the
+    /// machine's speed and load, not only on the settings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_seconds: Option<f64>,
     /// Adam epochs of each warm-started retraining (default 60).
     pub round_epochs: usize,
     /// Learning rate of the warm-started retrainings (default 1e-3, cosine decay).
@@ -136,6 +141,7 @@ impl Default for RefineSettings {
             budget: 50_000,
             initial: Vec::new(),
             max_rounds: 80,
+            max_seconds: None,
             round_epochs: 60,
             round_learning_rate: 1e-3,
             retrain_at: 0.6,
@@ -205,6 +211,12 @@ impl RefineSettings {
     pub fn validate(&self, nx: usize) -> Result<(), ConfigError> {
         if !(self.target_eps.is_finite() && self.target_eps > 0.0) {
             return Err(invalid("refine.target_eps", "must be positive and finite"));
+        }
+        if let Some(s) = self.max_seconds.filter(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(invalid(
+                "refine.max_seconds",
+                format!("must be positive and finite, got {s}"),
+            ));
         }
         if self.budget == 0 {
             return Err(invalid("refine.budget", "must be at least 1"));

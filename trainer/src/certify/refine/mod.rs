@@ -28,6 +28,7 @@ mod cellcheck;
 mod check;
 mod feedback;
 mod outputs;
+mod progress;
 mod region;
 mod rounds;
 mod start;
@@ -39,6 +40,10 @@ pub use feedback::reopen;
 pub use outputs::{
     cell_views, certificate, check_summary, dataset, pretty, sensitivity_spread, write_outputs,
     CellView, LocalCertificate,
+};
+pub use progress::{
+    infinite_causes, print_infinite, write_report, writing_sink, Allowance, InfiniteCell,
+    RefineReport, RoundSink, StopReason, REPORT_FILE,
 };
 pub use rounds::{refine, RefineOptions, Refined};
 

@@ -3,6 +3,7 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
+use super::progress::{RoundSink, StopReason};
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -31,6 +32,9 @@ pub struct RefineOptions {
     /// Certify this network as it is (`refine --certify-only`): no training, the rounds
     /// only split cells and solve their corners; the checkpoint is bound to its hash.
     pub fixed: Option<Model>,
+    /// Given each round's result and whether it is the best so far ([`RoundSink`]): the
+    /// caller writes the best out, so a stopped run leaves its best certificate.
+    pub on_result: Option<RoundSink>,
 }
 
 /// The result of a refinement run.
@@ -42,6 +46,8 @@ pub struct Refined {
     pub model: Model,
     /// Whether every cell meets the target.
     pub met: bool,
+    /// Why the run stopped ([`StopReason::Running`] for a result handed to [`RoundSink`]).
+    pub stopped: StopReason,
 }
 
 /// The local certificate's settings of a refinement.
@@ -311,7 +317,13 @@ pub fn refine(
                     &ex,
                 );
             }
-            return Ok(Refined { met, state, model });
+            let stopped = finished_reason(&state, rs, met);
+            return Ok(Refined {
+                met,
+                state,
+                model,
+                stopped,
+            });
         }
     }
     let mut st = match resumed {
@@ -333,6 +345,7 @@ pub fn refine(
         let q = qp.as_ref().map(|q| (q, rs.target_eps));
         bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex)
     };
+    let started = Instant::now();
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -348,15 +361,7 @@ pub fn refine(
             // Resumed or imported points: their active sets, for the proofs.
             fill_active(cfg, &mut st.points);
         }
-        // Retrain when a failing cell's corner (fit) error is a large part of the target:
-        // splitting cannot help there. Otherwise keep the net and only split (retraining
-        // would move every cell's bound).
-        let fit_bound = st
-            .bounds
-            .iter()
-            .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
-        let retrain = opts.fixed.is_none() && (st.model.is_none() || fit_bound);
-        if retrain {
+        if needs_retrain(&st, rs, opts) {
             st.model = Some(retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash));
         }
         let model = st.model.clone().expect("trained above");
@@ -364,9 +369,13 @@ pub fn refine(
         let log = round_log(&st, round, rs.target_eps, t0);
         let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
-        if st.best.as_ref().is_none_or(|(e, _)| eps < *e) {
-            st.best = Some((eps, model.clone()));
-        }
+        let improved = st.best.as_ref().is_none_or(|(e, _)| eps < *e);
+        st.best = if improved {
+            Some((eps, model.clone()))
+        } else {
+            st.best.take()
+        };
+        report_round(opts, rs, &st, &model, improved && eps.is_finite());
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
         }
@@ -375,24 +384,20 @@ pub fn refine(
         let met = !st.bounds.is_empty()
             && ok == st.bounds.len()
             && !st.bounds.iter().any(|(_, b)| unproven(b));
-        let split_any = !met
-            && round + 1 < rs.max_rounds
-            && split_failing(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven);
-        let done = met || !split_any;
-        let mut model = model;
-        if done && !met {
-            // Not met: the best model so far, bounded on the final (finer) tree, may do
-            // better than the last one.
-            if let Some((_, best)) = st.best.clone() {
-                let b = bound(&st, &best.mlp);
-                let e = max_eps(&b);
-                if e < eps {
-                    st.bounds = b;
-                    model = best;
-                }
-            }
-            st.model = Some(model.clone());
-        }
+        let out_of_time = rs
+            .max_seconds
+            .is_some_and(|s| started.elapsed().as_secs_f64() >= s);
+        let stopped = match (met, round + 1 >= rs.max_rounds, out_of_time) {
+            (true, _, _) => Some(StopReason::TargetMet),
+            (_, true, _) => Some(StopReason::MaxRounds),
+            (_, _, true) => Some(StopReason::MaxSeconds),
+            _ => split_or_stop(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven),
+        };
+        let done = stopped.is_some();
+        let model = match done && !met {
+            true => keep_best(&mut st, model, eps, &bound),
+            false => model,
+        };
         st.finished = done;
         if let Some(p) = checkpoint {
             // The checkpoint holds the tree with the new (unlabelled) points: on resume,
@@ -401,13 +406,96 @@ pub fn refine(
             write_atomic(p, &bytes)?;
         }
         if done {
-            let met = certified_all(&st.bounds, rs.target_eps);
             return Ok(Refined {
-                met,
+                met: certified_all(&st.bounds, rs.target_eps),
                 state: st,
                 model: opts.fixed.clone().unwrap_or(model),
+                stopped: stopped.unwrap_or(StopReason::NothingToSplit),
             });
         }
+    }
+}
+
+/// The cells' bounds of a state under a net.
+type BoundFn<'a> = dyn Fn(&RefineState, &Mlp) -> Vec<(usize, CellBound)> + 'a;
+
+/// A run that ends without meeting the target: the best model so far, bounded on the final
+/// (finer) tree, may do better than the last one (of ε `eps`); the better one is kept (its
+/// bounds in `st`) and returned.
+fn keep_best(st: &mut RefineState, mut model: Model, eps: f64, bound: &BoundFn) -> Model {
+    if let Some((_, best)) = st.best.clone() {
+        let b = bound(st, &best.mlp);
+        if max_eps(&b) < eps {
+            st.bounds = b;
+            model = best;
+        }
+    }
+    st.model = Some(model.clone());
+    model
+}
+
+/// Whether the round retrains: never for a fixed net; when there is no net yet or a failing
+/// cell's corner (fit) error is a large part of the target (splitting cannot help there).
+/// Otherwise the net is kept and cells are only split (retraining would move every bound).
+fn needs_retrain(st: &RefineState, rs: &RefineSettings, opts: &RefineOptions) -> bool {
+    let fit_bound = st
+        .bounds
+        .iter()
+        .any(|(_, b)| b.eps > rs.target_eps && b.corner > rs.retrain_at * rs.target_eps);
+    opts.fixed.is_none() && (st.model.is_none() || fit_bound)
+}
+
+/// Hands the round's result to the sink of `opts` (if any); `best`: the best so far.
+fn report_round(
+    opts: &RefineOptions,
+    rs: &RefineSettings,
+    st: &RefineState,
+    model: &Model,
+    best: bool,
+) {
+    if let Some(sink) = &opts.on_result {
+        let r = Refined {
+            met: certified_all(&st.bounds, rs.target_eps),
+            state: st.clone(),
+            model: opts.fixed.clone().unwrap_or_else(|| model.clone()),
+            stopped: StopReason::Running,
+        };
+        (sink.0)(&r, best);
+    }
+}
+
+/// Splits the failing cells ([`split_failing`]); `None` if any was split, else why the run
+/// stops: the budget (no room for a split's new corners) or nothing left to split.
+fn split_or_stop(
+    ctx: &mut Ctx,
+    st: &mut RefineState,
+    pending: &mut Vec<usize>,
+    (ex, rs): (&Exclusion, &RefineSettings),
+    unproven: &dyn Fn(&CellBound) -> bool,
+) -> Option<StopReason> {
+    if split_failing(ctx, st, pending, (ex, rs), unproven) {
+        return None;
+    }
+    let nx = ctx.lat.max.len();
+    Some(if st.points.len() + (1usize << (nx - 1)) > rs.budget {
+        StopReason::Budget
+    } else {
+        StopReason::NothingToSplit
+    })
+}
+
+/// Why a finished run read back from its checkpoint stopped (not stored: inferred from its
+/// state and the settings).
+fn finished_reason(st: &RefineState, rs: &RefineSettings, met: bool) -> StopReason {
+    let nx = st.nodes.first().map_or(1, |n| n.lo.len());
+    if met {
+        StopReason::TargetMet
+    } else if st.log.len() >= rs.max_rounds {
+        StopReason::MaxRounds
+    } else if st.points.len() + (1usize << (nx - 1)) > rs.budget {
+        StopReason::Budget
+    } else {
+        StopReason::NothingToSplit
     }
 }
 

@@ -435,3 +435,63 @@ fn unlabelled_corners_are_excluded_at_the_smallest_cell_and_eps_is_finite() {
         );
     }
 }
+
+/// A run with unlabelled corners (as in `cells_with_a_failed_corner_are_split_around_it`):
+/// every cell with ε_C = ∞ is named with its unlabelled corner states, their solve status
+/// and the cause; the run says why it stopped; the round sink sees every round, marked best
+/// exactly when ε is finite and below every earlier round's.
+#[test]
+fn infinite_cells_are_named_and_every_round_reaches_the_sink() {
+    use std::sync::{Arc, Mutex};
+    let mut cfg = stiff_spring();
+    cfg.solver.soft_fallback = false;
+    let rs = quick_refine([5, 5], 300, 5, 0.5);
+    let seen = Arc::new(Mutex::new(Vec::<(f64, bool)>::new()));
+    let sink = seen.clone();
+    let opts = RefineOptions {
+        on_result: Some(RoundSink(Arc::new(move |r: &Refined, best: bool| {
+            let e = super::rounds::max_eps(&r.state.bounds);
+            assert_eq!(r.stopped, StopReason::Running);
+            sink.lock().unwrap().push((e, best));
+        }))),
+        ..Default::default()
+    };
+    let r = refine(&cfg, &rs, None, &opts).unwrap();
+    let seen = seen.lock().unwrap();
+    assert_eq!(seen.len(), r.state.log.len(), "one call per round");
+    let mut least = f64::INFINITY;
+    for &(e, best) in seen.iter() {
+        assert_eq!(best, e.is_finite() && e < least, "{seen:?}");
+        least = least.min(e);
+    }
+    let expected = if r.state.log.len() == rs.max_rounds {
+        StopReason::MaxRounds
+    } else {
+        StopReason::Budget
+    };
+    assert_eq!(r.stopped, expected);
+    let inf = infinite_causes(&cfg, &rs, &r.state, usize::MAX);
+    let n_inf = r
+        .state
+        .bounds
+        .iter()
+        .filter(|(_, b)| b.eps.is_infinite())
+        .count();
+    assert!(n_inf > 0, "no infinite cell: the test shows nothing");
+    assert_eq!(inf.len(), n_inf);
+    for c in &inf {
+        assert!(
+            !c.unlabelled.is_empty() && c.cause.contains("min_cell"),
+            "{c:?}"
+        );
+        for (x, status) in &c.unlabelled {
+            let p = r.state.points.iter().find(|p| &p.x == x).expect("a corner");
+            assert!(!p.labelled());
+            assert_eq!(status, p.status.map_or("unsolved", |s| s.as_str()));
+            assert!((0..2).all(|k| c.cell.0[k] <= x[k] && x[k] <= c.cell.1[k]));
+        }
+    }
+    let report = RefineReport::new(&cfg, &rs, &r, r.stopped, "resume".into());
+    assert_eq!(report.infinite.len(), n_inf.min(10));
+    assert!(report.eps.is_infinite() && report.binding_cell.0.len() == 2);
+}
