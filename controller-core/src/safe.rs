@@ -319,7 +319,10 @@ where
         self.step_with(x, candidate)
     }
 
-    /// One control step with a candidate given by the caller (module doc). Never panics.
+    /// One control step with a candidate given by the caller (module doc). Never panics
+    /// (checked with `#[no_panic]` under the `no-panic` feature, for the plants it is
+    /// instantiated with in a release build: `tests/safe_closed_loop.rs`).
+    #[cfg_attr(feature = "no-panic", no_panic::no_panic)]
     pub fn step_with(&mut self, x: &[f32; NX], mut candidate: [[f32; NU]; N]) -> SafeOutput<NU> {
         let mut flags = SafeFlags::EMPTY;
         if !x.iter().all(|v| v.is_finite()) {

@@ -43,10 +43,12 @@ fn check_accepts_rest_and_rejects_each_kind_of_violation() {
             cost: 0.0
         }
     );
-    // Input bound.
-    let mut v = [[0.0]; N];
-    v[3] = [1.01];
-    assert!(!c.check(&[0.0, 0.0], &mut v, false).feasible);
+    // Input bound, exact: the saturated sequence passes, 1e-4 beyond the bound fails.
+    let mut v = saturated_k([1.0, 0.0], 0);
+    assert_eq!(v[0], [-1.0]);
+    assert!(c.check(&[1.0, 0.0], &mut v, false).feasible);
+    v[0] = [-1.0001];
+    assert!(!c.check(&[1.0, 0.0], &mut v, false).feasible);
     // State bound at the first stage (|v| > 2).
     assert!(!c.check(&[0.0, 2.1], &mut [[0.0]; N], false).feasible);
     // Terminal set: p = 0.2 at rest stays outside (37.25·0.04 > 1.2) although admissible.
@@ -80,12 +82,13 @@ fn check_accepts_rest_and_rejects_each_kind_of_violation() {
 #[test]
 fn complete_writes_the_terminal_controller_into_the_last_entry() {
     let c = ctl();
-    let x0 = [1.0, 0.0];
-    let mut v = saturated_k(x0, 0);
-    let want = v[N - 1];
+    // At rest at p = 0.1 for N − 1 steps, then κ_f(x_{N−1}) = K (0.1, 0) = −0.4.
+    let x0 = [0.1, 0.0];
+    let mut v = [[0.0]; N];
     v[N - 1] = [f32::NAN];
+    assert!(!c.check(&x0, &mut v.clone(), false).feasible);
     assert!(c.check(&x0, &mut v, true).feasible);
-    assert_eq!(v[N - 1], want);
+    assert_eq!(v[N - 1], [-0.4]);
 }
 
 #[test]
