@@ -12,8 +12,9 @@
 //!        x̂_{N−1} = F^{N−1}(x; ū_1 … ū_{N−1})              completed by the terminal controller
 //!   check(x, v): x_0 = x, x_{k+1} = F(x_k, v_k)           forward simulation (the plant's f32 RK4)
 //!        feasible ⇔ Π_U(v_k) = v_k         (k = 0 … N−1)   input box, exact (no margin)
-//!                  ∧ g(x_k, v_k) + m_s ≤ 0  (k = 0 … N−1)   state box + path constraints, margin m_s
-//!                  ∧ x_Nᵀ P x_N − α + m_f ≤ 0             terminal set (around x_ref), margin m_f
+//!                  ∧ g_k(x_k, v_k) + m_s ≤ 0 (k = 0 … N−1)  the OCP's stage-k constraints, margin m_s
+//!                  ∧ g_N(x_N) + m_f ≤ 0                   x_N: state box, terminal constraints and
+//!                                                         the terminal set (x−x_ref)ᵀP(x−x_ref) ≤ α
 //!                  ∧ J(x, v) finite
 //!        J(x, v) = Σ_k ℓ(x_k, v_k) + V_f(x_N)
 //!   apply c if c feasible ∧ (s infeasible ∨ J(x, c) ≤ J(x, s))      flag CANDIDATE
@@ -65,12 +66,16 @@ use crate::mlp::Network;
 pub trait Plant<const NX: usize, const NU: usize> {
     /// x⁺ = F(x, u): one sampling period of the nominal model (RK4 with the OCP's sub-steps).
     fn step(&self, x: &[f32; NX], u: &[f32; NU]) -> [f32; NX];
-    /// max_i g_i(x, u): the largest (normalised) state-box or path constraint value at a
-    /// stage; `≤ 0` means admissible. The input box is not part of it: it is checked exactly
+    /// g_k(x, u) = max_i g_i(x, u) over the constraints the OCP imposes at stage `k` on
+    /// (x_k, u_k) (normalised; `≤ 0` means admissible): the state box and state constraints
+    /// from k = 1 on (x_0 is the measured state, which the OCP does not constrain), path
+    /// constraints per the OCP's rule. The input box is not part of it: it is checked exactly
     /// through [`Plant::project_input`] (`Π_U(u) = u`), without a margin, since an input is
     /// applied as computed and a saturated input sits exactly on its bound.
-    fn stage_violation(&self, x: &[f32; NX], u: &[f32; NU]) -> f32;
-    /// (x − x_ref)ᵀ P (x − x_ref) − α: `≤ 0` means inside the terminal set.
+    fn stage_violation(&self, k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32;
+    /// g_N(x): the constraints on the last state (normalised; `≤ 0` means admissible): the
+    /// state box, the terminal constraints, and the terminal set
+    /// (x − x_ref)ᵀ P (x − x_ref) ≤ α.
     fn terminal_violation(&self, x: &[f32; NX]) -> f32;
     /// κ_f(x) = u_ref + K (x − x_ref): the terminal controller.
     fn terminal_input(&self, x: &[f32; NX]) -> [f32; NU];
@@ -294,7 +299,7 @@ where
             // The input box, exactly (a NaN input is projected elsewhere, so it fails).
             ok &= self.plant.project_input(u) == *u;
             // NaN compares false: a NaN constraint value fails.
-            ok &= self.plant.stage_violation(&xk, u) + self.margins.stage <= 0.0;
+            ok &= self.plant.stage_violation(k, &xk, u) + self.margins.stage <= 0.0;
             cost += self.plant.stage_cost(&xk, u);
             xk = self.plant.step(&xk, u);
         }

@@ -4,7 +4,9 @@
 //! ```text
 //! x = (p, v),  ṗ = v, v̇ = u,  h = 0.5 s:   F(x, u) = (p + h v + h²/2 u, v + h u)
 //!   (exact; RK4 with one sub-step gives the same map)
-//! constraints: |p| ≤ 4, |v| ≤ 2 (g(x, u) = max(|p|/4 − 1, |v|/2 − 1)), |u| ≤ 1 (Π_U: clamp)
+//! constraints: |p| ≤ 4, |v| ≤ 2 on x_1 … x_N (g_k(x, u) = max(|p|/4 − 1, |v|/2 − 1) for k ≥ 1;
+//!   at k = 0 only "x finite"), |u| ≤ 1 (Π_U: clamp)
+//! g_N(x) = xᵀPx/α − 1 (the terminal set, inside the state box)
 //! ℓ(x, u) = p² + v² + u²,  V_f(x) = xᵀ P x,  κ_f(x) = K x,  K = (−4, −3)
 //! A_K = A + B K is nilpotent (A_K² = 0), P = M + A_Kᵀ M A_K with M = I + KᵀK:
 //!   A_Kᵀ P A_K − P = −M   (V_f decreases by at least ℓ(x, κ_f(x)), exactly)
@@ -57,13 +59,22 @@ impl Plant<2, 1> for DoubleIntegrator {
         [p + h * v + 0.5 * h * h * u, v + h * u]
     }
 
-    fn stage_violation(&self, x: &[f32; 2], _u: &[f32; 1]) -> f32 {
+    fn stage_violation(&self, k: usize, x: &[f32; 2], _u: &[f32; 1]) -> f32 {
+        if k == 0 {
+            // x_0 is the measured state: no state constraint (the OCP's rule).
+            return if x.iter().all(|v| v.is_finite()) {
+                -1.0
+            } else {
+                f32::NAN
+            };
+        }
         let [p, v] = *x;
         nan_max(p.abs() / Self::P_MAX - 1.0, v.abs() / Self::V_MAX - 1.0)
     }
 
     fn terminal_violation(&self, x: &[f32; 2]) -> f32 {
-        self.terminal_cost(x) - Self::ALPHA
+        // The terminal set lies inside the state box (module doc): it is the only check.
+        self.terminal_cost(x) / Self::ALPHA - 1.0
     }
 
     fn terminal_input(&self, x: &[f32; 2]) -> [f32; 1] {

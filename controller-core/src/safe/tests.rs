@@ -33,6 +33,17 @@ fn saturated_k(x: [f32; 2], delay: usize) -> [[f32; 1]; N] {
     s
 }
 
+/// Four (`n`) full brakes u = −1, then the saturated κ_f, simulated from `x`.
+fn brake_then_k(x: [f32; 2], n: usize) -> [[f32; 1]; N] {
+    let mut v = [[-1.0]; N];
+    let mut xn = x;
+    for u in &v[..n] {
+        xn = Di.step(&xn, u);
+    }
+    v[n..].copy_from_slice(&saturated_k(xn, 0)[..N - n]);
+    v
+}
+
 #[test]
 fn check_accepts_rest_and_rejects_each_kind_of_violation() {
     let c = ctl();
@@ -49,12 +60,15 @@ fn check_accepts_rest_and_rejects_each_kind_of_violation() {
     assert!(c.check(&[1.0, 0.0], &mut v, false).feasible);
     v[0] = [-1.0001];
     assert!(!c.check(&[1.0, 0.0], &mut v, false).feasible);
-    // State bound at the first stage (|v| > 2).
+    // The state box binds from x_1 on (|v| > 2 at x_1), not at the measured x_0.
     assert!(!c.check(&[0.0, 2.1], &mut [[0.0]; N], false).feasible);
-    // Terminal set: p = 0.2 at rest stays outside (37.25·0.04 > 1.2) although admissible.
-    assert!(!c.check(&[0.2, 0.0], &mut [[0.0]; N], false).feasible);
-    // The margin: a velocity 2.5e-5 inside its bound passes without it, fails with it.
-    let x = [-1.0, 1.99995];
+    let mut v = brake_then_k([-2.0, 2.1], 4);
+    assert!(
+        c.check(&[-2.0, 2.1], &mut v, false).feasible,
+        "x_1 = (…, 1.6)"
+    );
+    // The margin: a velocity at x_1 2.5e-5 inside its bound passes without it, fails with it.
+    let x = [-3.0, 1.99995];
     let loose = SafeController::<_, _, 2, 1, N>::new(
         Di,
         NoSource,
@@ -63,8 +77,14 @@ fn check_accepts_rest_and_rejects_each_kind_of_violation() {
             terminal: 0.0,
         },
     );
+    // u_0 = 0 keeps v = 1.99995 at x_1; four full brakes; then the saturated κ_f.
     let mut v = [[-1.0]; N];
-    v[4..].copy_from_slice(&saturated_k([1.0, 0.0], 0)[..N - 4]);
+    v[0] = [0.0];
+    let mut x5 = x;
+    for u in &v[..5] {
+        x5 = Di.step(&x5, u);
+    }
+    v[5..].copy_from_slice(&saturated_k(x5, 0)[..N - 5]);
     assert!(loose.check(&x, &mut v, false).feasible);
     assert!(!c.check(&x, &mut v, false).feasible);
     // The cost is Σ ℓ + V_f along the simulated trajectory.
