@@ -12,9 +12,13 @@
 //! samples × a safety factor (10), in the units of the normalised constraints — sampled,
 //! so states outside the sample (or accumulation over the horizon's N steps, which this
 //! one-step test does not measure) are not covered by an argument.
+//!
+//! The OCP's part (`ocp_rs`: ℓ, V_f, Π_U, the normalised state-box violation) is compared
+//! with the same formulas in f64 on the same kind of samples (inputs drawn from twice the
+//! box, so that the projection clamps): Π_U exactly, the others to a relative 1e-5.
 
 use std::path::{Path, PathBuf};
-use trainer::deploy::plant_rs::{plant_model, plant_rs};
+use trainer::deploy::plant_rs::{ocp_rs, plant_model, plant_rs};
 use trainer::problem::model::Discrete;
 use trainer::problem::ProblemConfig;
 
@@ -47,7 +51,9 @@ fn generated_sources_are_the_committed_fixtures() {
     ] {
         let cfg = config(name);
         let model = plant_model(&cfg.system).unwrap();
-        let src = plant_rs(&cfg.name, &model, cfg.ocp.ts, cfg.ocp.rk4_substeps);
+        let src = plant_rs(&cfg.name, &model, cfg.ocp.ts, cfg.ocp.rk4_substeps)
+            + "\n"
+            + &ocp_rs(&cfg).unwrap();
         let path = root().join("tests/fixtures/safe-plant").join(file);
         if std::env::var_os("AMPC_BLESS").is_some() {
             std::fs::write(&path, &src).unwrap();
@@ -128,4 +134,100 @@ fn f32_plants_match_the_f64_model_on_1e5_states() {
             "{name}: no difference at all: the comparison is not running f32"
         );
     }
+}
+
+/// The generated `(stage_cost, terminal_cost, project_input, state_box_violation)`.
+type OcpFns<const NX: usize, const NU: usize> = (
+    fn(&[f32; NX], &[f32; NU]) -> f32,
+    fn(&[f32; NX]) -> f32,
+    fn(&[f32; NU]) -> [f32; NU],
+    fn(&[f32; NX]) -> f32,
+);
+
+/// ℓ, V_f, Π_U and g_X of the generated file against f64 formulas from the problem file.
+fn check_ocp<const NX: usize, const NU: usize>(name: &str, f: OcpFns<NX, NU>) {
+    let (stage_cost, terminal_cost, project_input, state_box_violation) = f;
+    let cfg = config(name);
+    let ocp = &cfg.ocp;
+    let (qm, rm, pm) = (
+        ocp.q.to_dmatrix().unwrap(),
+        ocp.r.to_dmatrix().unwrap(),
+        ocp.p.to_dmatrix().unwrap(),
+    );
+    let (q, r, p) = (
+        |i: usize, j: usize| qm[(i, j)],
+        |i: usize, j: usize| rm[(i, j)],
+        |i: usize, j: usize| pm[(i, j)],
+    );
+    let (xr, ur) = (ocp.x_ref_or_origin(NX), ocp.u_ref_or_zero(NU));
+    let scale = ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    fn quad(w: &dyn Fn(usize, usize) -> f64, d: &[f64]) -> f64 {
+        (0..d.len())
+            .map(|i| d[i] * (0..d.len()).map(|j| w(i, j) * d[j]).sum::<f64>())
+            .sum()
+    }
+    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let mut seed = 0x0C9_0041_u64 ^ NX as u64;
+    let close = |a: f32, b: f64| (f64::from(a) - b).abs() <= 1e-5 * (1.0 + b.abs());
+    for _ in 0..SAMPLES {
+        let x: [f32; NX] = std::array::from_fn(|i| {
+            let w = hi[i] - lo[i];
+            (lo[i] - 0.5 * w + 2.0 * w * uniform(&mut seed)) as f32
+        });
+        let u: [f32; NU] = std::array::from_fn(|j| {
+            let (l, h) = (ocp.u_lo[j], ocp.u_hi[j]);
+            (l - 0.5 * (h - l) + 2.0 * (h - l) * uniform(&mut seed)) as f32
+        });
+        let dx: Vec<f64> = (0..NX).map(|i| f64::from(x[i]) - xr[i]).collect();
+        let du: Vec<f64> = (0..NU).map(|j| f64::from(u[j]) - ur[j]).collect();
+        let l = quad(&q, &dx) + quad(&r, &du);
+        assert!(close(stage_cost(&x, &u), l), "{name}: ℓ at x={x:?} u={u:?}");
+        assert!(
+            close(terminal_cost(&x), quad(&p, &dx)),
+            "{name}: V_f at {x:?}"
+        );
+        let pu = project_input(&u);
+        for j in 0..NU {
+            let want = f64::from(u[j]).clamp(ocp.u_lo[j], ocp.u_hi[j]) as f32;
+            assert_eq!(pu[j], want, "{name}: Π_U at {u:?}");
+        }
+        let g = (0..NX)
+            .flat_map(|i| {
+                let xi = f64::from(x[i]);
+                [(ocp.x_lo[i] - xi) / scale[i], (xi - ocp.x_hi[i]) / scale[i]]
+            })
+            .filter(|v| v.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        let got = state_box_violation(&x);
+        assert!(
+            (g.is_infinite() && got == f32::NEG_INFINITY) || close(got, g),
+            "{name}: g_X at {x:?}: {got} vs {g}"
+        );
+    }
+    assert_eq!(project_input(&[f32::NAN; NU]).map(f64::from).to_vec(), ur);
+    assert!(state_box_violation(&[f32::NAN; NX]).is_nan());
+}
+
+#[test]
+fn ocp_functions_match_the_f64_formulas_on_1e5_points() {
+    use cartpole as c;
+    use quadrotor as q;
+    check_ocp::<4, 1>(
+        "cartpole",
+        (
+            c::stage_cost,
+            c::terminal_cost,
+            c::project_input,
+            c::state_box_violation,
+        ),
+    );
+    check_ocp::<6, 2>(
+        "planar_quadrotor",
+        (
+            q::stage_cost,
+            q::terminal_cost,
+            q::project_input,
+            q::state_box_violation,
+        ),
+    );
 }

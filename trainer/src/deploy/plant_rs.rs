@@ -15,7 +15,8 @@
 //! and Rust-implemented (`custom`) plants are not (an error names the plant).
 //!
 //! The generated file defines `NX`, `NU`, `TS`, `SUBSTEPS`, `rhs` (an ODE's f, or a discrete
-//! plant's F) and `step` (F). It needs the `libm` crate. Its difference from the trainer's
+//! plant's F) and `step` (F); [`ocp_rs`] adds the OCP's costs, input projection and state
+//! box (no expression constraints, no stage-dependent bounds, no terminal set yet). It needs the `libm` crate. Its difference from the trainer's
 //! f64 model is measured by `tests/safe_plant.rs` (that is where the online check's margin
 //! comes from; see that test's doc).
 
@@ -29,6 +30,9 @@ pub enum PlantRsError {
     /// The plant kind has no generator yet.
     #[error("system.kind = \"{0}\": no f32 Rust generator for this plant (expression plants and the cart-pole only)")]
     Unsupported(String),
+    /// A part of the OCP has no generator yet.
+    #[error("{0}: not generated as f32 Rust yet (the plain boxes, weights and setpoint only)")]
+    UnsupportedOcp(String),
     /// The cart-pole's expression form did not compile (a non-finite parameter).
     #[error("system: the cart-pole's expression form does not compile: {0}")]
     Compile(String),
@@ -190,6 +194,168 @@ fn step_fn(model: &ExprModel, ts: f64, substeps: usize, out: &mut String) {
 ",
     );
 }
+
+/// `pub const NAME: [f32; n] = [...];`
+fn vec_const(out: &mut String, doc: &str, name: &str, v: &[f64]) {
+    let items: Vec<String> = v.iter().map(|c| lit(*c)).collect();
+    let _ = writeln!(
+        out,
+        "/// {doc}\npub const {name}: [f32; {}] = [{}];",
+        v.len(),
+        items.join(", ")
+    );
+}
+
+/// `pub const NAME: [[f32; n]; n] = [[...], ...];` (a missing or ragged matrix: zeros, which
+/// `validate` has already refused).
+fn mat_const(out: &mut String, doc: &str, name: &str, m: &crate::problem::MatrixSpec, n: usize) {
+    let d = m.to_dmatrix().filter(|d| d.nrows() == n && d.ncols() == n);
+    let rows: Vec<String> = (0..n)
+        .map(|i| {
+            let r: Vec<String> = (0..n)
+                .map(|j| lit(d.as_ref().map_or(0.0, |d| d[(i, j)])))
+                .collect();
+            format!("[{}]", r.join(", "))
+        })
+        .collect();
+    let _ = writeln!(
+        out,
+        "/// {doc}\npub const {name}: [[f32; {n}]; {n}] = [{}];",
+        rows.join(", ")
+    );
+}
+
+/// The OCP's part of the online check: setpoint, weights, boxes, and the functions
+/// `stage_cost`, `terminal_cost`, `project_input`, `state_box_violation`.
+///
+/// ```text
+/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref),  V_f(x) = (x − x_ref)ᵀP(x − x_ref)
+/// Π_U(u)_j = clamp(u_j, u_lo,j, u_hi,j)  (NaN → u_ref,j)
+/// g_X(x) = max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i   over finite bounds; s = the state scale
+/// ```
+/// Stage-dependent (tightened) bounds and `[ocp]` expression constraints are not generated:
+/// an error names the key.
+pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsError> {
+    let ocp = &cfg.ocp;
+    if ocp.stages.is_some() {
+        return Err(PlantRsError::UnsupportedOcp("ocp.stages".into()));
+    }
+    if !ocp.constraints.is_empty() || !ocp.terminal_constraints.is_empty() {
+        return Err(PlantRsError::UnsupportedOcp(
+            "ocp.constraints / ocp.terminal_constraints".into(),
+        ));
+    }
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let mut out = String::new();
+    vec_const(
+        &mut out,
+        "Setpoint state x_ref.",
+        "X_REF",
+        &ocp.x_ref_or_origin(nx),
+    );
+    vec_const(
+        &mut out,
+        "Setpoint input u_ref.",
+        "U_REF",
+        &ocp.u_ref_or_zero(nu),
+    );
+    mat_const(&mut out, "Stage state weight Q.", "Q", &ocp.q, nx);
+    mat_const(&mut out, "Stage input weight R.", "R", &ocp.r, nu);
+    mat_const(&mut out, "Terminal weight P.", "P", &ocp.p, nx);
+    vec_const(
+        &mut out,
+        "Lower state bounds (x_1 … x_N).",
+        "X_LO",
+        &ocp.x_lo,
+    );
+    vec_const(
+        &mut out,
+        "Upper state bounds (x_1 … x_N).",
+        "X_HI",
+        &ocp.x_hi,
+    );
+    let scale = ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    vec_const(
+        &mut out,
+        "State scale s of the normalised violation.",
+        "X_SCALE",
+        &scale,
+    );
+    vec_const(&mut out, "Lower input bounds.", "U_LO", &ocp.u_lo);
+    vec_const(&mut out, "Upper input bounds.", "U_HI", &ocp.u_hi);
+    out.push_str(OCP_FNS);
+    Ok(out)
+}
+
+/// The OCP's functions (fixed text over the constants above).
+const OCP_FNS: &str = "
+/// dᵀWd.
+fn quad<const M: usize>(w: &[[f32; M]; M], d: &[f32; M]) -> f32 {
+    let mut s = 0.0_f32;
+    for (row, di) in w.iter().zip(d) {
+        let mut r = 0.0_f32;
+        for (a, dj) in row.iter().zip(d) {
+            r += *a * *dj;
+        }
+        s += *di * r;
+    }
+    s
+}
+
+/// a − b, element by element.
+fn diff<const M: usize>(a: &[f32; M], b: &[f32; M]) -> [f32; M] {
+    let mut d = [0.0_f32; M];
+    for ((d, a), b) in d.iter_mut().zip(a).zip(b) {
+        *d = *a - *b;
+    }
+    d
+}
+
+/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref).
+pub fn stage_cost(x: &[f32; NX], u: &[f32; NU]) -> f32 {
+    quad(&Q, &diff(x, &X_REF)) + quad(&R, &diff(u, &U_REF))
+}
+
+/// V_f(x) = (x − x_ref)ᵀP(x − x_ref).
+pub fn terminal_cost(x: &[f32; NX]) -> f32 {
+    quad(&P, &diff(x, &X_REF))
+}
+
+/// Π_U(u): clamp to [U_LO, U_HI]; a NaN component becomes u_ref's.
+pub fn project_input(u: &[f32; NU]) -> [f32; NU] {
+    let mut p = U_REF;
+    for ((((p, u), lo), hi), r) in p.iter_mut().zip(u).zip(&U_LO).zip(&U_HI).zip(&U_REF) {
+        *p = if u.is_nan() {
+            *r
+        } else if *u < *lo {
+            *lo
+        } else if *u > *hi {
+            *hi
+        } else {
+            *u
+        };
+    }
+    p
+}
+
+/// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; NaN for
+/// a NaN state): `≤ 0` inside the state box.
+pub fn state_box_violation(x: &[f32; NX]) -> f32 {
+    let mut g = f32::NEG_INFINITY;
+    for (((x, lo), hi), s) in x.iter().zip(&X_LO).zip(&X_HI).zip(&X_SCALE) {
+        if x.is_nan() {
+            return f32::NAN;
+        }
+        for v in [*lo - *x, *x - *hi] {
+            let v = v / *s;
+            if v > g {
+                g = v;
+            }
+        }
+    }
+    g
+}
+";
 
 /// The Rust source of the plant's F for `name` (a comment), with sampling time `ts` and
 /// `substeps` RK4 sub-steps.
