@@ -19,3 +19,4 @@ pub mod controller;
 pub mod export;
 pub mod onnx;
 pub mod plant_rs;
+pub mod plant_rs_safe;

@@ -16,7 +16,8 @@
 //!
 //! The generated file defines `NX`, `NU`, `TS`, `SUBSTEPS`, `rhs` (an ODE's f, or a discrete
 //! plant's F) and `step` (F); [`ocp_rs`] adds the OCP's costs, input projection and state
-//! box (no expression constraints, no stage-dependent bounds, no terminal set yet). It needs the `libm` crate. Its difference from the trainer's
+//! box (no expression constraints, no stage-dependent bounds); `plant_rs_safe` adds the
+//! terminal ingredients and the `Plant` implementation. It needs the `libm` crate. Its difference from the trainer's
 //! f64 model is measured by `tests/safe_plant.rs` (that is where the online check's margin
 //! comes from; see that test's doc).
 
@@ -33,6 +34,10 @@ pub enum PlantRsError {
     /// A part of the OCP has no generator yet.
     #[error("{0}: not generated as f32 Rust yet (the plain boxes, weights and setpoint only)")]
     UnsupportedOcp(String),
+    /// The robust design gives no terminal region (or fails): the terminal ingredients of
+    /// the generated plant are missing.
+    #[error("robust: no terminal region for the generated plant: {0}")]
+    NoTerminal(String),
     /// The cart-pole's expression form did not compile (a non-finite parameter).
     #[error("system: the cart-pole's expression form does not compile: {0}")]
     Compile(String),
@@ -53,7 +58,7 @@ pub fn plant_model(system: &System) -> Result<ExprModel, PlantRsError> {
 }
 
 /// An f64 constant as an f32 literal (rounded to nearest; non-finite ones by name).
-fn lit(c: f64) -> String {
+pub(crate) fn lit(c: f64) -> String {
     let v = c as f32;
     if v.is_nan() {
         "f32::NAN".into()
