@@ -131,3 +131,31 @@ fn safe_controller_closed_loop_on_the_generated_double_integrator() {
     assert_eq!(plant::TERMINAL_DECREASE, "not established");
     assert!(dist < 0.05, "not converged: {x:?}");
 }
+
+#[test]
+fn cli_export_plant_rs_writes_the_generated_plant_or_names_the_key() {
+    let dir = ampc_tests::tempdir();
+    let out = dir.path().join("plant.rs");
+    let o = ampc_tests::trainer(&[
+        "export",
+        "--config",
+        &ampc_tests::config("double_integrator_ode.toml"),
+        "--plant-rs",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let committed =
+        std::fs::read_to_string(root().join("tests/fixtures/safe-plant/double_integrator_safe.rs"))
+            .unwrap();
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), committed);
+    let o = ampc_tests::trainer(&[
+        "export",
+        "--config",
+        &ampc_tests::config("cartpole.toml"),
+        "--plant-rs",
+        dir.path().join("cp.rs").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("robust:"), "{err}");
+    assert!(!dir.path().join("cp.rs").exists());
+}
