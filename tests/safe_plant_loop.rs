@@ -159,3 +159,22 @@ fn cli_export_plant_rs_writes_the_generated_plant_or_names_the_key() {
     assert!(!o.status.success() && err.contains("robust:"), "{err}");
     assert!(!dir.path().join("cp.rs").exists());
 }
+
+/// The decrease check can say "sampled": with V_f = 1.01·P_f (P_f the Riccati matrix of the
+/// linear double integrator's LQR for the OCP's Q, R), V_f(F(x, κ_f)) − V_f(x) = −1.01·ℓ.
+#[test]
+fn decrease_condition_holds_for_a_scaled_riccati_terminal_weight() {
+    let mut cfg = config("double_integrator_ode");
+    cfg.robust.lqr_r_scales = vec![1.0];
+    let d = trainer::robust::design::design(&cfg).unwrap();
+    let p: Vec<Vec<f64>> = d
+        .tube
+        .p
+        .iter()
+        .map(|r| r.iter().map(|v| 1.01 * v).collect())
+        .collect();
+    cfg.ocp.p = trainer::problem::MatrixSpec::Full(p);
+    let g = safe_plant_rs(&cfg).unwrap();
+    assert_eq!(g.decrease, "sampled", "worst {:e}", g.decrease_worst);
+    assert!(g.source.contains("TERMINAL_DECREASE: &str = \"sampled\""));
+}
