@@ -11,6 +11,8 @@
 //! - [`controller`]: `evaluate`: domain projection, forward pass, clamp, flags.
 //! - [`certificate`]: the certificate's numbers.
 //! - [`blob`]: the postcard weight format and its validating decoder.
+//! - [`safe`]: the safety-augmented controller: a sequence network's candidate, checked
+//!   online with the nominal model against the shifted safe sequence ([`SafeController`]).
 //! - [`demo`]: the paper's pendulum, compiled in as an example controller (`trainer export`);
 //!   not re-exported at the root: a firmware names the controller it runs.
 //! - [`include_controller!`]: the same for a crate's own exported controller (no fork of
@@ -32,9 +34,13 @@ pub mod controller;
 pub mod demo;
 pub mod layer;
 pub mod mlp;
+pub mod safe;
 
 pub use certificate::{Certificate, Guarantee};
 pub use controller::{Controller, Flags, InvalidController, Output};
+pub use safe::{
+    Margins, Plant, SafeController, SafeFlags, SafeOutput, SequenceNet, SequenceSource,
+};
 
 /// Version of the weight/certificate format this core understands.
 pub const FORMAT_VERSION: u16 = 1;

@@ -56,9 +56,10 @@ pub(super) struct Args {
     /// problem stored in the model).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Model file from `trainer train`, or an ONNX file (detected by content).
-    #[arg(long)]
-    model: PathBuf,
+    /// Model file from `trainer train`, or an ONNX file (detected by content); not needed
+    /// when only --plant-rs is written.
+    #[arg(long, required_unless_present = "plant_rs")]
+    model: Option<PathBuf>,
     /// Certificate JSON (default: the one stored in the model by `trainer train`).
     #[arg(long)]
     certificate: Option<PathBuf>,
@@ -94,11 +95,29 @@ pub(super) struct Args {
     /// stderr and in the outputs). Without this flag such a file is refused.
     #[arg(long)]
     accept_unsealed: bool,
+    /// Write the plant of the problem (--config) as no_std f32 Rust for the online check of
+    /// `controller_core::safe::SafeController`: dynamics (RK4 with the OCP's sub-steps),
+    /// costs, boxes, the terminal set and controller of the robust design, and
+    /// `impl Plant for SafePlant` (`deploy::plant_rs_safe`; needs the `libm` crate).
+    /// Refused, naming the key, for plants or OCP parts without a generator and without a
+    /// terminal region.
+    #[arg(long, value_name = "FILE", requires = "config")]
+    plant_rs: Option<PathBuf>,
 }
 
 impl Args {
     /// Writes the export files that were asked for.
     pub(super) fn run(self) -> Result<()> {
+        if let (Some(file), Some(config)) = (&self.plant_rs, &self.config) {
+            refuse_overwrite(&[file], &[config, opt(&self.model)])?;
+            write_plant_rs(config, file)?;
+        }
+        let Some(model) = &self.model else {
+            if self.rust.is_some() || self.onnx.is_some() || self.c_lib.is_some() {
+                bail!("--rust, --onnx and --c-lib export a trained model: give --model");
+            }
+            return Ok(());
+        };
         refuse_overwrite(
             &[
                 opt(&self.rust),
@@ -106,7 +125,7 @@ impl Args {
                 opt(&self.onnx),
                 opt(&self.c_header),
             ],
-            &[&self.model, opt(&self.certificate), opt(&self.config)],
+            &[model, opt(&self.certificate), opt(&self.config)],
         )?;
         let out = Outputs {
             rust: self.rust.as_deref(),
@@ -117,13 +136,36 @@ impl Args {
         };
         execute(
             self.config.as_deref(),
-            &self.model,
+            model,
             self.certificate.as_deref(),
             &out,
             self.name.as_deref(),
             (self.statistical_band, self.accept_unsealed),
         )
     }
+}
+
+/// `--plant-rs FILE`: the generated plant of the problem `config` (`deploy::plant_rs_safe`).
+fn write_plant_rs(config: &Path, file: &Path) -> Result<()> {
+    let cfg = trainer::problem::ProblemConfig::load(config)?;
+    let g = trainer::deploy::plant_rs_safe::safe_plant_rs(&cfg)
+        .with_context(|| format!("cannot generate the plant of {} as Rust", config.display()))?;
+    std::fs::write(file, &g.source).with_context(|| format!("cannot write {}", file.display()))?;
+    eprintln!(
+        "{}: plant of `{}` as f32 Rust; terminal set alpha {:e} (invariance {}), decrease \
+         condition for ocp.p: {} (worst over the samples {:e})",
+        file.display(),
+        cfg.name,
+        g.terminal.alpha,
+        if g.terminal.proven() {
+            "proven"
+        } else {
+            "sampled"
+        },
+        g.decrease,
+        g.decrease_worst
+    );
+    Ok(())
 }
 
 pub(super) fn execute(

@@ -8,6 +8,8 @@
 //! - [`onnx`]: the same net as an ONNX model with the certificate in its metadata, and the
 //!   import of a dense MLP from an ONNX file trained elsewhere.
 //!
+//! - [`plant_rs`]: the plant's discrete map F as `no_std` f32 Rust, for the online check of
+//!   `controller_core::safe` (expression plants and the cart-pole).
 //! - [`controller`]: the deployed controller of a model file as a library object (what
 //!   `trainer eval` computes per state).
 //!
@@ -16,3 +18,5 @@
 pub mod controller;
 pub mod export;
 pub mod onnx;
+pub mod plant_rs;
+pub mod plant_rs_safe;

@@ -65,7 +65,8 @@ impl CartPole {
     /// constant factors precomputed the same way, so that the compiled tape computes `rhs`'s
     /// bits: the form in which [`Discrete`](super::Discrete) differentiates the cart-pole
     /// by sweeps (`expr::Sweep`).
-    pub(super) fn expressions(&self) -> SystemSpec {
+    /// The cart-pole as an expression plant (the same equations, term for term).
+    pub fn expressions(&self) -> SystemSpec {
         let mt = self.m_cart + self.m_pole;
         let s = |v: &[&str]| v.iter().map(|t| t.to_string()).collect::<Vec<_>>();
         SystemSpec {

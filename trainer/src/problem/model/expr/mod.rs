@@ -48,3 +48,4 @@ pub use model::ExprModel;
 pub use parse::{Func, MAX_DEPTH, MAX_NESTING};
 pub use spec::SystemSpec;
 pub use sweep::Sweep;
+pub use tape::{Instr, Op, Tape};

@@ -83,6 +83,10 @@ impl ExprModel {
             substeps,
         )
     }
+    /// The instruction tape (read-only; the code generators of `deploy` translate it).
+    pub fn tape(&self) -> &Tape {
+        &self.tape
+    }
     /// Number of registers: the length `scratch` grows to in [`ExprModel::eval`].
     pub fn n_registers(&self) -> usize {
         self.tape.n_registers()

@@ -343,7 +343,7 @@ impl Tape {
         &self.instrs
     }
     /// The register of each output.
-    pub(super) fn outs(&self) -> &[R] {
+    pub fn outs(&self) -> &[R] {
         &self.outs
     }
     /// Number of registers (the length the scratch vector grows to).

@@ -1,0 +1,389 @@
+//! `safe`: the safety-augmented controller [`SafeController`] (Hose, Köhler, Zeilinger,
+//! Trimpe, IEEE TCST 2025): a network proposes the MPC's whole input sequence, the device
+//! checks it online with the nominal model and applies it only when it is feasible and no
+//! worse than a safe candidate.
+//!
+//! ```text
+//! state: ū = (ū_0 … ū_{N−1})  the sequence applied at the previous step (the "safe" one),
+//!        or none yet
+//! step(x):
+//!   c  = network(x) = (c_0 … c_{N−1})                    candidate
+//!   s  = (ū_1 … ū_{N−1}, κ_f(x̂_{N−1}))                    safe candidate: ū shifted by one,
+//!        x̂_{N−1} = F^{N−1}(x; ū_1 … ū_{N−1})              completed by the terminal controller
+//!   check(x, v): x_0 = x, x_{k+1} = F(x_k, v_k)           forward simulation (the plant's f32 RK4)
+//!        feasible ⇔ Π_U(v_k) = v_k         (k = 0 … N−1)   input box, exact (no margin)
+//!                  ∧ g_k(x_k, v_k) + m_s ≤ 0 (k = 0 … N−1)  the OCP's stage-k constraints, margin m_s
+//!                  ∧ g_N(x_N) + m_f ≤ 0                   x_N: state box, terminal constraints and
+//!                                                         the terminal set (x−x_ref)ᵀP(x−x_ref) ≤ α
+//!                  ∧ J(x, v) finite
+//!        J(x, v) = Σ_k ℓ(x_k, v_k) + V_f(x_N)
+//!   apply c if c feasible ∧ (s infeasible ∨ J(x, c) ≤ J(x, s))      flag CANDIDATE
+//!   else s                                                          flag FALLBACK
+//!   u = Π_U(v_0); ū ← v  (shifted at the next step)
+//! ```
+//!
+//! κ_f(x) = u_ref + K(x − x_ref) is projected onto the input box by [`Plant::project_input`]
+//! (the identity inside the terminal set, where κ_f is admissible), so the stored sequence
+//! stays finite whatever the state.
+//!
+//! **Initialisation.** Before a safe sequence exists, [`SafeController::init_with`] adopts a
+//! sequence passed in (an MPC solution computed at the current state), if it passes the same
+//! check. Otherwise the first feasible candidate becomes the safe sequence (flags
+//! `CANDIDATE | INITIALISED`). Until then each step applies `Π_U(c_0)`, the candidate's first
+//! input projected onto the input box (a non-finite component → the plant's reference input),
+//! with the flag `NO_SAFE`: **nothing is guaranteed before a safe sequence exists** beyond an
+//! input inside the box.
+//!
+//! **What it guarantees**, once a safe sequence exists: *deterministic for the nominal model:
+//! constraint satisfaction and convergence*. If the plant evolves exactly as
+//! [`Plant::step`] predicts (model match, including the f32 arithmetic of the simulation),
+//! the state reached is the one the last check predicted, so the shifted sequence is feasible
+//! again (its last step is the terminal controller inside a positively invariant terminal set
+//! whose terminal cost decreases by at least the stage cost), and the applied sequence's cost
+//! decreases by at least ℓ(x, u) per step: constraints hold at every step and Σ ℓ is bounded,
+//! so the state converges to x_ref. This rests on
+//! - **model match**: the plant on the device is the trainer's model (generated code, tested
+//!   against its f64 model), and the real system follows it; under mismatch or disturbances
+//!   the check still runs, but nothing is claimed (the flag `SAFE_INFEASIBLE` says when the
+//!   fallback itself failed the check; it is applied all the same);
+//! - **the terminal ingredients' tier**: invariance of {xᵀPx ≤ α} under κ_f and the decrease
+//!   of V_f are as proven (or only sampled) as the terminal design that produced P, α, K;
+//! - **the f32 margin**: the online check runs in f32; the margins `m_s`, `m_f` must cover the
+//!   difference between the f32 simulation and the model the guarantee is stated for (see
+//!   [`Margins`]). The cost comparison is in f32 too: convergence holds up to its rounding.
+//!
+//! `step` never panics, never allocates, uses no `unsafe`; for every bit pattern of the state
+//! and of the candidate, the applied input is [`Plant::project_input`] of a finite input
+//! (finite and inside the input box for a plant whose projection is).
+
+use crate::mlp::Network;
+
+/// The nominal model and the OCP's ingredients, in f32, as the online check needs them.
+///
+/// The generated plants implement it from the problem file; tests implement it by hand.
+/// Every method must be total (no panic for any bit pattern); NaN results are treated as
+/// "infeasible".
+pub trait Plant<const NX: usize, const NU: usize> {
+    /// x⁺ = F(x, u): one sampling period of the nominal model (RK4 with the OCP's sub-steps).
+    fn step(&self, x: &[f32; NX], u: &[f32; NU]) -> [f32; NX];
+    /// g_k(x, u) = max_i g_i(x, u) over the constraints the OCP imposes at stage `k` on
+    /// (x_k, u_k) (normalised; `≤ 0` means admissible): the state box and state constraints
+    /// from k = 1 on (x_0 is the measured state, which the OCP does not constrain), path
+    /// constraints per the OCP's rule. The input box is not part of it: it is checked exactly
+    /// through [`Plant::project_input`] (`Π_U(u) = u`), without a margin, since an input is
+    /// applied as computed and a saturated input sits exactly on its bound.
+    fn stage_violation(&self, k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32;
+    /// g_N(x): the constraints on the last state (normalised; `≤ 0` means admissible): the
+    /// state box, the terminal constraints, and the terminal set
+    /// (x − x_ref)ᵀ P (x − x_ref) ≤ α.
+    fn terminal_violation(&self, x: &[f32; NX]) -> f32;
+    /// κ_f(x) = u_ref + K (x − x_ref): the terminal controller.
+    fn terminal_input(&self, x: &[f32; NX]) -> [f32; NU];
+    /// Π_U(u): the projection onto the input box; a NaN component maps to the reference
+    /// input's. Must return finite inputs for every `u`, and `u` itself exactly when `u` is
+    /// inside the box.
+    fn project_input(&self, u: &[f32; NU]) -> [f32; NU];
+    /// ℓ(x, u): the OCP's stage cost.
+    fn stage_cost(&self, x: &[f32; NX], u: &[f32; NU]) -> f32;
+    /// V_f(x): the OCP's terminal cost.
+    fn terminal_cost(&self, x: &[f32; NX]) -> f32;
+}
+
+/// Where the candidate sequence comes from: `x ↦ (c_0 … c_{N−1})`.
+pub trait SequenceSource<const NX: usize, const NU: usize, const N: usize> {
+    /// The candidate input sequence for state `x`.
+    fn sequence(&self, x: &[f32; NX]) -> [[f32; NU]; N];
+}
+
+/// A network whose `M = N·nu` outputs are the input sequence, step-major
+/// (`c_0[0], …, c_0[nu−1], c_1[0], …`).
+///
+/// If `M ≠ N·nu`, missing entries are NaN (so the candidate never passes the check) and
+/// surplus outputs are ignored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SequenceNet<Net>(pub Net);
+
+impl<const NX: usize, const NU: usize, const N: usize, const M: usize, Net>
+    SequenceSource<NX, NU, N> for SequenceNet<Net>
+where
+    Net: Network<NX, Output = [f32; M]>,
+{
+    fn sequence(&self, x: &[f32; NX]) -> [[f32; NU]; N] {
+        let y = self.0.forward(x);
+        let mut s = [[f32::NAN; NU]; N];
+        for (d, v) in s.as_flattened_mut().iter_mut().zip(y.iter()) {
+            *d = *v;
+        }
+        s
+    }
+}
+
+/// Bit set of what one [`SafeController::step`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SafeFlags(pub u8);
+
+impl SafeFlags {
+    /// Nothing to report (not returned by `step`: it always sets one of `CANDIDATE`,
+    /// `FALLBACK`, `NO_SAFE`).
+    pub const EMPTY: SafeFlags = SafeFlags(0);
+    /// The network's candidate passed the check and was applied.
+    pub const CANDIDATE: SafeFlags = SafeFlags(1);
+    /// The safe candidate (last sequence shifted, completed by κ_f) was applied.
+    pub const FALLBACK: SafeFlags = SafeFlags(2);
+    /// No safe sequence exists yet and the candidate failed the check: the applied input is
+    /// the candidate's first, projected onto the input box; nothing is guaranteed.
+    pub const NO_SAFE: SafeFlags = SafeFlags(4);
+    /// This step adopted its first safe sequence (the candidate, with `CANDIDATE`).
+    pub const INITIALISED: SafeFlags = SafeFlags(8);
+    /// The safe candidate failed the check (model mismatch, a disturbance, or a margin too
+    /// small): applied all the same if the network's candidate failed too; no guarantee.
+    pub const SAFE_INFEASIBLE: SafeFlags = SafeFlags(16);
+    /// A state component was NaN or ±inf (every check then fails).
+    pub const NON_FINITE_STATE: SafeFlags = SafeFlags(32);
+    /// A candidate component was NaN or ±inf (the candidate then fails the check).
+    pub const NON_FINITE_CANDIDATE: SafeFlags = SafeFlags(64);
+
+    /// Whether every flag in `other` is set.
+    ///
+    /// ```
+    /// use controller_core::safe::SafeFlags;
+    /// assert!(SafeFlags(3).contains(SafeFlags::FALLBACK));
+    /// ```
+    pub const fn contains(self, other: SafeFlags) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    /// The union of both sets.
+    pub const fn union(self, other: SafeFlags) -> SafeFlags {
+        SafeFlags(self.0 | other.0)
+    }
+}
+
+/// The margins of the online check: a sequence passes only if every state or path
+/// constraint holds with `stage` to spare and the terminal state is inside the terminal set with `terminal`
+/// to spare (in the units of [`Plant::stage_violation`] and [`Plant::terminal_violation`]).
+///
+/// They cover the difference between the f32 simulation on the device and the model the
+/// guarantee is stated for; the exporter derives them from the measured difference between
+/// the generated f32 plant and the trainer's f64 model (and says how).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Margins {
+    /// m_s ≥ 0, subtracted from every stage constraint.
+    pub stage: f32,
+    /// m_f ≥ 0, subtracted from the terminal set's level α.
+    pub terminal: f32,
+}
+
+/// The result of checking one sequence from one state (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Check {
+    /// Whether every constraint (with its margin), the terminal set and a finite cost hold.
+    pub feasible: bool,
+    /// J(x, v) = Σ ℓ + V_f (+∞ when infeasible).
+    pub cost: f32,
+}
+
+impl Check {
+    const INFEASIBLE: Check = Check {
+        feasible: false,
+        cost: f32::INFINITY,
+    };
+}
+
+/// Result of [`SafeController::step`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SafeOutput<const NU: usize> {
+    /// The input to apply (`Plant::project_input` of the chosen sequence's first input).
+    pub u: [f32; NU],
+    /// What happened.
+    pub flags: SafeFlags,
+    /// J of the network's candidate (+∞ if it failed the check).
+    pub candidate_cost: f32,
+    /// J of the safe candidate (+∞ if it failed or no safe sequence existed).
+    pub safe_cost: f32,
+}
+
+/// Why [`SafeController::init_with`] did not adopt a sequence.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InitRejected {
+    /// The sequence fails the online check from the given state (a constraint with its
+    /// margin, the terminal set, or a non-finite cost).
+    Infeasible,
+}
+
+/// Why a set of margins is not usable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InvalidMargins {
+    /// A margin is NaN, infinite or negative.
+    NotFiniteNonNegative,
+}
+
+/// The safety-augmented controller: plant, candidate source, margins and the last safe
+/// sequence (fixed-size, no heap). See the module doc for the algorithm and its guarantee.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SafeController<P, S, const NX: usize, const NU: usize, const N: usize> {
+    /// The nominal model and the OCP's ingredients.
+    pub plant: P,
+    /// The candidate source (the sequence network).
+    pub source: S,
+    /// The margins of the online check.
+    pub margins: Margins,
+    /// The sequence applied at the last step (shifted at the next), if any.
+    safe: Option<[[f32; NU]; N]>,
+}
+
+impl<P, S, const NX: usize, const NU: usize, const N: usize> SafeController<P, S, NX, NU, N>
+where
+    P: Plant<NX, NU>,
+{
+    /// A controller without a safe sequence yet (see the module doc's initialisation).
+    pub const fn new(plant: P, source: S, margins: Margins) -> Self {
+        Self {
+            plant,
+            source,
+            margins,
+            safe: None,
+        }
+    }
+
+    /// Checks that both margins are finite and ≥ 0.
+    pub const fn validate(&self) -> Result<(), InvalidMargins> {
+        let (s, t) = (self.margins.stage, self.margins.terminal);
+        if s.is_finite() && t.is_finite() && s >= 0.0 && t >= 0.0 {
+            Ok(())
+        } else {
+            Err(InvalidMargins::NotFiniteNonNegative)
+        }
+    }
+
+    /// The sequence applied at the last step (unshifted), if a safe sequence exists.
+    pub const fn safe_sequence(&self) -> Option<&[[f32; NU]; N]> {
+        self.safe.as_ref()
+    }
+
+    /// Forgets the safe sequence (e.g. after a reset of the plant).
+    pub fn reset(&mut self) {
+        self.safe = None;
+    }
+
+    /// Adopts `sequence` (an MPC solution at state `x`) as the safe sequence, as if it had
+    /// been applied at `x`, if it passes the online check from `x`; its first input is what
+    /// the caller applies at `x`. Returns its cost. Nothing changes on rejection.
+    pub fn init_with(
+        &mut self,
+        x: &[f32; NX],
+        sequence: &[[f32; NU]; N],
+    ) -> Result<f32, InitRejected> {
+        let mut v = *sequence;
+        let c = self.check(x, &mut v, false);
+        if c.feasible {
+            self.safe = Some(v);
+            Ok(c.cost)
+        } else {
+            Err(InitRejected::Infeasible)
+        }
+    }
+
+    /// Checks the sequence `v` from `x` (module doc). With `complete`, its last input is
+    /// first set to `Π_U(κ_f(x_{N−1}))`. Always simulates all N steps (the same work whether
+    /// or not a constraint fails, and the completed entry is always written).
+    pub fn check(&self, x: &[f32; NX], v: &mut [[f32; NU]; N], complete: bool) -> Check {
+        let mut xk = *x;
+        let mut cost = 0.0f32;
+        let mut ok = true;
+        let last = N.wrapping_sub(1);
+        for (k, u) in v.iter_mut().enumerate() {
+            if complete && k == last {
+                *u = self.plant.project_input(&self.plant.terminal_input(&xk));
+            }
+            // The input box, exactly (a NaN input is projected elsewhere, so it fails).
+            ok &= self.plant.project_input(u) == *u;
+            // NaN compares false: a NaN constraint value fails.
+            ok &= self.plant.stage_violation(k, &xk, u) + self.margins.stage <= 0.0;
+            cost += self.plant.stage_cost(&xk, u);
+            xk = self.plant.step(&xk, u);
+        }
+        ok &= self.plant.terminal_violation(&xk) + self.margins.terminal <= 0.0;
+        cost += self.plant.terminal_cost(&xk);
+        if ok && cost.is_finite() {
+            Check {
+                feasible: true,
+                cost,
+            }
+        } else {
+            Check::INFEASIBLE
+        }
+    }
+
+    /// One control step with the candidate from the controller's source.
+    pub fn step(&mut self, x: &[f32; NX]) -> SafeOutput<NU>
+    where
+        S: SequenceSource<NX, NU, N>,
+    {
+        let candidate = self.source.sequence(x);
+        self.step_with(x, candidate)
+    }
+
+    /// One control step with a candidate given by the caller (module doc). Never panics
+    /// (checked with `#[no_panic]` under the `no-panic` feature, for the plants it is
+    /// instantiated with in a release build: `tests/safe_closed_loop.rs`).
+    #[cfg_attr(feature = "no-panic", no_panic::no_panic)]
+    pub fn step_with(&mut self, x: &[f32; NX], mut candidate: [[f32; NU]; N]) -> SafeOutput<NU> {
+        let mut flags = SafeFlags::EMPTY;
+        if !x.iter().all(|v| v.is_finite()) {
+            flags = flags.union(SafeFlags::NON_FINITE_STATE);
+        }
+        if !candidate.as_flattened().iter().all(|v| v.is_finite()) {
+            flags = flags.union(SafeFlags::NON_FINITE_CANDIDATE);
+        }
+        let c = self.check(x, &mut candidate, false);
+        let Some(previous) = self.safe else {
+            if c.feasible {
+                self.safe = Some(candidate);
+                return self.output(
+                    &candidate,
+                    flags
+                        .union(SafeFlags::CANDIDATE)
+                        .union(SafeFlags::INITIALISED),
+                    c.cost,
+                    f32::INFINITY,
+                );
+            }
+            return self.output(
+                &candidate,
+                flags.union(SafeFlags::NO_SAFE),
+                c.cost,
+                f32::INFINITY,
+            );
+        };
+        // ū shifted by one; its last entry is completed inside `check`.
+        let mut shifted: [[f32; NU]; N] =
+            core::array::from_fn(|k| previous.get(k + 1).copied().unwrap_or([0.0; NU]));
+        let s = self.check(x, &mut shifted, true);
+        if !s.feasible {
+            flags = flags.union(SafeFlags::SAFE_INFEASIBLE);
+        }
+        let (chosen, flag) = if c.feasible && (!s.feasible || c.cost <= s.cost) {
+            (candidate, SafeFlags::CANDIDATE)
+        } else {
+            (shifted, SafeFlags::FALLBACK)
+        };
+        self.safe = Some(chosen);
+        self.output(&chosen, flags.union(flag), c.cost, s.cost)
+    }
+
+    fn output(&self, v: &[[f32; NU]; N], flags: SafeFlags, cand: f32, safe: f32) -> SafeOutput<NU> {
+        let first = v.first().copied().unwrap_or([f32::NAN; NU]);
+        SafeOutput {
+            u: self.plant.project_input(&first),
+            flags,
+            candidate_cost: cand,
+            safe_cost: safe,
+        }
+    }
+}
+
+pub mod example;
+
+#[cfg(test)]
+mod tests;

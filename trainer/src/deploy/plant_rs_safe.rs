@@ -1,0 +1,247 @@
+//! `plant_rs_safe`: the complete `controller_core::safe::Plant` implementation of a problem
+//! as `no_std` f32 Rust ([`safe_plant_rs`]): the dynamics of [`super::plant_rs::plant_rs`],
+//! the OCP of [`super::plant_rs::ocp_rs`], and the terminal ingredients of the trainer's
+//! terminal design ([`crate::robust::terminal`]), with the generated type `SafePlant`.
+//!
+//! ```text
+//! g_k(x, u) = −∞ (k = 0: the measured state is not constrained),  g_X(x) (k ≥ 1)
+//! g_N(x)    = max(g_X(x), ((x − x_r)ᵀP_f(x − x_r) − α) / α)          terminal set X_f
+//! κ_f(x)    = u_r + K (x − x_r)                                       terminal controller
+//! decrease: V_f(F(x, κ_f(x))) − V_f(x) ≤ −ℓ(x, κ_f(x))  on X_f          (V_f = the OCP's P)
+//! ```
+//! P_f, α, K, x_r, u_r are the terminal region of `robust::design::design(cfg)` (the
+//! ancillary LQR's Riccati matrix and gain); without one the generation is refused naming
+//! the key `robust` (the design's settings). The decrease condition is checked for the
+//! OCP's terminal weight `ocp.p` on [`DECREASE_SAMPLES`] seeded points of X_f with the f64
+//! model and stated as a tier in the generated `TERMINAL_DECREASE`: `"sampled"` when every
+//! sample satisfies it, `"not established"` otherwise (never `"proven"`: no bound over the
+//! whole set is computed here). The invariance tier (`TERMINAL_INVARIANCE`) is the design's
+//! (`proven` for exact or vertex bounds of ρ_f, else `sampled`).
+//! `[ocp]` expression constraints and stage-dependent bounds are refused by `ocp_rs`.
+
+use super::plant_rs::{ocp_rs, plant_model, plant_rs, PlantRsError};
+use crate::problem::model::Discrete;
+use crate::problem::ProblemConfig;
+use crate::robust::terminal::TerminalRegion;
+use std::fmt::Write as _;
+
+/// Points of X_f on which the decrease condition is checked.
+pub const DECREASE_SAMPLES: usize = 10_000;
+
+/// The generated source and what it rests on.
+#[derive(Debug, Clone)]
+pub struct SafePlantRs {
+    /// The Rust source (needs the crates `libm` and `controller_core`).
+    pub source: String,
+    /// The terminal region used.
+    pub terminal: TerminalRegion,
+    /// The decrease condition's tier: `"sampled"` or `"not established"`.
+    pub decrease: &'static str,
+    /// The largest V_f(F(x, κ_f)) − V_f(x) + ℓ(x, κ_f) over the samples (≤ 0: holds).
+    pub decrease_worst: f64,
+}
+
+/// The decrease condition on `samples` seeded points of X_f (uniform in the ball of the
+/// P_f-norm through a Cholesky factor): the largest V_f(x⁺) − V_f(x) + ℓ(x, κ_f(x)).
+pub fn decrease_check(
+    cfg: &ProblemConfig,
+    t: &TerminalRegion,
+    k: &[Vec<f64>],
+    p_f: &[Vec<f64>],
+    samples: usize,
+) -> f64 {
+    let (nx, nu) = (t.x_ref.len(), t.u_ref.len());
+    let pf = nalgebra::DMatrix::from_fn(nx, nx, |i, j| p_f[i][j]);
+    let Some(ch) = pf.cholesky() else {
+        return f64::INFINITY;
+    };
+    // x − x_r = L⁻ᵀ w with ‖w‖₂ ≤ √α  ⇒  (x − x_r)ᵀP_f(x − x_r) = ‖w‖² ≤ α.
+    let lt = ch.l().transpose();
+    let (q, r, p) = (cfg.q(), cfg.r(), cfg.p());
+    let quad = |m: &nalgebra::DMatrix<f64>, d: &[f64]| {
+        let v = nalgebra::DVector::from_column_slice(d);
+        (v.transpose() * m * &v)[(0, 0)]
+    };
+    let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    let mut seed = 0x5afe_u64;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut worst = f64::NEG_INFINITY;
+    let mut xp = vec![0.0; nx];
+    for _ in 0..samples {
+        let mut w: Vec<f64> = (0..nx).map(|_| 2.0 * next() - 1.0).collect();
+        let norm = w.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+        let rad = t.alpha.sqrt() * next().powf(1.0 / nx as f64);
+        w.iter_mut().for_each(|v| *v *= rad / norm);
+        let Some(d) = lt
+            .clone()
+            .solve_upper_triangular(&nalgebra::DVector::from_vec(w))
+        else {
+            return f64::INFINITY;
+        };
+        let x: Vec<f64> = (0..nx).map(|i| t.x_ref[i] + d[i]).collect();
+        let u: Vec<f64> = (0..nu)
+            .map(|j| t.u_ref[j] + (0..nx).map(|i| k[j][i] * d[i]).sum::<f64>())
+            .collect();
+        model.step(&x, &u, &mut xp);
+        let dx: Vec<f64> = d.iter().copied().collect();
+        let du: Vec<f64> = (0..nu).map(|j| u[j] - t.u_ref[j]).collect();
+        let dp: Vec<f64> = (0..nx).map(|i| xp[i] - t.x_ref[i]).collect();
+        let g = quad(&p, &dp) - quad(&p, &dx) + quad(&q, &dx) + quad(&r, &du);
+        // A NaN sample makes the result NaN (the condition then counts as not established).
+        worst = if g.is_nan() || worst.is_nan() {
+            f64::NAN
+        } else {
+            worst.max(g)
+        };
+    }
+    worst
+}
+
+/// The full generated plant of `cfg` (module doc): dynamics, OCP, terminal ingredients and
+/// `impl controller_core::safe::Plant<NX, NU> for SafePlant`.
+pub fn safe_plant_rs(cfg: &ProblemConfig) -> Result<SafePlantRs, PlantRsError> {
+    let model = plant_model(&cfg.system)?;
+    let ocp = ocp_rs(cfg)?;
+    let design = crate::robust::design::design(cfg)
+        .map_err(|e| PlantRsError::NoTerminal(format!("the robust design fails: {e}")))?;
+    let Some(t) = design.terminal.clone() else {
+        return Err(PlantRsError::NoTerminal(format!(
+            "problem `{}`: the design's local feedback admits no radius (see robust.eps, \
+             robust.lqr_r_scales)",
+            cfg.name
+        )));
+    };
+    let (k, p_f) = (&design.tube.k, &design.tube.p);
+    let worst = decrease_check(cfg, &t, k, p_f, DECREASE_SAMPLES);
+    let decrease = if worst <= 0.0 {
+        "sampled"
+    } else {
+        "not established"
+    };
+    let invariance = if t.proven() { "proven" } else { "sampled" };
+    let mut out = plant_rs(&cfg.name, &model, cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    out.push('\n');
+    out.push_str(&ocp);
+    let _ = writeln!(
+        out,
+        "\n// Terminal ingredients: the terminal region of the trainer's robust design\n\
+         // (robust::terminal; LQR r-scale {:?}, rho_f = {:e}, check {:?}).",
+        design.tube.lqr_r_scale, t.rho_local, t.check
+    );
+    let _ = writeln!(
+        out,
+        "/// Level α of the terminal set (x − x_r)ᵀP_f(x − x_r) ≤ α.\npub const ALPHA: f32 = {};",
+        super::plant_rs::lit(t.alpha)
+    );
+    let rows = |m: &[Vec<f64>]| {
+        m.iter()
+            .map(|r| {
+                let v: Vec<String> = r.iter().map(|c| super::plant_rs::lit(*c)).collect();
+                format!("[{}]", v.join(", "))
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let (nx, nu) = (t.x_ref.len(), t.u_ref.len());
+    let _ = writeln!(
+        out,
+        "/// P_f: the terminal set's matrix (the ancillary LQR's Riccati matrix).\n\
+         pub const P_F: [[f32; {nx}]; {nx}] = [{}];",
+        rows(p_f)
+    );
+    let _ = writeln!(
+        out,
+        "/// K: the terminal controller's gain, κ_f(x) = u_r + K(x − x_r).\n\
+         pub const K_F: [[f32; {nx}]; {nu}] = [{}];",
+        rows(k)
+    );
+    let _ = writeln!(
+        out,
+        "/// Invariance of X_f under κ_f: \"proven\" or \"sampled\" (the design's ρ_f).\n\
+         pub const TERMINAL_INVARIANCE: &str = \"{invariance}\";\n\
+         /// V_f(F(x, κ_f)) − V_f(x) ≤ −ℓ(x, κ_f) on X_f for the OCP's P: \"sampled\" ({DECREASE_SAMPLES} \
+         seeded points, worst {worst:e}) or \"not established\".\n\
+         pub const TERMINAL_DECREASE: &str = \"{decrease}\";"
+    );
+    out.push_str(SAFE_FNS);
+    Ok(SafePlantRs {
+        source: out,
+        terminal: t,
+        decrease,
+        decrease_worst: worst,
+    })
+}
+
+/// The terminal functions and the trait implementation (fixed text over the constants).
+const SAFE_FNS: &str = "
+/// κ_f(x) = u_r + K(x − x_r) (u_r = U_REF, x_r = X_REF).
+pub fn terminal_input(x: &[f32; NX]) -> [f32; NU] {
+    let d = diff(x, &X_REF);
+    let mut u = U_REF;
+    for (u, row) in u.iter_mut().zip(&K_F) {
+        for (k, d) in row.iter().zip(&d) {
+            *u += *k * *d;
+        }
+    }
+    u
+}
+
+/// g_k: −∞ at k = 0 (the measured state), the state box from k = 1 on (NaN for a NaN state).
+pub fn stage_violation(k: usize, x: &[f32; NX]) -> f32 {
+    if k == 0 {
+        if x.iter().any(|v| v.is_nan()) {
+            f32::NAN
+        } else {
+            f32::NEG_INFINITY
+        }
+    } else {
+        state_box_violation(x)
+    }
+}
+
+/// g_N = max(state box, ((x − x_r)ᵀP_f(x − x_r) − α)/α) (NaN for a NaN state).
+pub fn terminal_violation(x: &[f32; NX]) -> f32 {
+    let b = state_box_violation(x);
+    let t = (quad(&P_F, &diff(x, &X_REF)) - ALPHA) / ALPHA;
+    if b.is_nan() || t.is_nan() {
+        f32::NAN
+    } else if t > b {
+        t
+    } else {
+        b
+    }
+}
+
+/// The generated plant as a `controller_core::safe::Plant`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SafePlant;
+
+impl controller_core::safe::Plant<NX, NU> for SafePlant {
+    fn step(&self, x: &[f32; NX], u: &[f32; NU]) -> [f32; NX] {
+        step(x, u)
+    }
+    fn stage_violation(&self, k: usize, x: &[f32; NX], _u: &[f32; NU]) -> f32 {
+        stage_violation(k, x)
+    }
+    fn terminal_violation(&self, x: &[f32; NX]) -> f32 {
+        terminal_violation(x)
+    }
+    fn terminal_input(&self, x: &[f32; NX]) -> [f32; NU] {
+        terminal_input(x)
+    }
+    fn project_input(&self, u: &[f32; NU]) -> [f32; NU] {
+        project_input(u)
+    }
+    fn stage_cost(&self, x: &[f32; NX], u: &[f32; NU]) -> f32 {
+        stage_cost(x, u)
+    }
+    fn terminal_cost(&self, x: &[f32; NX]) -> f32 {
+        terminal_cost(x)
+    }
+}
+";
