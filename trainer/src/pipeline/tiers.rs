@@ -34,6 +34,15 @@ pub(super) const STATISTICAL_CERT: &str = "certificate_statistical.json";
 pub(super) const STATISTICAL_STORE: &str = "statistical.bin";
 /// Fresh states of the refinement's check (as the robust loop's).
 const CHECK_STATES: usize = 2000;
+/// The wall-clock budget of an automatic refinement (`[refine] enabled = "auto"` without
+/// `[refine] max_seconds`), so that `trainer run` always ends: a plant whose refinement
+/// cannot reach the target (an infeasible region, slow solves) stops after this long with
+/// its best certificate and `refine/refine_report.json` (why it stopped, the resume
+/// command), and the statistical tier covers it. A refinement that reaches its target
+/// sooner is unaffected (its result does not depend on time).
+pub(super) const AUTO_REFINE_SECONDS: f64 = 120.0;
+/// The best-so-far certificate of the refinement is written from this many seconds on.
+const BEST_AFTER_SECONDS: f64 = 10.0;
 
 /// Where a candidate's net and certificate live.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -313,14 +322,28 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     }
     let rdir = d.join("refine");
     std::fs::create_dir_all(&rdir).map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
-    let rs = &cfg.refine;
-    let r = crate::certify::refine::refine(
-        cfg,
-        rs,
-        Some(&rdir.join("refine_state.bin")),
-        &crate::certify::refine::RefineOptions::default(),
-    )
-    .map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
+    let mut rs = cfg.refine.clone();
+    if cfg.refine.enabled == RefineSwitch::Auto && rs.max_seconds.is_none() {
+        rs.max_seconds = Some(AUTO_REFINE_SECONDS);
+    }
+    let rs = &rs;
+    let resume = format!(
+        "trainer refine --config <problem file> --out {}",
+        rdir.display()
+    );
+    let name = cfg.name.clone();
+    let opts = crate::certify::refine::RefineOptions {
+        on_result: Some(crate::certify::refine::writing_sink(
+            cfg,
+            &rdir,
+            &resume,
+            (BEST_AFTER_SECONDS, !env.progress),
+            std::sync::Arc::new(move |m, c| crate::deploy::export::deployed_allowance(&name, m, c)),
+        )),
+        ..Default::default()
+    };
+    let r = crate::certify::refine::refine(cfg, rs, Some(&rdir.join("refine_state.bin")), &opts)
+        .map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
     let checked = crate::certify::refine::check(cfg, rs, &r, CHECK_STATES, cfg.certify.seed);
     write_atomic(
         &rdir.join("check.json"),
@@ -331,6 +354,9 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         crate::deploy::export::deployed_allowance(&cfg.name, &r.model, c)
     })
     .map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
+    let report = crate::certify::refine::RefineReport::new(cfg, rs, &r, r.stopped, resume);
+    crate::certify::refine::write_report(&rdir, &report)
+        .map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
     let why = match cfg.refine.enabled {
         RefineSwitch::On => "[refine] enabled = \"on\"".to_string(),
         _ => format!(
@@ -348,7 +374,7 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     };
     write_json(Stage::Refine, &d.join(REFINE_JSON), &out)?;
     Ok(format!(
-        "{why}: local ε {:.4} ({}) after {} rounds, {} cells{} → refine/",
+        "{why}: local ε {:.4} ({}) after {} rounds, {} cells{}{} → refine/",
         lc.base.eps,
         lc.guarantee.guarantee.name(),
         out.rounds,
@@ -356,7 +382,17 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         lc.local
             .excluded
             .as_ref()
-            .map_or(String::new(), |e| format!(", {} excluded", e.cells))
+            .map_or(String::new(), |e| format!(", {} excluded", e.cells)),
+        if r.met {
+            String::new()
+        } else {
+            format!(
+                "; target {} not met: {} (resume: {})",
+                rs.target_eps,
+                r.stopped.describe(),
+                report.resume
+            )
+        }
     ))
 }
 
