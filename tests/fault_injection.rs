@@ -158,7 +158,8 @@ fn setup(dir: &Path) {
             "{small}\n# fault injection: a small problem\n[training]\nepochs = 20\nvalidation_n = 10\n\
              log_every = 50\n\n[refine]\nbudget = 120\ninitial = [4, 3]\nmax_rounds = 3\n\
              target_eps = 100.0\n\n[refine.training]\nhidden = [6]\nepochs = 30\nvalidation_n = 10\n\n\
-             [closed_loop]\nrandom_initial_states = 3\nnoise_runs = 1\nseeds = 2\n"
+             [closed_loop]\nrandom_initial_states = 3\nnoise_runs = 1\nseeds = 2\n\n\
+             [certify]\nstatistical = 200\nclosed_loop = 200\n"
         ),
     )
     .unwrap();

@@ -35,6 +35,7 @@ fn check_controller_core_with(run: &Path) {
     let krate = dir.path().join("controller-core");
     let src = krate.join("src");
     std::fs::create_dir_all(src.join("demo")).unwrap();
+    std::fs::create_dir_all(src.join("safe")).unwrap();
     for f in [
         "lib.rs",
         "activation.rs",
@@ -43,6 +44,9 @@ fn check_controller_core_with(run: &Path) {
         "controller.rs",
         "layer.rs",
         "mlp.rs",
+        "safe.rs",
+        "safe/example.rs",
+        "safe/tests.rs",
         "demo/mod.rs",
     ] {
         std::fs::copy(root.join("controller-core/src").join(f), src.join(f))

@@ -84,7 +84,18 @@ fn a_custom_plant_runs_the_pipeline_and_matches_the_built_in() {
     run_problem(&builtin, &opts("sample")).unwrap();
     let reports = run_problem(&custom, &opts("export")).unwrap();
     let stages: Vec<&str> = reports.iter().map(|r| r.stage.as_str()).collect();
-    assert_eq!(stages, ["sample", "validate", "train", "certify", "export"]);
+    assert_eq!(
+        stages,
+        [
+            "sample",
+            "validate",
+            "train",
+            "certify",
+            "refine",
+            "statistical",
+            "export"
+        ]
+    );
     let dir = root.join("my_pendulum");
     for f in [
         "problem.toml",

@@ -8,8 +8,8 @@
 //! exported = argmin over candidates of (vacuous, tier, ε)   (sound < statistical < estimated)
 //! ```
 
-use super::stages::Env;
 use super::tiers::{self, Candidate, RefineOutcome, StatisticalOutcome};
+use super::Env;
 use super::{fail, PipelineError, Stage};
 use crate::deploy::export::{ExportModel, StatisticalClaim};
 use crate::io::{write_atomic, RunDir};
@@ -58,7 +58,7 @@ pub(super) fn choose(
         tiers::read_json(stage, &d.join(tiers::STATISTICAL_JSON))?;
     let t1_line = t1.describe();
     let mut cands = vec![t1];
-    if refine.ran {
+    if refine.candidate() {
         cands.push(tiers::read_candidate(
             stage,
             (d, cfg),
@@ -72,6 +72,20 @@ pub(super) fn choose(
     let lines: Vec<(String, &'static str)> =
         cands.iter().map(|c| (c.describe(), c.source)).collect();
     let best = tiers::strongest(cands).ok_or_else(|| fail(stage, "no candidate band"))?;
+    // The reason names the band actually exported; the Theorem-1 choice between the two nets
+    // follows it when another band won.
+    let net_reason = if best.source == "theorem1" {
+        net_reason
+    } else {
+        format!(
+            "the {} net, whose {} band (tier {}, ε = {:.4}) is the strongest guarantee reached; \
+             between the two Theorem-1 nets: {net_reason}",
+            best.net.name(),
+            best.source,
+            best.tier.name(),
+            best.eps
+        )
+    };
     let em = export_model(cfg, &best, &statistical).map_err(|e| fail(stage, e))?;
     let verdict = verdict(cfg, d, (&best, &t1_line, &lines), (&refine, &statistical));
     Ok(Exported {
@@ -157,7 +171,9 @@ fn verdict(
         why.push(t1_line.to_string());
     }
     let nx = cfg.system.nx();
-    if refine.ran {
+    if let Some(u) = refine.unusable.as_ref().filter(|_| refine.ran) {
+        why.push(format!("local refinement: {u}"));
+    } else if refine.ran {
         if best.source != "local" {
             if let Some((l, _)) = lines.iter().find(|(_, s)| *s == "local") {
                 why.push(format!(

@@ -263,7 +263,7 @@ pub fn run(
         let inputs = (stage.inputs)(&cx, cfg)?;
         let outputs = (stage.outputs)();
         let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
-        let env = stages::Env {
+        let env = Env {
             cfg,
             progress: opts.progress,
             timings: cx
@@ -376,6 +376,14 @@ fn lock(dir: &std::path::Path) -> Result<std::fs::File, PipelineError> {
             Err(fail_at("setup", &p, e))
         }
     }
+}
+
+/// What a stage's body sees: the problem, whether to draw progress bars, and the timings of
+/// the stages before it (for the report).
+pub(super) struct Env<'a> {
+    pub(super) cfg: &'a ProblemConfig,
+    pub(super) progress: bool,
+    pub(super) timings: Vec<Timing>,
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@
 //! ```
 
 use super::manifest::{settings_hash, sha_file, Ctx};
+use super::Env;
 use super::{fail, fail_at, fail_in, PipelineError, Stage};
 use crate::certify::certificate::CertifyOptions;
 use crate::certify::file::CertificateFile;
@@ -17,20 +18,11 @@ use crate::learn::setpoint::Hold;
 use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::plots::{FigureEntry, PLOTS};
-use crate::study::report::Timing;
 use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop};
 use crate::study::seeds::seed_study;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
-
-/// What a stage's body sees: the problem, whether to draw progress bars, and the timings of
-/// the stages before it (for the report).
-pub(super) struct Env<'a> {
-    pub(super) cfg: &'a ProblemConfig,
-    pub(super) progress: bool,
-    pub(super) timings: Vec<Timing>,
-}
 
 type Inputs = BTreeMap<String, String>;
 

@@ -16,7 +16,7 @@
 //! a non-vacuous band first, then the stronger tier (sound < statistical < estimated),
 //! then the smaller ε.
 
-use super::stages::Env;
+use super::Env;
 use super::{fail, fail_at, PipelineError, Stage};
 use crate::certify::file::CertificateFile;
 use crate::certify::Model;
@@ -90,6 +90,21 @@ pub(super) struct RefineOutcome {
     pub rounds: usize,
     /// Content hash of `refine/model.bin` (keys the later stages).
     pub model_hash: String,
+    /// Whether the refined certificate is a candidate band: it ran, its ε is finite and its
+    /// file verifies (a certificate whose check at fresh states failed is refused, as
+    /// `trainer export` refuses it). When not, [`RefineOutcome::unusable`] says why.
+    #[serde(default)]
+    pub usable: bool,
+    /// Why the refined certificate is not a candidate band (when it ran but is not usable).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unusable: Option<String>,
+}
+
+impl RefineOutcome {
+    /// Whether the refined net and certificate are a candidate band.
+    pub(super) fn candidate(&self) -> bool {
+        self.ran && self.usable
+    }
 }
 
 /// The outcome of the `statistical` stage (`statistical.json`).
@@ -242,7 +257,7 @@ pub(super) fn certified_candidates(
         read_candidate(stage, (d, cfg), Net::Regularized, None)?,
         read_candidate(stage, (d, cfg), Net::Nominal, None)?,
     ];
-    if with_refined && read_json::<RefineOutcome>(stage, &d.join(REFINE_JSON))?.ran {
+    if with_refined && read_json::<RefineOutcome>(stage, &d.join(REFINE_JSON))?.candidate() {
         v.push(read_candidate(stage, (d, cfg), Net::Refined, None)?);
     }
     Ok(v)
@@ -316,6 +331,8 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             tier: None,
             rounds: 0,
             model_hash: String::new(),
+            usable: false,
+            unusable: None,
         };
         write_json(Stage::Refine, &d.join(REFINE_JSON), &out)?;
         return Ok(format!("skipped: {why}"));
@@ -364,13 +381,27 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             cfg.system.nx()
         ),
     };
+    // A band only when finite and verified: an infinite ε (an unlabelled corner not yet
+    // split down to refine.min_cell) or a failed check leaves the other tiers to the export.
+    let unusable = if !lc.base.eps.is_finite() {
+        Some(format!(
+            "the local ε is ∞ ({}; refine/refine_report.json names the cells)",
+            r.stopped.describe()
+        ))
+    } else {
+        read_candidate(Stage::Refine, (d, cfg), Net::Refined, None)
+            .err()
+            .map(|e| format!("the refined certificate is refused: {e}"))
+    };
     let out = RefineOutcome {
         ran: true,
         reason: why.clone(),
-        eps: Some(lc.base.eps),
+        eps: Some(lc.base.eps).filter(|e| e.is_finite()),
         tier: Some(lc.guarantee.guarantee.name().to_string()),
         rounds: r.state.log.len(),
         model_hash: r.model.content_hash(),
+        usable: unusable.is_none(),
+        unusable: unusable.clone(),
     };
     write_json(Stage::Refine, &d.join(REFINE_JSON), &out)?;
     Ok(format!(
@@ -383,7 +414,9 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             .excluded
             .as_ref()
             .map_or(String::new(), |e| format!(", {} excluded", e.cells)),
-        if r.met {
+        if let Some(u) = &unusable {
+            format!("; not a candidate band: {u}")
+        } else if r.met {
             String::new()
         } else {
             format!(

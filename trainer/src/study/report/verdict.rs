@@ -72,7 +72,12 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     // Against U in physical units (ε itself for the unscaled norm).
     let (ratio, word) = judge(c.eps_physical(), &c.u_lo, &c.u_hi);
     let range = boxed(&c.u_lo, &c.u_hi);
+    let source = a.export["source"].as_str().unwrap_or("theorem1");
     let meaning = match word {
+        "vacuous" if source != "theorem1" => format!(
+            "**Theorem 1's bound is vacuous**: ε is {:.0} % of the largest distance between two inputs of U = {range}; the band exported is the {source} one above",
+            100.0 * ratio
+        ),
         "vacuous" => format!(
             "**the bound is vacuous**: ε is {:.0} % of the largest distance between two inputs of U = {range}, which the clamp alone guarantees — this certificate says nothing useful; tighten it with `trainer refine` (local certificates) or `--statistical N`",
             100.0 * ratio
@@ -92,7 +97,6 @@ pub(super) fn verdict(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         format!("it rests on: {}", g.assumptions.join("; "))
     };
     let (blo, bhi) = exported_band(a);
-    let source = a.export["source"].as_str().unwrap_or("theorem1");
     let theorem1 = if source == "theorem1" {
         format!("Theorem 1, the exported {net} net")
     } else {
