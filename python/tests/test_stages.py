@@ -48,10 +48,12 @@ def test_run_returns_typed_result(tmp_path):
     text = (REPO / "python" / "tests" / "conftest.py").read_text()
     di = text.split('DI_TEXT = """', 1)[1].split('"""', 1)[0]
     di += "[closed_loop]\nsteps = 20\nrandom_initial_states = 1\nnoise_runs = 1\nseeds = 0\n[plots]\nerror_map_grid = [8, 6]\n"
+    di += "[refine]\nenabled = \"off\"\n[certify]\nstatistical = 300\nclosed_loop = 300\n"
     problem = ampc.Problem.from_toml(di)
     r = ampc.run(problem, tmp_path)
     assert r.dir == tmp_path / "di_py"
-    assert [s.stage for s in r.stages][:5] == ["sample", "validate", "train", "certify", "export"]
+    assert [s.stage for s in r.stages][:7] == [
+        "sample", "validate", "train", "certify", "refine", "statistical", "export"]
     assert r.certificate == json.loads((r.dir / "certificate.json").read_text())
     u, flags = r.controller().eval(np.array([[0.5, 0.0]]))
     assert u.shape == (1, 1) and flags[0] == 0
