@@ -22,6 +22,7 @@
 //! The ladder runs only where the plain solve found no label, so every state labelled without
 //! it keeps its label bit for bit.
 
+pub mod along;
 pub mod starts;
 
 use crate::mpc::finite::{check_label, nan_max, Failure, LabelParts, Quantity};

@@ -3,11 +3,12 @@
 //!
 //! `x_{k+1} = F_plant(x_k, sat(π(y_k)))`, `y_k = x_k + w_k` (measurement noise), where
 //! F_plant is the OCP's RK4 model, optionally with perturbed physical parameters (model
-//! mismatch), and π is the MPC law κ (solved online at every step, warm-started from the
-//! previous step's hard solution, unshifted with x₀ replaced, and where the hard problem
-//! fails its soft problem from the last soft optimum; each warm-started solve that does not
-//! converge is retried cold, and the retry ladder of [`crate::mpc::law`] runs as for a
-//! label) or a network κ_NN. The plant receives the controller's input
+//! mismatch), and π is the MPC law κ (solved online at every step by
+//! [`MpcLaw::solve_next`]: warm from the previous step's hard solution shifted one stage;
+//! every start of `solver.starts`, the soft fallback and the retry ladder of
+//! [`crate::mpc::law`] at the first step and where that warm start does not converge;
+//! after a soft step, hard-infeasible states decided by the soft problem alone —
+//! [`crate::mpc::law::along`]) or a network κ_NN. The plant receives the controller's input
 //! saturated to the actuator limits U; a network's raw output outside the certified band
 //! U ⊕ [−ε, ε] is recorded.
 //!
@@ -26,8 +27,8 @@
 //! no `null` (serde_json writes NaN and ±∞ as `null`).
 
 use crate::learn::mlp::Mlp;
+use crate::mpc::law::along::Along;
 use crate::mpc::law::MpcLaw;
-use crate::mpc::sqp::PrimalDual;
 use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
@@ -349,25 +350,14 @@ fn divergence(next: &[f64], cost: f64, x: &[f64], u: &[f64]) -> Option<String> {
     }
 }
 
-/// The MPC's input at `y`, warm-started along the run (soft solves counted); `None` when
-/// it has no label there.
-fn reference(
-    law: &mut MpcLaw,
-    y: &[f64],
-    (warm, warm_soft): (&mut Option<PrimalDual>, &mut Option<PrimalDual>),
-    run: &mut Run,
-) -> Option<Vec<f64>> {
-    let (l, sol, soft) = law.solve_along(y, warm.as_ref(), warm_soft.as_ref());
-    *warm_soft = soft.or(warm_soft.take());
+/// The MPC's input at `y`, solved along the run ([`MpcLaw::solve_next`]; soft solves
+/// counted); `None` when it has no label there.
+fn reference(law: &mut MpcLaw, y: &[f64], along: &mut Along, run: &mut Run) -> Option<Vec<f64>> {
+    let l = law.solve_next(y, along);
     if l.status == crate::mpc::sqp::SqpStatus::Soft {
         run.mpc_soft_steps += 1;
     }
-    if l.status.is_labelled() {
-        *warm = sol.or(warm.take());
-        Some(l.u)
-    } else {
-        None
-    }
+    l.status.is_labelled().then_some(l.u)
 }
 
 /// The network's output at `y`, clamped to `clamp` where finite; notes when it leaves
@@ -458,8 +448,7 @@ pub fn simulate(
         })
     };
     let constraints = cfg.constraint_set().ok().flatten();
-    let mut warm: Option<PrimalDual> = None;
-    let mut warm_soft: Option<PrimalDual> = None;
+    let mut along = Along::default();
     let mut last_u = vec![0.0; nu];
     let mut next = vec![0.0; nx];
     for k in 0..s.steps {
@@ -471,7 +460,7 @@ pub fn simulate(
             .collect();
         let mut net_reason = None;
         let mut u = match ctrl {
-            Controller::Mpc => match reference(law, &y, (&mut warm, &mut warm_soft), &mut run) {
+            Controller::Mpc => match reference(law, &y, &mut along, &mut run) {
                 Some(u) => u,
                 None => {
                     run.mpc_failures += 1;
@@ -480,7 +469,7 @@ pub fn simulate(
             },
             Controller::Net(m, eps, clamp) => {
                 let u = net_output(m, *eps, *clamp, &y, (ulo, uhi), &mut run);
-                match reference(law, &y, (&mut warm, &mut warm_soft), &mut run) {
+                match reference(law, &y, &mut along, &mut run) {
                     Some(k) => net_reason = record_divergence(&mut run, &k, &u, &y),
                     None => run.mpc_failures += 1,
                 }

@@ -29,7 +29,6 @@
 
 use crate::certify::statistical::{clopper_pearson_upper, statistical_seed, TestedController};
 use crate::mpc::law::MpcLaw;
-use crate::mpc::sqp::SqpStatus;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
@@ -174,7 +173,7 @@ pub fn closed_loop_statistical(
                         lo + (hi - lo) * uniform(seed, i, k as u64)
                     })
                     .collect();
-                let feasible = law.solve(&x0, None).0.status == SqpStatus::Converged;
+                let feasible = law.is_hard_feasible(&x0);
                 (feasible, trajectory(cfg, &plant, controller, &x0))
             },
         )

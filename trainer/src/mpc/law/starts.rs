@@ -146,6 +146,38 @@ impl MpcLaw {
         (l, p)
     }
 
+    /// Whether [`solve`](Self::solve) at `xs` (cold) labels it by a hard optimum (status
+    /// `converged`), decided without solving more than needed: the `warm` start first — if
+    /// it converges, so does the multi-start law, whose status is `converged` as soon as one
+    /// start reaches a hard optimum (which one wins only decides the label, not the status)
+    /// — and the other starts only when it does not. The same answer as
+    /// `solve(xs, None).0.status == Converged`, at one solve where the first start converges.
+    pub fn is_hard_feasible(&mut self, xs: &[f64]) -> bool {
+        let (l, _) = self.solve_single(xs, None);
+        if l.status == SqpStatus::Converged {
+            return true;
+        }
+        let valid = xs.len() == self.hard.ocp.nx && xs.iter().all(|v| v.is_finite());
+        for s in self.starts.clone() {
+            // (As in `solve_starts`: a start without a guess is skipped, `neighbour` has none
+            // here.)
+            let Some(guess) = (s != Start::Warm && valid)
+                .then(|| self.guess(s, xs, None))
+                .flatten()
+            else {
+                continue;
+            };
+            let r = self.hard.solve(xs, guess);
+            if r.status == SqpStatus::Converged
+                && self.finish(&self.hard, xs, &r, SqpStatus::Converged).status
+                    == SqpStatus::Converged
+            {
+                return true;
+            }
+        }
+        false
+    }
+
     /// The hard problem at `xs` warm-started from the solution of the hard problem at a
     /// neighbour `near` (solved here first), with the default then the conservative
     /// globalisation: the retry for a state that stayed unlabelled after [`solve`](Self::solve)
@@ -389,6 +421,44 @@ mod tests {
         let (a, pa) = law.solve(&x, None);
         let (b, pb) = law.solve_single(&x, None);
         assert_eq!((a, pa), (b, pb));
+    }
+
+    /// `is_hard_feasible` is `solve(x, None).0.status == Converged`, state by state: the
+    /// pendulum's grid over X (its hard-infeasible corners included) and random swing-up
+    /// states (three starts).
+    #[test]
+    fn hard_feasibility_is_the_multi_start_status() {
+        let pendulum = ProblemConfig::default();
+        let mut cases: Vec<(ProblemConfig, Vec<f64>)> = Vec::new();
+        for i in 0..=12 {
+            for j in 0..=6 {
+                let (lo, hi) = (&pendulum.domain.lo, &pendulum.domain.hi);
+                let x = vec![
+                    lo[0] + (hi[0] - lo[0]) * i as f64 / 12.0,
+                    lo[1] + (hi[1] - lo[1]) * j as f64 / 6.0,
+                ];
+                cases.push((pendulum.clone(), x));
+            }
+        }
+        let swing = swingup();
+        for i in 0..12u64 {
+            let (lo, hi) = (&swing.domain.lo, &swing.domain.hi);
+            let x = (0..4)
+                .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(5, i, k as u64))
+                .collect();
+            cases.push((swing.clone(), x));
+        }
+        let (mut feasible, mut infeasible) = (0, 0);
+        for (cfg, x) in &cases {
+            let expected = MpcLaw::new(cfg).solve(x, None).0.status == SqpStatus::Converged;
+            assert_eq!(MpcLaw::new(cfg).is_hard_feasible(x), expected, "{x:?}");
+            if expected {
+                feasible += 1;
+            } else {
+                infeasible += 1;
+            }
+        }
+        assert!(feasible > 0 && infeasible > 0, "{feasible} / {infeasible}");
     }
 
     /// `solver.starts` is validated: empty or repeated lists are errors naming the key.

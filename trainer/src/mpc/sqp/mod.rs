@@ -308,6 +308,11 @@ impl SqpSolver {
         }
     }
 
+    /// The state bounds (x_lo, x_hi) of `[ocp]`.
+    pub fn state_bounds(&self) -> (&[f64], &[f64]) {
+        (&self.x_lo, &self.x_hi)
+    }
+
     /// Cold-start primal-dual guess for `xs`.
     pub fn cold_start(&self, xs: &[f64]) -> PrimalDual {
         PrimalDual {

@@ -230,7 +230,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
     let blocks = [
         verdict::verdict(cfg, &a),
         sections::problem(cfg),
-        sections::dataset(&a),
+        sections::dataset(cfg, &a),
         sections::table_i(cfg, &a),
         sections::training_seeds(cfg, &a),
         sections::certificate(&a),

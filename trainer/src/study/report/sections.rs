@@ -57,7 +57,7 @@ fn tuple(v: &[f64]) -> String {
 }
 
 /// The dataset: counts by label status, training and validation sizes.
-pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
+pub(super) fn dataset(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
     let c = a.data.counts();
     vec![
         Block::Heading(2, "Dataset".into()),
@@ -85,6 +85,55 @@ pub(super) fn dataset(a: &Artifacts) -> Vec<Block> {
             "Soft: the hard OCP is infeasible at the state and the label is the exact-penalty optimum; infeasible and failed states have no label and are not trained on; degenerate points keep their value term and drop the Jacobian term. {} labelled training points; R² is measured on {} MPC-labelled random states of X.",
             a.nom.train_stats.n, a.nom.validation_stats.n
         )),
+    ]
+    .into_iter()
+    .chain(starts_disagreement(cfg, a))
+    .collect()
+}
+
+/// Where the starts of `solver.starts` reached different hard optima (the dataset's
+/// disagreeing indices): the count, the rule that chose the label, and the first few states.
+/// Nothing when they never disagreed (the report of such a run is unchanged).
+fn starts_disagreement(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
+    let d = &a.data.disagree;
+    if d.is_empty() {
+        return Vec::new();
+    }
+    let starts: Vec<&str> = crate::mpc::law::MpcLaw::new(cfg)
+        .starts()
+        .iter()
+        .map(|s| s.as_str())
+        .collect();
+    let rows: Vec<Vec<String>> = d
+        .iter()
+        .filter_map(|&i| a.data.records.iter().find(|r| r.index == i))
+        .take(5)
+        .map(|r| {
+            let v = |x: &[f64]| {
+                let s: Vec<String> = x.iter().map(|v| format!("{v:.4}")).collect();
+                format!("({})", s.join(", "))
+            };
+            vec![
+                r.index.to_string(),
+                v(&r.x),
+                v(&r.u),
+                format!("{:.6e}", r.cost),
+            ]
+        })
+        .collect();
+    vec![
+        Block::Para(format!(
+            "**Where the starts disagree.** At {} of {} states the starts `{}` reached different hard optima (costs and u₀ apart by more than {:e} relative): the MPC law is set-valued there, and a regression would average branches. The label is the lowest-cost optimum; costs within {:e} relative go to the earlier start in the list (`warm` first: the branch continued from the previous labelled state). The first of them (index, x, the chosen u₀, its cost):",
+            d.len(),
+            a.data.records.len(),
+            starts.join(", "),
+            crate::mpc::law::starts::OPTIMA_TOL,
+            crate::mpc::law::starts::TIE_TOL,
+        )),
+        Block::Table {
+            head: strs(&["index", "x", "u₀ (chosen)", "cost"]),
+            rows,
+        },
     ]
 }
 
