@@ -7,6 +7,7 @@ use super::{
     load, med_min_max, Artifacts, Block, ReportError, Timing, PAPER_TABLE_I, PAPER_TABLE_II,
 };
 use crate::certify::certificate::Certificate;
+use crate::data::dataset::Dataset;
 use crate::problem::ProblemConfig;
 use crate::study::closed_loop::Run;
 use crate::study::plots::{FigureEntry, PLOTS};
@@ -87,26 +88,28 @@ pub(super) fn dataset(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         )),
     ]
     .into_iter()
-    .chain(starts_disagreement(cfg, a))
+    .chain(starts_disagreement(
+        crate::mpc::law::MpcLaw::new(cfg).starts(),
+        &a.data,
+    ))
     .collect()
 }
 
 /// Where the starts of `solver.starts` reached different hard optima (the dataset's
 /// disagreeing indices): the count, the rule that chose the label, and the first few states.
 /// Nothing when they never disagreed (the report of such a run is unchanged).
-fn starts_disagreement(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
-    let d = &a.data.disagree;
+pub(super) fn starts_disagreement(
+    starts: &[crate::problem::solver::Start],
+    data: &Dataset,
+) -> Vec<Block> {
+    let d = &data.disagree;
     if d.is_empty() {
         return Vec::new();
     }
-    let starts: Vec<&str> = crate::mpc::law::MpcLaw::new(cfg)
-        .starts()
-        .iter()
-        .map(|s| s.as_str())
-        .collect();
+    let starts: Vec<&str> = starts.iter().map(|s| s.as_str()).collect();
     let rows: Vec<Vec<String>> = d
         .iter()
-        .filter_map(|&i| a.data.records.iter().find(|r| r.index == i))
+        .filter_map(|&i| data.records.iter().find(|r| r.index == i))
         .take(5)
         .map(|r| {
             let v = |x: &[f64]| {
@@ -125,7 +128,7 @@ fn starts_disagreement(cfg: &ProblemConfig, a: &Artifacts) -> Vec<Block> {
         Block::Para(format!(
             "**Where the starts disagree.** At {} of {} states the starts `{}` reached different hard optima (costs and u₀ apart by more than {:e} relative): the MPC law is set-valued there, and a regression would average branches. The label is the lowest-cost optimum; costs within {:e} relative go to the earlier start in the list (`warm` first: the branch continued from the previous labelled state). The first of them (index, x, the chosen u₀, its cost):",
             d.len(),
-            a.data.records.len(),
+            data.records.len(),
             starts.join(", "),
             crate::mpc::law::starts::OPTIMA_TOL,
             crate::mpc::law::starts::TIE_TOL,

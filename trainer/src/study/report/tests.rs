@@ -84,3 +84,57 @@ fn paper_columns_only_for_the_papers_problem() {
     cfg.ocp.horizon = 10;
     assert!(!super::sections::is_paper_problem(&cfg));
 }
+
+/// The dataset section names where the starts disagreed — the count, the starts, the rule
+/// and the first states with the chosen u₀ — and says nothing when they never did.
+#[test]
+fn the_report_lists_where_the_starts_disagree() {
+    use crate::data::dataset::{Header, Record, CHUNK, FORMAT_VERSION, MAGIC};
+    use crate::mpc::sqp::SqpStatus;
+    use crate::problem::solver::Start;
+    let mut data = Dataset {
+        magic: MAGIC,
+        version: FORMAT_VERSION,
+        header: Header {
+            problem: "p".into(),
+            problem_hash: "h".into(),
+            config_toml: String::new(),
+            nx: 2,
+            nu: 1,
+            sampling: crate::problem::SamplingSettings::default(),
+            total: 3,
+            shard: None,
+            chunk: CHUNK as u32,
+        },
+        records: (0..3u64)
+            .map(|i| Record {
+                index: i,
+                x: vec![0.5, i as f64],
+                u: vec![-2.0 + i as f64],
+                du_dx: vec![0.0, 0.0],
+                cost: 10.0 + i as f64,
+                status: SqpStatus::Converged,
+                iterations: 3,
+                kkt: 1e-9,
+                degeneracy: None,
+                max_slack: 0.0,
+            })
+            .collect(),
+        labels: None,
+        disagree: Vec::new(),
+    };
+    let starts = [Start::Warm, Start::ULo, Start::UHi];
+    assert!(super::sections::starts_disagreement(&starts, &data).is_empty());
+    data.disagree = vec![1, 2];
+    let r = Report {
+        title: "t".into(),
+        blocks: super::sections::starts_disagreement(&starts, &data),
+    };
+    let md = r.to_markdown();
+    assert!(md.contains("At 2 of 3 states"), "{md}");
+    assert!(md.contains("`warm, u_lo, u_hi`"), "{md}");
+    assert!(md.contains("lowest-cost optimum"), "{md}");
+    assert!(md.contains("| 1 | (0.5000, 1.0000) | (-1.0000) |"), "{md}");
+    assert!(md.contains("| 2 | (0.5000, 2.0000) | (0.0000) |"), "{md}");
+    assert!(!md.contains("| 0 |"), "{md}");
+}
