@@ -172,6 +172,10 @@ fn sample_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
     let mut inputs = BTreeMap::new();
     inputs.insert("problem".into(), cfg.problem_hash());
     inputs.insert("sampling".into(), settings_hash(&cfg.sampling));
+    if cfg.keeps_sequences() {
+        // (Absent by default, so a default run's manifest is unchanged.)
+        inputs.insert("sequences".into(), "kept".into());
+    }
     Ok(inputs)
 }
 

@@ -15,7 +15,13 @@
 //! own datasets stay version 2, byte for byte, unless their starts disagreed somewhere
 //! (`solver.starts`, `crate::mpc::law::starts`): then version [`STARTS_FORMAT_VERSION`], the
 //! same bytes followed by the postcard encoding of the ascending indices where they did
-//! ([`Dataset::disagree`]); all versions are read
+//! ([`Dataset::disagree`]). A dataset that keeps the optimal input sequences
+//! (`[training] outputs = "sequence"`, [`ProblemConfig::keeps_sequences`]) is version
+//! [`SEQUENCE_FORMAT_VERSION`]: the version-2 bytes, then the postcard encoding of the
+//! disagreeing indices (possibly empty), then that of one sequence per record
+//! ([`Record::seq`]: u₀*, …, u_{N−1}*, N·nu f64, empty for an unlabelled state) — N·nu·8
+//! bytes more per state (the pendulum's N = 10, nu = 1: 80 bytes, about twice a version-2
+//! record); all versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
 //! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
@@ -48,6 +54,9 @@ pub const IMPORTED_FORMAT_VERSION: u32 = 3;
 /// Format version of a dataset of ampc's solver with states where the starts disagree:
 /// version 2 plus the list of those indices ([`Dataset::disagree`]).
 pub const STARTS_FORMAT_VERSION: u32 = 4;
+/// Format version of a dataset that keeps the optimal input sequences: version 2 plus the
+/// disagreeing indices and one sequence per record ([`Record::seq`]).
+pub const SEQUENCE_FORMAT_VERSION: u32 = 5;
 /// Magic bytes at the start of a dataset file.
 pub const MAGIC: [u8; 8] = *b"AMPCDSET";
 /// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
@@ -173,6 +182,11 @@ pub struct Record {
     pub degeneracy: Option<Degeneracy>,
     /// Largest state-bound slack (soft labels), 0 otherwise.
     pub max_slack: f64,
+    /// The optimal input sequence u₀*, …, u_{N−1}*, row-major N × nu (empty when not kept
+    /// or unlabelled). Stored after the records in format version
+    /// [`SEQUENCE_FORMAT_VERSION`] only.
+    #[serde(skip)]
+    pub seq: Vec<f64>,
 }
 
 impl Record {
@@ -189,6 +203,7 @@ impl Record {
             kkt: l.info.kkt.max(),
             degeneracy: l.degeneracy,
             max_slack: l.max_slack,
+            seq: l.seq,
         }
     }
     /// Whether the record may be used for training (hard or soft label).
@@ -219,9 +234,12 @@ pub struct Dataset {
     pub disagree: Vec<u64>,
 }
 
-/// The format version of ampc's own dataset with these disagreeing indices.
-pub fn own_version(disagree: &[u64]) -> u32 {
-    if disagree.is_empty() {
+/// The format version of ampc's own dataset with these disagreeing indices and records
+/// (with sequences: [`SEQUENCE_FORMAT_VERSION`]).
+pub fn own_version(disagree: &[u64], records: &[Record]) -> u32 {
+    if records.iter().any(|r| !r.seq.is_empty()) {
+        SEQUENCE_FORMAT_VERSION
+    } else if disagree.is_empty() {
         FORMAT_VERSION
     } else {
         STARTS_FORMAT_VERSION
@@ -288,7 +306,9 @@ impl Dataset {
             &MAGIC,
             "dataset",
             |d: &Dataset| match d.version {
-                IMPORTED_FORMAT_VERSION | STARTS_FORMAT_VERSION => FORMAT_VERSION,
+                IMPORTED_FORMAT_VERSION | STARTS_FORMAT_VERSION | SEQUENCE_FORMAT_VERSION => {
+                    FORMAT_VERSION
+                }
                 v => v,
             },
             FORMAT_VERSION,
@@ -313,6 +333,9 @@ impl Dataset {
                     part: "dataset without its list of disagreeing starts",
                     source,
                 })?;
+        }
+        if d.version == SEQUENCE_FORMAT_VERSION {
+            d.read_sequences(bytes, origin)?;
         }
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
         for (i, r) in d.records.iter().enumerate() {
@@ -339,10 +362,65 @@ impl Dataset {
         if let Some(l) = &self.labels {
             body.extend(postcard::to_allocvec(l).unwrap_or_default());
         }
-        if self.version == STARTS_FORMAT_VERSION {
+        if self.version == STARTS_FORMAT_VERSION || self.version == SEQUENCE_FORMAT_VERSION {
             body.extend(postcard::to_allocvec(&self.disagree).unwrap_or_default());
         }
+        if self.version == SEQUENCE_FORMAT_VERSION {
+            let seqs: Vec<&Vec<f64>> = self.records.iter().map(|r| &r.seq).collect();
+            body.extend(postcard::to_allocvec(&seqs).unwrap_or_default());
+        }
         crate::io::seal(body)
+    }
+
+    /// Version [`SEQUENCE_FORMAT_VERSION`]'s trailer: the disagreeing indices and one
+    /// sequence per record, all of one length L = N·nu (a multiple of nu) or empty (an
+    /// unlabelled state).
+    fn read_sequences(&mut self, bytes: &[u8], origin: &str) -> Result<(), DatasetError> {
+        let body = crate::io::unseal(bytes).unwrap_or_default();
+        let dec = |source| DatasetError::Decode {
+            path: origin.to_string(),
+            part: "dataset without its sequences",
+            source,
+        };
+        let (_, rest) = postcard::take_from_bytes::<Dataset>(body).map_err(dec)?;
+        let (disagree, rest) = postcard::take_from_bytes::<Vec<u64>>(rest).map_err(dec)?;
+        let seqs: Vec<Vec<f64>> = postcard::from_bytes(rest).map_err(dec)?;
+        let fmt = |reason: String| DatasetError::Format {
+            path: origin.to_string(),
+            reason,
+        };
+        if seqs.len() != self.records.len() {
+            return Err(fmt(format!(
+                "{} sequences for {} records",
+                seqs.len(),
+                self.records.len()
+            )));
+        }
+        let nu = (self.header.nu as usize).max(1);
+        let len = seqs.iter().map(Vec::len).find(|l| *l > 0).unwrap_or(0);
+        for (i, s) in seqs.iter().enumerate() {
+            if !(s.is_empty() || s.len() == len) || len % nu != 0 {
+                return Err(fmt(format!(
+                    "record {i}'s sequence has {} values, not N·nu = {len} (nu = {nu})",
+                    s.len()
+                )));
+            }
+        }
+        for (r, s) in self.records.iter_mut().zip(seqs) {
+            r.seq = s;
+        }
+        self.disagree = disagree;
+        Ok(())
+    }
+
+    /// The horizon N of the kept sequences (`None`: the dataset keeps none).
+    pub fn sequence_horizon(&self) -> Option<usize> {
+        let nu = (self.header.nu as usize).max(1);
+        self.records
+            .iter()
+            .map(|r| r.seq.len())
+            .find(|l| *l > 0)
+            .map(|l| l / nu)
     }
 
     /// Writes the dataset atomically.
@@ -365,7 +443,15 @@ impl Dataset {
                 s += &format!(",du{j}_dx{i}");
             }
         }
-        s += ",cost,status,iterations,kkt,degenerate,max_slack\n";
+        s += ",cost,status,iterations,kkt,degenerate,max_slack";
+        // Kept sequences (version 5): u{j}_{k} for step k, after the older columns.
+        let horizon = self.sequence_horizon().unwrap_or(0);
+        for k in 0..horizon {
+            for j in 1..=nu {
+                s += &format!(",u{j}_{k}");
+            }
+        }
+        s += "\n";
         for r in &self.records {
             s += &r.index.to_string();
             for v in r.x.iter().chain(&r.u).chain(&r.du_dx) {
@@ -377,7 +463,7 @@ impl Dataset {
                 Some(Degeneracy::Singular) => "singular",
             };
             s += &format!(
-                ",{:?},{},{},{:e},{},{:?}\n",
+                ",{:?},{},{},{:e},{},{:?}",
                 r.cost,
                 r.status.as_str(),
                 r.iterations,
@@ -385,6 +471,10 @@ impl Dataset {
                 deg,
                 r.max_slack
             );
+            for k in 0..horizon * nu {
+                s += &format!(",{:?}", r.seq.get(k).copied().unwrap_or(f64::NAN));
+            }
+            s += "\n";
         }
         s
     }
@@ -500,6 +590,14 @@ pub fn generate(
     }
     // The first batch rewrites the checkpoint with the resumed records (dropping a damaged
     // tail, after which appended frames would be unreadable); later batches are appended.
+    let keep = cfg.keeps_sequences();
+    if keep && records.iter().any(|r| r.is_labelled() && r.seq.is_empty()) {
+        // A checkpoint written without sequences cannot complete a dataset that keeps them.
+        (records, disagree) = (Vec::new(), Vec::new());
+    }
+    if !keep {
+        records.iter_mut().for_each(|r| r.seq = Vec::new());
+    }
     let mut fresh = true;
     let done: std::collections::HashSet<usize> =
         records.iter().map(|r| r.index as usize / CHUNK).collect();
@@ -530,13 +628,16 @@ pub fn generate(
             .map_init(
                 || MpcLaw::new(cfg),
                 |law, &c| {
-                    let r = label_chunk_with(
+                    let mut r = label_chunk_with(
                         law,
                         &sampler,
                         c * CHUNK,
                         ((c + 1) * CHUNK).min(total),
                         warm,
                     );
+                    if !keep {
+                        r.0.iter_mut().for_each(|rec| rec.seq = Vec::new());
+                    }
                     bar.inc(r.0.len() as u64);
                     r
                 },
@@ -563,7 +664,7 @@ pub fn generate(
     disagree.sort_unstable();
     let d = Dataset {
         magic: MAGIC,
-        version: own_version(&disagree),
+        version: own_version(&disagree, &records),
         header,
         records,
         labels: None,
@@ -646,7 +747,7 @@ pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
     disagree.sort_unstable();
     Ok(Dataset {
         magic: MAGIC,
-        version: own_version(&disagree),
+        version: own_version(&disagree, &records),
         header: base,
         records,
         labels: None,
