@@ -20,8 +20,8 @@
 //! [`SEQUENCE_FORMAT_VERSION`]: the version-2 bytes, then the postcard encoding of the
 //! disagreeing indices (possibly empty), then that of one sequence per record
 //! ([`Record::seq`]: u₀*, …, u_{N−1}*, N·nu f64, empty for an unlabelled state) — N·nu·8
-//! bytes more per state (the pendulum's N = 10, nu = 1: 80 bytes, about twice a version-2
-//! record); all versions are read
+//! bytes more per state (the pendulum's N = 20, nu = 1: 160 bytes beside a version-2
+//! record's ≈ 90; the quadrotor's N·nu·8 likewise); all versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
 //! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
