@@ -32,8 +32,10 @@
 
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
+mod csv;
 pub(crate) mod gate;
 pub(crate) mod labels;
+mod sequences;
 pub use gate::LabelsError;
 pub use labels::ImportedLabels;
 
@@ -372,111 +374,9 @@ impl Dataset {
         crate::io::seal(body)
     }
 
-    /// Version [`SEQUENCE_FORMAT_VERSION`]'s trailer: the disagreeing indices and one
-    /// sequence per record, all of one length L = N·nu (a multiple of nu) or empty (an
-    /// unlabelled state).
-    fn read_sequences(&mut self, bytes: &[u8], origin: &str) -> Result<(), DatasetError> {
-        let body = crate::io::unseal(bytes).unwrap_or_default();
-        let dec = |source| DatasetError::Decode {
-            path: origin.to_string(),
-            part: "dataset without its sequences",
-            source,
-        };
-        let (_, rest) = postcard::take_from_bytes::<Dataset>(body).map_err(dec)?;
-        let (disagree, rest) = postcard::take_from_bytes::<Vec<u64>>(rest).map_err(dec)?;
-        let seqs: Vec<Vec<f64>> = postcard::from_bytes(rest).map_err(dec)?;
-        let fmt = |reason: String| DatasetError::Format {
-            path: origin.to_string(),
-            reason,
-        };
-        if seqs.len() != self.records.len() {
-            return Err(fmt(format!(
-                "{} sequences for {} records",
-                seqs.len(),
-                self.records.len()
-            )));
-        }
-        let nu = (self.header.nu as usize).max(1);
-        let len = seqs.iter().map(Vec::len).find(|l| *l > 0).unwrap_or(0);
-        for (i, s) in seqs.iter().enumerate() {
-            if !(s.is_empty() || s.len() == len) || len % nu != 0 {
-                return Err(fmt(format!(
-                    "record {i}'s sequence has {} values, not N·nu = {len} (nu = {nu})",
-                    s.len()
-                )));
-            }
-        }
-        for (r, s) in self.records.iter_mut().zip(seqs) {
-            r.seq = s;
-        }
-        self.disagree = disagree;
-        Ok(())
-    }
-
-    /// The horizon N of the kept sequences (`None`: the dataset keeps none).
-    pub fn sequence_horizon(&self) -> Option<usize> {
-        let nu = (self.header.nu as usize).max(1);
-        self.records
-            .iter()
-            .map(|r| r.seq.len())
-            .find(|l| *l > 0)
-            .map(|l| l / nu)
-    }
-
     /// Writes the dataset atomically.
     pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
         Ok(write_atomic(path, &self.to_bytes())?)
-    }
-
-    /// The CSV export.
-    pub fn to_csv(&self) -> String {
-        let (nx, nu) = (self.header.nx as usize, self.header.nu as usize);
-        let mut s = String::from("index");
-        for i in 1..=nx {
-            s += &format!(",x{i}");
-        }
-        for j in 1..=nu {
-            s += &format!(",u{j}");
-        }
-        for j in 1..=nu {
-            for i in 1..=nx {
-                s += &format!(",du{j}_dx{i}");
-            }
-        }
-        s += ",cost,status,iterations,kkt,degenerate,max_slack";
-        // Kept sequences (version 5): u{j}_{k} for step k, after the older columns.
-        let horizon = self.sequence_horizon().unwrap_or(0);
-        for k in 0..horizon {
-            for j in 1..=nu {
-                s += &format!(",u{j}_{k}");
-            }
-        }
-        s += "\n";
-        for r in &self.records {
-            s += &r.index.to_string();
-            for v in r.x.iter().chain(&r.u).chain(&r.du_dx) {
-                s += &format!(",{v:?}");
-            }
-            let deg = match r.degeneracy {
-                None => "",
-                Some(Degeneracy::WeaklyActive(_)) => "weakly_active",
-                Some(Degeneracy::Singular) => "singular",
-            };
-            s += &format!(
-                ",{:?},{},{},{:e},{},{:?}",
-                r.cost,
-                r.status.as_str(),
-                r.iterations,
-                r.kkt,
-                deg,
-                r.max_slack
-            );
-            for k in 0..horizon * nu {
-                s += &format!(",{:?}", r.seq.get(k).copied().unwrap_or(f64::NAN));
-            }
-            s += "\n";
-        }
-        s
     }
 }
 
