@@ -98,6 +98,7 @@ fn batch_of(set: &TrainSet, n: usize) -> Batch<'_> {
         du: &set.du[..n * nu * nx],
         use_jac: &set.use_jac[..n],
         band: None,
+        seq: None,
     }
 }
 
@@ -212,6 +213,7 @@ fn scaling(c: &mut Criterion) {
                 du: &set.du[s * nu * nx..e * nu * nx],
                 use_jac: &set.use_jac[s..e],
                 band: None,
+                seq: None,
             };
             mlp.loss_grad(&b, LAM, &mut grad, &mut ws);
             adam.step(&mut mlp, &grad, 1e-3);

@@ -51,6 +51,7 @@ fn main() {
                 du: &set.du[i * nu * nx..(i + bs) * nu * nx],
                 use_jac: &set.use_jac[i..i + bs],
                 band: None,
+                seq: None,
             };
             let p = if grad_only {
                 let all = Batch {
@@ -59,6 +60,7 @@ fn main() {
                     du: &set.du,
                     use_jac: &set.use_jac,
                     band: None,
+                    seq: None,
                 };
                 let rows: Vec<usize> = (i..i + bs).collect();
                 lanes.grad(&mlp, &all, &rows, lam, &mut g);

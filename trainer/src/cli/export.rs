@@ -103,6 +103,12 @@ pub(super) struct Args {
     /// terminal region.
     #[arg(long, value_name = "FILE", requires = "config")]
     plant_rs: Option<PathBuf>,
+    /// Write the model's sequence net (`[training] outputs = "sequence"`) as no_std f32 Rust,
+    /// a module `sequence` (`Net`, `NET`, `N`) to `include!` beside weights.rs for
+    /// `controller_core::safe::SequenceNet` (`deploy::sequence_rs`). Refused for a model
+    /// without a sequence net.
+    #[arg(long, value_name = "FILE", requires = "model")]
+    sequence_rs: Option<PathBuf>,
 }
 
 impl Args {
@@ -111,6 +117,13 @@ impl Args {
         if let (Some(file), Some(config)) = (&self.plant_rs, &self.config) {
             refuse_overwrite(&[file], &[config, opt(&self.model)])?;
             write_plant_rs(config, file)?;
+        }
+        if let (Some(file), Some(model)) = (&self.sequence_rs, &self.model) {
+            refuse_overwrite(&[file], &[model, opt(&self.config)])?;
+            write_sequence_rs(model, file)?;
+            if self.rust.is_none() && self.onnx.is_none() && self.c_lib.is_none() {
+                return Ok(());
+            }
         }
         let Some(model) = &self.model else {
             if self.rust.is_some() || self.onnx.is_some() || self.c_lib.is_some() {
@@ -143,6 +156,34 @@ impl Args {
             (self.statistical_band, self.accept_unsealed),
         )
     }
+}
+
+/// `--sequence-rs FILE`: the model's sequence net (`deploy::sequence_rs`).
+fn write_sequence_rs(model: &Path, file: &Path) -> Result<()> {
+    let m = trainer::certify::Model::load(model)?;
+    let Some(seq) = &m.sequence else {
+        bail!(
+            "{}: the model has no sequence net (train it with [training] outputs = \"sequence\")",
+            model.display()
+        );
+    };
+    let nu = m.mlp.nu();
+    let name = m
+        .problem_toml
+        .as_deref()
+        .map_or("controller".to_string(), |t| {
+            trainer::problem::ProblemConfig::from_stored_toml(t, "model")
+                .map_or("controller".to_string(), |c| c.name)
+        });
+    let text = trainer::deploy::sequence_rs::render_sequence_rs(&name, seq, nu);
+    std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))?;
+    eprintln!(
+        "{}: sequence net of `{name}` ({} outputs = N {} × nu {nu})",
+        file.display(),
+        seq.nu(),
+        seq.nu() / nu.max(1)
+    );
+    Ok(())
 }
 
 /// `--plant-rs FILE`: the generated plant of the problem `config` (`deploy::plant_rs_safe`).

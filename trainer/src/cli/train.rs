@@ -104,16 +104,33 @@ pub(super) fn execute(
         hold: Hold::if_enabled(&cfg, cfg.training.hold_setpoint)?,
         keep_best: None,
     };
-    let mut model = train(
-        &cfg.training,
-        &opts,
-        &set,
-        &val,
-        (&cfg.domain.lo, &cfg.domain.hi),
-        (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
-        &d.header.problem_hash,
-        &sha256_file(data)?,
-    );
+    let mut model = if cfg.keeps_sequences() {
+        // The sequence net (`learn::sequence`); its curve's validation figure is on the
+        // training data, the model's validation statistics (u₀) on `val`.
+        let name = data.display().to_string();
+        let mut m: trainer::certify::Model = trainer::learn::sequence::train_sequence(
+            &cfg,
+            &opts,
+            &d,
+            &d,
+            (&name, &name),
+            &d.header.problem_hash,
+            &sha256_file(data)?,
+        )?;
+        m.validation_stats = trainer::learn::train::errors(&m.mlp, &val).1;
+        m
+    } else {
+        train(
+            &cfg.training,
+            &opts,
+            &set,
+            &val,
+            (&cfg.domain.lo, &cfg.domain.hi),
+            (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+            &d.header.problem_hash,
+            &sha256_file(data)?,
+        )
+    };
     let t_train = t1.elapsed().as_secs_f64();
     let cert = certify(
         &model,

@@ -20,3 +20,4 @@ pub mod export;
 pub mod onnx;
 pub mod plant_rs;
 pub mod plant_rs_safe;
+pub mod sequence_rs;

@@ -75,7 +75,7 @@ impl Passes {
         lam: LossWeights,
         lr: f64,
     ) {
-        let (nx, nu) = (train.nx, train.nu);
+        let (nx, nu, jr) = (train.nx, train.nu, train.jac_rows());
         for chunk in order.chunks(bs) {
             if self.f32_passes {
                 // The lanes read the minibatch's rows in place.
@@ -92,7 +92,7 @@ impl Passes {
             for &i in chunk {
                 bx.extend(train.x[i * nx..(i + 1) * nx].iter());
                 bu.extend(train.u[i * nu..(i + 1) * nu].iter());
-                bdu.extend(train.du[i * nu * nx..(i + 1) * nu * nx].iter());
+                bdu.extend(train.du[i * jr * nx..(i + 1) * jr * nx].iter());
                 bj.push(train.use_jac[i]);
             }
             let batch = Batch {
@@ -101,6 +101,7 @@ impl Passes {
                 du: bdu,
                 use_jac: bj,
                 band: set.band,
+                seq: set.seq,
             };
             mlp.loss_grad(&batch, lam, &mut self.grad, &mut self.ws);
             adam_step(&mut self.adam, mlp, &self.grad, lr);

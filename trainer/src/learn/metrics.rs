@@ -30,6 +30,10 @@ pub struct TrainSet {
     pub du: Vec<f64>,
     /// Whether the Jacobian label is usable (not degenerate).
     pub use_jac: Vec<bool>,
+    /// A sequence net's value weight per output (empty: the net of u₀, all 1); its
+    /// Jacobian labels are then those of u₀ alone (`du` holds [`TrainSet::jac_rows`] × nx
+    /// per point, `crate::learn::sequence`).
+    pub row_weight: Vec<f64>,
 }
 
 impl TrainSet {
@@ -49,6 +53,13 @@ impl TrainSet {
                 .push(r.degeneracy.is_none() && r.du_dx.iter().all(|v| v.is_finite()));
         }
         s
+    }
+    /// The outputs with a Jacobian label (`nu`, or a sequence net's u₀ rows).
+    pub fn jac_rows(&self) -> usize {
+        match self.len() * self.nx {
+            0 => self.nu,
+            n => self.du.len() / n,
+        }
     }
     /// Number of points.
     pub fn len(&self) -> usize {
@@ -127,7 +138,7 @@ fn error_stats(
     with_jac: bool,
     sorted: bool,
 ) -> (Vec<f64>, ErrorStats) {
-    let (nx, nu) = (set.nx, set.nu);
+    let (nx, nu, jr) = (set.nx, set.nu, set.jac_rows());
     let mut errs = Vec::with_capacity(set.len());
     let (mut ss_res, mut max_jac) = (0.0, 0.0f64);
     let mut mean_u = vec![0.0; nu];
@@ -148,9 +159,10 @@ fn error_stats(
         ss_res += e2;
         errs.push(e2.sqrt());
         if with_jac && set.use_jac[i] {
+            // (A sequence net's Jacobian labels are u₀'s: its first jr rows.)
             let j = &j_all[i * nu * nx..(i + 1) * nu * nx];
-            let je: f64 = (0..nu * nx)
-                .map(|k| (j[k] - set.du[i * nu * nx + k]).powi(2))
+            let je: f64 = (0..jr * nx)
+                .map(|k| (j[k] - set.du[i * jr * nx + k]).powi(2))
                 .sum();
             max_jac = max_jac.max(je.sqrt());
         }

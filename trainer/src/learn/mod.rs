@@ -12,6 +12,8 @@
 //! - [`train`]: Adam over the loss, learning-rate schedules, early stopping, the model file.
 //! - [`setpoint`]: the setpoint hold κ_NN(x) − κ_NN(x_ref) + κ(x_ref), folded into the
 //!   last bias after training.
+//! - [`sequence`]: the sequence net (`[training] outputs = "sequence"`): N·nu outputs, the
+//!   model's net its u₀ rows.
 //! - `stored_settings`: the model file's encoding of the training settings.
 //! - [`model_file`]: the model file (encoding, checks, the trailer holding the problem file).
 //!
@@ -22,6 +24,7 @@ mod epoch;
 mod metrics;
 pub mod mlp;
 pub(crate) mod model_file;
+pub mod sequence;
 pub mod setpoint;
 mod stored_settings;
 pub mod train;

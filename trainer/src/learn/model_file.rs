@@ -3,8 +3,13 @@
 //! model, inside the sealed body,
 //!
 //! ```text
-//! file = magic … postcard(TrainedModel) ‖ [ "AMPCPROB" ‖ postcard(String: problem TOML) ] ‖ SHA-256
+//! file = magic … postcard(TrainedModel) ‖ [ "AMPCPROB" ‖ postcard(String: problem TOML) ]
+//!        ‖ [ "AMPCSEQN" ‖ postcard(Mlp: the sequence net) ] ‖ SHA-256
 //! ```
+//!
+//! The second trailer holds a sequence net (`crate::learn::sequence`); on reading, its u₀
+//! rows must be exactly the model's network (else the file is refused), so that what is
+//! certified and exported is the sequence net's u₀.
 //!
 //! The trailer is optional both ways: postcard ignores bytes after a complete value, so a
 //! reader that does not look for it reads the model alone, and a file without it (or of a
@@ -21,6 +26,39 @@ use std::path::Path;
 
 /// Marks the start of the trailer.
 pub const PROBLEM_MAGIC: [u8; 8] = *b"AMPCPROB";
+/// Marks the start of the sequence net's trailer.
+pub const SEQUENCE_MAGIC: [u8; 8] = *b"AMPCSEQN";
+
+/// The sequence net's trailer (if any) and what follows it: the net, and the bytes before
+/// it; an error naming `origin` if it does not decode.
+fn split_sequence<'a>(
+    rest: &'a [u8],
+    origin: &str,
+) -> Result<(&'a [u8], Option<super::mlp::Mlp>), DatasetError> {
+    // The problem trailer's text is length-prefixed, so the marker is searched after it.
+    let at = match rest.strip_prefix(&PROBLEM_MAGIC[..]) {
+        Some(tail) => match postcard::take_from_bytes::<String>(tail) {
+            Ok((_, after)) => rest.len() - after.len(),
+            Err(_) => return Ok((rest, None)),
+        },
+        None => 0,
+    };
+    let Some(tail) = rest[at..].strip_prefix(&SEQUENCE_MAGIC[..]) else {
+        return Ok((rest, None));
+    };
+    match postcard::take_from_bytes::<super::mlp::Mlp>(tail) {
+        Ok((m, [])) => Ok((&rest[..at], Some(m))),
+        Ok((_, extra)) => Err(DatasetError::Format {
+            path: origin.to_string(),
+            reason: format!("{} unexpected bytes after the sequence net", extra.len()),
+        }),
+        Err(source) => Err(DatasetError::Decode {
+            path: origin.to_string(),
+            part: "sequence net",
+            source,
+        }),
+    }
+}
 
 /// Appends the trailer holding `toml` (if any) to an encoded model body.
 pub fn append(body: &mut Vec<u8>, toml: Option<&str>) {
@@ -65,6 +103,10 @@ impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut body = postcard::to_allocvec(self).unwrap_or_default();
         append(&mut body, self.problem_toml.as_deref());
+        if let Some(seq) = &self.sequence {
+            body.extend_from_slice(&SEQUENCE_MAGIC);
+            body.extend(postcard::to_allocvec(seq).unwrap_or_default());
+        }
         crate::io::seal(body)
     }
     /// Writes the model atomically.
@@ -98,7 +140,20 @@ impl<C: Serialize + serde::de::DeserializeOwned> TrainedModel<C> {
         }
         let body = crate::io::unseal(bytes).unwrap_or_default();
         let rest = postcard::take_from_bytes::<Self>(body).map_or(&[][..], |(_, r)| r);
+        let (rest, seq) = split_sequence(rest, origin)?;
         m.problem_toml = read(rest, origin)?;
+        if let Some(seq) = &seq {
+            let nu = m.mlp.nu();
+            if seq.nu() <= nu || seq.nu() % nu != 0 || super::sequence::first_rows(seq, nu) != m.mlp
+            {
+                return Err(fmt(format!(
+                    "the sequence net ({} outputs) does not have the model's net as its first \
+                     {nu} rows",
+                    seq.nu()
+                )));
+            }
+        }
+        m.sequence = seq;
         Ok(m)
     }
     /// SHA-256 (hex) of the network's parameters and scaling: what a certificate is about

@@ -3,7 +3,9 @@
 //!
 //! ```text
 //! flags = saturation_aware · 1 + hold_setpoint · 2 + (precision = f32) · 4
+//!       + (outputs = sequence) · 8
 //! ```
+//! (`sequence_weights` is not stored here: the model's problem file trailer has it.)
 //!
 //! Contract: a byte 0 or 1 (a plain `bool`, the format-3 files that store only
 //! `saturation_aware`) decodes with `hold_setpoint = false` and f64 precision, and settings
@@ -12,7 +14,7 @@
 //! through `#[serde(with)]`; every other encoding of the settings (TOML, JSON) is the
 //! derived one.
 
-use crate::problem::{Activation, Precision, Schedule, TrainSettings};
+use crate::problem::{Activation, Outputs, Precision, Schedule, TrainSettings};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Format 3's layout of the settings; `flags` in place of `saturation_aware`.
@@ -36,6 +38,7 @@ struct Stored {
 const SATURATION_AWARE: u8 = 1;
 const HOLD_SETPOINT: u8 = 2;
 const PRECISION_F32: u8 = 4;
+const SEQUENCE: u8 = 8;
 
 /// Encodes `s` in the stored layout.
 pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::Ok, S::Error> {
@@ -54,7 +57,8 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
         log_every: s.log_every,
         flags: u8::from(s.saturation_aware) * SATURATION_AWARE
             + u8::from(s.hold_setpoint) * HOLD_SETPOINT
-            + u8::from(s.precision == Precision::F32) * PRECISION_F32,
+            + u8::from(s.precision == Precision::F32) * PRECISION_F32
+            + u8::from(s.outputs == Outputs::Sequence) * SEQUENCE,
     }
     .serialize(ser)
 }
@@ -62,7 +66,7 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
 /// Decodes the stored layout; unknown flag bits are an error.
 pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSettings, D::Error> {
     let s = Stored::deserialize(de)?;
-    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT | PRECISION_F32) != 0 {
+    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT | PRECISION_F32 | SEQUENCE) != 0 {
         return Err(serde::de::Error::custom(format!(
             "unknown training flags {:#04x}",
             s.flags
@@ -88,6 +92,12 @@ pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSetti
         } else {
             Precision::F64
         },
+        outputs: if s.flags & SEQUENCE != 0 {
+            Outputs::Sequence
+        } else {
+            Outputs::First
+        },
+        sequence_weights: None,
     })
 }
 
@@ -152,8 +162,16 @@ mod tests {
         assert_eq!(f32s.precision, Precision::F32);
         let bytes = postcard::to_allocvec(&Wrap(f32s.clone())).unwrap();
         assert_eq!(postcard::from_bytes::<Wrap>(&bytes).unwrap().0, f32s);
+        // A sequence net round trips (flag 8; its per-step weights live in the problem file).
+        let seq = TrainSettings {
+            outputs: Outputs::Sequence,
+            ..TrainSettings::default()
+        };
+        let bytes = postcard::to_allocvec(&Wrap(seq.clone())).unwrap();
+        assert_eq!(*bytes.last().unwrap(), 8 | 4 | 2);
+        assert_eq!(postcard::from_bytes::<Wrap>(&bytes).unwrap().0, seq);
         let mut bad = postcard::to_allocvec(&Wrap(TrainSettings::default())).unwrap();
-        *bad.last_mut().unwrap() = 8;
+        *bad.last_mut().unwrap() = 16;
         assert!(postcard::from_bytes::<Wrap>(&bad).is_err());
     }
 }

@@ -86,6 +86,11 @@ pub struct TrainedModel<C> {
     /// ([`crate::learn::model_file`]); `None` in older files and ONNX imports.
     #[serde(skip)]
     pub problem_toml: Option<String>,
+    /// A sequence net's full network (N·nu outputs, `crate::learn::sequence`), whose u₀ rows
+    /// are exactly [`TrainedModel::mlp`]; kept in the model file's trailer; `None` for a net
+    /// of u₀ alone.
+    #[serde(skip)]
+    pub sequence: Option<Mlp>,
 }
 
 /// Options of a training run.
@@ -165,6 +170,10 @@ pub fn train_from<C>(
         du: &train.du,
         use_jac: &train.use_jac,
         band,
+        seq: (!train.row_weight.is_empty()).then(|| crate::learn::mlp::SeqLoss {
+            jac_rows: train.jac_rows(),
+            weight: &train.row_weight,
+        }),
     };
     let mut curve = CurvePoint::default();
     // The best checkpoint so far (`opts.keep_best`): its score and weights.
@@ -275,6 +284,7 @@ pub fn train_from<C>(
         certificate: None,
         source_hash: None,
         problem_toml: None,
+        sequence: None,
     }
 }
 

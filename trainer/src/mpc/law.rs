@@ -93,6 +93,9 @@ pub struct Label {
     /// Distinct hard optima the starts reached ([`starts`]; 0 when none was set, e.g. a
     /// single start): 2 or more means the starts disagree.
     pub optima: u32,
+    /// The optimal input sequence u_0*, …, u_{N−1}*, row-major N × nu (empty when
+    /// unlabelled); its first nu entries are [`u`](Self::u).
+    pub seq: Vec<f64>,
 }
 
 impl Label {
@@ -191,6 +194,9 @@ impl MpcLaw {
             active: sens.active,
             retry: None,
             optima: 0,
+            seq: (0..ocp.horizon)
+                .flat_map(|k| r.point.z[ocp.iu(k)..ocp.iu(k) + ocp.nu].iter().copied())
+                .collect(),
         }
     }
 
@@ -221,6 +227,7 @@ impl MpcLaw {
             active: Vec::new(),
             retry: None,
             optima: 0,
+            seq: Vec::new(),
         }
     }
 

@@ -42,6 +42,9 @@ pub enum ApiError {
     /// The net cannot be exported for controller-core.
     #[error(transparent)]
     Export(#[from] ExportError),
+    /// A sequence net cannot be trained on the dataset.
+    #[error(transparent)]
+    Sequence(#[from] crate::learn::sequence::SequenceError),
 }
 
 /// Labels `cfg`'s sampling plan with the MPC (κ and ∂κ/∂x per state; the status of every
@@ -66,6 +69,27 @@ pub fn train(
         return Err(ApiError::EmptyDataset);
     }
     let hold = Hold::if_enabled(cfg, cfg.training.hold_setpoint)?;
+    if cfg.keeps_sequences() {
+        let opts = TrainOptions {
+            nominal,
+            progress: None,
+            hold,
+            keep_best: None,
+        };
+        let dh = crate::io::sha256_hex(&data.to_bytes());
+        let names = ("dataset", "validation dataset");
+        let mut m: Model = crate::learn::sequence::train_sequence(
+            cfg,
+            &opts,
+            data,
+            validation,
+            names,
+            &data.header.problem_hash,
+            &dh,
+        )?;
+        m.problem_toml = cfg.to_toml_string().ok();
+        return Ok(m);
+    }
     let mut m: Model = crate::learn::train::train(
         &cfg.training,
         &TrainOptions {

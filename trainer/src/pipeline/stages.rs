@@ -172,6 +172,10 @@ fn sample_inputs(_: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
     let mut inputs = BTreeMap::new();
     inputs.insert("problem".into(), cfg.problem_hash());
     inputs.insert("sampling".into(), settings_hash(&cfg.sampling));
+    if cfg.keeps_sequences() {
+        // (Absent by default, so a default run's manifest is unchanged.)
+        inputs.insert("sequences".into(), "kept".into());
+    }
     Ok(inputs)
 }
 
@@ -269,26 +273,36 @@ fn train_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let hold =
         Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Train, e))?;
     let toml = cfg.to_toml_string().map_err(|e| fail(Stage::Train, e))?;
-    let one = |nominal: bool| -> Model {
-        let mut m: Model = train(
-            &cfg.training,
-            &TrainOptions {
-                nominal,
-                progress: None,
-                hold: hold.clone(),
-                keep_best: None,
-            },
-            &set,
-            &vset,
-            (&cfg.domain.lo, &cfg.domain.hi),
-            (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
-            &data.header.problem_hash,
-            &dh,
-        );
+    let one = |nominal: bool| -> Result<Model, PipelineError> {
+        let opts = TrainOptions {
+            nominal,
+            progress: None,
+            hold: hold.clone(),
+            keep_best: None,
+        };
+        let mut m: Model = if cfg.keeps_sequences() {
+            // The sequence net; the model's net is its u₀ rows (`learn::sequence`).
+            let names = (RunDir::DATASET, RunDir::VALIDATION);
+            let (ph, dh) = (&data.header.problem_hash, &dh);
+            crate::learn::sequence::train_sequence(cfg, &opts, &data, &val, names, ph, dh)
+                .map_err(|e| fail(Stage::Train, e))?
+        } else {
+            train(
+                &cfg.training,
+                &opts,
+                &set,
+                &vset,
+                (&cfg.domain.lo, &cfg.domain.hi),
+                (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
+                &data.header.problem_hash,
+                &dh,
+            )
+        };
         m.problem_toml = Some(toml.clone());
-        m
+        Ok(m)
     };
     let (n, r) = rayon::join(|| one(true), || one(false));
+    let (n, r) = (n?, r?);
     n.save(&d.model_nominal())
         .map_err(|e| fail(Stage::Train, e))?;
     r.save(&d.model_regularized())

@@ -38,7 +38,7 @@ pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{default_starts, QpSolverKind, SolverSettings, Start};
 pub use study::{ClosedLoopSettings, Mismatch, MismatchScenario, PlotSettings};
-pub use training::{Activation, Precision, Schedule, TrainSettings};
+pub use training::{Activation, Outputs, Precision, Schedule, TrainSettings};
 pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
@@ -295,6 +295,12 @@ impl ProblemConfig {
             &o.terminal_constraints,
         )
         .map(Some)
+    }
+
+    /// Whether the dataset keeps every labelled state's optimal input sequence (a sequence
+    /// net is trained: `[training] outputs = "sequence"`).
+    pub fn keeps_sequences(&self) -> bool {
+        !self.training.outputs.is_first()
     }
 
     /// Content hash (SHA-256, hex) of everything that determines a label: system, OCP and

@@ -468,3 +468,44 @@ fn norm_scales_are_validated_defaulted_and_not_hashed() {
     );
     assert_eq!(c.ocp.u_scale_or_default(), vec![15.0]);
 }
+
+/// `[training] outputs` and `sequence_weights`: parsed, the default stores as before, and
+/// the weights are checked (only with a sequence net, one per step, finite ≥ 0, w₀ > 0).
+#[test]
+fn sequence_outputs_and_weights_are_validated() {
+    let text = format!("{PENDULUM_TOML}\n[training]\noutputs = \"sequence\"\n");
+    let c = ProblemConfig::from_toml_str(&text, "x").unwrap();
+    assert!(c.keeps_sequences());
+    assert!(!ProblemConfig::default().keeps_sequences());
+    assert!(!toml::to_string(&ProblemConfig::default())
+        .unwrap()
+        .contains("outputs"));
+    let seq = |c: &mut ProblemConfig, w: Vec<f64>| {
+        c.training.outputs = Outputs::Sequence;
+        c.training.sequence_weights = Some(w);
+    };
+    assert_eq!(
+        err_key(|c| c.training.sequence_weights = Some(vec![1.0; 20])),
+        "training.sequence_weights"
+    );
+    assert_eq!(
+        err_key(|c| seq(c, vec![1.0; 19])),
+        "training.sequence_weights"
+    );
+    let mut w = vec![1.0; 20];
+    w[3] = f64::NAN;
+    assert_eq!(
+        err_key(|c| seq(c, w.clone())),
+        "training.sequence_weights[3]"
+    );
+    let mut w = vec![1.0; 20];
+    w[0] = 0.0;
+    assert_eq!(
+        err_key(|c| seq(c, w.clone())),
+        "training.sequence_weights[0]"
+    );
+    let mut ok = ProblemConfig::default();
+    seq(&mut ok, vec![0.5; 20]);
+    ok.validate().unwrap();
+    assert_eq!(ok.training.step_weights(20), vec![0.5; 20]);
+}

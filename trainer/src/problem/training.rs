@@ -63,6 +63,47 @@ pub struct TrainSettings {
     /// means f64, the only engine before f32 existed.
     #[serde(skip_serializing_if = "Precision::is_f64")]
     pub precision: Precision,
+    /// What the net predicts (default `"first"`: u₀ = κ(x), nu outputs). `"sequence"`: the
+    /// MPC's whole optimal input sequence u₀*, …, u_{N−1}*, N·nu outputs (the dataset then
+    /// keeps every labelled state's sequence, N·nu f64 more per state; the sensitivity term
+    /// stays on u₀; the certificates bound the u₀ rows). Written into stored copies only
+    /// when `"sequence"`, so a run with the default stores and hashes as before.
+    #[serde(skip_serializing_if = "Outputs::is_first")]
+    pub outputs: Outputs,
+    /// Per-step weights w_0, …, w_{N−1} of the value term of a sequence net (exactly N
+    /// values, each finite and ≥ 0, w_0 > 0): output (k, j) costs w_k·(u − κ)². Default:
+    /// all 1 (every step of the sequence counts as much as u₀). Only with
+    /// `outputs = "sequence"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sequence_weights: Option<Vec<f64>>,
+}
+
+/// What the network predicts (`[training] outputs`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outputs {
+    /// The first input u₀ = κ(x) (nu outputs): the controller of the paper.
+    #[default]
+    First,
+    /// The whole optimal input sequence u₀*, …, u_{N−1}* (N·nu outputs, row-major N × nu),
+    /// for the safety-augmented controller (`controller_core::safe`).
+    Sequence,
+}
+
+impl Outputs {
+    /// Whether this is [`Outputs::First`].
+    pub fn is_first(&self) -> bool {
+        *self == Outputs::First
+    }
+}
+
+impl TrainSettings {
+    /// The per-step weights of a sequence net over `horizon` steps (the setting, else all 1).
+    pub fn step_weights(&self, horizon: usize) -> Vec<f64> {
+        self.sequence_weights
+            .clone()
+            .unwrap_or_else(|| vec![1.0; horizon])
+    }
 }
 
 /// Arithmetic of the training passes (forward, tangent, reverse); Adam and the master
@@ -108,6 +149,8 @@ impl Default for TrainSettings {
             saturation_aware: false,
             hold_setpoint: true,
             precision: Precision::F32,
+            outputs: Outputs::First,
+            sequence_weights: None,
         }
     }
 }

@@ -163,6 +163,7 @@ impl ProblemConfig {
         self.validate_setpoint()?;
         self.solver.validate()?;
         self.training.validate()?;
+        self.validate_sequence_weights()?;
         self.closed_loop.validate(nx)?;
         self.robust.validate(nx, nu)?;
         self.closed_loop.validate_seeds()?;
@@ -171,6 +172,38 @@ impl ProblemConfig {
         self.sampling.validate(nx)?;
         self.refine.validate(nx)?;
         self.certify.validate()?;
+        Ok(())
+    }
+
+    /// `training.sequence_weights`: only with `outputs = "sequence"`, exactly `ocp.horizon`
+    /// values, each finite and ≥ 0, the first > 0.
+    fn validate_sequence_weights(&self) -> Result<(), ConfigError> {
+        let Some(w) = &self.training.sequence_weights else {
+            return Ok(());
+        };
+        let key = "training.sequence_weights";
+        if self.training.outputs.is_first() {
+            return Err(invalid(key, "needs training.outputs = \"sequence\""));
+        }
+        if w.len() != self.ocp.horizon {
+            return Err(invalid(
+                key,
+                format!(
+                    "needs one weight per step of ocp.horizon = {}, got {}",
+                    self.ocp.horizon,
+                    w.len()
+                ),
+            ));
+        }
+        if let Some(k) = w.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(invalid(
+                format!("{key}[{k}]"),
+                format!("must be finite and ≥ 0, got {}", w[k]),
+            ));
+        }
+        if w[0] <= 0.0 {
+            return Err(invalid(format!("{key}[0]"), "u₀'s weight must be > 0"));
+        }
         Ok(())
     }
 

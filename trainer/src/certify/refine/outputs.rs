@@ -32,6 +32,7 @@ pub fn dataset(cfg: &ProblemConfig, st: &RefineState) -> Dataset {
             kkt: f64::NAN,
             degeneracy: p.degeneracy,
             max_slack: p.max_slack,
+            seq: Vec::new(),
         })
         .collect::<Vec<_>>();
     Dataset {

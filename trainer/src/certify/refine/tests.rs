@@ -154,6 +154,7 @@ fn first_round_corners_take_the_labels_of_records_at_their_states() {
         kkt: 0.0,
         degeneracy: None,
         max_slack: 0.0,
+        seq: Vec::new(),
     };
     let p = |i: usize| st.points[pending[i]].x.clone();
     // Rounding of another tool's last digit is absorbed.

@@ -5,9 +5,11 @@
 //! file    = frame(opening) frame(batch)*
 //! frame   = len: u64 LE ‖ seal(postcard(payload))        (seal: payload ‖ SHA-256)
 //! opening = (CHECKPOINT_MAGIC, CHECKPOINT_VERSION, Header)
-//! batch   = Vec<Record> ‖ Vec<u64>                        (the records of one batch of chunks,
+//! batch   = Vec<Record> ‖ Vec<u64> ‖ Vec<Vec<f64>>        (the records of one batch of chunks,
 //!                                                          then the indices among them where the
-//!                                                          starts disagree; absent in older files)
+//!                                                          starts disagree, absent in older files
+//!                                                          and when empty without sequences; then
+//!                                                          the records' sequences when kept)
 //! ```
 //! The first frame and the first batch are written together atomically (so the file exists
 //! only with work in it); every later batch is appended and synced. A reader keeps the frames
@@ -60,13 +62,38 @@ pub fn create_with(
 }
 
 /// A batch frame's payload: the records, then the disagreeing indices when there are any
-/// (so a batch without is byte for byte the older format).
+/// or sequences follow, then the records' sequences when any is kept (so a batch without
+/// either is byte for byte the older format).
 fn batch(records: &[Record], disagree: &[u64]) -> Vec<u8> {
     let mut p = postcard::to_allocvec(records).unwrap_or_default();
-    if !disagree.is_empty() {
+    let seqs = records.iter().any(|r| !r.seq.is_empty());
+    if !disagree.is_empty() || seqs {
         p.extend(postcard::to_allocvec(disagree).unwrap_or_default());
     }
+    if seqs {
+        let s: Vec<&Vec<f64>> = records.iter().map(|r| &r.seq).collect();
+        p.extend(postcard::to_allocvec(&s).unwrap_or_default());
+    }
     p
+}
+
+/// The rest of a batch frame after its records: the disagreeing indices and the sequences
+/// (both possibly absent); `None` if it does not decode.
+fn batch_tail(rest: &[u8], records: &mut [Record]) -> Option<Vec<u64>> {
+    if rest.is_empty() {
+        return Some(Vec::new());
+    }
+    let (d, rest) = postcard::take_from_bytes::<Vec<u64>>(rest).ok()?;
+    if !rest.is_empty() {
+        let seqs: Vec<Vec<f64>> = postcard::from_bytes(rest).ok()?;
+        if seqs.len() != records.len() {
+            return None;
+        }
+        for (r, s) in records.iter_mut().zip(seqs) {
+            r.seq = s;
+        }
+    }
+    Some(d)
 }
 
 /// Appends one batch of records to the checkpoint and syncs it.
@@ -106,14 +133,9 @@ pub fn read_with(bytes: &[u8]) -> Option<(Header, Vec<Record>, Vec<u64>)> {
     let (mut records, mut disagree) = (Vec::new(), Vec::new());
     for f in frames {
         match postcard::take_from_bytes::<Vec<Record>>(f) {
-            Ok((batch, rest)) => {
-                let d = if rest.is_empty() {
-                    Vec::new()
-                } else {
-                    match postcard::from_bytes::<Vec<u64>>(rest) {
-                        Ok(d) => d,
-                        Err(_) => break,
-                    }
+            Ok((mut batch, rest)) => {
+                let Some(d) = batch_tail(rest, &mut batch) else {
+                    break;
                 };
                 records.extend(batch);
                 disagree.extend(d);

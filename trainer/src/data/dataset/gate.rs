@@ -227,6 +227,7 @@ mod tests {
                         kkt: 1e-9,
                         degeneracy: None,
                         max_slack: 0.0,
+                        seq: Vec::new(),
                     }
                 })
                 .collect(),

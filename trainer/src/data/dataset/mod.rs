@@ -15,7 +15,13 @@
 //! own datasets stay version 2, byte for byte, unless their starts disagreed somewhere
 //! (`solver.starts`, `crate::mpc::law::starts`): then version [`STARTS_FORMAT_VERSION`], the
 //! same bytes followed by the postcard encoding of the ascending indices where they did
-//! ([`Dataset::disagree`]); all versions are read
+//! ([`Dataset::disagree`]). A dataset that keeps the optimal input sequences
+//! (`[training] outputs = "sequence"`, [`ProblemConfig::keeps_sequences`]) is version
+//! [`SEQUENCE_FORMAT_VERSION`]: the version-2 bytes, then the postcard encoding of the
+//! disagreeing indices (possibly empty), then that of one sequence per record
+//! ([`Record::seq`]: u₀*, …, u_{N−1}*, N·nu f64, empty for an unlabelled state) — N·nu·8
+//! bytes more per state (the pendulum's N = 20, nu = 1: 160 bytes beside a version-2
+//! record's ≈ 90; the quadrotor's N·nu·8 likewise); all versions are read
 //! (`crate::io::seal`; one flipped byte is an error naming the file). Written atomically (temporary file +
 //! rename). A run appends each batch of chunks to a checkpoint `<out>.partial` (an
 //! append-only log, [`checkpoint`]) and resumes from it when restarted with the same
@@ -26,8 +32,10 @@
 
 use crate::data::sampling::Sampler;
 pub mod checkpoint;
+mod csv;
 pub(crate) mod gate;
 pub(crate) mod labels;
+mod sequences;
 pub use gate::LabelsError;
 pub use labels::ImportedLabels;
 
@@ -48,6 +56,9 @@ pub const IMPORTED_FORMAT_VERSION: u32 = 3;
 /// Format version of a dataset of ampc's solver with states where the starts disagree:
 /// version 2 plus the list of those indices ([`Dataset::disagree`]).
 pub const STARTS_FORMAT_VERSION: u32 = 4;
+/// Format version of a dataset that keeps the optimal input sequences: version 2 plus the
+/// disagreeing indices and one sequence per record ([`Record::seq`]).
+pub const SEQUENCE_FORMAT_VERSION: u32 = 5;
 /// Magic bytes at the start of a dataset file.
 pub const MAGIC: [u8; 8] = *b"AMPCDSET";
 /// States per chunk (the unit of warm starting, parallelism, sharding and checkpoints).
@@ -173,6 +184,11 @@ pub struct Record {
     pub degeneracy: Option<Degeneracy>,
     /// Largest state-bound slack (soft labels), 0 otherwise.
     pub max_slack: f64,
+    /// The optimal input sequence u₀*, …, u_{N−1}*, row-major N × nu (empty when not kept
+    /// or unlabelled). Stored after the records in format version
+    /// [`SEQUENCE_FORMAT_VERSION`] only.
+    #[serde(skip)]
+    pub seq: Vec<f64>,
 }
 
 impl Record {
@@ -189,6 +205,7 @@ impl Record {
             kkt: l.info.kkt.max(),
             degeneracy: l.degeneracy,
             max_slack: l.max_slack,
+            seq: l.seq,
         }
     }
     /// Whether the record may be used for training (hard or soft label).
@@ -219,9 +236,12 @@ pub struct Dataset {
     pub disagree: Vec<u64>,
 }
 
-/// The format version of ampc's own dataset with these disagreeing indices.
-pub fn own_version(disagree: &[u64]) -> u32 {
-    if disagree.is_empty() {
+/// The format version of ampc's own dataset with these disagreeing indices and records
+/// (with sequences: [`SEQUENCE_FORMAT_VERSION`]).
+pub fn own_version(disagree: &[u64], records: &[Record]) -> u32 {
+    if records.iter().any(|r| !r.seq.is_empty()) {
+        SEQUENCE_FORMAT_VERSION
+    } else if disagree.is_empty() {
         FORMAT_VERSION
     } else {
         STARTS_FORMAT_VERSION
@@ -288,7 +308,9 @@ impl Dataset {
             &MAGIC,
             "dataset",
             |d: &Dataset| match d.version {
-                IMPORTED_FORMAT_VERSION | STARTS_FORMAT_VERSION => FORMAT_VERSION,
+                IMPORTED_FORMAT_VERSION | STARTS_FORMAT_VERSION | SEQUENCE_FORMAT_VERSION => {
+                    FORMAT_VERSION
+                }
                 v => v,
             },
             FORMAT_VERSION,
@@ -313,6 +335,9 @@ impl Dataset {
                     part: "dataset without its list of disagreeing starts",
                     source,
                 })?;
+        }
+        if d.version == SEQUENCE_FORMAT_VERSION {
+            d.read_sequences(bytes, origin)?;
         }
         let (nx, nu) = (d.header.nx as usize, d.header.nu as usize);
         for (i, r) in d.records.iter().enumerate() {
@@ -339,8 +364,12 @@ impl Dataset {
         if let Some(l) = &self.labels {
             body.extend(postcard::to_allocvec(l).unwrap_or_default());
         }
-        if self.version == STARTS_FORMAT_VERSION {
+        if self.version == STARTS_FORMAT_VERSION || self.version == SEQUENCE_FORMAT_VERSION {
             body.extend(postcard::to_allocvec(&self.disagree).unwrap_or_default());
+        }
+        if self.version == SEQUENCE_FORMAT_VERSION {
+            let seqs: Vec<&Vec<f64>> = self.records.iter().map(|r| &r.seq).collect();
+            body.extend(postcard::to_allocvec(&seqs).unwrap_or_default());
         }
         crate::io::seal(body)
     }
@@ -348,45 +377,6 @@ impl Dataset {
     /// Writes the dataset atomically.
     pub fn save(&self, path: &Path) -> Result<(), DatasetError> {
         Ok(write_atomic(path, &self.to_bytes())?)
-    }
-
-    /// The CSV export.
-    pub fn to_csv(&self) -> String {
-        let (nx, nu) = (self.header.nx as usize, self.header.nu as usize);
-        let mut s = String::from("index");
-        for i in 1..=nx {
-            s += &format!(",x{i}");
-        }
-        for j in 1..=nu {
-            s += &format!(",u{j}");
-        }
-        for j in 1..=nu {
-            for i in 1..=nx {
-                s += &format!(",du{j}_dx{i}");
-            }
-        }
-        s += ",cost,status,iterations,kkt,degenerate,max_slack\n";
-        for r in &self.records {
-            s += &r.index.to_string();
-            for v in r.x.iter().chain(&r.u).chain(&r.du_dx) {
-                s += &format!(",{v:?}");
-            }
-            let deg = match r.degeneracy {
-                None => "",
-                Some(Degeneracy::WeaklyActive(_)) => "weakly_active",
-                Some(Degeneracy::Singular) => "singular",
-            };
-            s += &format!(
-                ",{:?},{},{},{:e},{},{:?}\n",
-                r.cost,
-                r.status.as_str(),
-                r.iterations,
-                r.kkt,
-                deg,
-                r.max_slack
-            );
-        }
-        s
     }
 }
 
@@ -500,6 +490,14 @@ pub fn generate(
     }
     // The first batch rewrites the checkpoint with the resumed records (dropping a damaged
     // tail, after which appended frames would be unreadable); later batches are appended.
+    let keep = cfg.keeps_sequences();
+    if keep && records.iter().any(|r| r.is_labelled() && r.seq.is_empty()) {
+        // A checkpoint written without sequences cannot complete a dataset that keeps them.
+        (records, disagree) = (Vec::new(), Vec::new());
+    }
+    if !keep {
+        records.iter_mut().for_each(|r| r.seq = Vec::new());
+    }
     let mut fresh = true;
     let done: std::collections::HashSet<usize> =
         records.iter().map(|r| r.index as usize / CHUNK).collect();
@@ -530,13 +528,16 @@ pub fn generate(
             .map_init(
                 || MpcLaw::new(cfg),
                 |law, &c| {
-                    let r = label_chunk_with(
+                    let mut r = label_chunk_with(
                         law,
                         &sampler,
                         c * CHUNK,
                         ((c + 1) * CHUNK).min(total),
                         warm,
                     );
+                    if !keep {
+                        r.0.iter_mut().for_each(|rec| rec.seq = Vec::new());
+                    }
                     bar.inc(r.0.len() as u64);
                     r
                 },
@@ -563,7 +564,7 @@ pub fn generate(
     disagree.sort_unstable();
     let d = Dataset {
         magic: MAGIC,
-        version: own_version(&disagree),
+        version: own_version(&disagree, &records),
         header,
         records,
         labels: None,
@@ -646,7 +647,7 @@ pub fn merge(inputs: &[Dataset]) -> Result<Dataset, DatasetError> {
     disagree.sort_unstable();
     Ok(Dataset {
         magic: MAGIC,
-        version: own_version(&disagree),
+        version: own_version(&disagree, &records),
         header: base,
         records,
         labels: None,

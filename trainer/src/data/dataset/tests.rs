@@ -109,7 +109,7 @@ proptest! {
             },
             records: (0..5).map(|i| Record {
                 index: i, x: vec![0.5, 1.0], u: vec![2.0], du_dx: vec![1.0, 2.0], cost: 1.0,
-                status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0,
+                status: SqpStatus::Converged, iterations: 3, kkt: 1e-9, degeneracy: None, max_slack: 0.0, seq: Vec::new(),
             }).collect(),
             labels: None,
             disagree: Vec::new(),
@@ -349,7 +349,7 @@ fn disagreeing_starts_are_stored_and_read_back() {
     assert!(d.disagree.is_empty());
     let mut e = d.clone();
     e.disagree = vec![3, 17];
-    e.version = own_version(&e.disagree);
+    e.version = own_version(&e.disagree, &e.records);
     assert_eq!(e.version, STARTS_FORMAT_VERSION);
     let bytes = e.to_bytes();
     let back = Dataset::from_bytes(&bytes, "e").unwrap();
@@ -384,11 +384,98 @@ fn disagreeing_starts_are_stored_and_read_back() {
         };
         let mut s = generate(&small_cfg(), &tmp(&format!("dis-shard{k}")), &opts).unwrap();
         s.disagree = if k == 0 { vec![3] } else { vec![17] };
-        s.version = own_version(&s.disagree);
+        s.version = own_version(&s.disagree, &s.records);
         shards.push(s);
     }
     let m = merge(&shards).unwrap();
     assert_eq!(m.disagree, vec![3, 17]);
     assert_eq!(m.version, STARTS_FORMAT_VERSION);
     assert_eq!(m.records, e.records);
+}
+
+/// `[training] outputs = "sequence"`: every labelled record keeps u₀*, …, u_{N−1}* (its first
+/// nu values are the label u), the file is version 5 and round-trips byte for byte (with
+/// the CSV's sequence columns); a resumed checkpoint, shards and their merge keep the
+/// sequences byte-identically; the default keeps none and stays version 2; and a version-2
+/// file still reads (without sequences).
+#[test]
+fn sequences_are_kept_round_trip_and_survive_shards_and_resume() {
+    let plain = generate(&small_cfg(), &tmp("seq-plain"), &GenerateOptions::default()).unwrap();
+    assert_eq!(plain.version, FORMAT_VERSION);
+    assert!(plain.records.iter().all(|r| r.seq.is_empty()));
+    assert_eq!(plain.sequence_horizon(), None);
+    let mut cfg = small_cfg();
+    cfg.training.outputs = crate::problem::Outputs::Sequence;
+    let n = cfg.ocp.horizon;
+    let out = tmp("seq");
+    let d = generate(&cfg, &out, &GenerateOptions::default()).unwrap();
+    assert_eq!(d.version, SEQUENCE_FORMAT_VERSION);
+    assert_eq!(d.sequence_horizon(), Some(n));
+    for (r, p) in d.records.iter().zip(&plain.records) {
+        assert_eq!(r.seq.len(), n * r.u.len());
+        assert_eq!(&r.seq[..r.u.len()], &r.u[..]);
+        // The sequence is the plan of the OCP: not the first input repeated.
+        assert!(r.seq.iter().any(|v| *v != r.u[0]) || r.u[0] == 0.0);
+        // Everything else is the label of the default run.
+        let mut q = r.clone();
+        q.seq = Vec::new();
+        assert_eq!(&q, p);
+    }
+    let bytes = std::fs::read(&out).unwrap();
+    let back = Dataset::load(&out).unwrap();
+    assert_eq!(back, d);
+    assert_eq!(back.to_bytes(), bytes);
+    // The version-2 prefix holds the default run's records (the header differs only in the
+    // stored problem file): an older reader's view.
+    let body = crate::io::unseal(&bytes).unwrap();
+    let (mut head, _) = postcard::take_from_bytes::<Dataset>(body).unwrap();
+    head.header
+        .config_toml
+        .clone_from(&plain.header.config_toml);
+    head.version = FORMAT_VERSION;
+    assert_eq!(head.to_bytes(), plain.to_bytes());
+    let csv = std::fs::read_to_string(csv_path(&out)).unwrap();
+    let first = csv.lines().next().unwrap();
+    assert!(first.ends_with(&format!(",u1_{}", n - 1)), "{first}");
+    // A record's sequence of the wrong length is refused, naming the file and record.
+    let mut bad = d.clone();
+    bad.records[5].seq.pop();
+    let err = Dataset::from_bytes(&bad.to_bytes(), "bad.bin")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("bad.bin") && err.contains("record 5"), "{err}");
+    // Resume: a checkpoint holding the first chunks (with their sequences) completes to the
+    // same bytes; one written without sequences is not resumed into a sequence run.
+    let out2 = tmp("seq-resume");
+    checkpoint::create(&partial_path(&out2), &d.header, &d.records[..CHUNK]).unwrap();
+    let r = generate(&cfg, &out2, &GenerateOptions::default()).unwrap();
+    assert_eq!(r.to_bytes(), bytes);
+    let (_, ck, _) = checkpoint::read_with(&{
+        let p = tmp("seq-ck");
+        checkpoint::create(&p, &d.header, &d.records[..CHUNK]).unwrap();
+        std::fs::read(&p).unwrap()
+    })
+    .unwrap();
+    assert_eq!(ck, d.records[..CHUNK].to_vec());
+    let out3 = tmp("seq-resume-plain");
+    checkpoint::create(&partial_path(&out3), &d.header, &plain.records[..CHUNK]).unwrap();
+    assert_eq!(
+        generate(&cfg, &out3, &GenerateOptions::default())
+            .unwrap()
+            .to_bytes(),
+        bytes
+    );
+    // Shards and their merge.
+    let shards: Vec<Dataset> = (0..3)
+        .map(|k| {
+            let opts = GenerateOptions {
+                shard: Some(Shard { index: k, count: 3 }),
+                progress: false,
+            };
+            let s = generate(&cfg, &tmp(&format!("seq-shard{k}")), &opts).unwrap();
+            Dataset::from_bytes(&s.to_bytes(), "shard").unwrap()
+        })
+        .collect();
+    assert!(shards.iter().all(|s| s.version == SEQUENCE_FORMAT_VERSION));
+    assert_eq!(merge(&shards).unwrap().to_bytes(), bytes);
 }

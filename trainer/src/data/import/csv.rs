@@ -261,6 +261,7 @@ fn read_row(
         kkt: f64::NAN,
         degeneracy: None,
         max_slack: 0.0,
+        seq: Vec::new(),
     };
     for (k, (col, raw)) in cols.iter().zip(fields).enumerate() {
         let v = unquote(raw);

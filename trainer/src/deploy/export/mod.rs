@@ -44,7 +44,7 @@ pub mod device;
 mod guarantee;
 mod placeholder;
 pub(crate) mod range;
-mod rust;
+pub(crate) mod rust;
 mod tanh;
 mod tested;
 #[cfg(test)]

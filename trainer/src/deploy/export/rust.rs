@@ -244,7 +244,7 @@ fn header(o: &mut String, model: &ExportModel, report: &ExportReport, sizes: &[u
 }
 
 /// The network's type `Net`, its layers' constants `W1, B1, …` and the constant `NET`.
-fn network(o: &mut String, folded: &Folded, sizes: &[usize]) {
+pub(crate) fn network(o: &mut String, folded: &Folded, sizes: &[usize]) {
     // Network type
     let n = sizes.len() - 1; // the number of layers
     let mut ty = format!("Dense<{}, {}>", sizes[n - 1], sizes[n]);

@@ -106,6 +106,7 @@ pub fn import_bytes(bytes: &[u8], origin: &str) -> Result<(Model, ImportNotes), 
         certificate: None,
         source_hash: Some(crate::io::sha256_hex(bytes)),
         problem_toml: None,
+        sequence: None,
     };
     Ok((model, notes))
 }

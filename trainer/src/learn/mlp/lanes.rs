@@ -516,6 +516,7 @@ impl Lanes {
             mut outputs,
         } = job;
         let (nx, nu, m) = (mlp.nx(), mlp.nu(), mlp.layers.len());
+        let jr = batch.jac_rows(nu);
         let bsz = rows.map_or(batch.use_jac.len(), <[usize]>::len);
         let inv_b = 1.0 / bsz.max(1) as f64;
         let tangent = lam.jacobian != 0.0;
@@ -550,16 +551,17 @@ impl Lanes {
                         u[(i0 + s) * nu + r] = pred;
                     }
                     let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
+                    let lv = batch.value_weight(lam.value, r);
                     if with_loss {
-                        parts.value += lam.value * inv_b * e * e;
+                        parts.value += lv * inv_b * e * e;
                     }
-                    self.g[o + r * q][i] = (2.0 * lam.value * inv_b * e * sc) as f32;
-                    if !use_jac || exact {
+                    self.g[o + r * q][i] = (2.0 * lv * inv_b * e * sc) as f32;
+                    if !use_jac || exact || r >= jr {
                         continue;
                     }
                     for k in 0..nx {
                         let yk = f64::from(y[o + r * q + 1 + k][i]);
-                        let e = sc * yk - batch.du[gi * nu * nx + r * nx + k];
+                        let e = sc * yk - batch.du[gi * jr * nx + r * nx + k];
                         if with_loss {
                             parts.jacobian += lam.jacobian * inv_b * e * e;
                         }

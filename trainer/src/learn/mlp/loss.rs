@@ -6,7 +6,9 @@
 //! ```
 //! with `W̃_j` the weights in physical units (`W̃_1 = W_1 D`, `W̃_m = S W_m`). With a
 //! clamp band ([`Batch::band`]) the terms of outputs that the deployed clamp matches
-//! exactly are zero.
+//! exactly are zero. A sequence net ([`Batch::seq`], outputs u₀, …, u_{N−1}) weighs output
+//! r's value term by w_r and has the Jacobian term on its first `jac_rows` outputs (u₀)
+//! only: `λ₁/B Σ Σ_r w_r (u_ir − κ_ir)² + λ₂/B Σ ‖∂u₀_i/∂x − ∂κ_i/∂x‖²_F + …`.
 
 use super::kernels::{dot_block, WeightGrad};
 use super::{Mlp, Workspace, BLOCK};
@@ -65,6 +67,32 @@ pub struct Batch<'a> {
     /// beyond that bound is matched exactly after the clamp, so its value and Jacobian terms
     /// are zero. `None`: the plain loss.
     pub band: Option<(&'a [f64], &'a [f64])>,
+    /// A sequence net's loss ([`SeqLoss`]); `None`: every output has weight 1 and a
+    /// Jacobian target (the net of u₀ alone).
+    pub seq: Option<SeqLoss<'a>>,
+}
+
+/// The loss of a sequence net: per-output value weights and the Jacobian on u₀ only.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeqLoss<'a> {
+    /// Outputs with a Jacobian target (the first ones, u₀): `du` holds `jac_rows × nx` per
+    /// sample.
+    pub jac_rows: usize,
+    /// Value weight of each output (w_k repeated nu times for step k).
+    pub weight: &'a [f64],
+}
+
+impl Batch<'_> {
+    /// The outputs with a Jacobian target (all `nu` without [`Batch::seq`]).
+    #[inline(always)]
+    pub fn jac_rows(&self, nu: usize) -> usize {
+        self.seq.map_or(nu, |s| s.jac_rows)
+    }
+    /// λ₁ times output r's value weight (λ₁ itself without [`Batch::seq`], the same bits).
+    #[inline(always)]
+    pub fn value_weight(&self, lam: f64, r: usize) -> f64 {
+        self.seq.map_or(lam, |s| lam * s.weight[r])
+    }
 }
 
 /// Labels within this of a band bound count as saturated (see [`Batch::band`]).
@@ -232,6 +260,7 @@ impl Mlp {
         ws: &mut Workspace,
     ) {
         let (nx, nu, m) = (self.nx(), self.nu(), self.layers.len());
+        let jr = batch.jac_rows(nu);
         let (y, yt) = (&ws.a[m], &ws.t[m]);
         for i in 0..nb {
             let gi = i0 + i;
@@ -240,14 +269,15 @@ impl Mlp {
                 let s = self.out_half[r];
                 let pred = self.out_center[r] + s * y[r * nb + i];
                 let (e, exact) = value_error(batch.band, r, pred, batch.u[gi * nu + r]);
-                parts.value += lam.value * inv_b * e * e;
-                ws.ga[r * nb + i] = 2.0 * lam.value * inv_b * e * s;
+                let lv = batch.value_weight(lam.value, r);
+                parts.value += lv * inv_b * e * e;
+                ws.ga[r * nb + i] = 2.0 * lv * inv_b * e * s;
                 if !tangent {
                     continue;
                 }
                 for k in 0..nx {
-                    let g = if use_jac && !exact {
-                        let e = s * yt[(r * nx + k) * nb + i] - batch.du[gi * nu * nx + r * nx + k];
+                    let g = if use_jac && !exact && r < jr {
+                        let e = s * yt[(r * nx + k) * nb + i] - batch.du[gi * jr * nx + r * nx + k];
                         parts.jacobian += lam.jacobian * inv_b * e * e;
                         2.0 * lam.jacobian * inv_b * e * s
                     } else {

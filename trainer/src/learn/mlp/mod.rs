@@ -57,7 +57,7 @@ pub(crate) fn cpu_has_avx512() -> bool {
 }
 
 pub use lanes::Lanes;
-pub use loss::{clamped_exact, Batch, Grad, LossParts, LossWeights, SAT_TOL};
+pub use loss::{clamped_exact, Batch, Grad, LossParts, LossWeights, SeqLoss, SAT_TOL};
 use serde::{Deserialize, Serialize};
 
 impl Activation {

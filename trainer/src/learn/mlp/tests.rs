@@ -72,6 +72,7 @@ fn check_grad_band(act: Activation, widths: &[usize], seed: u64, saturated: bool
         du: &du,
         use_jac: &uj,
         band: saturated.then_some((&blo[..], &bhi[..])),
+        seq: None,
     };
     for lam in [
         LossWeights {
@@ -383,6 +384,7 @@ fn batched_kernels_match_the_per_sample_reference_bitwise() {
                 du: &du,
                 use_jac: &uj,
                 band: banded.then_some((&blo[..], &bhi[..])),
+                seq: None,
             };
             for lam in [
                 LossWeights {

@@ -57,6 +57,7 @@ fn lane_loss_and_gradient_match_the_f64_passes() {
                     du: &du,
                     use_jac: &uj,
                     band: banded.then_some((&blo[..], &bhi[..])),
+                    seq: None,
                 };
                 for lam in lams {
                     let (mut g64, mut g32) = (m.zero_grad(), m.zero_grad());
@@ -139,6 +140,7 @@ fn lane_results_are_reproducible_bit_for_bit() {
         du: &du,
         use_jac: &uj,
         band: None,
+        seq: None,
     };
     let lam = LossWeights {
         value: 1.0,
@@ -160,6 +162,7 @@ fn lane_results_are_reproducible_bit_for_bit() {
         du: &odu,
         use_jac: &ouj,
         band: None,
+        seq: None,
     };
     a.loss_grad(&other, &ob, lam, Some(&mut other.zero_grad()));
     assert_eq!(run(&mut a), first);
@@ -185,6 +188,7 @@ fn avx2_avx_and_portable_code_give_the_same_bits() {
             du: &du,
             use_jac: &uj,
             band: None,
+            seq: None,
         };
         let mut lanes = Lanes::default();
         let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
@@ -271,6 +275,7 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
                 du: &bdu,
                 use_jac: &bj,
                 band: None,
+                seq: None,
             };
             let set = Batch {
                 x: &x,
@@ -278,6 +283,7 @@ fn grad_alone_is_the_gradient_of_loss_grad() {
                 du: &du,
                 use_jac: &uj,
                 band: None,
+                seq: None,
             };
             let (mut ga, mut gb) = (m.zero_grad(), m.zero_grad());
             lanes.loss_grad(&m, &batch, lam, Some(&mut ga));
@@ -302,6 +308,7 @@ fn loss_outputs_are_the_loss_and_the_outputs_of_eval_batch() {
             du: &du,
             use_jac: &uj,
             band: None,
+            seq: None,
         };
         for jacobian in [3.0, 0.0] {
             let lam = LossWeights {
