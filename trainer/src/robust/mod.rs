@@ -71,6 +71,7 @@ pub mod design;
 pub(crate) mod exclusion;
 pub(crate) mod jacobians;
 pub(crate) mod terminal;
+pub mod terminal_nominal;
 pub(crate) mod tube;
 pub mod verdict;
 pub(crate) mod verified;
