@@ -151,17 +151,18 @@ fn write_plant_rs(config: &Path, file: &Path) -> Result<()> {
     let g = trainer::deploy::plant_rs_safe::safe_plant_rs(&cfg)
         .with_context(|| format!("cannot generate the plant of {} as Rust", config.display()))?;
     std::fs::write(file, &g.source).with_context(|| format!("cannot write {}", file.display()))?;
+    use trainer::deploy::plant_rs_safe::TerminalSource;
+    let (from, invariance) = match &g.terminal {
+        TerminalSource::Robust(t) if t.proven() => ("the robust design", "proven"),
+        TerminalSource::Robust(_) => ("the robust design", "sampled"),
+        TerminalSource::Nominal(_) => ("the nominal terminal ingredients", "sampled"),
+    };
     eprintln!(
-        "{}: plant of `{}` as f32 Rust; terminal set alpha {:e} (invariance {}), decrease \
-         condition for ocp.p: {} (worst over the samples {:e})",
+        "{}: plant of `{}` as f32 Rust; terminal set from {from}: alpha {:e} (invariance \
+         {invariance}), decrease condition for the generated V_f: {} (worst over the samples {:e})",
         file.display(),
         cfg.name,
-        g.terminal.alpha,
-        if g.terminal.proven() {
-            "proven"
-        } else {
-            "sampled"
-        },
+        g.terminal.alpha(),
         g.decrease,
         g.decrease_worst
     );

@@ -19,4 +19,5 @@ pub mod controller;
 pub mod export;
 pub mod onnx;
 pub mod plant_rs;
+pub mod plant_rs_margin;
 pub mod plant_rs_safe;

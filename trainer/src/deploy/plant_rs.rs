@@ -116,19 +116,37 @@ fn instr(op: &Op) -> String {
 
 /// The `rhs` function: the tape, one line per instruction.
 fn rhs_fn(model: &ExprModel, out: &mut String) {
-    let (nx, nu) = (model.nx(), model.nu());
-    let tape = model.tape();
     let what = if model.is_discrete() {
         "F(x, u): the discrete plant's `next` expressions"
     } else {
         "f(x, u) = ẋ: the ODE's right-hand side"
     };
+    tape_fn(
+        model.tape(),
+        (model.nx(), model.nu()),
+        "rhs",
+        "NX",
+        what,
+        out,
+    );
+}
+
+/// `pub fn name(x: &[f32; NX], u: &[f32; NU]) -> [f32; outs]`: a tape over (x, u), one line
+/// per instruction, in f32.
+fn tape_fn(
+    tape: &expr::Tape,
+    (nx, nu): (usize, usize),
+    name: &str,
+    outs: &str,
+    what: &str,
+    out: &mut String,
+) {
     let _ = writeln!(out, "/// {what} (the trainer's instruction tape, in f32).");
     let _ = writeln!(out, "#[allow(clippy::all, unused_parens)]");
     let _ = writeln!(out, "#[inline]");
     let _ = writeln!(
         out,
-        "pub fn rhs(x: &[f32; NX], u: &[f32; NU]) -> [f32; NX] {{"
+        "pub fn {name}(x: &[f32; NX], u: &[f32; NU]) -> [f32; {outs}] {{"
     );
     let _ = writeln!(
         out,
@@ -230,25 +248,32 @@ fn mat_const(out: &mut String, doc: &str, name: &str, m: &crate::problem::Matrix
     );
 }
 
-/// The OCP's part of the online check: setpoint, weights, boxes, and the functions
-/// `stage_cost`, `terminal_cost`, `project_input`, `state_box_violation`.
+/// The OCP's part of the online check: setpoint, weights, boxes, the `[ocp]` expression
+/// constraints, and the functions `stage_cost`, `terminal_cost`, `project_input`,
+/// `state_box_violation`, `constraints`, `path_violation`, `terminal_constraint_violation`.
 ///
 /// ```text
 /// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref),  V_f(x) = (x − x_ref)ᵀP(x − x_ref)
 /// Π_U(u)_j = clamp(u_j, u_lo,j, u_hi,j)  (NaN → u_ref,j)
 /// g_X(x) = max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i   over finite bounds; s = the state scale
+/// g_i(x, u) = lhs − rhs (or rhs − lhs) of `ocp.constraints` / `ocp.terminal_constraints`
+///             (raw units, the compiled set's tape in f32), imposed per the OCP's rule:
+///             states only on k ≥ 1, inputs only on every k, mixed on k ≥ 1, terminal on x_N
 /// ```
-/// Stage-dependent (tightened) bounds and `[ocp]` expression constraints are not generated:
-/// an error names the key.
+/// Stage-dependent (tightened) bounds are not generated: an error names `ocp.stages`.
 pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsError> {
+    ocp_rs_with(cfg, None)
+}
+
+/// [`ocp_rs`] with the terminal cost's matrix `vf` in place of the OCP's `ocp.p` (the
+/// nominal terminal ingredients' P_f, for which the decrease condition was checked).
+pub fn ocp_rs_with(
+    cfg: &crate::problem::ProblemConfig,
+    vf: Option<&[Vec<f64>]>,
+) -> Result<String, PlantRsError> {
     let ocp = &cfg.ocp;
     if ocp.stages.is_some() {
         return Err(PlantRsError::UnsupportedOcp("ocp.stages".into()));
-    }
-    if !ocp.constraints.is_empty() || !ocp.terminal_constraints.is_empty() {
-        return Err(PlantRsError::UnsupportedOcp(
-            "ocp.constraints / ocp.terminal_constraints".into(),
-        ));
     }
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let mut out = String::new();
@@ -266,7 +291,19 @@ pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsErro
     );
     mat_const(&mut out, "Stage state weight Q.", "Q", &ocp.q, nx);
     mat_const(&mut out, "Stage input weight R.", "R", &ocp.r, nu);
-    mat_const(&mut out, "Terminal weight P.", "P", &ocp.p, nx);
+    match vf {
+        None => mat_const(&mut out, "Terminal weight P.", "P", &ocp.p, nx),
+        Some(m) => {
+            let spec = crate::problem::MatrixSpec::Full(m.to_vec());
+            mat_const(
+                &mut out,
+                "Terminal cost V_f's matrix P_f (the nominal terminal ingredients'; not `ocp.p`).",
+                "P",
+                &spec,
+                nx,
+            )
+        }
+    }
     vec_const(
         &mut out,
         "Lower state bounds (x_1 … x_N).",
@@ -288,8 +325,68 @@ pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsErro
     );
     vec_const(&mut out, "Lower input bounds.", "U_LO", &ocp.u_lo);
     vec_const(&mut out, "Upper input bounds.", "U_HI", &ocp.u_hi);
+    constraints_rs(cfg, &mut out)?;
     out.push_str(OCP_FNS);
     Ok(out)
+}
+
+/// `NC`, `C_KIND` and `constraints(x, u)`: the `[ocp]` expression constraints (path, then
+/// terminal) as f32 code (an empty set without any).
+fn constraints_rs(
+    cfg: &crate::problem::ProblemConfig,
+    out: &mut String,
+) -> Result<(), PlantRsError> {
+    let cs = cfg
+        .constraint_set()
+        .map_err(|e| PlantRsError::UnsupportedOcp(format!("{}: {e}", e.key)))?;
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let kinds: Vec<&str> = cs.as_ref().map_or(vec![], |cs| {
+        cs.items
+            .iter()
+            .map(
+                |c| match (c.terminal, c.uses_states(nx), c.uses_inputs(nx)) {
+                    (true, _, _) => "3",
+                    (false, true, false) => "0",
+                    (false, false, true) => "1",
+                    _ => "2",
+                },
+            )
+            .collect()
+    });
+    let texts: Vec<String> = cs.as_ref().map_or(vec![], |cs| {
+        cs.items
+            .iter()
+            .map(|c| format!("//   {}: `{}`", c.key, c.text))
+            .collect()
+    });
+    let _ = writeln!(
+        out,
+        "/// Number of `[ocp]` expression constraints g_i(x, u) ≤ 0 (path, then terminal).
+         pub const NC: usize = {};
+         /// Where each is imposed: 0 = states only (k ≥ 1), 1 = inputs only (every k), 2 = both          (k ≥ 1), 3 = terminal (x_N).
+         pub const C_KIND: [u8; NC] = [{}];",
+        kinds.len(),
+        kinds.join(", ")
+    );
+    match &cs {
+        Some(cs) => {
+            let _ = writeln!(out, "// The constraints:\n{}", texts.join("\n"));
+            tape_fn(
+                cs.tape(),
+                (nx, nu),
+                "constraints",
+                "NC",
+                "g(x, u): the `[ocp]` constraints as g_i ≤ 0",
+                out,
+            );
+        }
+        None => out.push_str(
+            "/// g(x, u): no `[ocp]` expression constraints.\n\
+             pub fn constraints(_x: &[f32; NX], _u: &[f32; NU]) -> [f32; NC] {\n    \
+             [0.0_f32; NC]\n}\n",
+        ),
+    }
+    Ok(())
 }
 
 /// The OCP's functions (fixed text over the constants above).
@@ -341,6 +438,42 @@ pub fn project_input(u: &[f32; NU]) -> [f32; NU] {
         };
     }
     p
+}
+
+/// The largest of `g` over the constraints of `C_KIND` selected by `keep` (−∞ if none; NaN
+/// if one is NaN).
+fn max_kind(g: &[f32; NC], keep: impl Fn(u8) -> bool) -> f32 {
+    let mut m = f32::NEG_INFINITY;
+    for (g, kind) in g.iter().zip(&C_KIND) {
+        if keep(*kind) {
+            if g.is_nan() {
+                return f32::NAN;
+            }
+            if *g > m {
+                m = *g;
+            }
+        }
+    }
+    m
+}
+
+/// The path constraints the OCP imposes at stage k on (x_k, u_k): inputs-only ones at every
+/// k, the others from k = 1 on (raw units; −∞ if none).
+pub fn path_violation(k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32 {
+    if NC == 0 {
+        return f32::NEG_INFINITY;
+    }
+    let g = constraints(x, u);
+    max_kind(&g, |kind| kind == 1 || (k >= 1 && (kind == 0 || kind == 2)))
+}
+
+/// The terminal constraints at x_N (raw units; −∞ if none).
+pub fn terminal_constraint_violation(x: &[f32; NX]) -> f32 {
+    if NC == 0 {
+        return f32::NEG_INFINITY;
+    }
+    let g = constraints(x, &U_REF);
+    max_kind(&g, |kind| kind == 3)
 }
 
 /// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; NaN for
