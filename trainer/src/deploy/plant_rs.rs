@@ -9,7 +9,8 @@
 //! ```
 //! f is the plant's instruction tape ([`ExprModel::tape`]) translated one instruction per
 //! line into f32 (constants rounded to nearest, h/2, h, h/6 computed in f64 then rounded;
-//! transcendental functions from `libm`'s f32 versions, `a^b = exp(b·log a)` as the tape).
+//! sin and cos from `controller_core::safe::fmath` (f32 only; NaN beyond |x| = 8192), the
+//! other transcendental functions from `libm`'s f32 versions, `a^b = exp(b·log a)` as the tape).
 //! Covered: the expression plants (`kind = "ode"` and `"discrete"`) and the built-in
 //! cart-pole (through its expression form); the built-in pendulum and double integrator
 //! and Rust-implemented (`custom`) plants are not (an error names the plant).
@@ -94,8 +95,8 @@ fn instr(op: &Op) -> String {
         Op::Powi(a, n) => format!("libm::powf({}, {}.0_f32)", g(a), n),
         Op::Powf(a, c) => format!("libm::powf({}, {})", g(a), lit(*c)),
         Op::Pow(a, b) => format!("libm::expf({} * libm::logf({}))", g(b), g(a)),
-        Op::Sin(a) => format!("libm::sinf({})", g(a)),
-        Op::Cos(a) => format!("libm::cosf({})", g(a)),
+        Op::Sin(a) => format!("controller_core::safe::fmath::sin({})", g(a)),
+        Op::Cos(a) => format!("controller_core::safe::fmath::cos({})", g(a)),
         Op::Tan(a) => format!("libm::tanf({})", g(a)),
         Op::Asin(a) => format!("libm::asinf({})", g(a)),
         Op::Acos(a) => format!("libm::acosf({})", g(a)),
@@ -561,7 +562,7 @@ mod tests {
         let src = plant_rs("cp", &m, 0.05, 2);
         assert!(src.contains("pub const SUBSTEPS: usize = 2;"), "{src}");
         assert!(
-            src.contains("libm::sinf(") && src.contains("libm::cosf("),
+            src.contains("fmath::sin(") && src.contains("fmath::cos("),
             "{src}"
         );
     }

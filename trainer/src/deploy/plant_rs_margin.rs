@@ -13,8 +13,8 @@
 //! a tenth of the input box's width: sequences near the ones the check accepts), both
 //! simulations fed the same f32 inputs; a trajectory counts while its f64 states stay in the
 //! state box (outside it no sequence is accepted). x32 is an **emulation** of the generated
-//! code — the same instruction tape, the same operation order, the same `libm` f32
-//! functions and constants (`tests/safe_plant.rs` compares it with the compiled generated
+//! code — the same instruction tape, the same operation order, the same f32
+//! functions (`controller_core::safe::fmath`, `libm`) and constants (`tests/safe_plant.rs` compares it with the compiled generated
 //! file) — and x64 is `Discrete::step`.
 //!
 //! What it rests on: a sample (states outside it, other input sequences, are not covered by
@@ -74,8 +74,8 @@ pub fn eval_f32(tape: &Tape, x: &[f32], u: &[f32], regs: &mut Vec<f32>, out: &mu
             Op::Powi(a, n) => libm::powf(g(a), *n as f32),
             Op::Powf(a, k) => libm::powf(g(a), c(k)),
             Op::Pow(a, b) => libm::expf(g(b) * libm::logf(g(a))),
-            Op::Sin(a) => libm::sinf(g(a)),
-            Op::Cos(a) => libm::cosf(g(a)),
+            Op::Sin(a) => controller_core::safe::fmath::sin(g(a)),
+            Op::Cos(a) => controller_core::safe::fmath::cos(g(a)),
             Op::Tan(a) => libm::tanf(g(a)),
             Op::Asin(a) => libm::asinf(g(a)),
             Op::Acos(a) => libm::acosf(g(a)),
@@ -172,12 +172,15 @@ fn quad32(p: &[Vec<f64>], x: &[f32], xr: &[f64]) -> f32 {
     s
 }
 
+/// The terminal ingredients the margins are measured for: x_r, u_r, K, P_f, α.
+pub type Ingredients<'a> = (&'a [f64], &'a [f64], &'a [Vec<f64>], &'a [Vec<f64>], f64);
+
 /// The margins of the terminal ingredients (x_r, u_r, K, P_f, α) for `cfg` (module doc),
 /// over `states` seeded trajectories.
 pub fn estimate_margins(
     cfg: &ProblemConfig,
     model: &ExprModel,
-    (xr, ur, k, p_f, alpha): (&[f64], &[f64], &[Vec<f64>], &[Vec<f64>], f64),
+    (xr, ur, k, p_f, alpha): Ingredients<'_>,
     states: usize,
 ) -> MarginEstimate {
     let (nx, nu) = (xr.len(), ur.len());

@@ -217,7 +217,7 @@ fn check_points(
         if let Some(cs) = &cs {
             cs.eval(x, &u, &mut g, &mut scratch);
             for (gi, item) in g.iter().zip(&cs.items) {
-                if !item.affine && !(*gi <= 0.0) {
+                if !item.affine && (gi.is_nan() || *gi > 0.0) {
                     ok = false;
                 }
             }
