@@ -327,6 +327,7 @@ pub fn ocp_rs_with(
     vec_const(&mut out, "Lower input bounds.", "U_LO", &ocp.u_lo);
     vec_const(&mut out, "Upper input bounds.", "U_HI", &ocp.u_hi);
     constraints_rs(cfg, &mut out)?;
+    sparse_fns(cfg, &mut out);
     out.push_str(OCP_FNS);
     Ok(out)
 }
@@ -390,6 +391,71 @@ fn constraints_rs(
     Ok(())
 }
 
+/// `Σ_ij w_ij d_i d_j` unrolled over the nonzero entries of `m` (`0.0` without any), over
+/// the difference `d` named `d`.
+fn sparse_quad(m: &crate::problem::MatrixSpec, n: usize) -> String {
+    let Some(w) = m.to_dmatrix().filter(|d| d.nrows() == n && d.ncols() == n) else {
+        return "0.0_f32".into();
+    };
+    let mut terms = Vec::new();
+    for i in 0..n {
+        let row: Vec<String> = (0..n)
+            .filter(|&j| w[(i, j)] != 0.0)
+            .map(|j| format!("{} * d[{j}]", lit(w[(i, j)])))
+            .collect();
+        if !row.is_empty() {
+            terms.push(format!("d[{i}] * ({})", row.join(" + ")));
+        }
+    }
+    if terms.is_empty() {
+        "0.0_f32".into()
+    } else {
+        terms.join("\n        + ")
+    }
+}
+
+/// `stage_cost` (Q, R unrolled over their nonzero entries) and `state_box_violation` (over
+/// the finite bounds only): the functions the online check calls N times per sequence.
+fn sparse_fns(cfg: &crate::problem::ProblemConfig, out: &mut String) {
+    let ocp = &cfg.ocp;
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let _ = writeln!(
+        out,
+        "\n/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref) (unrolled over the \
+         nonzero weights).\n\
+         #[allow(clippy::all)]\n\
+         pub fn stage_cost(x: &[f32; NX], u: &[f32; NU]) -> f32 {{\n    \
+         let sx = {{\n        let d = diff(x, &X_REF);\n        {}\n    }};\n    \
+         let su = {{\n        let d = diff(u, &U_REF);\n        {}\n    }};\n    sx + su\n}}",
+        sparse_quad(&ocp.q, nx),
+        sparse_quad(&ocp.r, nu)
+    );
+    let scale = ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    let mut body = String::new();
+    for i in 0..nx {
+        for (bound, expr) in [
+            (ocp.x_lo[i], format!("(X_LO[{i}] - x[{i}]) / X_SCALE[{i}]")),
+            (ocp.x_hi[i], format!("(x[{i}] - X_HI[{i}]) / X_SCALE[{i}]")),
+        ] {
+            if bound.is_finite() && scale[i].is_finite() {
+                let _ = write!(
+                    body,
+                    "    let v = {expr};\n    if v > g {{\n        g = v;\n    }}\n"
+                );
+            }
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\n/// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; \
+         NaN for\n/// a NaN state): `≤ 0` inside the state box.\n\
+         #[allow(clippy::all)]\n\
+         pub fn state_box_violation(x: &[f32; NX]) -> f32 {{\n    \
+         if x.iter().any(|v| v.is_nan()) {{\n        return f32::NAN;\n    }}\n    \
+         let mut g = f32::NEG_INFINITY;\n{body}    g\n}}"
+    );
+}
+
 /// The OCP's functions (fixed text over the constants above).
 const OCP_FNS: &str = "
 /// dᵀWd.
@@ -414,10 +480,6 @@ fn diff<const M: usize>(a: &[f32; M], b: &[f32; M]) -> [f32; M] {
     d
 }
 
-/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref).
-pub fn stage_cost(x: &[f32; NX], u: &[f32; NU]) -> f32 {
-    quad(&Q, &diff(x, &X_REF)) + quad(&R, &diff(u, &U_REF))
-}
 
 /// V_f(x) = (x − x_ref)ᵀP(x − x_ref).
 pub fn terminal_cost(x: &[f32; NX]) -> f32 {
@@ -477,23 +539,6 @@ pub fn terminal_constraint_violation(x: &[f32; NX]) -> f32 {
     max_kind(&g, |kind| kind == 3)
 }
 
-/// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; NaN for
-/// a NaN state): `≤ 0` inside the state box.
-pub fn state_box_violation(x: &[f32; NX]) -> f32 {
-    let mut g = f32::NEG_INFINITY;
-    for (((x, lo), hi), s) in x.iter().zip(&X_LO).zip(&X_HI).zip(&X_SCALE) {
-        if x.is_nan() {
-            return f32::NAN;
-        }
-        for v in [*lo - *x, *x - *hi] {
-            let v = v / *s;
-            if v > g {
-                g = v;
-            }
-        }
-    }
-    g
-}
 ";
 
 /// The Rust source of the plant's F for `name` (a comment), with sampling time `ts` and
