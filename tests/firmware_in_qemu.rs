@@ -305,6 +305,7 @@ fn no_panic_reachable_from_evaluate_in_the_elf() {
         // same `--bins` build): no panic path, and it runs on the device with its safe
         // sequence adopted (`init=1`).
         no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step");
+        no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step_pendulum");
         let bins = build_firmware(&board);
         let out = qemu(&board, &bins.join("safe-bench"));
         assert!(

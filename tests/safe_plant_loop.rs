@@ -53,6 +53,7 @@ fn generated_safe_plants_are_the_committed_fixtures() {
         ("cartpole", "cartpole_safe.rs", true),
         ("planar_quadrotor", "planar_quadrotor_safe.rs", true),
         ("stiff_spring_setpoint", "stiff_spring_safe.rs", true),
+        ("pendulum_ode", "pendulum_ode_safe.rs", false),
     ] {
         let cfg = config(name);
         let g = safe_plant_rs(&cfg).unwrap();
