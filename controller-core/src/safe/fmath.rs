@@ -26,8 +26,7 @@ const DP3: f32 = 3.774_895e-8;
 #[inline]
 fn reduce(x: f32) -> Option<(f32, u32)> {
     let a = if x < 0.0 { -x } else { x };
-    // NaN fails the comparison.
-    if !(a <= MAX_ARG) {
+    if a.is_nan() || a > MAX_ARG {
         return None;
     }
     let mut j = (a * FOPI) as u32;

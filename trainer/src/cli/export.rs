@@ -97,10 +97,11 @@ pub(super) struct Args {
     accept_unsealed: bool,
     /// Write the plant of the problem (--config) as no_std f32 Rust for the online check of
     /// `controller_core::safe::SafeController`: dynamics (RK4 with the OCP's sub-steps),
-    /// costs, boxes, the terminal set and controller of the robust design, and
-    /// `impl Plant for SafePlant` (`deploy::plant_rs_safe`; needs the `libm` crate).
-    /// Refused, naming the key, for plants or OCP parts without a generator and without a
-    /// terminal region.
+    /// costs, boxes, `[ocp]` path and terminal constraints, the terminal set and controller
+    /// (the robust design's region, else the nominal terminal ingredients), the online
+    /// check's estimated margins `MARGINS`, and `impl Plant for SafePlant`
+    /// (`deploy::plant_rs_safe`; needs the `libm` crate). Refused, naming the key, for
+    /// plants or OCP parts without a generator and without a terminal set.
     #[arg(long, value_name = "FILE", requires = "config")]
     plant_rs: Option<PathBuf>,
 }
