@@ -5,7 +5,9 @@
 //! same f32 code — bit for bit — and (2) the f64 network, within the certificate's f32
 //! allowance; runs `evaluate-check` (600 probe states: edge cases, inside and around X) and
 //! compares every `u` bit pattern and flag set with the host's `evaluate`. Also checks on
-//! each ELF that no panic symbol is reachable from `ampc_evaluate` (call graph from objdump).
+//! each ELF that no panic symbol is reachable from `ampc_evaluate`, nor from `ampc_safe_step`
+//! (`safe-bench`: the SafeController on the generated quadrotor, which also runs once in QEMU)
+//! (call graph from objdump).
 //!
 //! Needs `rustup target add thumbv7em-none-eabihf thumbv6m-none-eabi`, `qemu-system-arm`
 //! and `binutils-arm-none-eabi` (`.ci/run` installs them); fails loudly without them.
@@ -298,25 +300,34 @@ fn call_graph(
 #[test]
 fn no_panic_reachable_from_evaluate_in_the_elf() {
     for board in [M4, M0] {
-        no_panic_reachable_from_evaluate(&board);
+        no_panic_reachable_from(&board, "evaluate-bench", "ampc_evaluate");
+        // The safety-augmented step on the generated quadrotor (`safe-bench`, built by the
+        // same `--bins` build): no panic path, and it runs on the device with its safe
+        // sequence adopted (`init=1`).
+        no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step");
+        no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step_pendulum");
+        let bins = build_firmware(&board);
+        let out = qemu(&board, &bins.join("safe-bench"));
+        assert!(
+            out.starts_with("calls=1 ") && out.contains(" init=1 "),
+            "{}: {out}",
+            board.machine
+        );
     }
 }
 
-fn no_panic_reachable_from_evaluate(board: &Board) {
+fn no_panic_reachable_from(board: &Board, bin: &str, entry: &str) {
     let bins = build_firmware(board);
-    let elf = bins.join("evaluate-bench");
+    let elf = bins.join(bin);
     let (graph, sizes) = call_graph(&elf);
-    assert!(
-        graph.contains_key("ampc_evaluate"),
-        "ampc_evaluate not in the ELF"
-    );
+    assert!(graph.contains_key(entry), "{entry} not in {bin}");
     // Sanity: the checker sees panics where they are (the firmware's own panic handler).
     assert!(
         graph.keys().any(|k| k.contains("panic")),
         "no panic symbol at all: checker blind?"
     );
     let mut seen = BTreeSet::new();
-    let mut stack = vec!["ampc_evaluate".to_string()];
+    let mut stack = vec![entry.to_string()];
     while let Some(f) = stack.pop() {
         if seen.insert(f.clone()) {
             stack.extend(graph.get(&f).into_iter().flatten().cloned());
@@ -328,14 +339,14 @@ fn no_panic_reachable_from_evaluate(board: &Board) {
         .collect();
     assert!(
         bad.is_empty(),
-        "panic paths reachable from ampc_evaluate: {bad:?}"
+        "{bin}: panic paths reachable from {entry}: {bad:?}"
     );
     let code: u64 = seen.iter().filter_map(|f| sizes.get(f)).sum();
     // The optimiser turns the weights into literal-pool constants of `ampc_evaluate`, so the
     // static itself usually disappears: its size (if any) is added separately.
     let data = sizes.get("AMPC_CONTROLLER").copied().unwrap_or(0);
     println!(
-        "{}: controller flash: {code} B in {} functions {:?} (code + literal pools) + AMPC_CONTROLLER static {data} B = {} B",
+        "{} {entry}: controller flash: {code} B in {} functions {:?} (code + literal pools) + AMPC_CONTROLLER static {data} B = {} B",
         board.machine,
         seen.len(),
         seen,

@@ -7,11 +7,10 @@
 //! differs).
 //!
 //! The largest difference per state component, relative to the domain's half-width, is
-//! printed and must stay below `REL_TOL`. **The online check's margin** (`safe::Margins`)
-//! is derived from it as an *estimate*, not a bound: the measured maximum over these 10⁵
-//! samples × a safety factor (10), in the units of the normalised constraints — sampled,
-//! so states outside the sample (or accumulation over the horizon's N steps, which this
-//! one-step test does not measure) are not covered by an argument.
+//! printed and must stay below `REL_TOL`. This is the one-step difference; **the online
+//! check's margin** (`safe::Margins`, the generated `MARGINS`) comes from the N-step
+//! difference over 10⁵ trajectories × 10, marked *estimated* (`deploy::plant_rs_margin`;
+//! checked against the compiled code on other trajectories in `safe_plant_loop`).
 //!
 //! The OCP's part (`ocp_rs`: ℓ, V_f, Π_U, the normalised state-box violation) is compared
 //! with the same formulas in f64 on the same kind of samples (inputs drawn from twice the

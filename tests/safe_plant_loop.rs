@@ -1,8 +1,7 @@
 //! The complete generated plant (`deploy::plant_rs_safe`: dynamics, OCP, terminal
 //! ingredients of the robust design, `impl controller_core::safe::Plant`) for the double
 //! integrator (`configs/double_integrator_ode.toml`, an `ode` expression plant whose robust
-//! design has a terminal region; the cart-pole's and the quadrotor's have none, and their
-//! generation is refused naming `robust`), committed under
+//! design has a terminal region), committed under
 //! `fixtures/safe-plant/double_integrator_safe.rs` (regenerate with `AMPC_BLESS=1`),
 //! compiled into this test and run in a `SafeController` closed loop: the MPC's sequence at
 //! x₀ (the trainer's SQP, `MpcLaw`) adopted with `init_with`, then at each step the MPC's
@@ -11,11 +10,14 @@
 //! The plant evolves by the generated f32 model (the nominal case of the guarantee). Checked:
 //! no step without a safe sequence or with an infeasible fallback, every corrupted candidate
 //! refused, the state box at every step, convergence to the origin (max |x| < 0.05 after
-//! 60 steps). Margins are 0 here (the online margin is not generated yet).
+//! 60 steps). The margins are the generated `MARGINS` (estimated, `deploy::plant_rs_margin`).
+//! The cart-pole and the quadrotor (no robust region) get the nominal terminal ingredients
+//! (`robust::terminal_nominal`); the quadrotor runs the same closed loop (`safe_plant_nominal`
+//! module), and the stiff spring's expression constraints are compared with the f64 set.
 
-use controller_core::safe::{Margins, SafeController, SafeFlags};
+use controller_core::safe::{SafeController, SafeFlags};
 use std::path::{Path, PathBuf};
-use trainer::deploy::plant_rs_safe::safe_plant_rs;
+use trainer::deploy::plant_rs_safe::{safe_plant_rs, TerminalSource};
 use trainer::mpc::law::MpcLaw;
 use trainer::problem::ProblemConfig;
 
@@ -28,34 +30,65 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// xorshift64 → uniform [0, 1).
+fn uniform_seed(s: &mut u64) -> f64 {
+    *s ^= *s << 13;
+    *s ^= *s >> 7;
+    *s ^= *s << 17;
+    (*s >> 11) as f64 / (1u64 << 53) as f64
+}
+
 fn config(name: &str) -> ProblemConfig {
     ProblemConfig::load(&root().join("configs").join(format!("{name}.toml"))).unwrap()
 }
 
+/// The generated safe plants are the committed fixtures: the double integrator from its
+/// robust design's region, the cart-pole, the quadrotor and the stiff spring (path and
+/// terminal expression constraints; its robust design refuses the nonlinear one) from the
+/// nominal terminal ingredients.
 #[test]
-fn plants_without_a_terminal_region_are_refused_naming_the_key() {
-    let e = safe_plant_rs(&config("cartpole")).unwrap_err().to_string();
-    assert!(e.starts_with("robust:") && e.contains("`cartpole`"), "{e}");
-}
-
-#[test]
-fn generated_safe_plant_is_the_committed_fixture() {
-    let cfg = config("double_integrator_ode");
-    let g = safe_plant_rs(&cfg).unwrap();
-    eprintln!(
-        "double integrator: alpha {:e}, rho_f {:e} ({:?}), decrease {} (worst {:e})",
-        g.terminal.alpha, g.terminal.rho_local, g.terminal.check, g.decrease, g.decrease_worst
-    );
-    let path = root().join("tests/fixtures/safe-plant/double_integrator_safe.rs");
-    if std::env::var_os("AMPC_BLESS").is_some() {
-        std::fs::write(&path, &g.source).unwrap();
+fn generated_safe_plants_are_the_committed_fixtures() {
+    for (name, file, nominal) in [
+        ("double_integrator_ode", "double_integrator_safe.rs", false),
+        ("cartpole", "cartpole_safe.rs", true),
+        ("planar_quadrotor", "planar_quadrotor_safe.rs", true),
+        ("stiff_spring_setpoint", "stiff_spring_safe.rs", true),
+        ("pendulum_ode", "pendulum_ode_safe.rs", false),
+    ] {
+        let cfg = config(name);
+        let g = safe_plant_rs(&cfg).unwrap();
+        let from = match &g.terminal {
+            TerminalSource::Robust(t) => format!("robust, rho_f {:e} ({:?})", t.rho_local, t.check),
+            TerminalSource::Nominal(t) => format!("nominal, P_f {:?}", t.cost),
+        };
+        assert_eq!(
+            matches!(g.terminal, TerminalSource::Nominal(_)),
+            nominal,
+            "{name}"
+        );
+        eprintln!(
+            "{name}: alpha {:e} ({from}), decrease {} (worst {:e}); margins: stage {:e} \
+             (d_s {:e}), terminal {:e} (d_f {:e}), {} full trajectories",
+            g.terminal.alpha(),
+            g.decrease,
+            g.decrease_worst,
+            g.margins.stage,
+            g.margins.stage_diff,
+            g.margins.terminal,
+            g.margins.terminal_diff,
+            g.margins.trajectories
+        );
+        let path = root().join("tests/fixtures/safe-plant").join(file);
+        if std::env::var_os("AMPC_BLESS").is_some() {
+            std::fs::write(&path, &g.source).unwrap();
+        }
+        let committed = std::fs::read_to_string(&path).unwrap();
+        assert!(
+            committed == g.source,
+            "{} is not what deploy::plant_rs_safe writes: rerun with AMPC_BLESS=1",
+            path.display()
+        );
     }
-    let committed = std::fs::read_to_string(&path).unwrap();
-    assert!(
-        committed == g.source,
-        "{} is not what deploy::plant_rs_safe writes: rerun with AMPC_BLESS=1",
-        path.display()
-    );
 }
 
 const N: usize = 20;
@@ -79,11 +112,7 @@ fn safe_controller_closed_loop_on_the_generated_double_integrator() {
     assert_eq!(cfg.ocp.horizon, N);
     let mut law = MpcLaw::new(&cfg);
     let plant = plant::SafePlant;
-    let margins = Margins {
-        stage: 0.0,
-        terminal: 0.0,
-    };
-    let mut ctl: SafeController<_, (), 2, 1, N> = SafeController::new(plant, (), margins);
+    let mut ctl: SafeController<_, (), 2, 1, N> = SafeController::new(plant, (), plant::MARGINS);
     let mut x = [-0.8f32, 0.2];
     let init = mpc_sequence(&mut law, &x).expect("the MPC solves at x0");
     let j0 = ctl
@@ -151,13 +180,13 @@ fn cli_export_plant_rs_writes_the_generated_plant_or_names_the_key() {
     let o = ampc_tests::trainer(&[
         "export",
         "--config",
-        &ampc_tests::config("cartpole.toml"),
+        &ampc_tests::config("pendulum.toml"),
         "--plant-rs",
-        dir.path().join("cp.rs").to_str().unwrap(),
+        dir.path().join("p.rs").to_str().unwrap(),
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("robust:"), "{err}");
-    assert!(!dir.path().join("cp.rs").exists());
+    assert!(!o.status.success() && err.contains("\"pendulum\""), "{err}");
+    assert!(!dir.path().join("p.rs").exists());
 }
 
 /// The decrease check can say "sampled": with V_f = 1.01·P_f (P_f the Riccati matrix of the
@@ -178,3 +207,6 @@ fn decrease_condition_holds_for_a_scaled_riccati_terminal_weight() {
     assert_eq!(g.decrease, "sampled", "worst {:e}", g.decrease_worst);
     assert!(g.source.contains("TERMINAL_DECREASE: &str = \"sampled\""));
 }
+
+#[path = "safe_plant_nominal.rs"]
+mod safe_plant_nominal;

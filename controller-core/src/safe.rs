@@ -384,6 +384,7 @@ where
 }
 
 pub mod example;
+pub mod fmath;
 
 #[cfg(test)]
 mod tests;

@@ -97,10 +97,11 @@ pub(super) struct Args {
     accept_unsealed: bool,
     /// Write the plant of the problem (--config) as no_std f32 Rust for the online check of
     /// `controller_core::safe::SafeController`: dynamics (RK4 with the OCP's sub-steps),
-    /// costs, boxes, the terminal set and controller of the robust design, and
-    /// `impl Plant for SafePlant` (`deploy::plant_rs_safe`; needs the `libm` crate).
-    /// Refused, naming the key, for plants or OCP parts without a generator and without a
-    /// terminal region.
+    /// costs, boxes, `[ocp]` path and terminal constraints, the terminal set and controller
+    /// (the robust design's region, else the nominal terminal ingredients), the online
+    /// check's estimated margins `MARGINS`, and `impl Plant for SafePlant`
+    /// (`deploy::plant_rs_safe`; needs the `libm` crate). Refused, naming the key, for
+    /// plants or OCP parts without a generator and without a terminal set.
     #[arg(long, value_name = "FILE", requires = "config")]
     plant_rs: Option<PathBuf>,
     /// Write the model's sequence net (`[training] outputs = "sequence"`) as no_std f32 Rust,
@@ -192,17 +193,18 @@ fn write_plant_rs(config: &Path, file: &Path) -> Result<()> {
     let g = trainer::deploy::plant_rs_safe::safe_plant_rs(&cfg)
         .with_context(|| format!("cannot generate the plant of {} as Rust", config.display()))?;
     std::fs::write(file, &g.source).with_context(|| format!("cannot write {}", file.display()))?;
+    use trainer::deploy::plant_rs_safe::TerminalSource;
+    let (from, invariance) = match &g.terminal {
+        TerminalSource::Robust(t) if t.proven() => ("the robust design", "proven"),
+        TerminalSource::Robust(_) => ("the robust design", "sampled"),
+        TerminalSource::Nominal(_) => ("the nominal terminal ingredients", "sampled"),
+    };
     eprintln!(
-        "{}: plant of `{}` as f32 Rust; terminal set alpha {:e} (invariance {}), decrease \
-         condition for ocp.p: {} (worst over the samples {:e})",
+        "{}: plant of `{}` as f32 Rust; terminal set from {from}: alpha {:e} (invariance \
+         {invariance}), decrease condition for the generated V_f: {} (worst over the samples {:e})",
         file.display(),
         cfg.name,
-        g.terminal.alpha,
-        if g.terminal.proven() {
-            "proven"
-        } else {
-            "sampled"
-        },
+        g.terminal.alpha(),
         g.decrease,
         g.decrease_worst
     );

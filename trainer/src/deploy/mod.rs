@@ -19,5 +19,6 @@ pub mod controller;
 pub mod export;
 pub mod onnx;
 pub mod plant_rs;
+pub mod plant_rs_margin;
 pub mod plant_rs_safe;
 pub mod sequence_rs;

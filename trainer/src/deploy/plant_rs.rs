@@ -9,7 +9,8 @@
 //! ```
 //! f is the plant's instruction tape ([`ExprModel::tape`]) translated one instruction per
 //! line into f32 (constants rounded to nearest, h/2, h, h/6 computed in f64 then rounded;
-//! transcendental functions from `libm`'s f32 versions, `a^b = exp(b·log a)` as the tape).
+//! sin and cos from `controller_core::safe::fmath` (f32 only; NaN beyond |x| = 8192), the
+//! other transcendental functions from `libm`'s f32 versions, `a^b = exp(b·log a)` as the tape).
 //! Covered: the expression plants (`kind = "ode"` and `"discrete"`) and the built-in
 //! cart-pole (through its expression form); the built-in pendulum and double integrator
 //! and Rust-implemented (`custom`) plants are not (an error names the plant).
@@ -94,8 +95,8 @@ fn instr(op: &Op) -> String {
         Op::Powi(a, n) => format!("libm::powf({}, {}.0_f32)", g(a), n),
         Op::Powf(a, c) => format!("libm::powf({}, {})", g(a), lit(*c)),
         Op::Pow(a, b) => format!("libm::expf({} * libm::logf({}))", g(b), g(a)),
-        Op::Sin(a) => format!("libm::sinf({})", g(a)),
-        Op::Cos(a) => format!("libm::cosf({})", g(a)),
+        Op::Sin(a) => format!("controller_core::safe::fmath::sin({})", g(a)),
+        Op::Cos(a) => format!("controller_core::safe::fmath::cos({})", g(a)),
         Op::Tan(a) => format!("libm::tanf({})", g(a)),
         Op::Asin(a) => format!("libm::asinf({})", g(a)),
         Op::Acos(a) => format!("libm::acosf({})", g(a)),
@@ -116,19 +117,37 @@ fn instr(op: &Op) -> String {
 
 /// The `rhs` function: the tape, one line per instruction.
 fn rhs_fn(model: &ExprModel, out: &mut String) {
-    let (nx, nu) = (model.nx(), model.nu());
-    let tape = model.tape();
     let what = if model.is_discrete() {
         "F(x, u): the discrete plant's `next` expressions"
     } else {
         "f(x, u) = ẋ: the ODE's right-hand side"
     };
+    tape_fn(
+        model.tape(),
+        (model.nx(), model.nu()),
+        "rhs",
+        "NX",
+        what,
+        out,
+    );
+}
+
+/// `pub fn name(x: &[f32; NX], u: &[f32; NU]) -> [f32; outs]`: a tape over (x, u), one line
+/// per instruction, in f32.
+fn tape_fn(
+    tape: &expr::Tape,
+    (nx, nu): (usize, usize),
+    name: &str,
+    outs: &str,
+    what: &str,
+    out: &mut String,
+) {
     let _ = writeln!(out, "/// {what} (the trainer's instruction tape, in f32).");
     let _ = writeln!(out, "#[allow(clippy::all, unused_parens)]");
     let _ = writeln!(out, "#[inline]");
     let _ = writeln!(
         out,
-        "pub fn rhs(x: &[f32; NX], u: &[f32; NU]) -> [f32; NX] {{"
+        "pub fn {name}(x: &[f32; NX], u: &[f32; NU]) -> [f32; {outs}] {{"
     );
     let _ = writeln!(
         out,
@@ -230,25 +249,32 @@ fn mat_const(out: &mut String, doc: &str, name: &str, m: &crate::problem::Matrix
     );
 }
 
-/// The OCP's part of the online check: setpoint, weights, boxes, and the functions
-/// `stage_cost`, `terminal_cost`, `project_input`, `state_box_violation`.
+/// The OCP's part of the online check: setpoint, weights, boxes, the `[ocp]` expression
+/// constraints, and the functions `stage_cost`, `terminal_cost`, `project_input`,
+/// `state_box_violation`, `constraints`, `path_violation`, `terminal_constraint_violation`.
 ///
 /// ```text
 /// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref),  V_f(x) = (x − x_ref)ᵀP(x − x_ref)
 /// Π_U(u)_j = clamp(u_j, u_lo,j, u_hi,j)  (NaN → u_ref,j)
 /// g_X(x) = max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i   over finite bounds; s = the state scale
+/// g_i(x, u) = lhs − rhs (or rhs − lhs) of `ocp.constraints` / `ocp.terminal_constraints`
+///             (raw units, the compiled set's tape in f32), imposed per the OCP's rule:
+///             states only on k ≥ 1, inputs only on every k, mixed on k ≥ 1, terminal on x_N
 /// ```
-/// Stage-dependent (tightened) bounds and `[ocp]` expression constraints are not generated:
-/// an error names the key.
+/// Stage-dependent (tightened) bounds are not generated: an error names `ocp.stages`.
 pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsError> {
+    ocp_rs_with(cfg, None)
+}
+
+/// [`ocp_rs`] with the terminal cost's matrix `vf` in place of the OCP's `ocp.p` (the
+/// nominal terminal ingredients' P_f, for which the decrease condition was checked).
+pub fn ocp_rs_with(
+    cfg: &crate::problem::ProblemConfig,
+    vf: Option<&[Vec<f64>]>,
+) -> Result<String, PlantRsError> {
     let ocp = &cfg.ocp;
     if ocp.stages.is_some() {
         return Err(PlantRsError::UnsupportedOcp("ocp.stages".into()));
-    }
-    if !ocp.constraints.is_empty() || !ocp.terminal_constraints.is_empty() {
-        return Err(PlantRsError::UnsupportedOcp(
-            "ocp.constraints / ocp.terminal_constraints".into(),
-        ));
     }
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let mut out = String::new();
@@ -266,7 +292,19 @@ pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsErro
     );
     mat_const(&mut out, "Stage state weight Q.", "Q", &ocp.q, nx);
     mat_const(&mut out, "Stage input weight R.", "R", &ocp.r, nu);
-    mat_const(&mut out, "Terminal weight P.", "P", &ocp.p, nx);
+    match vf {
+        None => mat_const(&mut out, "Terminal weight P.", "P", &ocp.p, nx),
+        Some(m) => {
+            let spec = crate::problem::MatrixSpec::Full(m.to_vec());
+            mat_const(
+                &mut out,
+                "Terminal cost V_f's matrix P_f (the nominal terminal ingredients'; not `ocp.p`).",
+                "P",
+                &spec,
+                nx,
+            )
+        }
+    }
     vec_const(
         &mut out,
         "Lower state bounds (x_1 … x_N).",
@@ -288,8 +326,134 @@ pub fn ocp_rs(cfg: &crate::problem::ProblemConfig) -> Result<String, PlantRsErro
     );
     vec_const(&mut out, "Lower input bounds.", "U_LO", &ocp.u_lo);
     vec_const(&mut out, "Upper input bounds.", "U_HI", &ocp.u_hi);
+    constraints_rs(cfg, &mut out)?;
+    sparse_fns(cfg, &mut out);
     out.push_str(OCP_FNS);
     Ok(out)
+}
+
+/// `NC`, `C_KIND` and `constraints(x, u)`: the `[ocp]` expression constraints (path, then
+/// terminal) as f32 code (an empty set without any).
+fn constraints_rs(
+    cfg: &crate::problem::ProblemConfig,
+    out: &mut String,
+) -> Result<(), PlantRsError> {
+    let cs = cfg
+        .constraint_set()
+        .map_err(|e| PlantRsError::UnsupportedOcp(format!("{}: {e}", e.key)))?;
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let kinds: Vec<&str> = cs.as_ref().map_or(vec![], |cs| {
+        cs.items
+            .iter()
+            .map(
+                |c| match (c.terminal, c.uses_states(nx), c.uses_inputs(nx)) {
+                    (true, _, _) => "3",
+                    (false, true, false) => "0",
+                    (false, false, true) => "1",
+                    _ => "2",
+                },
+            )
+            .collect()
+    });
+    let texts: Vec<String> = cs.as_ref().map_or(vec![], |cs| {
+        cs.items
+            .iter()
+            .map(|c| format!("//   {}: `{}`", c.key, c.text))
+            .collect()
+    });
+    let _ = writeln!(
+        out,
+        "/// Number of `[ocp]` expression constraints g_i(x, u) ≤ 0 (path, then terminal).
+         pub const NC: usize = {};
+         /// Where each is imposed: 0 = states only (k ≥ 1), 1 = inputs only (every k), 2 = both          (k ≥ 1), 3 = terminal (x_N).
+         pub const C_KIND: [u8; NC] = [{}];",
+        kinds.len(),
+        kinds.join(", ")
+    );
+    match &cs {
+        Some(cs) => {
+            let _ = writeln!(out, "// The constraints:\n{}", texts.join("\n"));
+            tape_fn(
+                cs.tape(),
+                (nx, nu),
+                "constraints",
+                "NC",
+                "g(x, u): the `[ocp]` constraints as g_i ≤ 0",
+                out,
+            );
+        }
+        None => out.push_str(
+            "/// g(x, u): no `[ocp]` expression constraints.\n\
+             pub fn constraints(_x: &[f32; NX], _u: &[f32; NU]) -> [f32; NC] {\n    \
+             [0.0_f32; NC]\n}\n",
+        ),
+    }
+    Ok(())
+}
+
+/// `Σ_ij w_ij d_i d_j` unrolled over the nonzero entries of `m` (`0.0` without any), over
+/// the difference `d` named `d`.
+fn sparse_quad(m: &crate::problem::MatrixSpec, n: usize) -> String {
+    let Some(w) = m.to_dmatrix().filter(|d| d.nrows() == n && d.ncols() == n) else {
+        return "0.0_f32".into();
+    };
+    let mut terms = Vec::new();
+    for i in 0..n {
+        let row: Vec<String> = (0..n)
+            .filter(|&j| w[(i, j)] != 0.0)
+            .map(|j| format!("{} * d[{j}]", lit(w[(i, j)])))
+            .collect();
+        if !row.is_empty() {
+            terms.push(format!("d[{i}] * ({})", row.join(" + ")));
+        }
+    }
+    if terms.is_empty() {
+        "0.0_f32".into()
+    } else {
+        terms.join("\n        + ")
+    }
+}
+
+/// `stage_cost` (Q, R unrolled over their nonzero entries) and `state_box_violation` (over
+/// the finite bounds only): the functions the online check calls N times per sequence.
+fn sparse_fns(cfg: &crate::problem::ProblemConfig, out: &mut String) {
+    let ocp = &cfg.ocp;
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
+    let _ = writeln!(
+        out,
+        "\n/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref) (unrolled over the \
+         nonzero weights).\n\
+         #[allow(clippy::all)]\n\
+         pub fn stage_cost(x: &[f32; NX], u: &[f32; NU]) -> f32 {{\n    \
+         let sx = {{\n        let d = diff(x, &X_REF);\n        {}\n    }};\n    \
+         let su = {{\n        let d = diff(u, &U_REF);\n        {}\n    }};\n    sx + su\n}}",
+        sparse_quad(&ocp.q, nx),
+        sparse_quad(&ocp.r, nu)
+    );
+    let scale = ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    let mut body = String::new();
+    for i in 0..nx {
+        for (bound, expr) in [
+            (ocp.x_lo[i], format!("(X_LO[{i}] - x[{i}]) / X_SCALE[{i}]")),
+            (ocp.x_hi[i], format!("(x[{i}] - X_HI[{i}]) / X_SCALE[{i}]")),
+        ] {
+            if bound.is_finite() && scale[i].is_finite() {
+                let _ = write!(
+                    body,
+                    "    let v = {expr};\n    if v > g {{\n        g = v;\n    }}\n"
+                );
+            }
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\n/// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; \
+         NaN for\n/// a NaN state): `≤ 0` inside the state box.\n\
+         #[allow(clippy::all)]\n\
+         pub fn state_box_violation(x: &[f32; NX]) -> f32 {{\n    \
+         if x.iter().any(|v| v.is_nan()) {{\n        return f32::NAN;\n    }}\n    \
+         let mut g = f32::NEG_INFINITY;\n{body}    g\n}}"
+    );
 }
 
 /// The OCP's functions (fixed text over the constants above).
@@ -316,10 +480,6 @@ fn diff<const M: usize>(a: &[f32; M], b: &[f32; M]) -> [f32; M] {
     d
 }
 
-/// ℓ(x, u) = (x − x_ref)ᵀQ(x − x_ref) + (u − u_ref)ᵀR(u − u_ref).
-pub fn stage_cost(x: &[f32; NX], u: &[f32; NU]) -> f32 {
-    quad(&Q, &diff(x, &X_REF)) + quad(&R, &diff(u, &U_REF))
-}
 
 /// V_f(x) = (x − x_ref)ᵀP(x − x_ref).
 pub fn terminal_cost(x: &[f32; NX]) -> f32 {
@@ -343,23 +503,42 @@ pub fn project_input(u: &[f32; NU]) -> [f32; NU] {
     p
 }
 
-/// max_i max(x_lo,i − x_i, x_i − x_hi,i) / s_i over the finite bounds (−∞ if none; NaN for
-/// a NaN state): `≤ 0` inside the state box.
-pub fn state_box_violation(x: &[f32; NX]) -> f32 {
-    let mut g = f32::NEG_INFINITY;
-    for (((x, lo), hi), s) in x.iter().zip(&X_LO).zip(&X_HI).zip(&X_SCALE) {
-        if x.is_nan() {
-            return f32::NAN;
-        }
-        for v in [*lo - *x, *x - *hi] {
-            let v = v / *s;
-            if v > g {
-                g = v;
+/// The largest of `g` over the constraints of `C_KIND` selected by `keep` (−∞ if none; NaN
+/// if one is NaN).
+fn max_kind(g: &[f32; NC], keep: impl Fn(u8) -> bool) -> f32 {
+    let mut m = f32::NEG_INFINITY;
+    for (g, kind) in g.iter().zip(&C_KIND) {
+        if keep(*kind) {
+            if g.is_nan() {
+                return f32::NAN;
+            }
+            if *g > m {
+                m = *g;
             }
         }
     }
-    g
+    m
 }
+
+/// The path constraints the OCP imposes at stage k on (x_k, u_k): inputs-only ones at every
+/// k, the others from k = 1 on (raw units; −∞ if none).
+pub fn path_violation(k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32 {
+    if NC == 0 {
+        return f32::NEG_INFINITY;
+    }
+    let g = constraints(x, u);
+    max_kind(&g, |kind| kind == 1 || (k >= 1 && (kind == 0 || kind == 2)))
+}
+
+/// The terminal constraints at x_N (raw units; −∞ if none).
+pub fn terminal_constraint_violation(x: &[f32; NX]) -> f32 {
+    if NC == 0 {
+        return f32::NEG_INFINITY;
+    }
+    let g = constraints(x, &U_REF);
+    max_kind(&g, |kind| kind == 3)
+}
+
 ";
 
 /// The Rust source of the plant's F for `name` (a comment), with sampling time `ts` and
@@ -428,7 +607,7 @@ mod tests {
         let src = plant_rs("cp", &m, 0.05, 2);
         assert!(src.contains("pub const SUBSTEPS: usize = 2;"), "{src}");
         assert!(
-            src.contains("libm::sinf(") && src.contains("libm::cosf("),
+            src.contains("fmath::sin(") && src.contains("fmath::cos("),
             "{src}"
         );
     }

@@ -4,25 +4,34 @@
 //! terminal design ([`crate::robust::terminal`]), with the generated type `SafePlant`.
 //!
 //! ```text
-//! g_k(x, u) = −∞ (k = 0: the measured state is not constrained),  g_X(x) (k ≥ 1)
-//! g_N(x)    = max(g_X(x), ((x − x_r)ᵀP_f(x − x_r) − α) / α)          terminal set X_f
+//! g_k(x, u) = path constraints on inputs only (k = 0: the measured state is not constrained),
+//!             max(g_X(x), every path constraint) (k ≥ 1)
+//! g_N(x)    = max(g_X(x), terminal constraints, ((x − x_r)ᵀP_f(x − x_r) − α) / α)   X_f
 //! κ_f(x)    = u_r + K (x − x_r)                                       terminal controller
-//! decrease: V_f(F(x, κ_f(x))) − V_f(x) ≤ −ℓ(x, κ_f(x))  on X_f          (V_f = the OCP's P)
+//! decrease: V_f(F(x, κ_f(x))) − V_f(x) ≤ −ℓ(x, κ_f(x))  on X_f
 //! ```
-//! P_f, α, K, x_r, u_r are the terminal region of `robust::design::design(cfg)` (the
-//! ancillary LQR's Riccati matrix and gain); without one the generation is refused naming
-//! the key `robust` (the design's settings). The decrease condition is checked for the
-//! OCP's terminal weight `ocp.p` on [`DECREASE_SAMPLES`] seeded points of X_f with the f64
-//! model and stated as a tier in the generated `TERMINAL_DECREASE`: `"sampled"` when every
-//! sample satisfies it, `"not established"` otherwise (never `"proven"`: no bound over the
-//! whole set is computed here). The invariance tier (`TERMINAL_INVARIANCE`) is the design's
-//! (`proven` for exact or vertex bounds of ρ_f, else `sampled`).
-//! `[ocp]` expression constraints and stage-dependent bounds are refused by `ocp_rs`.
+//! P_f, α, K, x_r, u_r are ([`TerminalSource`]):
+//! - the terminal region of `robust::design::design(cfg)` (the ancillary LQR's Riccati
+//!   matrix and gain) when it has one; V_f is then the OCP's `ocp.p`, the decrease condition
+//!   is checked for it on [`DECREASE_SAMPLES`] seeded points of X_f with the f64 model and
+//!   stated in the generated `TERMINAL_DECREASE`: `"sampled"` when every sample satisfies it,
+//!   `"not established"` otherwise; the invariance tier (`TERMINAL_INVARIANCE`) is the
+//!   design's (`proven` for exact or vertex bounds of ρ_f, else `sampled`);
+//! - otherwise the nominal terminal ingredients (`robust::terminal_nominal`), whose level was
+//!   chosen so that the decrease holds on its samples: both tiers `"sampled"`, and V_f (the
+//!   generated `P`, used by `terminal_cost`) is *their* P_f — the matrix the decrease was
+//!   checked for, which may differ from `ocp.p`.
+//!
+//! Neither is ever `"proven"` for the decrease: no bound over the whole set is computed.
+//! Without either the generation is refused naming the key `robust`. Stage-dependent bounds
+//! (`ocp.stages`) are refused by `ocp_rs`.
 
-use super::plant_rs::{ocp_rs, plant_model, plant_rs, PlantRsError};
+use super::plant_rs::{ocp_rs, ocp_rs_with, plant_model, plant_rs, PlantRsError};
+use super::plant_rs_margin::{estimate_margins, MarginEstimate, FACTOR, MARGIN_STATES};
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::robust::terminal::TerminalRegion;
+use crate::robust::terminal_nominal::{nominal_terminal, NominalTerminal, NOMINAL_SAMPLES};
 use std::fmt::Write as _;
 
 /// Points of X_f on which the decrease condition is checked.
@@ -33,12 +42,14 @@ pub const DECREASE_SAMPLES: usize = 10_000;
 pub struct SafePlantRs {
     /// The Rust source (needs the crates `libm` and `controller_core`).
     pub source: String,
-    /// The terminal region used.
-    pub terminal: TerminalRegion,
+    /// The terminal ingredients used.
+    pub terminal: TerminalSource,
     /// The decrease condition's tier: `"sampled"` or `"not established"`.
     pub decrease: &'static str,
     /// The largest V_f(F(x, κ_f)) − V_f(x) + ℓ(x, κ_f) over the samples (≤ 0: holds).
     pub decrease_worst: f64,
+    /// The online check's margins written as `MARGINS` (estimated, `plant_rs_margin`).
+    pub margins: MarginEstimate,
 }
 
 /// The decrease condition on `samples` seeded points of X_f (uniform in the ball of the
@@ -102,41 +113,99 @@ pub fn decrease_check(
     worst
 }
 
+/// The terminal ingredients written into the generated plant.
+#[derive(Debug, Clone)]
+pub enum TerminalSource {
+    /// The robust design's terminal region (`robust::terminal`), with its tube's K and P.
+    Robust(TerminalRegion),
+    /// The nominal terminal ingredients (`robust::terminal_nominal`): the robust design has
+    /// no region (or fails).
+    Nominal(NominalTerminal),
+}
+
+impl TerminalSource {
+    /// The level α.
+    pub fn alpha(&self) -> f64 {
+        match self {
+            TerminalSource::Robust(t) => t.alpha,
+            TerminalSource::Nominal(t) => t.alpha,
+        }
+    }
+}
+
 /// The full generated plant of `cfg` (module doc): dynamics, OCP, terminal ingredients and
 /// `impl controller_core::safe::Plant<NX, NU> for SafePlant`.
 pub fn safe_plant_rs(cfg: &ProblemConfig) -> Result<SafePlantRs, PlantRsError> {
     let model = plant_model(&cfg.system)?;
-    let ocp = ocp_rs(cfg)?;
-    let design = crate::robust::design::design(cfg)
-        .map_err(|e| PlantRsError::NoTerminal(format!("the robust design fails: {e}")))?;
-    let Some(t) = design.terminal.clone() else {
-        return Err(PlantRsError::NoTerminal(format!(
-            "problem `{}`: the design's local feedback admits no radius (see robust.eps, \
-             robust.lqr_r_scales)",
-            cfg.name
-        )));
+    let design = crate::robust::design::design(cfg);
+    let robust = match &design {
+        Ok(d) => d.terminal.clone().map(|t| (t, d)),
+        Err(_) => None,
     };
-    let (k, p_f) = (&design.tube.k, &design.tube.p);
-    let worst = decrease_check(cfg, &t, k, p_f, DECREASE_SAMPLES);
-    let decrease = if worst <= 0.0 {
-        "sampled"
-    } else {
-        "not established"
-    };
-    let invariance = if t.proven() { "proven" } else { "sampled" };
     let mut out = plant_rs(&cfg.name, &model, cfg.ocp.ts, cfg.ocp.rk4_substeps);
     out.push('\n');
-    out.push_str(&ocp);
-    let _ = writeln!(
-        out,
-        "\n// Terminal ingredients: the terminal region of the trainer's robust design\n\
-         // (robust::terminal; LQR r-scale {:?}, rho_f = {:e}, check {:?}).",
-        design.tube.lqr_r_scale, t.rho_local, t.check
-    );
+    let (k, p_f, worst, decrease, invariance, source, head) = match robust {
+        Some((t, d)) => {
+            let (k, p_f) = (d.tube.k.clone(), d.tube.p.clone());
+            let worst = decrease_check(cfg, &t, &k, &p_f, DECREASE_SAMPLES);
+            let decrease = if worst <= 0.0 {
+                "sampled"
+            } else {
+                "not established"
+            };
+            let invariance = if t.proven() { "proven" } else { "sampled" };
+            out.push_str(&ocp_rs(cfg)?);
+            let head = format!(
+                "the terminal region of the trainer's robust design\n\
+                 // (robust::terminal; LQR r-scale {:?}, rho_f = {:e}, check {:?}).",
+                d.tube.lqr_r_scale, t.rho_local, t.check
+            );
+            (
+                k,
+                p_f,
+                worst,
+                decrease,
+                invariance,
+                TerminalSource::Robust(t),
+                head,
+            )
+        }
+        None => {
+            let why = match &design {
+                Ok(_) => "the robust design's local feedback admits no radius".to_string(),
+                Err(e) => format!("the robust design fails: {e}"),
+            };
+            let t = nominal_terminal(cfg, NOMINAL_SAMPLES).ok_or_else(|| {
+                PlantRsError::NoTerminal(format!(
+                    "problem `{}`: {why}, and no nominal terminal level passes the decrease \
+                     condition on {NOMINAL_SAMPLES} points (robust::terminal_nominal)",
+                    cfg.name
+                ))
+            })?;
+            out.push_str(&ocp_rs_with(cfg, Some(&t.p))?);
+            let head = format!(
+                "the nominal terminal ingredients (robust::terminal_nominal;\n\
+                 // {why}): P_f = {:?}, V_f = P_f (the P above).",
+                t.cost
+            );
+            let (k, p_f, worst) = (t.k.clone(), t.p.clone(), t.decrease_worst);
+            (
+                k,
+                p_f,
+                worst,
+                "sampled",
+                "sampled",
+                TerminalSource::Nominal(t),
+                head,
+            )
+        }
+    };
+    let alpha = source.alpha();
+    let _ = writeln!(out, "\n// Terminal ingredients: {head}");
     let _ = writeln!(
         out,
         "/// Level α of the terminal set (x − x_r)ᵀP_f(x − x_r) ≤ α.\npub const ALPHA: f32 = {};",
-        super::plant_rs::lit(t.alpha)
+        super::plant_rs::lit(alpha)
     );
     let rows = |m: &[Vec<f64>]| {
         m.iter()
@@ -147,33 +216,59 @@ pub fn safe_plant_rs(cfg: &ProblemConfig) -> Result<SafePlantRs, PlantRsError> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let (nx, nu) = (t.x_ref.len(), t.u_ref.len());
+    let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let _ = writeln!(
         out,
-        "/// P_f: the terminal set's matrix (the ancillary LQR's Riccati matrix).\n\
+        "/// P_f: the terminal set's matrix.\n\
          pub const P_F: [[f32; {nx}]; {nx}] = [{}];",
-        rows(p_f)
+        rows(&p_f)
     );
     let _ = writeln!(
         out,
         "/// K: the terminal controller's gain, κ_f(x) = u_r + K(x − x_r).\n\
          pub const K_F: [[f32; {nx}]; {nu}] = [{}];",
-        rows(k)
+        rows(&k)
     );
+    let samples = match &source {
+        TerminalSource::Robust(_) => DECREASE_SAMPLES,
+        TerminalSource::Nominal(t) => t.samples,
+    };
     let _ = writeln!(
         out,
-        "/// Invariance of X_f under κ_f: \"proven\" or \"sampled\" (the design's ρ_f).\n\
+        "/// Invariance of X_f under κ_f: \"proven\" or \"sampled\".\n\
          pub const TERMINAL_INVARIANCE: &str = \"{invariance}\";\n\
-         /// V_f(F(x, κ_f)) − V_f(x) ≤ −ℓ(x, κ_f) on X_f for the OCP's P: \"sampled\" ({DECREASE_SAMPLES} \
-         seeded points, worst {worst:e}) or \"not established\".\n\
+         /// V_f(F(x, κ_f)) − V_f(x) ≤ −ℓ(x, κ_f) on X_f for the V_f of `terminal_cost`: \"sampled\" \
+         ({samples} seeded points, worst {worst:e}) or \"not established\".\n\
          pub const TERMINAL_DECREASE: &str = \"{decrease}\";"
+    );
+    let (xr, ur) = match &source {
+        TerminalSource::Robust(t) => (t.x_ref.clone(), t.u_ref.clone()),
+        TerminalSource::Nominal(t) => (t.x_ref.clone(), t.u_ref.clone()),
+    };
+    let m = estimate_margins(cfg, &model, (&xr, &ur, &k, &p_f, alpha), MARGIN_STATES);
+    let _ = writeln!(
+        out,
+        "/// The online check's margins — ESTIMATED, not a bound (deploy::plant_rs_margin): \
+         {FACTOR} × the largest\n\
+         /// f32-vs-f64 difference measured over {MARGIN_STATES} seeded {n}-step trajectories \
+         from X ({full} stayed in the box)\n\
+         /// under Π_U(κ_f + noise): state/constraint {:e} (normalised), terminal cost {:e} (/α).\n\
+         pub const MARGINS: controller_core::safe::Margins = controller_core::safe::Margins {{\n    \
+         stage: {},\n    terminal: {},\n}};",
+        m.stage_diff,
+        m.terminal_diff,
+        super::plant_rs::lit(m.stage * (1.0 + 1e-6)),
+        super::plant_rs::lit(m.terminal * (1.0 + 1e-6)),
+        n = cfg.ocp.horizon,
+        full = m.trajectories,
     );
     out.push_str(SAFE_FNS);
     Ok(SafePlantRs {
         source: out,
-        terminal: t,
+        terminal: source,
         decrease,
         decrease_worst: worst,
+        margins: m,
     })
 }
 
@@ -191,9 +286,21 @@ pub fn terminal_input(x: &[f32; NX]) -> [f32; NU] {
     u
 }
 
-/// g_k: −∞ at k = 0 (the measured state), the state box from k = 1 on (NaN for a NaN state).
-pub fn stage_violation(k: usize, x: &[f32; NX]) -> f32 {
-    if k == 0 {
+/// max(a, b), NaN if either is NaN.
+fn max_nan(a: f32, b: f32) -> f32 {
+    if a.is_nan() || b.is_nan() {
+        f32::NAN
+    } else if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// g_k: at k = 0 (the measured state) only the inputs-only path constraints, from k = 1 on
+/// the state box and every path constraint (NaN for a NaN state).
+pub fn stage_violation(k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32 {
+    let b = if k == 0 {
         if x.iter().any(|v| v.is_nan()) {
             f32::NAN
         } else {
@@ -201,20 +308,15 @@ pub fn stage_violation(k: usize, x: &[f32; NX]) -> f32 {
         }
     } else {
         state_box_violation(x)
-    }
+    };
+    max_nan(b, path_violation(k, x, u))
 }
 
-/// g_N = max(state box, ((x − x_r)ᵀP_f(x − x_r) − α)/α) (NaN for a NaN state).
+/// g_N = max(state box, terminal constraints, ((x − x_r)ᵀP_f(x − x_r) − α)/α) (NaN for a
+/// NaN state).
 pub fn terminal_violation(x: &[f32; NX]) -> f32 {
-    let b = state_box_violation(x);
-    let t = (quad(&P_F, &diff(x, &X_REF)) - ALPHA) / ALPHA;
-    if b.is_nan() || t.is_nan() {
-        f32::NAN
-    } else if t > b {
-        t
-    } else {
-        b
-    }
+    let b = max_nan(state_box_violation(x), terminal_constraint_violation(x));
+    max_nan(b, (quad(&P_F, &diff(x, &X_REF)) - ALPHA) / ALPHA)
 }
 
 /// The generated plant as a `controller_core::safe::Plant`.
@@ -225,8 +327,8 @@ impl controller_core::safe::Plant<NX, NU> for SafePlant {
     fn step(&self, x: &[f32; NX], u: &[f32; NU]) -> [f32; NX] {
         step(x, u)
     }
-    fn stage_violation(&self, k: usize, x: &[f32; NX], _u: &[f32; NU]) -> f32 {
-        stage_violation(k, x)
+    fn stage_violation(&self, k: usize, x: &[f32; NX], u: &[f32; NU]) -> f32 {
+        stage_violation(k, x, u)
     }
     fn terminal_violation(&self, x: &[f32; NX]) -> f32 {
         terminal_violation(x)

@@ -60,7 +60,9 @@
 //! steps where the soft fallback was needed (`mpc_soft_steps`).
 //!
 //! Files: [`jacobians`] (the family of (A, B) and how its sup is bounded), [`tube`] (ρ, w̄,
-//! the radii s_k and the tightening), [`terminal`] (the terminal region X_f), [`design`](mod@design) (the LQR choice, the tightened problem),
+//! the radii s_k and the tightening), [`terminal`] (the terminal region X_f),
+//! [`terminal_nominal`] (the nominal terminal set, controller and cost of the
+//! safety-augmented controller, without a tube), [`design`](mod@design) (the LQR choice, the tightened problem),
 //! [`exclusion`] (the proof that an excluded box is infeasible for the tightened
 //! OCP), [`verdict`](mod@verdict) (the verdict of a certificate against the design ε: certified,
 //! conditional with what it rests on, or not certified). The robust closed-loop study is
@@ -71,6 +73,7 @@ pub mod design;
 pub(crate) mod exclusion;
 pub(crate) mod jacobians;
 pub(crate) mod terminal;
+pub mod terminal_nominal;
 pub(crate) mod tube;
 pub mod verdict;
 pub(crate) mod verified;

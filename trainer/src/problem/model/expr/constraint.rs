@@ -146,6 +146,12 @@ impl ConstraintSet {
         self.nu
     }
 
+    /// The instruction tape of all g_i (inputs: the states, then the inputs; outputs in
+    /// the order of [`ConstraintSet::items`]), e.g. for code generation.
+    pub fn tape(&self) -> &Tape {
+        &self.tape
+    }
+
     /// All g_i(x, u), in any number type (f64, or dual numbers for derivatives).
     /// `out.len() == self.len()`; `scratch` is grown on first use.
     pub fn eval<D: DualNum<Primitive = f64> + Copy>(
