@@ -398,6 +398,7 @@ fn statistical_level(path: &Path, file: &CertificateFile) -> Result<(f64, Statis
             p_exceed_upper: st.p_target,
             confidence: st.confidence,
             samples: st.samples,
+            unlabelled_p_upper: None,
         },
     ))
 }

@@ -1,6 +1,7 @@
 //! `trainer sample`: generates the labelled dataset of the problem file's sampling plan
-//! (`--config`), or one shard of it (`--shard K/N`), into `--out` (postcard) with a CSV
-//! export beside it; resumes an interrupted run.
+//! (`--config`), or with `--validation` its validation set (what `trainer run`'s `validate`
+//! stage labels), or one shard of either (`--shard K/N`), into `--out` (postcard) with a
+//! CSV export beside it; resumes an interrupted run.
 
 use super::common::{load_config, opt, refuse_overwrite};
 use anyhow::Result;
@@ -20,6 +21,12 @@ pub(super) struct Args {
     /// Compute only shard K of N (`K/N`, 0 ≤ K < N).
     #[arg(long)]
     shard: Option<Shard>,
+    /// Label the validation set instead of the sampling plan: the `[training]
+    /// validation_n` random states of `validation_seed` that `trainer run`'s `validate` stage
+    /// labels into `validation.bin` (with --shard: one shard of it; `trainer merge` of all
+    /// shards is byte-identical to that file).
+    #[arg(long)]
+    validation: bool,
     /// No progress bar or summary.
     #[arg(long, short)]
     quiet: bool,
@@ -30,23 +37,27 @@ impl Args {
     pub(super) fn run(self) -> Result<()> {
         let csv = dataset::csv_path(&self.out);
         refuse_overwrite(&[&self.out, &csv], &[opt(&self.config)])?;
-        execute(self.config.as_deref(), &self.out, self.shard, self.quiet)
+        let mut cfg = load_config(self.config.as_deref())?;
+        if self.validation {
+            cfg = trainer::pipeline::validation_config(&cfg);
+        }
+        execute_with(&cfg, &self.out, self.shard, self.quiet)
     }
 }
 
-pub(super) fn execute(
-    config: Option<&Path>,
+/// Generates `cfg`'s sampling plan (or one shard) into `out` and its CSV export.
+fn execute_with(
+    cfg: &trainer::problem::ProblemConfig,
     out: &Path,
     shard: Option<Shard>,
     quiet: bool,
 ) -> Result<()> {
-    let cfg = load_config(config)?;
     let t = std::time::Instant::now();
     let opts = GenerateOptions {
         shard,
         progress: !quiet && std::io::stderr().is_terminal(),
     };
-    let d = dataset::generate(&cfg, out, &opts)?;
+    let d = dataset::generate(cfg, out, &opts)?;
     if !quiet {
         let c = d.counts();
         eprintln!(
@@ -75,7 +86,7 @@ pub(super) fn execute(
         }
         // Why the first numerical failure has no label (re-solved once: the record does
         // not store it).
-        if let Some((index, x, failure)) = d.first_failure(&cfg) {
+        if let Some((index, x, failure)) = d.first_failure(cfg) {
             let why = failure.map_or_else(
                 || "the solver broke down (QP or line search)".to_string(),
                 |f| f.to_string(),

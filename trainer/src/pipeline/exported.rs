@@ -127,6 +127,7 @@ fn export_model(
             p_exceed_upper: st.p_target,
             confidence: st.confidence,
             samples,
+            unlabelled_p_upper: st.conditional.then_some(st.unlabelled_p_upper).flatten(),
         };
         em = em.with_statistical_eps(best.eps, claim)?;
     }
@@ -321,8 +322,15 @@ pub(super) fn closed_loop_statistical(env: &Env, d: &RunDir) -> Result<String, P
             .clone()
             .unwrap_or_else(|| s.feasible_starts.clone()),
     );
+    let mpc = match (&s.mpc_failing, s.controller_failing_same) {
+        (Some(m), Some(c)) => format!(
+            "; the MPC itself from the first {} of the same starts: {} fail (controller: {c})",
+            m.trajectories, m.violating
+        ),
+        _ => String::new(),
+    };
     Ok(format!(
-        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}",
+        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}{mpc}",
         ff.p_violation_upper, ff.violating, ff.trajectories, f.p_violation_upper, f.violating, f.trajectories, s.confidence
     ))
 }

@@ -33,6 +33,7 @@ mod exported;
 pub mod manifest;
 pub mod robust;
 mod stages;
+pub use stages::validation_config;
 mod tiers;
 
 use crate::io::{write_atomic, RunDir};

@@ -207,8 +207,11 @@ fn sample(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
 
 // ---- validate: MPC labels of random states (R², L_MPC estimate) ------------------------
 
-/// The problem whose sampling plan is the validation set.
-fn validation_config(cfg: &ProblemConfig) -> ProblemConfig {
+/// The problem whose sampling plan is the validation set (`[training] validation_n` random
+/// states from `validation_seed`): the `validate` stage labels it, `trainer sample
+/// --validation` labels it (or one shard of it, `--shard K/M`; `trainer merge` of the M
+/// shards is byte-identical to the stage's `validation.bin`).
+pub fn validation_config(cfg: &ProblemConfig) -> ProblemConfig {
     let mut vcfg = cfg.clone();
     vcfg.sampling = SamplingSettings {
         sampler: SamplerKind::Random,

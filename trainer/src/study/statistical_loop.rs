@@ -40,6 +40,10 @@ use serde::{Deserialize, Serialize};
 /// ∞-norm (5 % of each state's scale).
 pub const CONVERGE_TOL: f64 = 0.05;
 
+/// The MPC's own closed loop is run from this many of the initial states (the first ones
+/// of the draw): a solve per step makes it far costlier than the controller's.
+pub const MPC_STARTS: usize = 100;
+
 /// A Clopper–Pearson bound from n trials with k events.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Bound {
@@ -78,6 +82,17 @@ pub struct ClosedLoopStatistical {
     /// Trajectories whose last state is not within [`CONVERGE_TOL`] of x_ref (scaled).
     #[serde(default)]
     pub not_converged: u64,
+    /// The MPC's own closed loop (a fresh solve at every step, its input saturated to U;
+    /// no label: the centre of U) from the first [`MPC_STARTS`] of the same initial states,
+    /// with the same rule "violates or does not converge": how often the reference law
+    /// itself fails within `steps` — the scale against which the controller's failure
+    /// bound is read. Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mpc_failing: Option<Bound>,
+    /// Of the same first [`MPC_STARTS`] initial states: how many runs of the deployed
+    /// controller fail (the like-for-like count beside [`ClosedLoopStatistical::mpc_failing`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller_failing_same: Option<u64>,
     /// 1 − β.
     pub confidence: f64,
     /// Steps per trajectory.
@@ -97,11 +112,23 @@ pub struct ClosedLoopStatistical {
     pub rests_on: String,
 }
 
-/// One trajectory: whether it violated, its largest violation.
+/// One trajectory of the deployed `controller`: its largest violation and its final
+/// distance to the setpoint.
 fn trajectory(
     cfg: &ProblemConfig,
     plant: &Discrete,
     controller: &dyn TestedController,
+    x0: &[f64],
+) -> (f64, f64) {
+    trajectory_of(cfg, plant, &mut |x| controller.input(x), x0)
+}
+
+/// One trajectory of the input law `input` (its output saturated to U; a non-finite output
+/// is the centre of U): its largest violation and its final distance to the setpoint.
+fn trajectory_of(
+    cfg: &ProblemConfig,
+    plant: &Discrete,
+    input: &mut dyn FnMut(&[f64]) -> Vec<f64>,
     x0: &[f64],
 ) -> (f64, f64) {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
@@ -111,7 +138,7 @@ fn trajectory(
     let mut next = vec![0.0; nx];
     let mut worst = 0.0f64;
     for k in 0..cfg.closed_loop.steps {
-        let mut u = controller.input(&x);
+        let mut u = input(&x);
         u.resize(nu, f64::NAN);
         for j in 0..nu {
             // The actuator saturates the deployed controller's output; a non-finite one
@@ -187,12 +214,33 @@ pub fn closed_loop_statistical(
     let feas = || results.iter().filter(|(f, _)| *f).map(|(_, r)| *r);
     let n_feas = feas().count() as u64;
     let not_converged = count(&mut all(), &|(_, d)| d > CONVERGE_TOL);
+    // The MPC's own closed loop from the first starts of the same draw.
+    let m = n.min(MPC_STARTS);
+    let mpc: Vec<(f64, f64)> = (0..m as u64)
+        .into_par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, i| {
+                let x0: Vec<f64> = (0..nx)
+                    .map(|k| {
+                        let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
+                        lo + (hi - lo) * uniform(seed, i, k as u64)
+                    })
+                    .collect();
+                trajectory_of(cfg, &plant, &mut |x| law.solve(x, None).0.u, &x0)
+            },
+        )
+        .collect();
+    let mpc_fail = count(&mut mpc.iter().copied(), &fails);
+    let same = count(&mut results[..m].iter().map(|(_, r)| *r), &fails);
     ClosedLoopStatistical {
         all: Bound::new(n as u64, count(&mut all(), &violates), confidence),
         feasible_starts: Bound::new(n_feas, count(&mut feas(), &violates), confidence),
         failing: Some(Bound::new(n as u64, count(&mut all(), &fails), confidence)),
         failing_feasible: Some(Bound::new(n_feas, count(&mut feas(), &fails), confidence)),
         not_converged,
+        mpc_failing: (m > 0).then(|| Bound::new(m as u64, mpc_fail, confidence)),
+        controller_failing_same: (m > 0).then_some(same),
         confidence,
         steps: cfg.closed_loop.steps,
         seed,
@@ -318,5 +366,36 @@ mod tests {
         let ff = s.failing_feasible.as_ref().unwrap();
         assert_eq!(ff.trajectories, s.feasible_starts.trajectories);
         assert!(ff.violating >= s.feasible_starts.violating);
+        // The controller's count on the MPC's starts (all 30 here) is its failing count.
+        assert_eq!(s.controller_failing_same, Some(failing));
+        // The MPC's own closed loop from the same starts, re-simulated by hand.
+        let mut law = MpcLaw::new(&cfg);
+        let mut mpc_failing = 0;
+        for i in 0..30u64 {
+            let mut x: Vec<f64> = (0..2)
+                .map(|j| {
+                    let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
+                    lo + (hi - lo) * uniform(s.seed, i, j as u64)
+                })
+                .collect();
+            let (mut bad, mut next) = (false, vec![0.0; 2]);
+            for _ in 0..3 {
+                let u = law.solve(&x, None).0.u[0];
+                let (lo, hi) = (cfg.ocp.u_lo[0], cfg.ocp.u_hi[0]);
+                let u = if u.is_finite() {
+                    u.clamp(lo, hi)
+                } else {
+                    0.5 * (lo + hi)
+                };
+                plant.step(&x, &[u], &mut next);
+                bad |= (0..2)
+                    .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
+                x.copy_from_slice(&next);
+            }
+            let d = (0..2).map(|j| x[j].abs() / scale[j]).fold(0.0, f64::max);
+            mpc_failing += u64::from(bad || d > CONVERGE_TOL);
+        }
+        let m = s.mpc_failing.as_ref().unwrap();
+        assert_eq!((m.trajectories, m.violating), (30, mpc_failing));
     }
 }

@@ -222,9 +222,60 @@ fn splits(nx: usize) -> usize {
 /// The sub-boxes are bounded in parallel; the maximum does not depend on the order, so the
 /// result is the same for every thread count.
 pub fn f32_allowance(model: &ExportModel, tanh: Tanh) -> (f64, usize) {
-    use rayon::prelude::*;
     let folded = model.folded();
-    let exact = model_unfolded_as_exact(&folded);
+    let key = allowance_key(model, &folded, tanh);
+    let memo = ALLOWANCES.get_or_init(Default::default);
+    if let Some(&hit) = memo.lock().ok().as_ref().and_then(|m| m.get(&key)) {
+        return hit;
+    }
+    let r = f32_allowance_of(model, &folded, tanh);
+    if let Ok(mut m) = memo.lock() {
+        m.insert(key, r);
+    }
+    r
+}
+
+/// The allowances computed so far in this process, by [`allowance_key`]: a run computes
+/// the same net's allowance in several stages (its certificate, the refinement's writes,
+/// the statistical tier, the export), each a pure function of the key's inputs.
+type AllowanceMemo = std::sync::Mutex<std::collections::HashMap<[u8; 32], (f64, usize)>>;
+static ALLOWANCES: std::sync::OnceLock<AllowanceMemo> = std::sync::OnceLock::new();
+
+/// SHA-256 of everything [`f32_allowance_of`] reads: the folded f64 and f32 layers, X, the
+/// norm's S_u and the tanh.
+fn allowance_key(model: &ExportModel, folded: &Folded, tanh: Tanh) -> [u8; 32] {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    let mut f64s = |v: &[f64]| {
+        h.update((v.len() as u64).to_le_bytes());
+        for x in v {
+            h.update(x.to_bits().to_le_bytes());
+        }
+    };
+    for l in &folded.layers {
+        for row in &l.w {
+            f64s(row);
+        }
+        f64s(&l.b);
+    }
+    f64s(&model.domain_lo);
+    f64s(&model.domain_hi);
+    f64s(&model.u_scale);
+    for (n_in, n_out, w, b) in &folded.f32_layers {
+        h.update((*n_in as u64).to_le_bytes());
+        h.update((*n_out as u64).to_le_bytes());
+        for x in w.iter().chain(b) {
+            h.update(x.to_bits().to_le_bytes());
+        }
+    }
+    h.update([tanh as u8]);
+    h.finalize().into()
+}
+
+/// [`f32_allowance`] computed (not looked up).
+fn f32_allowance_of(model: &ExportModel, folded: &Folded, tanh: Tanh) -> (f64, usize) {
+    use rayon::prelude::*;
+    let exact = model_unfolded_as_exact(folded);
     let nx = model.nx();
     let k = splits(nx);
     let boxes = k.pow(nx as u32);

@@ -75,6 +75,12 @@ pub struct StatisticalClaim {
     pub confidence: f64,
     /// n: the i.i.d. uniform states.
     pub samples: u64,
+    /// Set when the claim is conditional on MPC-feasible states (the draw had states the
+    /// MPC left unlabelled; `samples` then counts the labelled ones): P(the MPC leaves a
+    /// uniform state of X unlabelled) ≤ this, its own Clopper–Pearson bound at the same
+    /// confidence. `None`: the claim is over every state of X.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unlabelled_p_upper: Option<f64>,
 }
 
 impl StatisticalClaim {
@@ -96,15 +102,33 @@ impl StatisticalClaim {
         if self.samples == 0 {
             return bad("statistical.samples must be at least 1".into());
         }
+        if let Some(q) = self.unlabelled_p_upper {
+            if !(0.0..=1.0).contains(&q) {
+                return bad(format!(
+                    "statistical.unlabelled_p_upper must lie in [0, 1], got {q}"
+                ));
+            }
+        }
         Ok(())
     }
 
-    /// The claim in words, for the generated files.
+    /// The claim in words, for the generated files: conditional on MPC-feasible states when
+    /// it is ([`StatisticalClaim::unlabelled_p_upper`]), with the unlabelled share's bound.
     pub fn words(&self) -> String {
-        format!(
-            "P(‖κ − u‖ > ε) ≤ {:.3e} with confidence {} (Clopper–Pearson, {} i.i.d. uniform states of X)",
-            self.p_exceed_upper, self.confidence, self.samples
-        )
+        match self.unlabelled_p_upper {
+            None => format!(
+                "P(‖κ − u‖ > ε) ≤ {:.3e} with confidence {} (Clopper–Pearson, {} i.i.d. uniform states of X)",
+                self.p_exceed_upper, self.confidence, self.samples
+            ),
+            Some(q) => format!(
+                "P(‖κ − u‖ > ε | the MPC has a solution at x) ≤ {:.3e} with confidence {} \
+                 (Clopper–Pearson, {} i.i.d. uniform states of X that the MPC labelled): \
+                 conditional on MPC-feasible states; the MPC leaves a uniform state of X \
+                 unlabelled with P ≤ {:.3e} (its own Clopper–Pearson bound), where the claim \
+                 says nothing",
+                self.p_exceed_upper, self.confidence, self.samples, q
+            ),
+        }
     }
 }
 
@@ -154,5 +178,26 @@ mod tests {
             Guarantee::Estimated
         );
         assert_eq!(default_guarantee(), Guarantee::Estimated);
+    }
+
+    /// A claim conditional on MPC-feasible states says so in its words, with the
+    /// unlabelled share's bound; an unconditional one does not.
+    #[test]
+    fn a_conditional_claim_says_it_is_conditional() {
+        let mut c = StatisticalClaim {
+            p_exceed_upper: 1e-3,
+            confidence: 0.99,
+            samples: 4500,
+            unlabelled_p_upper: None,
+        };
+        assert!(!c.words().contains("conditional"));
+        c.unlabelled_p_upper = Some(0.031);
+        let w = c.words();
+        assert!(w.contains("conditional on MPC-feasible states"), "{w}");
+        assert!(w.contains("| the MPC has a solution at x"), "{w}");
+        assert!(w.contains("3.100e-2"), "{w}");
+        assert!(c.validate().is_ok());
+        c.unlabelled_p_upper = Some(1.5);
+        assert!(c.validate().is_err());
     }
 }

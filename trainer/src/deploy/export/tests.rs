@@ -144,6 +144,7 @@ fn a_statistical_eps_is_statistical_and_narrows_the_band() {
         p_exceed_upper: 1e-3,
         confidence: 0.99,
         samples: 5000,
+        unlabelled_p_upper: None,
     };
     // A placeholder has no statistical ε.
     let e = m
@@ -185,6 +186,7 @@ fn a_statistical_eps_is_statistical_and_narrows_the_band() {
             p_exceed_upper: p,
             confidence: c,
             samples: n,
+            unlabelled_p_upper: None,
         };
         let e = m
             .clone()

@@ -177,6 +177,27 @@ fn closed_loop_statement(cl: &serde_json::Value) -> String {
         cl["confidence"].as_f64().unwrap_or(f64::NAN),
         cl["steps"].as_u64().unwrap_or(0),
         cl["not_converged"].as_u64().unwrap_or(0),
+    ) + &mpc_beside(cl)
+}
+
+/// The MPC's own failures from the same starts, beside the controller's (empty in files
+/// written before they were counted).
+fn mpc_beside(cl: &serde_json::Value) -> String {
+    let m = &cl["mpc_failing"];
+    let (Some(k), Some(n), Some(c)) = (
+        m["violating"].as_u64(),
+        m["trajectories"].as_u64(),
+        cl["controller_failing_same"].as_u64(),
+    ) else {
+        return String::new();
+    };
+    format!(
+        " The MPC itself, run in closed loop from the first {n} of the same starts for the \
+         same {} steps, fails on {k} of them ({:.1} %; P ≤ {:.3e}); the exported controller \
+         fails on {c} of those {n}.",
+        cl["steps"].as_u64().unwrap_or(0),
+        100.0 * k as f64 / n.max(1) as f64,
+        m["p_violation_upper"].as_f64().unwrap_or(f64::NAN),
     )
 }
 
