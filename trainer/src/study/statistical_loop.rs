@@ -82,7 +82,7 @@ pub struct ClosedLoopStatistical {
     /// Trajectories whose last state is not within [`CONVERGE_TOL`] of x_ref (scaled).
     #[serde(default)]
     pub not_converged: u64,
-    /// The MPC's own closed loop (a fresh solve at every step, its input saturated to U;
+    /// The MPC's own closed loop (solved along the run at every step, its input saturated to U;
     /// no label: the centre of U) from the first [`MPC_STARTS`] of the same initial states,
     /// with the same rule "violates or does not converge": how often the reference law
     /// itself fails within `steps` — the scale against which the controller's failure
@@ -227,7 +227,9 @@ pub fn closed_loop_statistical(
                         lo + (hi - lo) * uniform(seed, i, k as u64)
                     })
                     .collect();
-                trajectory_of(cfg, &plant, &mut |x| law.solve(x, None).0.u, &x0)
+                // Solved along the run (`MpcLaw::solve_next`), as the closed-loop study does.
+                let mut along = crate::mpc::law::along::Along::default();
+                trajectory_of(cfg, &plant, &mut |x| law.solve_next(x, &mut along).u, &x0)
             },
         )
         .collect();
