@@ -118,6 +118,7 @@ fn the_report_lists_where_the_starts_disagree() {
                 kkt: 1e-9,
                 degeneracy: None,
                 max_slack: 0.0,
+                seq: Vec::new(),
             })
             .collect(),
         labels: None,
