@@ -28,30 +28,29 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// Copies the directory `from` into `to`, recursively.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap_or_else(|e| panic!("{}: {e}", from.display())) {
+        let e = e.unwrap();
+        let (s, d) = (e.path(), to.join(e.file_name()));
+        if e.file_type().unwrap().is_dir() {
+            copy_tree(&s, &d);
+        } else {
+            std::fs::copy(&s, &d).unwrap_or_else(|err| panic!("{}: {err}", s.display()));
+        }
+    }
+}
+
 /// `cargo check` of a copy of controller-core whose generated weights are `run`'s.
 fn check_controller_core_with(run: &Path) {
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
     let dir = tempdir();
     let krate = dir.path().join("controller-core");
     let src = krate.join("src");
-    std::fs::create_dir_all(src.join("demo")).unwrap();
-    std::fs::create_dir_all(src.join("safe")).unwrap();
-    for f in [
-        "lib.rs",
-        "activation.rs",
-        "blob.rs",
-        "certificate.rs",
-        "controller.rs",
-        "layer.rs",
-        "mlp.rs",
-        "safe.rs",
-        "safe/example.rs",
-        "safe/tests.rs",
-        "demo/mod.rs",
-    ] {
-        std::fs::copy(root.join("controller-core/src").join(f), src.join(f))
-            .unwrap_or_else(|e| panic!("controller-core/src/{f}: {e}"));
-    }
+    // The whole source tree (a module added later is copied too), then the run's weights
+    // in place of the demo's.
+    copy_tree(&root.join("controller-core/src"), &src);
     for f in ["weights.rs", "weights.bin"] {
         std::fs::copy(run.join(f), src.join("demo").join(f)).unwrap();
     }

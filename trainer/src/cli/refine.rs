@@ -170,8 +170,8 @@ pub(super) fn execute(
     Ok(())
 }
 
-/// Seconds of a run before its best certificate so far is first written out (a shorter run
-/// writes only its final outputs).
+/// Seconds of a run after which its best certificate so far is rewritten (the first best is
+/// written at once).
 const BEST_AFTER_SECONDS: f64 = 10.0;
 
 /// The command that resumes this run from its checkpoint (the same problem, output

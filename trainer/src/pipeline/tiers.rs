@@ -41,7 +41,8 @@ const CHECK_STATES: usize = 2000;
 /// command), and the statistical tier covers it. A refinement that reaches its target
 /// sooner is unaffected (its result does not depend on time).
 pub(super) const AUTO_REFINE_SECONDS: f64 = 120.0;
-/// The best-so-far certificate of the refinement is written from this many seconds on.
+/// After the first best (written at once), the refinement's best-so-far certificate is
+/// rewritten from this many seconds on.
 const BEST_AFTER_SECONDS: f64 = 10.0;
 
 /// Where a candidate's net and certificate live.

@@ -223,9 +223,11 @@ pub type Allowance = Arc<
 /// A [`RoundSink`] that writes the best result so far into `dir` as the run's outputs
 /// ([`super::write_outputs`]: `certificate.json`, `model.bin`, dataset, cells, log) with a
 /// `refine_report.json` saying the run is in progress (`resume`: the command that resumes
-/// it). Writing costs a certificate (Lipschitz bounds, the f32 allowance), so it is paced:
-/// the first best after `after` seconds of the run, later ones once at least 5× the last
-/// write's duration has passed since it — at most ~20 % of the run's time; the run's final
+/// it). The first best is written at once, so a run stopped during a long later round (an
+/// infeasible region's slow solves) still leaves a certificate and a report. Writing costs a
+/// certificate (Lipschitz bounds, the f32 allowance), so later writes are paced: from
+/// `after` seconds of the run on, once at least 5× the last write's duration has passed
+/// since it — at most ~20 % of the run's time; the run's final
 /// outputs are written by the caller. A round whose ε is infinite has its first cell at
 /// fault and its cause printed on stderr (unless `quiet`). Write errors are printed as
 /// warnings (the run goes on).
@@ -247,8 +249,10 @@ pub fn writing_sink(
         }
         let Ok(mut last) = last.lock() else { return };
         let due = match *last {
-            None => started.elapsed().as_secs_f64() >= after,
-            Some((t, d)) => t.elapsed().as_secs_f64() >= 5.0 * d,
+            None => true,
+            Some((t, d)) => {
+                started.elapsed().as_secs_f64() >= after && t.elapsed().as_secs_f64() >= 5.0 * d
+            }
         };
         if !best || !due {
             return;

@@ -496,3 +496,40 @@ fn infinite_cells_are_named_and_every_round_reaches_the_sink() {
     assert_eq!(report.infinite.len(), n_inf.min(10));
     assert!(report.eps.is_infinite() && report.binding_cell.0.len() == 2);
 }
+
+/// The writing sink writes the first best round at once, whatever its pacing (`after` = 10⁹
+/// s here): a run stopped during a long later round (an infeasible region's slow solves) still
+/// leaves a certificate and a report saying it was running, and later rounds are paced.
+#[test]
+fn the_first_best_round_is_written_at_once() {
+    let cfg = ProblemConfig {
+        refine: quick_refine([5, 5], 200, 3, 1e-9),
+        ..Default::default()
+    };
+    let dir = std::env::temp_dir().join(format!("ampc_refine_first_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let opts = RefineOptions {
+        on_result: Some(writing_sink(
+            &cfg,
+            &dir,
+            "resume",
+            (1e9, true),
+            std::sync::Arc::new(|_: &Model, _: &crate::certify::certificate::Certificate| None),
+        )),
+        ..Default::default()
+    };
+    let r = refine(&cfg, &cfg.refine, None, &opts).unwrap();
+    assert!(r.state.log.len() >= 2, "one round shows no pacing");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join(REPORT_FILE)).unwrap()).unwrap();
+    assert_eq!(report["stopped"], "running", "{report}");
+    assert_eq!(
+        report["rounds"], 1,
+        "only the first round is written: {report}"
+    );
+    let cert: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("certificate.json")).unwrap()).unwrap();
+    assert_eq!(cert["eps"].as_f64(), report["eps"].as_f64());
+    let _ = std::fs::remove_dir_all(&dir);
+}
