@@ -189,17 +189,21 @@ pub fn closed_loop_statistical(
     let seed = statistical_seed(&format!("{model_hash}\0closed loop"), user_seed);
     let nx = cfg.system.nx();
     let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+    // The i-th initial state of the draw: uniform in X.
+    let start = |i: u64| -> Vec<f64> {
+        (0..nx)
+            .map(|k| {
+                let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
+                lo + (hi - lo) * uniform(seed, i, k as u64)
+            })
+            .collect()
+    };
     let results: Vec<(bool, (f64, f64))> = (0..n as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(cfg),
             |law, i| {
-                let x0: Vec<f64> = (0..nx)
-                    .map(|k| {
-                        let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
-                        lo + (hi - lo) * uniform(seed, i, k as u64)
-                    })
-                    .collect();
+                let x0 = start(i);
                 let feasible = law.is_hard_feasible(&x0);
                 (feasible, trajectory(cfg, &plant, controller, &x0))
             },
@@ -221,12 +225,7 @@ pub fn closed_loop_statistical(
         .map_init(
             || MpcLaw::new(cfg),
             |law, i| {
-                let x0: Vec<f64> = (0..nx)
-                    .map(|k| {
-                        let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
-                        lo + (hi - lo) * uniform(seed, i, k as u64)
-                    })
-                    .collect();
+                let x0 = start(i);
                 // Solved along the run (`MpcLaw::solve_next`), as the closed-loop study does.
                 let mut along = crate::mpc::law::along::Along::default();
                 trajectory_of(cfg, &plant, &mut |x| law.solve_next(x, &mut along).u, &x0)
