@@ -284,9 +284,15 @@ fn rust_firmware() -> PathBuf {
 
 /// The C firmware's ELF: `capi/c/firmware` + the thumbv7em static library.
 fn c_firmware() -> PathBuf {
+    c_firmware_of("main.c", "c-firmware.elf", &[])
+}
+
+/// A C firmware of `capi/c/firmware` (`main`: its main file; `defines`: `-D` options),
+/// linked against the thumbv7em library, written to `target/c-api/<elf>`.
+fn c_firmware_of(main: &str, elf: &str, defines: &[&str]) -> PathBuf {
     let lib = build_staticlib(Some("thumbv7em-none-eabihf"), &["pendulum-plant"]);
     let fw = capi().join("c/firmware");
-    let elf = target_dir().join("c-api/c-firmware.elf");
+    let elf = target_dir().join("c-api").join(elf);
     let mut gcc = Command::new("arm-none-eabi-gcc");
     gcc.args([
         "-mcpu=cortex-m4",
@@ -310,8 +316,9 @@ fn c_firmware() -> PathBuf {
     .arg(fw.join("mps2_an386.ld"))
     .arg("-I")
     .arg(capi().join("include"))
+    .args(defines)
     .arg(fw.join("startup.c"))
-    .arg(fw.join("main.c"))
+    .arg(fw.join(main))
     .arg(&lib)
     .arg("-o")
     .arg(&elf);
@@ -411,4 +418,181 @@ fn call_graph(elf: &Path) -> BTreeMap<String, BTreeSet<String>> {
         }
     }
     graph
+}
+
+mod safe_pendulum {
+    controller_core::include_safe_controller!("fixtures/safe-controller/pendulum_ode_safe.rs");
+}
+
+/// `ampc_safe_step` from C (`capi/c/ampc_safe_stdin.c`, strict C99, `ampc_safe.h`): over
+/// 20 closed loops of 40 steps (the f32 plant, every seventh state perturbed, every 23rd a
+/// NaN or ±inf component, a reset between runs) flags, the bits of u and `has_safe` equal the
+/// Rust controller compiled from the same file; the header's sizes are the library's; null
+/// pointers give the documented answers.
+#[test]
+fn host_c_safe_step_is_bit_identical_to_the_core() {
+    use ampc_capi::safe::{AmpcSafe, SAFE_FLAG_NULL_ARGUMENT, SAFE_N, SAFE_NU, SAFE_NX};
+    use controller_core::safe::{Plant, SafeFlags};
+    let lib = build_staticlib(None, &[]);
+    let dir = ampc_tests::tempdir();
+    let exe = dir.path().join("ampc_safe_stdin");
+    run_checked(
+        Command::new("cc")
+            .args(STRICT)
+            .arg("-O2")
+            .arg("-I")
+            .arg(capi().join("include"))
+            .arg(capi().join("c/ampc_safe_stdin.c"))
+            .arg(&lib)
+            .args(["-lm", "-lpthread", "-ldl", "-o"])
+            .arg(&exe),
+        "cc (strict C99) of ampc_safe_stdin.c + libampc_capi.a",
+    );
+    let mut ctl = safe_pendulum::safe::CONTROLLER;
+    let plant = ctl.plant;
+    let mut s = 0x5afe_c0de_u64;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut input, mut want) = (String::new(), Vec::new());
+    let mut k = 0usize;
+    for _ in 0..20 {
+        input += "reset\n";
+        ctl.reset();
+        let mut x = [(2.0 * next() - 1.0) as f32, (1.6 * next() - 0.8) as f32];
+        for _ in 0..40 {
+            k += 1;
+            let mut xin = x;
+            if k % 7 == 0 {
+                xin[0] += (0.2 * next() - 0.1) as f32;
+            }
+            if k % 23 == 0 {
+                xin[k % 2] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
+            }
+            let line: Vec<String> = xin.iter().map(|v| format!("0x{:08x}", v.to_bits())).collect();
+            input += &line.join(" ");
+            input.push('\n');
+            let o = ctl.step(&xin);
+            let bits: Vec<String> = o.u.iter().map(|v| format!("0x{:08x}", v.to_bits())).collect();
+            want.push(format!(
+                "{} {} {}",
+                o.flags.0,
+                bits.join(" "),
+                u8::from(ctl.safe_sequence().is_some())
+            ));
+            x = if xin.iter().all(|v| v.is_finite()) { plant.step(&xin, &o.u) } else { x };
+        }
+    }
+    let mut child = Command::new(&exe)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()));
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        format!(
+            "sizeof={} n={SAFE_N} nx={SAFE_NX} nu={SAFE_NU}",
+            std::mem::size_of::<AmpcSafe>()
+        )
+    );
+    let u_ref = plant.project_input(&[f32::NAN; 1])[0].to_bits();
+    let bad = SAFE_FLAG_NULL_ARGUMENT | SafeFlags::NON_FINITE_STATE.0;
+    assert_eq!(
+        lines.next().unwrap(),
+        format!(
+            "null {SAFE_FLAG_NULL_ARGUMENT} {bad} 0x{u_ref:08x} {bad} 0x{u_ref:08x} \
+             {SAFE_FLAG_NULL_ARGUMENT} has_safe=0"
+        )
+    );
+    let got: Vec<&str> = lines.filter(|l| !l.starts_with("reset")).collect();
+    assert_eq!(got.len(), want.len());
+    let (mut cand, mut fb) = (0, 0);
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(g, w, "step {i}");
+        let f: u8 = w.split(' ').next().unwrap().parse().unwrap();
+        cand += usize::from(SafeFlags(f).contains(SafeFlags::CANDIDATE));
+        fb += usize::from(SafeFlags(f).contains(SafeFlags::FALLBACK));
+    }
+    eprintln!("C safe step: {} steps bit-identical (candidate {cand}, fallback {fb})", want.len());
+    assert!(cand > 0 && fb > 0, "candidate {cand}, fallback {fb}");
+}
+
+/// Instructions executed by `elf` on the Cortex-M4 (QEMU mps2-an386 with the counting
+/// plugin `firmware-example/tools/insn_count.c`) and its stdout.
+fn counted_run(elf: &Path) -> (u64, String) {
+    let plugin = target_dir().join("c-api/libinsn_count.so");
+    run_checked(
+        Command::new("cc")
+            .args(["-shared", "-fPIC", "-O2", "-o"])
+            .arg(&plugin)
+            .arg(root().join("firmware-example/tools/insn_count.c")),
+        "cc of the instruction-counting plugin",
+    );
+    let out = Command::new("timeout")
+        .args(["-k", "5", "300", "qemu-system-arm"])
+        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native", "-plugin"])
+        .arg(&plugin)
+        .args(["-d", "plugin", "-kernel"])
+        .arg(elf)
+        .output()
+        .expect("run qemu-system-arm");
+    assert!(out.status.success(), "{}: {:?}", elf.display(), out.status);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned()
+        + &String::from_utf8_lossy(&out.stderr);
+    let n = text
+        .split("insns:")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no instruction count in {text:?}"));
+    (n, String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The C safe firmware (`capi/c/firmware/safe_bench.c`, `ampc_safe_step` of the pendulum's
+/// safe controller with its sequence network) in QEMU on the Cortex-M4: its sums of flags
+/// and of the bits of u over 1001 steps equal the Rust controller's on the host, no panic is
+/// reachable from `ampc_safe_step`, and the instructions per step are printed
+/// ((count(1001) − count(1))/1000; BENCHMARKS.md).
+#[test]
+fn c_safe_firmware_in_qemu_matches_rust_and_is_counted() {
+    let one = c_firmware_of("safe_bench.c", "c-safe-1.elf", &["-DSAFE_CALLS=1"]);
+    let many = c_firmware_of("safe_bench.c", "c-safe-1001.elf", &["-DSAFE_CALLS=1001"]);
+    let (c1, _) = counted_run(&one);
+    let (c2, out) = counted_run(&many);
+    let states = [[0.1f32, -0.1], [0.05, 0.1], [-0.1, 0.05], [0.02, -0.02]];
+    let mut ctl = safe_pendulum::safe::CONTROLLER;
+    let (mut fl, mut acc) = (0u32, 0u32);
+    for i in 0..1001 {
+        let o = ctl.step(&states[i % 4]);
+        fl = fl.wrapping_add(u32::from(o.flags.0));
+        acc = acc.wrapping_add(o.u[0].to_bits());
+    }
+    assert_eq!(out.trim(), format!("calls=1001 flags_sum={fl} u_sum_bits={acc}"));
+    let graph = call_graph(&many);
+    assert!(graph.contains_key("ampc_safe_step"), "ampc_safe_step not in the ELF");
+    let mut seen = BTreeSet::new();
+    let mut todo = vec!["ampc_safe_step".to_string()];
+    while let Some(f) = todo.pop() {
+        if seen.insert(f.clone()) {
+            assert!(!f.contains("panic"), "{f} reachable from ampc_safe_step");
+            todo.extend(graph.get(&f).into_iter().flatten().cloned());
+        }
+    }
+    eprintln!(
+        "C safe firmware (M4): {} instructions per ampc_safe_step (counts {c1}, {c2}); \
+         {} functions reachable",
+        (c2 - c1) / 1000,
+        seen.len()
+    );
 }

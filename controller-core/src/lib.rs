@@ -17,6 +17,8 @@
 //!   not re-exported at the root: a firmware names the controller it runs.
 //! - [`include_controller!`]: the same for a crate's own exported controller (no fork of
 //!   this crate); [`demo`] includes the paper's pendulum with it.
+//! - [`include_safe_controller!`]: a crate's own safety-augmented controller (`trainer
+//!   export --safe-rs`: plant, sequence net and [`SafeController`] in one file).
 //!
 //! ```
 //! use controller_core::{demo::CONTROLLER, Flags};
@@ -127,6 +129,48 @@ macro_rules! include_controller {
         #[inline]
         pub fn evaluate(x: &[f32; NX]) -> $crate::Output<NU> {
             CONTROLLER.evaluate(x)
+        }
+    };
+}
+
+/// Compiles a safety-augmented controller exported by `trainer export --safe-rs FILE` into
+/// the calling crate (no fork of this repository).
+///
+/// `include_safe_controller!("pendulum_safe.rs")` (path relative to the invoking file, as
+/// `include!`) expands, in the current module, to `pub mod safe` holding the generated
+/// file: `safe::plant` (the problem's f32 plant, OCP and terminal ingredients,
+/// `safe::plant::SafePlant`, `safe::plant::MARGINS`), `safe::sequence` (the sequence net),
+/// `safe::N`, `safe::NX`, `safe::NU`, `safe::GUARANTEE`, the type `safe::Controller` =
+/// [`SafeController`]`<SafePlant, SequenceNet<&'static Net>, NX, NU, N>` and the constant
+/// `safe::CONTROLLER` (no safe sequence yet; the weights stay in flash, the controller itself
+/// is the last sequence, N·NU floats). The file names this crate as `controller_core`: the
+/// calling crate depends on it under that name. A margin that is not finite and ≥ 0 fails
+/// to compile ([`SafeController::validate`] in a `const` assertion).
+///
+/// (Not a doctest: the path is the user crate's file; `tests/safe_controller.rs` compiles
+/// the committed fixtures the same way.)
+///
+/// ```text
+/// controller_core::include_safe_controller!("pendulum_safe.rs");
+/// let mut ctl = safe::CONTROLLER;
+/// let out = ctl.step(&[0.1, 0.0]);   // out.u, out.flags (SafeFlags)
+/// ```
+#[macro_export]
+macro_rules! include_safe_controller {
+    ($path:expr) => {
+        /// The safety-augmented controller written by `trainer export --safe-rs` (see the
+        /// header of its file).
+        #[allow(
+            clippy::all,
+            clippy::approx_constant,
+            clippy::excessive_precision,
+            clippy::unreadable_literal,
+            dead_code,
+            unused_imports,
+            unused_parens
+        )]
+        pub mod safe {
+            include!($path);
         }
     };
 }

@@ -85,6 +85,19 @@ impl<const I: usize, const H: usize, N: Network<H>> Network<I> for Hidden<I, H, 
     }
 }
 
+/// A reference to a network is the network (so a controller can hold `&'static Net`: the
+/// weights stay in flash instead of being copied with the controller).
+impl<const I: usize, N: Network<I> + ?Sized> Network<I> for &N {
+    type Output = N::Output;
+    #[inline]
+    fn forward(&self, x: &[f32; I]) -> N::Output {
+        (**self).forward(x)
+    }
+    fn for_each_layer(&self, f: &mut LayerVisitor<'_>) {
+        (**self).for_each_layer(f);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,6 +109,21 @@ mod tests {
             Dense::<1, 1>::new([[2.0]], [1.0]),
         );
         assert_eq!(net.forward(&[0.5]), [2.0 * tanh(0.5) + 1.0]);
+    }
+
+    #[test]
+    fn a_reference_to_a_network_computes_the_same() {
+        let net = Hidden::new(
+            Dense::<1, 2>::new([[1.5], [-0.25]], [0.1, 0.0]),
+            Dense::<2, 1>::new([[2.0, 3.0]], [1.0]),
+        );
+        let r: &Hidden<1, 2, Dense<2, 1>> = &net;
+        for x in [-2.0f32, 0.0, 0.3, 7.0] {
+            assert_eq!(Network::forward(&r, &[x]), net.forward(&[x]));
+        }
+        let mut n = 0;
+        Network::for_each_layer(&r, &mut |_, _, _, _| n += 1);
+        assert_eq!(n, 2);
     }
 
     #[test]

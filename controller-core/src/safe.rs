@@ -266,6 +266,16 @@ where
         self.safe = None;
     }
 
+    /// Puts back a safe sequence kept elsewhere (what [`Self::safe_sequence`] returned after
+    /// the last step, e.g. across the C API, whose caller holds the controller's memory).
+    /// Not checked here: the next `step` checks the shifted sequence from the state it is
+    /// given like any other, and flags [`SafeFlags::SAFE_INFEASIBLE`] when it fails — so a
+    /// sequence that is not the one last returned voids the guarantee but is never applied
+    /// unflagged.
+    pub fn restore(&mut self, sequence: Option<[[f32; NU]; N]>) {
+        self.safe = sequence;
+    }
+
     /// Adopts `sequence` (an MPC solution at state `x`) as the safe sequence, as if it had
     /// been applied at `x`, if it passes the online check from `x`; its first input is what
     /// the caller applies at `x`. Returns its cost. Nothing changes on rejection.

@@ -3,7 +3,10 @@
 //! ```text
 //! uint8_t ampc_evaluate(const float x[AMPC_NX], float u[AMPC_NU]);   // flags
 //! extern const struct ampc_certificate ampc_linked_certificate;
+//! uint8_t ampc_safe_step(struct ampc_safe *s, const float x[], float u[]);  // ampc_safe.h
 //! ```
+//! The safety-augmented controller (`ampc_safe_init`, `ampc_safe_step`, header
+//! `include/ampc_safe.h`) is [`safe`].
 //! `ampc_evaluate` is [`controller_core::demo::evaluate`] behind raw pointers: `u = κ_NN(Π_X(x))`
 //! clamped to the band, the return value is [`Flags`]' bits, plus
 //! [`FLAG_NULL_ARGUMENT`] for a null pointer (x null: u = fallback, flags NON_FINITE |
@@ -155,6 +158,8 @@ pub unsafe extern "C" fn ampc_example_pendulum_step(x: *mut f32, u: f32) {
     // SAFETY: x is non-null and points to 2 readable, writable, aligned f32 (contract).
     unsafe { p.write(plant::rk4_step(p.read(), u)) };
 }
+
+pub mod safe;
 
 /// The Rust firmware's plant, compiled from its very source file (no dependency on the
 /// firmware crate, whose Cortex-M runtime must not end up in the static library).

@@ -260,3 +260,26 @@ fn step_uses_the_controllers_own_source() {
     assert_eq!(o.flags, SafeFlags::CANDIDATE.union(SafeFlags::INITIALISED));
     assert_eq!((o.u, o.candidate_cost), ([0.0], 0.0));
 }
+
+#[test]
+fn restore_puts_back_a_sequence_and_a_corrupt_one_is_flagged_not_applied_silently() {
+    let x0 = [1.0, 0.0];
+    let safe = saturated_k(x0, 0);
+    let x1 = Di.step(&x0, &safe[0]);
+    // Kept outside and put back: the same step as an uninterrupted controller.
+    let mut a = ctl();
+    a.init_with(&x0, &safe).unwrap();
+    let kept = a.safe_sequence().copied();
+    let mut b = ctl();
+    b.restore(kept);
+    assert_eq!(a.step_with(&x1, [[1.0]; N]), b.step_with(&x1, [[1.0]; N]));
+    assert_eq!(a.safe_sequence(), b.safe_sequence());
+    // A corrupt sequence (NaN) fails its check: flagged, and the output stays in the box.
+    let mut c = ctl();
+    c.restore(Some([[f32::NAN]; N]));
+    let o = c.step_with(&x1, [[1.0]; N]);
+    assert!(o.flags.contains(SafeFlags::SAFE_INFEASIBLE), "{:?}", o.flags);
+    assert!(o.u[0].is_finite() && o.u[0].abs() <= Di::U_MAX);
+    c.restore(None);
+    assert_eq!(c.safe_sequence(), None);
+}

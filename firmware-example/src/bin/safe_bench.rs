@@ -4,8 +4,12 @@
 //! constraints, costs, the nominal terminal ingredients and `MARGINS`), N = 20, on the
 //! Cortex-M4 or the Cortex-M0 (QEMU; `tools/measure.sh safe`).
 //!
-//! The candidate is given (no sequence network yet: its cost is the net's `evaluate-bench`
-//! figure for a net with N·nu = 40 outputs, to be added). A safe sequence is adopted first
+//! Two kinds of entry points: the check alone (`ampc_safe_step`, `ampc_safe_step_pendulum`:
+//! `step_with` a given candidate), and the whole controller with its sequence network
+//! (`ampc_safe_step_net`, `ampc_safe_step_net_pendulum`: `step`, the network's candidate then
+//! the check — the file `trainer export --safe-rs` writes,
+//! `tests/fixtures/safe-controller/*_safe.rs`, compiled with
+//! `controller_core::include_safe_controller!`; command-line word `net`). A safe sequence is adopted first
 //! (`init_with` the terminal controller's sequence from a state of X_f), so every measured
 //! step checks both the candidate and the shifted safe sequence over all N steps — the
 //! check's work does not depend on the data (`SafeController::check`). Reads the number of
@@ -34,8 +38,24 @@ mod pend {
 }
 
 #[cfg(target_os = "none")]
+mod quad_net {
+    controller_core::include_safe_controller!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/fixtures/safe-controller/planar_quadrotor_safe.rs"
+    ));
+}
+
+#[cfg(target_os = "none")]
+mod pend_net {
+    controller_core::include_safe_controller!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/fixtures/safe-controller/pendulum_ode_safe.rs"
+    ));
+}
+
+#[cfg(target_os = "none")]
 mod device {
-    use super::{pend, quad};
+    use super::{pend, pend_net, quad, quad_net};
     use controller_core::safe::{Plant, SafeController, SafeOutput};
     use core::hint::black_box;
     use cortex_m_rt::entry;
@@ -53,6 +73,102 @@ mod device {
     }
 
     type PendCtl = SafeController<pend::SafePlant, (), 2, 1, N>;
+
+    /// The measured entry point of the quadrotor with its sequence network
+    /// (`safe-bench net N`): the network's candidate, then the check.
+    #[no_mangle]
+    #[inline(never)]
+    pub fn ampc_safe_step_net(ctl: &mut quad_net::safe::Controller, x: &[f32; 6]) -> SafeOutput<2> {
+        ctl.step(x)
+    }
+
+    /// The measured entry point of the pendulum with its sequence network
+    /// (`safe-bench pendulum net N`).
+    #[no_mangle]
+    #[inline(never)]
+    pub fn ampc_safe_step_net_pendulum(
+        ctl: &mut pend_net::safe::Controller,
+        x: &[f32; 2],
+    ) -> SafeOutput<1> {
+        ctl.step(x)
+    }
+
+    /// `n` steps of `f` over four states (flags sum, u bits sum).
+    fn steps<const NX: usize, const NU: usize>(
+        n: u32,
+        states: &[[f32; NX]; 4],
+        mut f: impl FnMut(&[f32; NX]) -> SafeOutput<NU>,
+    ) -> (u32, u32) {
+        let (mut acc, mut fl) = (0u32, 0u32);
+        for i in 0..n {
+            let x = states.get((i % 4) as usize).copied().unwrap_or([0.0; NX]);
+            let o = black_box(f(black_box(&x)));
+            acc = o.u.iter().fold(acc, |a, u| a.wrapping_add(u.to_bits()));
+            fl = fl.wrapping_add(u32::from(o.flags.0));
+        }
+        (fl, acc)
+    }
+
+    /// The pendulum with its network: (init, flags sum, u bits sum) over n steps.
+    fn pendulum_net(n: u32) -> (bool, u32, u32) {
+        let p = pend::SafePlant;
+        let x0 = [0.1f32, -0.1];
+        let mut x = x0;
+        let seq: [[f32; 1]; N] = core::array::from_fn(|_| {
+            let u = p.project_input(&p.terminal_input(&x));
+            x = p.step(&x, &u);
+            u
+        });
+        let mut ctl = pend_net::safe::CONTROLLER;
+        let init_ok = ctl.init_with(&x0, &seq).is_ok();
+        let states: [[f32; 2]; 4] = [x0, [0.05, 0.1], [-0.1, 0.05], [0.02, -0.02]];
+        let (fl, acc) = steps(n, &states, |x| ampc_safe_step_net_pendulum(&mut ctl, x));
+        (init_ok, fl, acc)
+    }
+
+    /// The quadrotor with its network: (init, flags sum, u bits sum) over n steps.
+    fn quadrotor_net(n: u32) -> (bool, u32, u32) {
+        let x0 = [0.05f32, -0.05, 0.02, 0.0, 0.05, 0.0];
+        let seq = kappa_sequence(&x0);
+        let mut ctl = quad_net::safe::CONTROLLER;
+        let init_ok = ctl.init_with(&x0, &seq).is_ok();
+        let (fl, acc) = steps(n, &QUAD_STATES, |x| ampc_safe_step_net(&mut ctl, x));
+        (init_ok, fl, acc)
+    }
+
+    /// The quadrotor's measurement states.
+    const QUAD_STATES: [[f32; 6]; 4] = [
+        [0.05, -0.05, 0.02, 0.0, 0.05, 0.0],
+        [0.04, -0.04, 0.015, 0.01, 0.04, 0.0],
+        [-0.05, 0.05, -0.02, 0.0, -0.05, 0.01],
+        [0.02, 0.01, 0.0, -0.01, 0.0, 0.0],
+    ];
+
+    /// Prints `prefix` then `calls=`, `init=`, `flags_sum=`, `u_sum_bits=` and exits.
+    fn report(prefix: &str, n: u32, (init_ok, fl, acc): (bool, u32, u32)) -> ! {
+        let mut ok = init_ok;
+        if let Ok(mut out) = hio::hstdout() {
+            let mut t = [0u8; 24];
+            ok &= out.write_all(prefix.as_bytes()).is_ok();
+            for (label, v) in [
+                ("calls=", n),
+                (" init=", u32::from(init_ok)),
+                (" flags_sum=", fl),
+                (" u_sum_bits=", acc),
+            ] {
+                let l = write_u32(v, &mut t);
+                ok &= out.write_all(label.as_bytes()).is_ok();
+                ok &= out.write_all(t.get(..l).unwrap_or(&[])).is_ok();
+            }
+            ok &= out.write_all(b"\n").is_ok();
+        }
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+        loop {}
+    }
 
     /// The measured entry point of the pendulum (`safe-bench pendulum N`).
     #[no_mangle]
@@ -92,12 +208,12 @@ mod device {
         (init_ok, fl, acc)
     }
 
-    /// Whether the command line names the pendulum.
-    fn wants_pendulum() -> bool {
+    /// Whether the command line holds the word `word`.
+    fn wants(word: &[u8]) -> bool {
         let mut buf = [0u8; 64];
         // SAFETY: GET_CMDLINE writes at most `buf.len()` bytes into `buf`.
         let r = unsafe { syscall!(GET_CMDLINE, buf.as_mut_ptr(), buf.len()) };
-        r == 0 && buf.windows(8).any(|w| w == b"pendulum")
+        r == 0 && buf.windows(word.len()).any(|w| w == word)
     }
 
     /// The terminal controller's sequence from `x`.
@@ -163,7 +279,12 @@ mod device {
     #[entry]
     fn main() -> ! {
         let n = calls();
-        if wants_pendulum() {
+        match (wants(b"pendulum"), wants(b" net")) {
+            (true, true) => report("pendulum net ", n, pendulum_net(n)),
+            (false, true) => report("net ", n, quadrotor_net(n)),
+            _ => {}
+        }
+        if wants(b"pendulum") {
             let (init_ok, fl, acc) = pendulum(n);
             let mut ok = init_ok;
             if let Ok(mut out) = hio::hstdout() {

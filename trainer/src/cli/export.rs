@@ -110,6 +110,14 @@ pub(super) struct Args {
     /// without a sequence net.
     #[arg(long, value_name = "FILE", requires = "model")]
     sequence_rs: Option<PathBuf>,
+    /// Write the safety-augmented controller of a sequence-net model as one no_std Rust file
+    /// for `controller_core::include_safe_controller!`: the plant of --plant-rs (of --config,
+    /// else the model's problem) in `mod plant`, the sequence net in `mod sequence`, `N`,
+    /// the type `Controller` and the constant `CONTROLLER` (`deploy::safe_rs`). Refused for a
+    /// model without a sequence net, a net whose outputs are not ocp.horizon × nu, and the
+    /// plants --plant-rs refuses.
+    #[arg(long, value_name = "FILE", requires = "model")]
+    safe_rs: Option<PathBuf>,
 }
 
 impl Args {
@@ -122,6 +130,17 @@ impl Args {
         if let (Some(file), Some(model)) = (&self.sequence_rs, &self.model) {
             refuse_overwrite(&[file], &[model, opt(&self.config)])?;
             write_sequence_rs(model, file)?;
+            if self.rust.is_none()
+                && self.onnx.is_none()
+                && self.c_lib.is_none()
+                && self.safe_rs.is_none()
+            {
+                return Ok(());
+            }
+        }
+        if let (Some(file), Some(model)) = (&self.safe_rs, &self.model) {
+            refuse_overwrite(&[file], &[model, opt(&self.config)])?;
+            write_safe_rs(self.config.as_deref(), model, file)?;
             if self.rust.is_none() && self.onnx.is_none() && self.c_lib.is_none() {
                 return Ok(());
             }
@@ -183,6 +202,46 @@ fn write_sequence_rs(model: &Path, file: &Path) -> Result<()> {
         file.display(),
         seq.nu(),
         seq.nu() / nu.max(1)
+    );
+    Ok(())
+}
+
+/// `--safe-rs FILE`: the safe controller of the model's sequence net (`deploy::safe_rs`).
+fn write_safe_rs(config: Option<&Path>, model: &Path, file: &Path) -> Result<()> {
+    let m = super::common::load_model(model)?;
+    let Some(seq) = &m.sequence else {
+        bail!(
+            "{}: the model has no sequence net (train it with [training] outputs = \"sequence\")",
+            model.display()
+        );
+    };
+    let Some(cfg) = super::common::problem_for_model(config, model, &m)? else {
+        bail!(
+            "{}: the model stores no problem: pass --config (the plant is generated from it)",
+            model.display()
+        );
+    };
+    let (text, g) = trainer::deploy::safe_rs::render_safe_rs(&cfg, seq).with_context(|| {
+        format!(
+            "cannot generate the safe controller of {} for `{}`",
+            model.display(),
+            cfg.name
+        )
+    })?;
+    trainer::io::write_atomic(file, text.as_bytes())
+        .with_context(|| format!("cannot write {}", file.display()))?;
+    eprintln!(
+        "{}: safe controller of `{}`: sequence net {:?}, N {}, terminal set alpha {:e} \
+         (invariance {}, decrease {}), margins stage {:e} / terminal {:e} (estimated)",
+        file.display(),
+        cfg.name,
+        seq.widths(),
+        cfg.ocp.horizon,
+        g.terminal.alpha(),
+        g.invariance(),
+        g.decrease,
+        g.margins.stage,
+        g.margins.terminal,
     );
     Ok(())
 }

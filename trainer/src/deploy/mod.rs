@@ -10,6 +10,8 @@
 //!
 //! - [`plant_rs`]: the plant's discrete map F as `no_std` f32 Rust, for the online check of
 //!   `controller_core::safe` (expression plants and the cart-pole).
+//! - [`safe_rs`]: the safety-augmented controller of a sequence-net model as one file
+//!   (plant, sequence net, `CONTROLLER`) for `controller_core::include_safe_controller!`.
 //! - [`controller`]: the deployed controller of a model file as a library object (what
 //!   `trainer eval` computes per state).
 //!
@@ -21,4 +23,5 @@ pub mod onnx;
 pub mod plant_rs;
 pub mod plant_rs_margin;
 pub mod plant_rs_safe;
+pub mod safe_rs;
 pub mod sequence_rs;

@@ -133,6 +133,17 @@ impl TerminalSource {
     }
 }
 
+impl SafePlantRs {
+    /// The invariance tier of the terminal set written (`TERMINAL_INVARIANCE`): `"proven"`
+    /// for a robust design's region with an exact or vertex bound, else `"sampled"`.
+    pub fn invariance(&self) -> &'static str {
+        match &self.terminal {
+            TerminalSource::Robust(t) if t.proven() => "proven",
+            _ => "sampled",
+        }
+    }
+}
+
 /// The full generated plant of `cfg` (module doc): dynamics, OCP, terminal ingredients and
 /// `impl controller_core::safe::Plant<NX, NU> for SafePlant`.
 pub fn safe_plant_rs(cfg: &ProblemConfig) -> Result<SafePlantRs, PlantRsError> {
