@@ -6,7 +6,9 @@
 //! allowance; runs `evaluate-check` (600 probe states: edge cases, inside and around X) and
 //! compares every `u` bit pattern and flag set with the host's `evaluate`. Also checks on
 //! each ELF that no panic symbol is reachable from `ampc_evaluate`, nor from `ampc_safe_step`
-//! (`safe-bench`: the SafeController on the generated quadrotor, which also runs once in QEMU)
+//! (`safe-bench`: the SafeController on the generated quadrotor, which also runs once in QEMU),
+//! nor from `ampc_safe_step_net` / `ampc_safe_step_net_pendulum` (the same with the
+//! sequence networks of `tests/fixtures/safe-controller`, run three steps in QEMU)
 //! (call graph from objdump).
 //!
 //! Needs `rustup target add thumbv7em-none-eabihf thumbv6m-none-eabi`, `qemu-system-arm`
@@ -95,6 +97,22 @@ fn build_firmware(board: &Board) -> PathBuf {
 
 fn qemu(board: &Board, elf: &std::path::Path) -> String {
     ampc_tests::qemu(board.cpu, board.machine, elf)
+}
+
+/// `elf` in QEMU with the semihosting command line `safe-bench <args>` (`args`: QEMU's
+/// `arg=` list after the first); its stdout.
+fn qemu_args(board: &Board, elf: &std::path::Path, args: &str) -> String {
+    let out = Command::new("timeout")
+        .args(["-k", "5", "300", "qemu-system-arm"])
+        .args(["-cpu", board.cpu, "-machine", board.machine, "-nographic"])
+        .arg("-semihosting-config")
+        .arg(format!("enable=on,target=native,arg=safe-bench,arg={args}"))
+        .arg("-kernel")
+        .arg(elf)
+        .output()
+        .expect("run qemu-system-arm");
+    assert!(out.status.success(), "{} {args}: {:?}", elf.display(), out.status);
+    String::from_utf8(out.stdout).expect("firmware output is UTF-8")
 }
 
 fn parse(csv: &str) -> Vec<Row> {
@@ -306,6 +324,9 @@ fn no_panic_reachable_from_evaluate_in_the_elf() {
         // sequence adopted (`init=1`).
         no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step");
         no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step_pendulum");
+        // With the sequence network (`trainer export --safe-rs` files): the whole step.
+        no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step_net");
+        no_panic_reachable_from(&board, "safe-bench", "ampc_safe_step_net_pendulum");
         let bins = build_firmware(&board);
         let out = qemu(&board, &bins.join("safe-bench"));
         assert!(
@@ -313,6 +334,14 @@ fn no_panic_reachable_from_evaluate_in_the_elf() {
             "{}: {out}",
             board.machine
         );
+        for (args, prefix) in [("net,arg=3", "net calls=3 "), ("pendulum,arg=net,arg=3", "pendulum net calls=3 ")] {
+            let out = qemu_args(&board, &bins.join("safe-bench"), args);
+            assert!(
+                out.starts_with(prefix) && out.contains(" init=1 "),
+                "{} {args}: {out}",
+                board.machine
+            );
+        }
     }
 }
 

@@ -8,7 +8,8 @@
  * Guarantee, once a safe sequence exists (flag CANDIDATE or FALLBACK without
  * SAFE_INFEASIBLE): deterministic for the nominal model: constraint satisfaction and
  * convergence. It rests on model match (the plant follows the generated f32 model), the
- * terminal set's tier (sampled) and the f32 margins (estimated). Nothing is guaranteed while
+ * terminal set (invariance sampled, decrease "not established" for this pendulum) and the
+ * f32 margins (estimated). Nothing is guaranteed while
  * NO_SAFE is returned beyond an input inside the input box.
  * Plain C99; no allocation, no global state: the caller owns struct ampc_safe.
  */
