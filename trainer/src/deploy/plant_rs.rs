@@ -144,7 +144,11 @@ fn tape_fn(
 ) {
     let _ = writeln!(out, "/// {what} (the trainer's instruction tape, in f32).");
     let _ = writeln!(out, "#[allow(clippy::all, unused_parens)]");
-    let _ = writeln!(out, "#[inline]");
+    // Always inlined, as `step`: the online check calls them 4·N times per sequence, and
+    // on a Cortex-M4 the calls cost about a fifth of a safe step (BENCHMARKS.md: 35,476 →
+    // 28,332 instructions for the quadrotor with its net; the same arithmetic, so the same
+    // bits).
+    let _ = writeln!(out, "#[inline(always)]");
     let _ = writeln!(
         out,
         "pub fn {name}(x: &[f32; NX], u: &[f32; NU]) -> [f32; {outs}] {{"
@@ -174,7 +178,7 @@ fn step_fn(model: &ExprModel, ts: f64, substeps: usize, out: &mut String) {
         out,
         "/// F(x, u): one sampling period of the nominal model."
     );
-    let _ = writeln!(out, "#[inline]");
+    let _ = writeln!(out, "#[inline(always)]");
     let _ = writeln!(
         out,
         "pub fn step(x: &[f32; NX], u: &[f32; NU]) -> [f32; NX] {{"
