@@ -472,18 +472,28 @@ fn host_c_safe_step_is_bit_identical_to_the_core() {
             if k % 23 == 0 {
                 xin[k % 2] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
             }
-            let line: Vec<String> = xin.iter().map(|v| format!("0x{:08x}", v.to_bits())).collect();
+            let line: Vec<String> = xin
+                .iter()
+                .map(|v| format!("0x{:08x}", v.to_bits()))
+                .collect();
             input += &line.join(" ");
             input.push('\n');
             let o = ctl.step(&xin);
-            let bits: Vec<String> = o.u.iter().map(|v| format!("0x{:08x}", v.to_bits())).collect();
+            let bits: Vec<String> =
+                o.u.iter()
+                    .map(|v| format!("0x{:08x}", v.to_bits()))
+                    .collect();
             want.push(format!(
                 "{} {} {}",
                 o.flags.0,
                 bits.join(" "),
                 u8::from(ctl.safe_sequence().is_some())
             ));
-            x = if xin.iter().all(|v| v.is_finite()) { plant.step(&xin, &o.u) } else { x };
+            x = if xin.iter().all(|v| v.is_finite()) {
+                plant.step(&xin, &o.u)
+            } else {
+                x
+            };
         }
     }
     let mut child = Command::new(&exe)
@@ -523,7 +533,10 @@ fn host_c_safe_step_is_bit_identical_to_the_core() {
         cand += usize::from(SafeFlags(f).contains(SafeFlags::CANDIDATE));
         fb += usize::from(SafeFlags(f).contains(SafeFlags::FALLBACK));
     }
-    eprintln!("C safe step: {} steps bit-identical (candidate {cand}, fallback {fb})", want.len());
+    eprintln!(
+        "C safe step: {} steps bit-identical (candidate {cand}, fallback {fb})",
+        want.len()
+    );
     assert!(cand > 0 && fb > 0, "candidate {cand}, fallback {fb}");
 }
 
@@ -548,8 +561,8 @@ fn counted_run(elf: &Path) -> (u64, String) {
         .output()
         .expect("run qemu-system-arm");
     assert!(out.status.success(), "{}: {:?}", elf.display(), out.status);
-    let text = String::from_utf8_lossy(&out.stdout).into_owned()
-        + &String::from_utf8_lossy(&out.stderr);
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
     let n = text
         .split("insns:")
         .nth(1)
@@ -578,9 +591,15 @@ fn c_safe_firmware_in_qemu_matches_rust_and_is_counted() {
         fl = fl.wrapping_add(u32::from(o.flags.0));
         acc = acc.wrapping_add(o.u[0].to_bits());
     }
-    assert_eq!(out.trim(), format!("calls=1001 flags_sum={fl} u_sum_bits={acc}"));
+    assert_eq!(
+        out.trim(),
+        format!("calls=1001 flags_sum={fl} u_sum_bits={acc}")
+    );
     let graph = call_graph(&many);
-    assert!(graph.contains_key("ampc_safe_step"), "ampc_safe_step not in the ELF");
+    assert!(
+        graph.contains_key("ampc_safe_step"),
+        "ampc_safe_step not in the ELF"
+    );
     let mut seen = BTreeSet::new();
     let mut todo = vec!["ampc_safe_step".to_string()];
     while let Some(f) = todo.pop() {

@@ -111,7 +111,12 @@ fn qemu_args(board: &Board, elf: &std::path::Path, args: &str) -> String {
         .arg(elf)
         .output()
         .expect("run qemu-system-arm");
-    assert!(out.status.success(), "{} {args}: {:?}", elf.display(), out.status);
+    assert!(
+        out.status.success(),
+        "{} {args}: {:?}",
+        elf.display(),
+        out.status
+    );
     String::from_utf8(out.stdout).expect("firmware output is UTF-8")
 }
 
@@ -334,7 +339,10 @@ fn no_panic_reachable_from_evaluate_in_the_elf() {
             "{}: {out}",
             board.machine
         );
-        for (args, prefix) in [("net,arg=3", "net calls=3 "), ("pendulum,arg=net,arg=3", "pendulum net calls=3 ")] {
+        for (args, prefix) in [
+            ("net,arg=3", "net calls=3 "),
+            ("pendulum,arg=net,arg=3", "pendulum net calls=3 "),
+        ] {
             let out = qemu_args(&board, &bins.join("safe-bench"), args);
             assert!(
                 out.starts_with(prefix) && out.contains(" init=1 "),

@@ -67,7 +67,11 @@ fn committed_files_are_what_the_exporter_writes() {
             .arg(&out)
             .output()
             .unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
         let text = std::fs::read_to_string(&out).unwrap();
         let path = fixture(&format!("{name}_safe.rs"));
         if std::env::var_os("AMPC_BLESS").is_some() {
@@ -102,7 +106,10 @@ fn a_model_without_a_sequence_net_is_refused_naming_it() {
         .unwrap();
     let err = String::from_utf8_lossy(&st.stderr);
     assert!(!st.status.success());
-    assert!(err.contains("plain.model") && err.contains("no sequence net"), "{err}");
+    assert!(
+        err.contains("plain.model") && err.contains("no sequence net"),
+        "{err}"
+    );
     assert!(!out.exists());
 }
 
@@ -135,7 +142,9 @@ fn net_difference<const NX: usize, const M: usize>(
 fn compiled_sequence_nets_are_the_models() {
     let d = net_difference::<2, 20>("pendulum_ode", &pend::safe::sequence::NET);
     let q = net_difference::<6, 40>("planar_quadrotor", &quad::safe::sequence::NET);
-    eprintln!("sequence nets, largest relative difference f32 vs f64: pendulum {d:e}, quadrotor {q:e}");
+    eprintln!(
+        "sequence nets, largest relative difference f32 vs f64: pendulum {d:e}, quadrotor {q:e}"
+    );
     assert!(d < 1e-4 && q < 1e-4, "{d:e} {q:e}");
     assert_eq!((pend::safe::N, pend::safe::NX, pend::safe::NU), (20, 2, 1));
     assert_eq!((quad::safe::N, quad::safe::NX, quad::safe::NU), (20, 6, 2));
@@ -240,7 +249,10 @@ fn compiled_controllers_close_the_loop_on_the_f64_model() {
     );
     eprintln!("safe closed loops on the f64 model: pendulum {p:?}, quadrotor {q:?}");
     for (name, t) in [("pendulum", &p), ("quadrotor", &q)] {
-        assert!(t.candidate > 0, "{name}: the candidate was never used: {t:?}");
+        assert!(
+            t.candidate > 0,
+            "{name}: the candidate was never used: {t:?}"
+        );
         assert_eq!(t.candidate + t.fallback + t.no_safe, t.steps, "{name}");
     }
 }

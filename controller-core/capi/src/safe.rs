@@ -170,13 +170,19 @@ mod tests {
         }
         assert_eq!(mem.has_safe, 0);
         // SAFETY: null s is allowed.
-        assert_eq!(unsafe { ampc_safe_init(core::ptr::null_mut()) }, SAFE_FLAG_NULL_ARGUMENT);
+        assert_eq!(
+            unsafe { ampc_safe_init(core::ptr::null_mut()) },
+            SAFE_FLAG_NULL_ARGUMENT
+        );
         let nan = [f32::NAN, 0.0];
         // SAFETY: live arrays.
         let f = unsafe { ampc_safe_step(&mut mem, nan.as_ptr(), u.as_mut_ptr()) };
         assert!(SafeFlags(f).contains(SafeFlags::NON_FINITE_STATE));
         assert!(u[0].is_finite());
-        let (lo, hi) = (pendulum::safe::plant::U_LO[0], pendulum::safe::plant::U_HI[0]);
+        let (lo, hi) = (
+            pendulum::safe::plant::U_LO[0],
+            pendulum::safe::plant::U_HI[0],
+        );
         assert!(lo <= u[0] && u[0] <= hi);
     }
 }

@@ -278,7 +278,11 @@ fn restore_puts_back_a_sequence_and_a_corrupt_one_is_flagged_not_applied_silentl
     let mut c = ctl();
     c.restore(Some([[f32::NAN]; N]));
     let o = c.step_with(&x1, [[1.0]; N]);
-    assert!(o.flags.contains(SafeFlags::SAFE_INFEASIBLE), "{:?}", o.flags);
+    assert!(
+        o.flags.contains(SafeFlags::SAFE_INFEASIBLE),
+        "{:?}",
+        o.flags
+    );
     assert!(o.u[0].is_finite() && o.u[0].abs() <= Di::U_MAX);
     c.restore(None);
     assert_eq!(c.safe_sequence(), None);
