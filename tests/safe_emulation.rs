@@ -109,7 +109,11 @@ where
             let rows: Vec<Vec<f32>> = c.iter().map(|r| r.to_vec()).collect();
             let a = real.init_with(&x, &c).ok();
             let b = mine.init_with(&x.to_vec(), &rows);
-            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "{name} init at {x:?}");
+            assert_eq!(
+                a.map(f32::to_bits),
+                b.map(f32::to_bits),
+                "{name} init at {x:?}"
+            );
         }
         for k in 0..steps {
             let kind = (next(&mut s) * 5.0) as u64 % 5;
@@ -119,7 +123,11 @@ where
             let b = mine.step_with(&x, rows);
             let what = format!("{name} loop {l} step {k} kind {kind} x {x:?}");
             assert_eq!(a.flags, b.flags, "{what}");
-            assert_eq!(a.candidate_cost.to_bits(), b.candidate_cost.to_bits(), "{what}");
+            assert_eq!(
+                a.candidate_cost.to_bits(),
+                b.candidate_cost.to_bits(),
+                "{what}"
+            );
             assert_eq!(a.safe_cost.to_bits(), b.safe_cost.to_bits(), "{what}");
             let ua: Vec<u32> = a.u.iter().map(|v| v.to_bits()).collect();
             let ub: Vec<u32> = b.u.iter().map(|v| v.to_bits()).collect();
@@ -148,10 +156,22 @@ where
 
 #[test]
 fn double_integrator_emulation_is_the_safe_controller_bit_for_bit() {
-    compare::<di::SafePlant, 2, 1, 20>("double_integrator_ode", di::SafePlant, di::MARGINS, 200, 40);
+    compare::<di::SafePlant, 2, 1, 20>(
+        "double_integrator_ode",
+        di::SafePlant,
+        di::MARGINS,
+        200,
+        40,
+    );
 }
 
 #[test]
 fn quadrotor_emulation_is_the_safe_controller_bit_for_bit() {
-    compare::<quad::SafePlant, 6, 2, 20>("planar_quadrotor", quad::SafePlant, quad::MARGINS, 200, 40);
+    compare::<quad::SafePlant, 6, 2, 20>(
+        "planar_quadrotor",
+        quad::SafePlant,
+        quad::MARGINS,
+        200,
+        40,
+    );
 }

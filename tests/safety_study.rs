@@ -54,12 +54,21 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
     let g = &s.nominal;
     let runs = cfg.closed_loop.safety_runs as u64;
     assert_eq!(g.safe.runs.len() as u64, runs);
-    assert_eq!(g.init_mpc + g.init_candidate + g.runs_without_safe_sequence, runs);
+    assert_eq!(
+        g.init_mpc + g.init_candidate + g.runs_without_safe_sequence,
+        runs
+    );
     assert_eq!(g.init_candidate, 0, "a NaN candidate never initialises");
-    assert!(g.init_mpc >= runs / 2, "most starts get the MPC's sequence: {g:?}");
+    assert!(
+        g.init_mpc >= runs / 2,
+        "most starts get the MPC's sequence: {g:?}"
+    );
     let fallback: usize = g.safe.runs.iter().map(|r| r.fallback_steps).sum();
     assert_eq!(fallback as u64, g.init_mpc * (steps as u64 - 1));
-    assert_eq!(g.safe.no_safe_steps, g.runs_without_safe_sequence * steps as u64);
+    assert_eq!(
+        g.safe.no_safe_steps,
+        g.runs_without_safe_sequence * steps as u64
+    );
     let share = fallback as f64 / (runs as f64 * steps as f64);
     assert!((g.safe.fallback_share - share).abs() < 1e-12);
     for r in g.safe.runs.iter().filter(|r| r.fallback_steps > 0) {
@@ -68,13 +77,26 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
     }
     assert_eq!(g.mpc.median_cost_ratio, Some(1.0));
     assert_eq!(g.mpc.fallback_share, 0.0);
-    assert!(g.plain.converged < runs, "u = 0 does not stop the double integrator");
+    assert!(
+        g.plain.converged < runs,
+        "u = 0 does not stop the double integrator"
+    );
     let json = serde_json::to_string(&s).unwrap();
     assert!(!json.contains("null"), "{json}");
-    for key in ["\"safe\":", "\"plain\":", "\"mpc\":", "\"violation_steps\":", "\"fallback_steps\":", "\"converged\":", "\"cost\":"] {
+    for key in [
+        "\"safe\":",
+        "\"plain\":",
+        "\"mpc\":",
+        "\"violation_steps\":",
+        "\"fallback_steps\":",
+        "\"converged\":",
+        "\"cost\":",
+    ] {
         assert!(json.contains(key), "{key}");
     }
-    assert!(s.guarantee.contains("deterministic for the nominal model: constraint satisfaction and convergence"));
+    assert!(s
+        .guarantee
+        .contains("deterministic for the nominal model: constraint satisfaction and convergence"));
     let back: SafetyStudy = serde_json::from_str(&json).unwrap();
     assert_eq!(back, s);
     // Thread count does not matter.

@@ -67,7 +67,11 @@ fn f32m(m: &[Vec<f64>]) -> Vec<Vec<f32>> {
 fn dense(m: &crate::problem::MatrixSpec, n: usize) -> Vec<Vec<f64>> {
     let d = m.to_dmatrix().filter(|d| d.nrows() == n && d.ncols() == n);
     (0..n)
-        .map(|i| (0..n).map(|j| d.as_ref().map_or(0.0, |d| d[(i, j)])).collect())
+        .map(|i| {
+            (0..n)
+                .map(|j| d.as_ref().map_or(0.0, |d| d[(i, j)]))
+                .collect()
+        })
         .collect()
 }
 
@@ -271,7 +275,10 @@ impl EmulatedPlant {
     pub fn terminal_violation(&self, x: &[f32]) -> f32 {
         let tc = self.max_kind(x, &self.u_ref, |kind| kind == 3);
         let b = max_nan(self.state_box_violation(x), tc);
-        max_nan(b, (quad(&self.p_f, &diff(x, &self.x_ref)) - self.alpha) / self.alpha)
+        max_nan(
+            b,
+            (quad(&self.p_f, &diff(x, &self.x_ref)) - self.alpha) / self.alpha,
+        )
     }
 
     /// κ_f(x) = u_r + K(x − x_r): the generated `terminal_input`.

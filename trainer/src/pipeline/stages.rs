@@ -470,10 +470,7 @@ fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     );
     let cl = closed_loop(env.cfg, &n, &r);
     let safety = super::safety::safety_study(env.cfg, &r)?;
-    let file = ClosedLoopFile {
-        safety,
-        runs: cl,
-    };
+    let file = ClosedLoopFile { safety, runs: cl };
     let text = serde_json::to_string(&file).map_err(|e| fail(Stage::ClosedLoop, e))?;
     write_atomic(&d.closed_loop(), text.as_bytes()).map_err(|e| fail(Stage::ClosedLoop, e))?;
     let (cl, safety) = (file.runs, file.safety);

@@ -49,7 +49,8 @@ use std::collections::BTreeMap;
 pub const SAFETY_SEED: u64 = 0x5afe_5eed;
 
 /// The guarantee's words, exactly.
-pub const GUARANTEE: &str = "deterministic for the nominal model: constraint satisfaction and convergence";
+pub const GUARANTEE: &str =
+    "deterministic for the nominal model: constraint satisfaction and convergence";
 
 /// One closed loop.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -361,7 +362,8 @@ fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
         .collect();
     let steps = cfg.closed_loop.steps;
     let count = |w: Init| out.iter().filter(|t| t.3 == w).count() as u64;
-    let (init_mpc, init_candidate, never) = (count(Init::Mpc), count(Init::Candidate), count(Init::Never));
+    let (init_mpc, init_candidate, never) =
+        (count(Init::Mpc), count(Init::Candidate), count(Init::Never));
     let mut safe = Vec::new();
     let mut plain = Vec::new();
     let mut mpc = Vec::new();
