@@ -8,7 +8,8 @@
 //! applied input) from seeded states — near the setpoint and anywhere in X — with candidates
 //! of every kind: the terminal controller's f32 rollout (often feasible), the same slightly
 //! perturbed, uniform inputs in U, inputs just outside U, NaN entries; some loops start with
-//! `init_with`. At every step the applied input, the flags and both costs must be
+//! `init_with`; every seventh step the state is kicked (a disturbance, so that the shifted
+//! sequence can fail its check). At every step the applied input, the flags and both costs must be
 //! bit-identical, and every kind of outcome (candidate, fallback, no safe sequence,
 //! initialised, infeasible fallback) must occur, so that the comparison covers each branch.
 
@@ -145,6 +146,13 @@ where
                 seen[i] += usize::from(a.flags.contains(*f));
             }
             x = plant.step(&x, &a.u);
+            if k % 7 == 6 {
+                // A disturbance now and then: the shifted sequence may then fail its check.
+                for (i, v) in x.iter_mut().enumerate() {
+                    let w = cfg.domain.hi[i] - cfg.domain.lo[i];
+                    *v += (0.2 * w * (next(&mut s) - 0.5)) as f32;
+                }
+            }
         }
     }
     eprintln!("{name}: candidate, fallback, no safe, initialised, safe infeasible: {seen:?}");
