@@ -221,7 +221,7 @@ fn run_loop(s: &Setup, model: &Discrete, x0: &[f64], policy: &mut Policy) -> Saf
         }
         run.cost = cost;
         let v = step_violation(cfg, s.cs.as_ref(), k, &x, &u, &next);
-        if !(v <= VIOLATION_TOL) {
+        if v.is_nan() || v > VIOLATION_TOL {
             run.violation_steps += 1;
         }
         x.copy_from_slice(&next);
