@@ -23,5 +23,6 @@ pub mod onnx;
 pub mod plant_rs;
 pub mod plant_rs_margin;
 pub mod plant_rs_safe;
+pub mod safe_emulation;
 pub mod safe_rs;
 pub mod sequence_rs;

@@ -50,6 +50,10 @@ pub struct SafePlantRs {
     pub decrease_worst: f64,
     /// The online check's margins written as `MARGINS` (estimated, `plant_rs_margin`).
     pub margins: MarginEstimate,
+    /// K, written as `K_F` (nu × nx).
+    pub k: Vec<Vec<f64>>,
+    /// P_f of the terminal set, written as `P_F` (nx × nx).
+    pub p_f: Vec<Vec<f64>>,
 }
 
 /// The decrease condition on `samples` seeded points of X_f (uniform in the ball of the
@@ -280,6 +284,8 @@ pub fn safe_plant_rs(cfg: &ProblemConfig) -> Result<SafePlantRs, PlantRsError> {
         decrease,
         decrease_worst: worst,
         margins: m,
+        k,
+        p_f,
     })
 }
 

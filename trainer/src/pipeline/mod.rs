@@ -32,6 +32,7 @@ mod choice;
 mod exported;
 pub mod manifest;
 pub mod robust;
+mod safety;
 mod stages;
 pub use stages::validation_config;
 mod tiers;

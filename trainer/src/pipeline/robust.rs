@@ -28,7 +28,7 @@ use crate::robust::{
 };
 use crate::study::closed_loop::Run;
 use crate::study::robust::*;
-use crate::study::scenarios::{initial_states, ClosedLoop};
+use crate::study::scenarios::{initial_states, ClosedLoop, ClosedLoopFile};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -240,22 +240,22 @@ pub fn run(cfg: &ProblemConfig, opts: &RunOptions) -> Result<RobustReport, Robus
     // The study (skipped when closed_loop.json already holds it for the same inputs).
     let clpath = dir.closed_loop();
     let cltext = std::fs::read_to_string(&clpath).map_err(|e| io(&clpath, e))?;
-    let mut cl: ClosedLoop = serde_json::from_str(&cltext).map_err(|e| io(&clpath, e))?;
+    let mut file: ClosedLoopFile = serde_json::from_str(&cltext).map_err(|e| io(&clpath, e))?;
     let inputs = study_inputs(cfg, &rcfg, &root, &j.cert);
     let spath = dir.join("robust_study.json");
     let cached: Option<(String, RobustReport)> = std::fs::read_to_string(&spath)
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok());
     if let Some((inp, rep)) = cached {
-        if inp == inputs && cl.contains_key("robust") && rep.verdict_detail == v {
+        if inp == inputs && file.runs.contains_key("robust") && rep.verdict_detail == v {
             return Ok(rep);
         }
     }
     let (rep, st) = study_report(cfg, &rcfg, &root, d, j, refinement);
     for (k, runs) in st {
-        cl.insert(k, runs);
+        file.runs.insert(k, runs);
     }
-    let text_cl = serde_json::to_string(&cl).map_err(|e| io(&clpath, e))?;
+    let text_cl = serde_json::to_string(&file).map_err(|e| io(&clpath, e))?;
     write_atomic(&clpath, text_cl.as_bytes()).map_err(|e| io(&clpath, e))?;
     super::manifest::reseal(&dir, Stage::ClosedLoop, RunDir::CLOSED_LOOP)?;
     let json = serde_json::to_string_pretty(&rep).map_err(|e| io(dir.path(), e))?;

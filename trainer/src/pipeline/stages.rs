@@ -18,7 +18,7 @@ use crate::learn::setpoint::Hold;
 use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::plots::{FigureEntry, PLOTS};
-use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop};
+use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop, ClosedLoopFile};
 use crate::study::seeds::seed_study;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -469,8 +469,11 @@ fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         load(RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE)?,
     );
     let cl = closed_loop(env.cfg, &n, &r);
-    let text = serde_json::to_string(&cl).map_err(|e| fail(Stage::ClosedLoop, e))?;
+    let safety = super::safety::safety_study(env.cfg, &r)?;
+    let file = ClosedLoopFile { safety, runs: cl };
+    let text = serde_json::to_string(&file).map_err(|e| fail(Stage::ClosedLoop, e))?;
     write_atomic(&d.closed_loop(), text.as_bytes()).map_err(|e| fail(Stage::ClosedLoop, e))?;
+    let (cl, safety) = (file.runs, file.safety);
     let first = |k: &str| cl.get(k).and_then(|v| v.first()).cloned();
     // Runs of a controller (its nominal, noise and mismatch runs) that stopped as diverged.
     let diverged = |k: &str| {
@@ -499,6 +502,9 @@ fn closed_loop_study(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             }
             s += "; ";
         }
+    }
+    if let Some(st) = &safety {
+        s += &super::safety::safety_summary(st);
     }
     s += &super::exported::closed_loop_statistical(env, d)?;
     Ok(s)
@@ -611,7 +617,7 @@ fn make_plots(
     let val = load_dataset(Stage::Plots, &d.validation())?;
     let nom = load_model(Stage::Plots, &d.model_nominal())?;
     let reg = load_model(Stage::Plots, &d.model_regularized())?;
-    let cl: ClosedLoop = load_json(Stage::Plots, &d.closed_loop())?;
+    let cl: ClosedLoop = load_json::<ClosedLoopFile>(Stage::Plots, &d.closed_loop())?.runs;
     let (train, validation) = (TrainSet::from_dataset(&data), TrainSet::from_dataset(&val));
     let axes = crate::study::plots::slice_axes(cfg, &train);
     let grid = crate::study::plots::ErrorGrid::label(cfg, &reg.mlp, cfg.plots.error_map_grid, axes);

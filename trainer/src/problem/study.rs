@@ -56,6 +56,38 @@ pub struct ClosedLoopSettings {
     /// from each seed's initial weights and simulated from the reference initial state.
     /// 0 or 1 = no extra training.
     pub seeds: usize,
+    /// The safety study (`study::safety`, issue 41 §6): Monte Carlo of closed loops of the
+    /// safety-augmented controller (`controller_core::safe`, emulated bit for bit by
+    /// `deploy::safe_emulation`), the plain network and the MPC from the same i.i.d. starts
+    /// in X, written to `closed_loop.json` under `safety`. Needs `[training] outputs =
+    /// "sequence"`. Default false; not serialised when false.
+    #[serde(skip_serializing_if = "is_false")]
+    pub safety: bool,
+    /// Closed loops per controller of the nominal safety study (default 10 000).
+    #[serde(skip_serializing_if = "is_default_safety_runs")]
+    pub safety_runs: usize,
+    /// Closed loops per controller and mismatch scenario sign of the safety study (default
+    /// 1 000; 0 = none). The scenarios are [`mismatch_scenarios`](Self::mismatch_scenarios).
+    #[serde(skip_serializing_if = "is_default_safety_mismatch_runs")]
+    pub safety_mismatch_runs: usize,
+}
+
+/// Default of [`ClosedLoopSettings::safety_runs`].
+pub const SAFETY_RUNS: usize = 10_000;
+
+/// Default of [`ClosedLoopSettings::safety_mismatch_runs`].
+pub const SAFETY_MISMATCH_RUNS: usize = 1_000;
+
+fn is_false(v: &bool) -> bool {
+    !*v
+}
+
+fn is_default_safety_runs(v: &usize) -> bool {
+    *v == SAFETY_RUNS
+}
+
+fn is_default_safety_mismatch_runs(v: &usize) -> bool {
+    *v == SAFETY_MISMATCH_RUNS
 }
 
 impl Default for ClosedLoopSettings {
@@ -69,6 +101,9 @@ impl Default for ClosedLoopSettings {
             mass_mismatch: 0.1,
             mismatch: None,
             seeds: 10,
+            safety: false,
+            safety_runs: SAFETY_RUNS,
+            safety_mismatch_runs: SAFETY_MISMATCH_RUNS,
         }
     }
 }

@@ -509,3 +509,33 @@ fn sequence_outputs_and_weights_are_validated() {
     ok.validate().unwrap();
     assert_eq!(ok.training.step_weights(20), vec![0.5; 20]);
 }
+
+/// `closed_loop.safety`: needs a sequence net (the error names the key and the fix), the run
+/// counts are bounded, and the defaults are not serialised (hashes of runs without the study
+/// unchanged).
+#[test]
+fn the_safety_study_needs_a_sequence_net() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/cartpole_safe.toml"
+    ))
+    .unwrap();
+    let cfg = ProblemConfig::from_toml_str(&text, "cartpole_safe").unwrap();
+    assert!(cfg.closed_loop.safety);
+    assert_eq!(cfg.closed_loop.safety_runs, 10_000);
+    let first = text.replacen("outputs = \"sequence\"", "outputs = \"first\"", 1);
+    let e = ProblemConfig::from_toml_str(&first, "c")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("closed_loop.safety") && e.contains("outputs = \"sequence\""),
+        "{e}"
+    );
+    let zero = text.replacen("safety = true", "safety = true\nsafety_runs = 0", 1);
+    let e = ProblemConfig::from_toml_str(&zero, "c")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("closed_loop.safety_runs"), "{e}");
+    let plain = toml::to_string(&ProblemConfig::default().closed_loop).unwrap();
+    assert!(!plain.contains("safety"), "{plain}");
+}

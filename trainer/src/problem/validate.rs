@@ -168,6 +168,7 @@ impl ProblemConfig {
         self.robust.validate(nx, nu)?;
         self.closed_loop.validate_seeds()?;
         self.validate_mismatch()?;
+        self.validate_safety()?;
         self.plots.validate()?;
         self.sampling.validate(nx)?;
         self.refine.validate(nx)?;
@@ -500,6 +501,36 @@ impl ClosedLoopSettings {
 }
 
 impl ProblemConfig {
+    /// `closed_loop.safety`: needs `[training] outputs = "sequence"` (the online check runs
+    /// the network's whole sequence); `closed_loop.safety_runs` in 1 ..= 10⁷,
+    /// `closed_loop.safety_mismatch_runs` ≤ 10⁷.
+    fn validate_safety(&self) -> Result<(), ConfigError> {
+        let c = &self.closed_loop;
+        if !c.safety {
+            return Ok(());
+        }
+        if self.training.outputs != super::training::Outputs::Sequence {
+            return Err(invalid(
+                "closed_loop.safety",
+                "needs `[training] outputs = \"sequence\"`: the safety-augmented controller \
+                 checks the network's whole input sequence",
+            ));
+        }
+        if !(1..=10_000_000).contains(&c.safety_runs) {
+            return Err(invalid(
+                "closed_loop.safety_runs",
+                format!("must be in 1 ..= 10000000, got {}", c.safety_runs),
+            ));
+        }
+        if c.safety_mismatch_runs > 10_000_000 {
+            return Err(invalid(
+                "closed_loop.safety_mismatch_runs",
+                format!("at most 10000000, got {}", c.safety_mismatch_runs),
+            ));
+        }
+        Ok(())
+    }
+
     /// `closed_loop.mismatch`: each entry a parameter of the plant (the message lists
     /// them) and a relative change in (0, 1); no parameter twice.
     fn validate_mismatch(&self) -> Result<(), ConfigError> {

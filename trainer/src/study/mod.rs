@@ -5,6 +5,8 @@
 //! - [`plots`]: the figures (trajectories, error box plots, the error map, training curves,
 //!   the local-certificate map), SVG and PNG.
 //! - [`report`]: the run report in Markdown and self-contained HTML.
+//! - [`safety`]: the safety study (`[closed_loop] safety = true`): the safety-augmented
+//!   controller, the plain network and the MPC in ≥ 10⁴ closed loops from i.i.d. starts.
 //! - [`statistical_loop`]: the Clopper–Pearson bound on P(a closed-loop trajectory from a
 //!   uniform random x₀ violates a constraint).
 //!
@@ -14,6 +16,7 @@ pub mod closed_loop;
 pub mod plots;
 pub mod report;
 pub(crate) mod robust;
+pub mod safety;
 pub(crate) mod scenarios;
 pub(crate) mod seeds;
 pub mod statistical_loop;

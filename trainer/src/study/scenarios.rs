@@ -16,6 +16,20 @@ use std::collections::BTreeMap;
 /// Closed-loop results keyed by controller name.
 pub type ClosedLoop = BTreeMap<String, Vec<Run>>;
 
+/// The whole of `closed_loop.json`: the runs keyed by controller name, and the safety study
+/// (`[closed_loop] safety = true`) under the key `safety` when it ran. A file without it is
+/// exactly the map of runs (files written before the safety study read unchanged, and the
+/// study's absence writes them byte for byte as before).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClosedLoopFile {
+    /// The safety study (`study::safety`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<crate::study::safety::SafetyStudy>,
+    /// The runs keyed by controller name.
+    #[serde(flatten)]
+    pub runs: ClosedLoop,
+}
+
 /// Initial states of the closed-loop study: `closed_loop.x0` (default: the paper's
 /// (−π, 0) for the pendulum, a quarter of the way from the domain's centre to its lower
 /// corner otherwise), then `closed_loop.random_initial_states` seeded random states of X.

@@ -26,7 +26,7 @@ use crate::certify::Model;
 use crate::data::dataset::Dataset;
 use crate::io::RunDir;
 use crate::problem::ProblemConfig;
-use crate::study::scenarios::ClosedLoop;
+use crate::study::scenarios::{ClosedLoop, ClosedLoopFile};
 use crate::study::seeds::SeedRun;
 use std::path::Path;
 
@@ -158,8 +158,10 @@ struct Artifacts {
     cert_n: Certificate,
     /// Its tier.
     tier_n: crate::certify::tier::Guarantee,
-    /// `closed_loop.json`.
+    /// `closed_loop.json`'s runs.
     cl: ClosedLoop,
+    /// `closed_loop.json`'s safety study, if it ran.
+    safety: Option<crate::study::safety::SafetyStudy>,
     /// `seeds.json`: per training seed, the nominal and the regularized net.
     seeds: Vec<[SeedRun; 2]>,
     /// `export_report.json`.
@@ -190,6 +192,7 @@ impl Artifacts {
         let reg = Model::load(&dir.model_regularized())?;
         let cert = certificate(&dir.certificate(), &reg, &data_hash)?;
         let cert_n = certificate(&dir.certificate_nominal(), &nom, &data_hash)?;
+        let clf: ClosedLoopFile = load(&dir.closed_loop())?;
         Ok(Artifacts {
             data,
             nom,
@@ -198,7 +201,8 @@ impl Artifacts {
             cert: cert.base,
             tier_n: cert_n.guarantee,
             cert_n: cert_n.base,
-            cl: load(&dir.closed_loop())?,
+            cl: clf.runs,
+            safety: clf.safety,
             seeds: load(&dir.seeds())?,
             export: load(&dir.export_report())?,
             cl_stat: load(&dir.join("closed_loop_statistical.json")).ok(),
@@ -235,6 +239,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
         sections::training_seeds(cfg, &a),
         sections::certificate(&a),
         sections::table_ii(cfg, &a),
+        safety_section::safety(&a),
         sections::closed_loop_seeds(&a),
         sections::all_runs(cfg, &a),
         sections::figures(dir)?,
@@ -248,6 +253,7 @@ pub fn build(cfg: &ProblemConfig, dir: &Path, timings: &[Timing]) -> Result<Repo
     })
 }
 
+mod safety_section;
 mod verdict;
 pub use verdict::judge;
 

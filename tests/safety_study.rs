@@ -1,0 +1,137 @@
+//! The safety study (`trainer::study::safety`, `[closed_loop] safety = true`) end to end on
+//! the double integrator (`configs/double_integrator_ode.toml`, robust terminal region), with
+//! candidate sources whose outcome is known in advance, so that a wrong count fails:
+//!
+//! - **a network that only outputs NaN**: every candidate fails the online check. A run whose
+//!   start the MPC labels with a sequence that passes the check is initialised by it (step 0
+//!   applies its first input) and then falls back at every later step; a run without one
+//!   never has a safe sequence (every step `NO_SAFE`). So Σ fallback = init_mpc · (steps − 1),
+//!   Σ no-safe = runs_without_safe_sequence · steps, no run initialised by a candidate, and
+//!   — the nominal guarantee, the fallback replaying the MPC's plan completed by κ_f — no
+//!   violation in every initialised run. The plain network applies Π_U(NaN) =
+//!   u_ref = 0: the double integrator coasts, and the runs starting with a velocity do not
+//!   converge;
+//! - **the terminal controller's f32 rollout** as the candidate (the sequence a perfect
+//!   network would give inside X_f): accepted where feasible, so fewer fallbacks than the
+//!   NaN network, and no violation in the runs that have a safe sequence from the start;
+//! - the MPC's own cost ratio is exactly 1, the JSON has no null, and the result does not
+//!   depend on the number of threads.
+
+use std::path::{Path, PathBuf};
+use trainer::deploy::safe_emulation::EmulatedPlant;
+use trainer::problem::ProblemConfig;
+use trainer::study::safety::{safety_study, SafetyStudy};
+
+fn config() -> ProblemConfig {
+    let root: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut cfg =
+        ProblemConfig::load(&root.join("configs").join("double_integrator_ode.toml")).unwrap();
+    cfg.closed_loop.steps = 40;
+    cfg.closed_loop.safety_runs = 12;
+    cfg.closed_loop.safety_mismatch_runs = 0;
+    cfg
+}
+
+fn run(
+    cfg: &ProblemConfig,
+    plant: &EmulatedPlant,
+    threads: usize,
+    source: &(dyn Fn(&[f32]) -> Vec<Vec<f32>> + Sync),
+) -> SafetyStudy {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| safety_study(cfg, plant, ("proven", "sampled"), source))
+}
+
+#[test]
+fn a_nan_network_always_falls_back_and_the_counts_say_so() {
+    let cfg = config();
+    let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
+    let (n, nu, steps) = (cfg.ocp.horizon, cfg.system.nu(), cfg.closed_loop.steps);
+    let nan = move |_: &[f32]| vec![vec![f32::NAN; nu]; n];
+    let s = run(&cfg, &plant, 2, &nan);
+    let g = &s.nominal;
+    let runs = cfg.closed_loop.safety_runs as u64;
+    assert_eq!(g.safe.runs.len() as u64, runs);
+    assert_eq!(
+        g.init_mpc + g.init_candidate + g.runs_without_safe_sequence,
+        runs
+    );
+    assert_eq!(g.init_candidate, 0, "a NaN candidate never initialises");
+    // From this X, some starts cannot reach the terminal set within N (no MPC sequence
+    // passes the check) and some can: both branches are counted.
+    assert!(
+        g.init_mpc >= 1 && g.runs_without_safe_sequence >= 1,
+        "{g:?}"
+    );
+    let fallback: usize = g.safe.runs.iter().map(|r| r.fallback_steps).sum();
+    assert_eq!(fallback as u64, g.init_mpc * (steps as u64 - 1));
+    assert_eq!(
+        g.safe.no_safe_steps,
+        g.runs_without_safe_sequence * steps as u64
+    );
+    let share = fallback as f64 / (runs as f64 * steps as f64);
+    assert!((g.safe.fallback_share - share).abs() < 1e-12);
+    for r in g.safe.runs.iter().filter(|r| r.fallback_steps > 0) {
+        assert_eq!(r.violation_steps, 0, "{r:?}");
+    }
+    assert_eq!(g.mpc.median_cost_ratio, Some(1.0));
+    assert_eq!(g.mpc.fallback_share, 0.0);
+    assert!(
+        g.plain.converged < runs,
+        "u = 0 does not stop the double integrator"
+    );
+    let json = serde_json::to_string(&s).unwrap();
+    assert!(!json.contains("null"), "{json}");
+    for key in [
+        "\"safe\":",
+        "\"plain\":",
+        "\"mpc\":",
+        "\"violation_steps\":",
+        "\"fallback_steps\":",
+        "\"converged\":",
+        "\"cost\":",
+    ] {
+        assert!(json.contains(key), "{key}");
+    }
+    assert!(s
+        .guarantee
+        .contains("deterministic for the nominal model: constraint satisfaction and convergence"));
+    let back: SafetyStudy = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, s);
+    // Thread count does not matter.
+    assert_eq!(run(&cfg, &plant, 1, &nan), s);
+}
+
+#[test]
+fn the_terminal_controller_as_network_is_accepted() {
+    let cfg = config();
+    let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
+    let n = cfg.ocp.horizon;
+    let p = &plant;
+    let rollout = move |x: &[f32]| {
+        let mut xk = x.to_vec();
+        (0..n)
+            .map(|_| {
+                let u = p.project_input(&p.terminal_input(&xk));
+                xk = p.step(&xk, &u);
+                u
+            })
+            .collect::<Vec<_>>()
+    };
+    let s = run(&cfg, &plant, 2, &rollout);
+    let g = &s.nominal;
+    // Nothing is guaranteed before a safe sequence exists (NO_SAFE steps apply the
+    // candidate's first input); once one exists from the start, no violation.
+    for r in g.safe.runs.iter().filter(|r| r.no_safe_steps == 0) {
+        assert_eq!(r.violation_steps, 0, "{r:?}");
+    }
+    assert!(g.safe.runs.iter().any(|r| r.no_safe_steps == 0));
+    // The saturated terminal controller is feasible from most starts of this X: candidates
+    // are taken, so fallbacks stay below half of the NaN network's bound (every step but one).
+    let steps = cfg.closed_loop.steps as f64;
+    assert!(g.safe.fallback_share < (steps - 1.0) / steps * 0.5, "{g:?}");
+    assert!(g.safe.runs.iter().any(|r| r.fallback_steps == 0));
+}

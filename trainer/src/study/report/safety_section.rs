@@ -1,0 +1,85 @@
+//! The report's safety section: `closed_loop.json`'s `safety` study (`study::safety`) as a
+//! Table-II-style table — safe / plain / MPC: violating steps, violating runs, fallback share
+//! of steps, median cost ratio against the MPC, converged runs — for the nominal model (with
+//! the guarantee's exact words and what it rests on) and for each mismatch scenario (no
+//! guarantee claimed).
+
+use super::{Artifacts, Block};
+use crate::study::safety::{ControllerRuns, SafetyGroup, SafetyStudy};
+
+/// The table of one group of runs.
+pub(super) fn group_table(g: &SafetyGroup) -> Block {
+    let row = |name: &str, c: &ControllerRuns| {
+        vec![
+            name.to_string(),
+            c.total_violations.to_string(),
+            format!("{} / {}", c.violating_runs, c.runs.len()),
+            format!("{:.2} %", 100.0 * c.fallback_share),
+            c.median_cost_ratio
+                .map_or("—".into(), |r| format!("{r:.4}")),
+            format!("{} / {}", c.converged, c.runs.len()),
+        ]
+    };
+    Block::Table {
+        head: [
+            "controller",
+            "violating steps",
+            "violating runs",
+            "fallback (share of steps)",
+            "median cost / MPC",
+            "converged runs",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect(),
+        rows: vec![
+            row("safe", &g.safe),
+            row("plain", &g.plain),
+            row("mpc", &g.mpc),
+        ],
+    }
+}
+
+/// The section (nothing when the study did not run).
+pub(super) fn safety(a: &Artifacts) -> Vec<Block> {
+    a.safety.as_ref().map_or(vec![], section)
+}
+
+/// The section of study `s`.
+pub(super) fn section(s: &SafetyStudy) -> Vec<Block> {
+    let g = &s.nominal;
+    let mut out = vec![
+        Block::Heading(2, "Safety-augmented controller: closed loops".into()),
+        Block::Para(format!(
+            "{} closed loops of {} steps per controller from i.i.d. uniform starts in X (seed \
+             {}), nominal model. Guarantee of the safe controller: **{}** — resting on {}. \
+             Initialisation: {}: {} runs by the MPC's sequence, {} by a feasible candidate, {} \
+             without a safe sequence ({} steps without one in all). Violation: {}.",
+            s.runs,
+            s.steps,
+            s.seed,
+            s.guarantee,
+            s.rests_on,
+            s.initialisation,
+            g.init_mpc,
+            g.init_candidate,
+            g.runs_without_safe_sequence,
+            g.safe.no_safe_steps,
+            s.violation_rule
+        )),
+        group_table(g),
+    ];
+    for (tag, m) in &s.mismatch {
+        out.push(Block::Heading(
+            3,
+            format!("Model mismatch {tag} (no guarantee claimed)"),
+        ));
+        out.push(Block::Para(format!(
+            "{} loops per controller from the first starts of the same draw; the plant's \
+             parameter scaled, the controllers unchanged.",
+            m.safe.runs.len()
+        )));
+        out.push(group_table(m));
+    }
+    out
+}
