@@ -66,38 +66,78 @@ fn next_f32(c: f32, up: bool) -> f32 {
 /// κ_NN,f32(x) exactly as `controller-core` computes it, before the output clamp:
 /// projection onto the f32 box, folded f32 layers in the core's order, device tanh.
 pub fn eval_f32(folded: &Folded, lo: &[f32], hi: &[f32], x: &[f32], tanh: Tanh) -> Vec<f32> {
-    let mut h: Vec<f32> = x
-        .iter()
-        .zip(lo.iter().zip(hi))
-        .map(|(x, (l, u))| {
-            if x < l {
-                *l
-            } else if x > u {
-                *u
-            } else {
-                *x
-            }
-        })
-        .collect();
+    let mut bufs = (Vec::new(), Vec::new());
+    eval_f32_in(folded, (lo, hi), x, tanh, &mut bufs);
+    bufs.0
+}
+
+/// [`eval_f32`] into reused buffers: the result is left in `bufs.0` (the same operations in
+/// the same order, so the same bits; no allocation once the buffers have grown).
+fn eval_f32_in(
+    folded: &Folded,
+    (lo, hi): (&[f32], &[f32]),
+    x: &[f32],
+    tanh: Tanh,
+    bufs: &mut (Vec<f32>, Vec<f32>),
+) {
+    let (h, next) = bufs;
+    h.clear();
+    h.extend(x.iter().zip(lo.iter().zip(hi)).map(|(x, (l, u))| {
+        if x < l {
+            *l
+        } else if x > u {
+            *u
+        } else {
+            *x
+        }
+    }));
     let n = folded.f32_layers.len();
     for (k, (n_in, _, w, b)) in folded.f32_layers.iter().enumerate() {
-        h = b
-            .iter()
-            .enumerate()
-            .map(|(o, b)| {
-                let mut acc = *b;
-                for i in 0..*n_in {
-                    acc += w[o * n_in + i] * h[i];
-                }
-                if k + 1 < n {
-                    tanh.eval(acc)
-                } else {
-                    acc
-                }
-            })
-            .collect();
+        next.clear();
+        next.extend(b.iter().enumerate().map(|(o, b)| {
+            let mut acc = *b;
+            for i in 0..*n_in {
+                acc += w[o * n_in + i] * h[i];
+            }
+            if k + 1 < n {
+                tanh.eval(acc)
+            } else {
+                acc
+            }
+        }));
+        std::mem::swap(h, next);
     }
-    h
+}
+
+/// [`ExportModel::eval_f64`] into reused buffers: the result is left in `bufs.0` (the same
+/// operations in the same order, so the same bits).
+fn eval_f64_in(model: &ExportModel, x: &[f64], bufs: &mut (Vec<f64>, Vec<f64>)) {
+    let (h, next) = bufs;
+    h.clear();
+    h.extend(
+        x.iter()
+            .zip(model.input.mean.iter().zip(&model.input.scale))
+            .map(|(x, (m, s))| (x - m) / s),
+    );
+    let n = model.layers.len();
+    for (k, l) in model.layers.iter().enumerate() {
+        next.clear();
+        next.extend(l.w.iter().zip(&l.b).map(|(row, b)| {
+            let z = row.iter().zip(h.iter()).fold(*b, |acc, (w, x)| acc + w * x);
+            if k + 1 < n {
+                z.tanh()
+            } else {
+                z
+            }
+        }));
+        std::mem::swap(h, next);
+    }
+    for (y, (m, s)) in h
+        .iter_mut()
+        .zip(model.output.mean.iter().zip(&model.output.scale))
+    {
+        *y = m + s * *y;
+    }
 }
 
 /// Interval bound on |computed − exact| of the folded network over the box `[a, b]`, for
@@ -129,16 +169,10 @@ fn box_error(
         let mut zhi = Vec::with_capacity(l.b.len());
         let mut zerr = Vec::with_capacity(l.b.len());
         for (o, (row, bias)) in l.w.iter().zip(&l.b).enumerate() {
-            let (wr, br): (Vec<f64>, f64) = match rounded {
-                Some(r) => (
-                    r[k].2[o * n..(o + 1) * n]
-                        .iter()
-                        .map(|v| f64::from(*v))
-                        .collect(),
-                    f64::from(r[k].3[o]),
-                ),
-                None => (row.clone(), *bias),
-            };
+            // The weights as computed (rounded to f32, or exact), read in place.
+            let wrow = rounded.map(|r| &r[k].2[o * n..(o + 1) * n]);
+            let wr = |i: usize| wrow.map_or(row[i], |w| f64::from(w[i]));
+            let br = rounded.map_or(*bias, |r| f64::from(r[k].3[o]));
             // Exact enclosure of z_o.
             let (mut s_lo, mut s_hi, mut mag) = (*bias, *bias, bias.abs());
             let mut e = widen((br - bias).abs());
@@ -150,8 +184,9 @@ fn box_error(
                 s_hi += p.max(q);
                 let m = lo[i].abs().max(hi[i].abs());
                 mag += w.abs() * m;
-                e += wr[i].abs() * err[i] + (wr[i] - w).abs() * m;
-                rmag += wr[i].abs() * (m + err[i]);
+                let wi = wr(i);
+                e += wi.abs() * err[i] + (wi - w).abs() * m;
+                rmag += wi.abs() * (m + err[i]);
             }
             let slack = widen(mag) * 1e-13;
             zlo.push(s_lo - slack);
@@ -356,19 +391,30 @@ pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) ->
                 *v = model.domain_lo[i] + next() * (model.domain_hi[i] - model.domain_lo[i]);
             }
         }
+        // Scratch per worker (no allocation per state): x in f32, the f32 and f64 layer
+        // buffers, the difference.
+        type Scratch = (
+            Vec<f32>,
+            (Vec<f32>, Vec<f32>),
+            (Vec<f64>, Vec<f64>),
+            Vec<f64>,
+        );
         let w = xs[..m * nx]
             .par_chunks(nx.max(1))
-            .map(|x| {
-                let x32: Vec<f32> = x.iter().map(|v| *v as f32).collect();
-                let y32 = eval_f32(&folded, &lo, &hi, &x32, tanh);
-                let y64 = model.eval_f64(x);
-                let d: Vec<f64> = y32
-                    .iter()
-                    .zip(&y64)
-                    .enumerate()
-                    .map(|(o, (a, b))| (f64::from(*a) - b) / model.u_scale_of(o))
-                    .collect();
-                norm2_sampled(&d)
+            .map_init(Scratch::default, |(x32, b32, b64, d), x| {
+                x32.clear();
+                x32.extend(x.iter().map(|v| *v as f32));
+                eval_f32_in(&folded, (&lo, &hi), x32, tanh, b32);
+                eval_f64_in(model, x, b64);
+                d.clear();
+                d.extend(
+                    b32.0
+                        .iter()
+                        .zip(&b64.0)
+                        .enumerate()
+                        .map(|(o, (a, b))| (f64::from(*a) - b) / model.u_scale_of(o)),
+                );
+                norm2_sampled(d)
             })
             .reduce(|| 0.0, max_or_nan);
         worst = max_or_nan(worst, w);
