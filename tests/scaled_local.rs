@@ -51,7 +51,10 @@ log_every = 100
 "#;
 
 /// The local certificate of `model` under `cfg` (certify-only: the net is fixed).
-fn local(cfg: &ProblemConfig, model: &trainer::certify::Model) -> trainer::certify::certificate::Certificate {
+fn local(
+    cfg: &ProblemConfig,
+    model: &trainer::certify::Model,
+) -> trainer::certify::certificate::Certificate {
     let mut rs = cfg.refine.clone();
     rs.initial = vec![5, 5];
     rs.budget = 400;
@@ -84,7 +87,10 @@ fn local_cells_in_the_scaled_norm_are_tight_per_input_and_cover_fresh_states() {
     let model = trainer::train(&cfg, &data, &val, false).unwrap();
 
     let scaled = local(&cfg, &model);
-    let norm = scaled.scales.clone().expect("the certificate states its norm");
+    let norm = scaled
+        .scales
+        .clone()
+        .expect("the certificate states its norm");
     assert_eq!(norm, Norm::of_problem(&cfg));
     assert_eq!(norm.u_scale, vec![1000.0, 1.0]);
     assert_eq!(scaled.epsilon_per_input, norm.per_input(scaled.eps));
@@ -102,10 +108,22 @@ fn local_cells_in_the_scaled_norm_are_tight_per_input_and_cover_fresh_states() {
         "local ε: scaled {:.5} → f {fs:.3} mm/s, g {gs:.5} m/s; unscaled {:.3} → f {fu:.3}, g {gu:.3}",
         scaled.eps, unscaled.eps
     );
-    assert!(gu >= 2.0, "unscaled bound on g {gu} m/s is not beyond g's range");
-    assert!(gs * 50.0 < gu, "scaled bound on g {gs} not far below unscaled {gu}");
-    assert!(gs < 0.2, "scaled bound on g {gs} m/s is not tight (range 2)");
-    assert!(fs < 200.0, "scaled bound on f {fs} mm/s is not tight (range 2000)");
+    assert!(
+        gu >= 2.0,
+        "unscaled bound on g {gu} m/s is not beyond g's range"
+    );
+    assert!(
+        gs * 50.0 < gu,
+        "scaled bound on g {gs} not far below unscaled {gu}"
+    );
+    assert!(
+        gs < 0.2,
+        "scaled bound on g {gs} m/s is not tight (range 2)"
+    );
+    assert!(
+        fs < 200.0,
+        "scaled bound on f {fs} mm/s is not tight (range 2000)"
+    );
 
     // Second method: fresh states (another seed), the MPC's label against the clamped net.
     let mut fcfg = cfg.clone();
@@ -126,12 +144,27 @@ fn local_cells_in_the_scaled_norm_are_tight_per_input_and_cover_fresh_states() {
         n += 1;
     }
     assert!(n >= 380, "only {n} fresh states labelled");
-    eprintln!("sampled at {n} fresh states: f {:.3}, g {:.5}, scaled {worst_scaled:.5}", worst[0], worst[1]);
+    eprintln!(
+        "sampled at {n} fresh states: f {:.3}, g {:.5}, scaled {worst_scaled:.5}",
+        worst[0], worst[1]
+    );
     for (j, w) in worst.iter().enumerate() {
-        assert!(*w <= scaled.epsilon_per_input[j], "input {j}: sampled {w} above {}", scaled.epsilon_per_input[j]);
+        assert!(
+            *w <= scaled.epsilon_per_input[j],
+            "input {j}: sampled {w} above {}",
+            scaled.epsilon_per_input[j]
+        );
         assert!(*w <= unscaled.epsilon_per_input[j]);
     }
-    assert!(worst_scaled <= scaled.eps, "sampled scaled error {worst_scaled} above ε {}", scaled.eps);
+    assert!(
+        worst_scaled <= scaled.eps,
+        "sampled scaled error {worst_scaled} above ε {}",
+        scaled.eps
+    );
     // The bound is no free pass: the sampled error is a sizeable part of it.
-    assert!(worst_scaled * 20.0 >= scaled.eps, "ε {} far above the sampled {worst_scaled}", scaled.eps);
+    assert!(
+        worst_scaled * 20.0 >= scaled.eps,
+        "ε {} far above the sampled {worst_scaled}",
+        scaled.eps
+    );
 }

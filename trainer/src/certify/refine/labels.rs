@@ -98,9 +98,8 @@ pub(super) fn label(
         .map_init(
             || MpcLaw::new(cfg),
             |law, &(i, j)| {
-                let l = (!deadline.spent()).then(|| {
-                    j.and_then(|j| law.solve_from_neighbour(&points[i].x, &points[j].x))
-                });
+                let l = (!deadline.spent())
+                    .then(|| j.and_then(|j| law.solve_from_neighbour(&points[i].x, &points[j].x)));
                 (i, l)
             },
         )

@@ -3,8 +3,8 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
-use super::progress::{RoundSink, StopReason};
 use super::labels::{label, Deadline};
+use super::progress::{RoundSink, StopReason};
 use super::split::split_or_stop;
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
@@ -573,7 +573,12 @@ fn retrain_net(
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     // Emphasis: points with a large error under the current net.
     let u_scale = crate::certify::norm::Norm::of_problem(cfg).u_scale;
-    let hard = hard_points(st, (band, &u_scale), (nx, nu), rs.emphasis_at * rs.target_eps);
+    let hard = hard_points(
+        st,
+        (band, &u_scale),
+        (nx, nu),
+        rs.emphasis_at * rs.target_eps,
+    );
     let set = train_set(st, nx, nu, &hard, rs.emphasis, ex);
     // The points before the repeated ones (those the checkpoints are measured on).
     let keep = kept_points(st, ex);
@@ -642,4 +647,3 @@ fn round_log(st: &RefineState, round: usize, target: f64, t0: Instant) -> RoundL
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
-

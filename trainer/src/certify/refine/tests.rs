@@ -565,19 +565,32 @@ fn a_round_cut_by_the_wall_clock_budget_keeps_the_last_round_and_resumes() {
     };
     let r = refine(&cfg, &cfg.refine, Some(&ck), &opts).unwrap();
     let took = t0.elapsed().as_secs_f64();
-    assert_eq!(r.stopped, StopReason::MaxSecondsInRound, "after {took:.1} s");
+    assert_eq!(
+        r.stopped,
+        StopReason::MaxSecondsInRound,
+        "after {took:.1} s"
+    );
     assert_eq!(r.state.log.len(), 1, "round 0's result");
     assert!(!r.state.bounds.is_empty());
     assert!(r.state.bounds.iter().all(|(_, b)| b.eps.is_finite()));
     for (n, _) in &r.state.bounds {
         assert!(r.state.nodes[*n].split.is_none());
-        assert!(r.state.nodes[*n].corners.iter().all(|&c| r.state.points[c].labelled()));
+        assert!(r.state.nodes[*n]
+            .corners
+            .iter()
+            .all(|&c| r.state.points[c].labelled()));
     }
-    assert!(took < max + 5.0, "stopped {took:.1} s after the start (budget {max} s)");
+    assert!(
+        took < max + 5.0,
+        "stopped {took:.1} s after the start (budget {max} s)"
+    );
     let bytes = std::fs::read(&ck).unwrap();
     let saved = RefineState::from_bytes(&bytes, &ck).unwrap();
     let unsolved = saved.points.iter().filter(|p| p.status.is_none()).count();
-    assert!(!saved.finished && unsolved > 0, "the checkpoint keeps the unsolved corners");
+    assert!(
+        !saved.finished && unsolved > 0,
+        "the checkpoint keeps the unsolved corners"
+    );
     // Resumed without a wall-clock budget: round 1 goes on, its corners solved first.
     cfg.refine.max_seconds = None;
     cfg.refine.max_rounds = 2;
