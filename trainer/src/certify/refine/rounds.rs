@@ -300,6 +300,11 @@ pub fn refine(
         lat: lat.clone(),
         index: HashMap::new(),
     };
+    // The cells' bounds under a net (a QP's cells proven exact where the proof succeeds).
+    let bound = |st: &RefineState, mlp: &crate::learn::mlp::Mlp| {
+        let q = qp.as_ref().map(|q| (q, rs.target_eps));
+        bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex, &u_scale)
+    };
     let resumed = resume(checkpoint, &hash, &counts, &lat, cfg.system.nu())?;
     let mut pending = Vec::new();
     if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
@@ -309,20 +314,10 @@ pub fn refine(
         let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
         if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
             let mut state = st.clone();
-            if let Some(q) = &qp {
+            if qp.is_some() {
                 // Which cells are exact is not stored: prove them again.
                 fill_active(cfg, &mut state.points);
-                state.bounds = bound_leaves(
-                    &state,
-                    &lat,
-                    &model.mlp,
-                    band,
-                    &ls,
-                    centre_check,
-                    Some((q, rs.target_eps)),
-                    &ex,
-                    &u_scale,
-                );
+                state.bounds = bound(&state, &model.mlp);
             }
             let stopped = finished_reason(&state, rs, met);
             return Ok(Refined {
@@ -347,11 +342,6 @@ pub fn refine(
         // The given net (with its source hash, which a checkpoint does not store).
         st.model = Some(m.clone());
     }
-    // The cells' bounds under a net (a QP's cells proven exact where the proof succeeds).
-    let bound = |st: &RefineState, mlp: &crate::learn::mlp::Mlp| {
-        let q = qp.as_ref().map(|q| (q, rs.target_eps));
-        bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex, &u_scale)
-    };
     let deadline = Deadline::new(rs.max_seconds);
     // The last complete round (its tree as bounded, before its splits) while a wall-clock
     // budget is set: a round cut by it returns this one.
@@ -365,14 +355,7 @@ pub fn refine(
             Some(_) => deadline,
             None => Deadline::new(None),
         };
-        let mut complete = label(cfg, &mut st.points, &pending, &dl);
-        pending.retain(|&i| st.points[i].status.is_none());
-        if centre_check && complete {
-            // The centres of the cells that may use the second-order form (see
-            // `certify::local::centre_consistent`).
-            let new = region::add_centres(&mut ctx, &mut st, rs.budget);
-            complete = label(cfg, &mut st.points, &new, &dl);
-        }
+        let complete = label_round(&mut ctx, &mut st, &mut pending, (centre_check, rs), &dl);
         if let (false, Some(prev)) = (complete, last.take()) {
             // Cut inside the round: its new corners are not all solved, so its cells
             // cannot all be bounded. The checkpoint keeps the solves done (the rest are
@@ -392,11 +375,9 @@ pub fn refine(
         let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
         let improved = st.best.as_ref().is_none_or(|(e, _)| eps < *e);
-        st.best = if improved {
-            Some((eps, model.clone()))
-        } else {
-            st.best.take()
-        };
+        if improved {
+            st.best = Some((eps, model.clone()));
+        }
         report_round(opts, rs, &st, &model, improved && eps.is_finite());
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
@@ -437,6 +418,25 @@ pub fn refine(
             });
         }
     }
+}
+
+/// Solves the round's `pending` points and, with the centre check, the centres of the
+/// cells that may use the second-order form (see `certify::local::centre_consistent`),
+/// within `dl`; `pending` keeps the points left unsolved. Returns whether every solve ran.
+fn label_round(
+    ctx: &mut Ctx,
+    st: &mut RefineState,
+    pending: &mut Vec<usize>,
+    (centre_check, rs): (bool, &RefineSettings),
+    dl: &Deadline,
+) -> bool {
+    let complete = label(ctx.cfg, &mut st.points, pending, dl);
+    pending.retain(|&i| st.points[i].status.is_none());
+    if !(centre_check && complete) {
+        return complete;
+    }
+    let new = region::add_centres(ctx, st, rs.budget);
+    label(ctx.cfg, &mut st.points, &new, dl)
 }
 
 /// Writes the checkpoint `p` of `st` (sealed, atomically).
