@@ -170,6 +170,8 @@ pub struct QpCertifier {
     dependent: Mutex<HashMap<Vec<usize>, bool>>,
     /// The rational data of `exact.rs`, built on first use.
     exact: std::sync::OnceLock<exact::Exact>,
+    /// S_u of the certificate's norm (`[ocp] u_scale`): the cell bounds are in it.
+    u_scale: Vec<f64>,
 }
 
 /// Exact test of symmetric positive (semi)definiteness by diagonal dominance: every
@@ -270,6 +272,7 @@ impl QpCertifier {
             cache: Mutex::new(HashMap::new()),
             dependent: Mutex::new(HashMap::new()),
             exact: std::sync::OnceLock::new(),
+            u_scale: crate::certify::norm::Norm::of_problem(cfg).u_scale,
         })
     }
 

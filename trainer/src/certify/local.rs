@@ -19,7 +19,13 @@
 //!   quadratically with the cell, and only the fit at the corners remains.
 //!
 //! The smaller of the two is used; vector outputs are bounded per component and combined
-//! in the 2-norm.
+//! in the certificate's norm (`[ocp] u_scale`, [`crate::certify::norm`]): ε_C =
+//! ‖(ε_C,i / s_u,i)_i‖₂. The per-output bounds themselves do not depend on `x_scale`: under
+//! z = S_x⁻¹x the slope ranges scale by s_x,k and the widths by 1/s_x,k, so every term
+//! (b_k − a_k)·w_k/4 and M_k·w_k²/8 is unchanged; only the division by s_u,i and the
+//! combination over outputs follow the norm (and with all scales 1 every division is
+//! exact: the unscaled bound bit for bit). The per-input bound in physical units is
+//! s_u,j·ε (`certificate.json`'s `epsilon_per_input`).
 //!
 //! **Network parts (sound).** ∂_k κ_NN, ∂²_kk κ_NN and κ_NN over C are enclosed by
 //! [`crate::certify::netbounds`]. The clamp: if the enclosure of κ_NN,i lies inside the band, sat is
@@ -241,6 +247,7 @@ pub fn cell_bound(
     net: &BoxBounds,
     band: (&[f64], &[f64]),
     s: &LocalSettings,
+    u_scale: &[f64],
 ) -> CellBound {
     let nx = lo.len();
     debug_assert_eq!(corners.len(), 1 << nx);
@@ -262,7 +269,7 @@ pub fn cell_bound(
         smooth,
         net_u,
         net,
-        band,
+        (band, u_scale),
         Labels::Solved,
     )
 }
@@ -304,6 +311,7 @@ pub fn exact_cell_bound(
     net_u: &[Iv],
     net: &BoxBounds,
     band: (&[f64], &[f64]),
+    u_scale: &[f64],
 ) -> CellBound {
     let nx = lo.len();
     let mid: Vec<f64> = net_u.iter().map(|v| 0.5 * (v.lo + v.hi)).collect();
@@ -345,7 +353,7 @@ pub fn exact_cell_bound(
             true,
             &mid,
             net,
-            band,
+            (band, u_scale),
             Labels::Verified,
         );
         best = Some(match best {
@@ -356,6 +364,33 @@ pub fn exact_cell_bound(
     let mut b = best.unwrap_or_else(|| infinite(nx));
     b.exact = !pieces.is_empty() && b.eps.is_finite();
     b
+}
+
+/// s_u,i of the certificate's norm (1 where `u_scale` has no entry: unscaled).
+pub fn scale_of(u_scale: &[f64], i: usize) -> f64 {
+    u_scale.get(i).copied().unwrap_or(1.0)
+}
+
+/// [`LABEL_TOL`] in the certificate's norm: LABEL_TOL / min_i s_u,i (LABEL_TOL unscaled).
+pub fn label_tol(u_scale: &[f64]) -> f64 {
+    let m = u_scale.iter().copied().fold(f64::INFINITY, f64::min);
+    if m.is_finite() {
+        LABEL_TOL / m
+    } else {
+        LABEL_TOL
+    }
+}
+
+/// The clamped error in the certificate's norm, ‖S_u⁻¹(κ − sat(κ_NN))‖₂, of a label `u`
+/// and the network's output `un` clamped to `band` (`u_scale` empty: unscaled). With all
+/// scales 1 it is the unscaled 2-norm bit for bit (division by 1 is exact).
+pub fn clamped_error(u: &[f64], un: &[f64], band: (&[f64], &[f64]), u_scale: &[f64]) -> f64 {
+    u.iter()
+        .zip(un)
+        .enumerate()
+        .map(|(r, (a, n))| ((a - n.clamp(band.0[r], band.1[r])) / scale_of(u_scale, r)).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 fn infinite(nx: usize) -> CellBound {
@@ -393,7 +428,7 @@ fn bound_with(
     smooth: bool,
     net_u: &[f64],
     net: &BoxBounds,
-    band: (&[f64], &[f64]),
+    (band, u_scale): ((&[f64], &[f64]), &[f64]),
     labels: Labels,
 ) -> CellBound {
     let nx = lo.len();
@@ -415,13 +450,15 @@ fn bound_with(
     let mut form = Form::FirstOrder;
     for i in 0..nu {
         let (blo, bhi) = (band.0[i], band.1[i]);
+        let si = scale_of(u_scale, i);
         // Corner errors after the clamp.
         let mut e0 = 0.0f64;
         for c in 0..1usize << nx {
             let e = corner_u(c, i) - net_u[c * nu + i].clamp(blo, bhi);
             e0 = e0.max(e.abs());
         }
-        e0 += corner_tol;
+        // In the certificate's norm: output i divided by s_u,i (exact for s_u,i = 1).
+        e0 = (e0 + corner_tol) / si;
         let v = net.value[i];
         let clamp = if v.lo > blo && v.hi < bhi {
             Clamp::Inside
@@ -449,7 +486,7 @@ fn bound_with(
             };
             // ∂_k e ∈ [kr.lo − jr.hi, kr.hi − jr.lo]: the interpolation error along an edge
             // is at most (width of that range)·w_k/4 (see the module doc).
-            term_a[k] = (kr.width() + jr.width()).max(0.0) * w[k] / 4.0;
+            term_a[k] = (kr.width() + jr.width()).max(0.0) * w[k] / 4.0 / si;
             if b_ok {
                 let h = match (clamp, &net.hess_diag) {
                     (Clamp::Constant, _) => 0.0,
@@ -460,7 +497,7 @@ fn bound_with(
                     }
                 };
                 let m = sq + h;
-                term_b[k] = m * w[k] * w[k] / 8.0;
+                term_b[k] = m * w[k] * w[k] / 8.0 / si;
             }
         }
         let ra: f64 = term_a.iter().sum();
@@ -485,7 +522,7 @@ fn bound_with(
         eps2 += (e0 + r) * (e0 + r);
     }
     let eps = match labels {
-        Labels::Solved => eps2.sqrt() + LABEL_TOL,
+        Labels::Solved => eps2.sqrt() + label_tol(u_scale),
         Labels::Verified => eps2.sqrt() * (1.0 + 1e-12) + 1e-300,
     };
     CellBound {

@@ -221,6 +221,8 @@ pub struct KeepBest {
     pub points: usize,
     /// Error threshold θ (≥ 0).
     pub threshold: f64,
+    /// The norm's S_u: errors are ‖S_u⁻¹(·)‖₂ (empty: unscaled).
+    pub u_scale: Vec<f64>,
 }
 
 impl KeepBest {
@@ -240,7 +242,10 @@ impl KeepBest {
         let mut excess = 0.0;
         for (i, ui) in u.chunks_exact(nu.max(1)).enumerate().take(n) {
             let e2: f64 = (0..nu)
-                .map(|r| (ui[r].clamp(self.lo[r], self.hi[r]) - set.u[i * nu + r]).powi(2))
+                .map(|r| {
+                    let s = self.u_scale.get(r).copied().unwrap_or(1.0);
+                    ((ui[r].clamp(self.lo[r], self.hi[r]) - set.u[i * nu + r]) / s).powi(2)
+                })
                 .sum();
             let e = e2.sqrt();
             excess += if e.is_nan() {

@@ -526,6 +526,7 @@ mod tests {
                 hi: hi.clone(),
                 points: set.len(),
                 threshold: th,
+                u_scale: Vec::new(),
             };
             let (mut lanes, mut u) = (Lanes::default(), Vec::new());
             let (f32_score, f64_score) = (

@@ -15,7 +15,8 @@ fn is_default_min_cell(v: &f64) -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RefineSettings {
-    /// Target certified ε (default 0.75; `--target-eps` overrides).
+    /// Target certified ε (default 0.75; `--target-eps` overrides), in the certificate's
+    /// norm ‖S_u⁻¹(κ − κ_NN)‖₂ (`[ocp] u_scale`; unscaled where all scales are 1).
     pub target_eps: f64,
     /// Budget of OCP solves (default 50 000; `--budget` overrides).
     pub budget: usize,
@@ -24,9 +25,12 @@ pub struct RefineSettings {
     pub initial: Vec<usize>,
     /// Largest number of refinement rounds (default 80).
     pub max_rounds: usize,
-    /// Wall-clock budget in seconds (default: none). Checked after each round: once spent,
-    /// the run stops with its best certificate (resumable). The result then depends on the
-    /// machine's speed and load, not only on the settings.
+    /// Wall-clock budget in seconds (default: none). Checked after each round and before
+    /// every solve of a round after the first: once spent, the run stops with its best
+    /// certificate (resumable). A round cut while its new corners are solved returns the
+    /// last complete round (stop reason `max_seconds_in_round`), its checkpoint keeps the
+    /// solves done. The first round of a run always completes. The result then depends on
+    /// the machine's speed and load, not only on the settings.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_seconds: Option<f64>,
     /// Adam epochs of each warm-started retraining (default 60).

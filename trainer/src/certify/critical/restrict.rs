@@ -235,7 +235,7 @@ impl QpCertifier {
         }
         match out {
             Some(b) if b.eps.is_finite() => CellBound { exact: true, ..b },
-            _ => exact_cell_bound(lo, hi, &[], &[], &nb.bounds(lo, hi), band),
+            _ => exact_cell_bound(lo, hi, &[], &[], &nb.bounds(lo, hi), band, &self.u_scale),
         }
     }
 }
@@ -277,7 +277,15 @@ impl Bisect<'_> {
             net_u.extend(self.nb.value_at(&v));
         }
         let pieces = self.q.pieces(lo, hi, std::slice::from_ref(l));
-        let b = exact_cell_bound(lo, hi, &pieces, &net_u, &self.nb.bounds(lo, hi), self.band);
+        let b = exact_cell_bound(
+            lo,
+            hi,
+            &pieces,
+            &net_u,
+            &self.nb.bounds(lo, hi),
+            self.band,
+            &self.q.u_scale,
+        );
         if depth == 0 || b.eps <= self.goal || !b.eps.is_finite() || self.hopeless(l, lo, hi) {
             return Some(b);
         }
@@ -316,10 +324,7 @@ impl Bisect<'_> {
         }
         let (k, _) = self.q.kappa(l, &c);
         let n = self.mlp.predict(&c);
-        let e: f64 = (0..k.len())
-            .map(|i| (k[i] - n[i].clamp(self.band.0[i], self.band.1[i])).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        let e = crate::certify::local::clamped_error(&k, &n, self.band, &self.q.u_scale);
         e > self.goal
     }
 }

@@ -271,6 +271,7 @@ fn the_exact_cell_bound_holds_at_sampled_points() {
             &net_u,
             &nb.bounds(&lo, &hi),
             (&band.0, &band.1),
+            &[],
         );
         assert!(b.exact && b.eps.is_finite());
         for i in 0..300u64 {
@@ -388,6 +389,7 @@ fn the_restricted_bound_holds_against_dense_sampling() {
             &nu_c,
             &nb.bounds(&lo, &hi),
             band,
+            &[],
         );
         if laws.len() > 1 && split.eps < unrestricted.eps {
             tighter += 1;

@@ -81,6 +81,7 @@ fn check_cell(law: &Law, m: &Mlp, lo: [f64; 2], hi: [f64; 2], seed: u64) -> (Cel
         &nb.bounds(&lo, &hi),
         (&band.0, &band.1),
         &LocalSettings::default(),
+        &[],
     );
     let mut worst = 0.0f64;
     let mut ws = Workspace::default();
@@ -304,6 +305,7 @@ fn bound_with_extras(
         &nb.bounds(&lo, &hi),
         (&[-2.0], &[2.0]),
         s,
+        &[],
     )
 }
 
@@ -427,6 +429,7 @@ fn exact_cell_bound_uses_the_verified_errors_not_a_constant() {
         &corners(1e-14),
         &net(1e-14),
         (&band.0, &band.1),
+        &[],
     );
     assert!(tight.exact);
     assert!(
@@ -442,6 +445,7 @@ fn exact_cell_bound_uses_the_verified_errors_not_a_constant() {
         &corners(1e-3),
         &net(1e-3),
         (&band.0, &band.1),
+        &[],
     );
     assert!(wide.eps >= 1e-3 && wide.eps < 1.1e-3, "ε_C {}", wide.eps);
     // A NaN enclosure gives no bound.
@@ -455,6 +459,7 @@ fn exact_cell_bound_uses_the_verified_errors_not_a_constant() {
         }; 4],
         &net(1e-14),
         (&band.0, &band.1),
+        &[],
     );
     assert!(!nan.exact && nan.eps.is_infinite(), "{nan:?}");
 }

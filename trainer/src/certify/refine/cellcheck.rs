@@ -102,6 +102,8 @@ pub(super) struct Setup<'a> {
     pub settings: &'a CheckSettings,
     pub target: f64,
     pub seed: u64,
+    /// S_u of the certificate's norm (empty: unscaled): sampled errors are ‖S_u⁻¹·‖₂.
+    pub u_scale: &'a [f64],
 }
 
 #[derive(Default, Clone)]
@@ -176,10 +178,7 @@ pub(super) fn per_cell<W>(
                     a.labelled += 1;
                     let (mut un, mut jn) = (vec![0.0; nu], vec![0.0; nu * nx]);
                     s.mlp.eval(&x, &mut un, &mut jn, ws);
-                    let e = (0..nu)
-                        .map(|r| (u[r] - un[r].clamp(s.band.0[r], s.band.1[r])).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
+                    let e = crate::certify::local::clamped_error(&u, &un, s.band, s.u_scale);
                     let e = if e.is_finite() { e } else { f64::INFINITY };
                     a.over += (e > b.eps) as usize;
                     if let Some(wu) = &smp.warm {

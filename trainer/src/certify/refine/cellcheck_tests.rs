@@ -69,6 +69,7 @@ fn bound(st: &mut RefineState, lat: &Lattice, rs: &RefineSettings, m: &Mlp) {
             infeasible: false,
             min_size: vec![0; 2],
         },
+        &[],
     );
 }
 
@@ -93,6 +94,7 @@ fn run(
             settings: &rs.check,
             target: rs.target_eps,
             seed: 11,
+            u_scale: &[],
         },
         || (),
         |_, x, near| {

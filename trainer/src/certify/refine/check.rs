@@ -115,6 +115,8 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
     let st = &r.state;
     let mlp = &r.model.mlp;
     let band = cfg.ocp.u_bounds(0);
+    // Errors in the certificate's norm ‖S_u⁻¹·‖₂, as the cells' bounds.
+    let u_scale = crate::certify::norm::Norm::of_problem(cfg).u_scale;
     let bound_of: HashMap<usize, &CellBound> = st.bounds.iter().map(|(n, b)| (*n, b)).collect();
     let certified = super::rounds::max_eps(&st.bounds);
     let ls = super::rounds::local_settings(rs);
@@ -148,10 +150,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
                     a.labelled += 1;
                     let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
                     mlp.eval(&x, &mut u, &mut j, &mut ws);
-                    let e = (0..nu)
-                        .map(|r| (l.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
+                    let e = crate::certify::local::clamped_error(&l.u, &u, band, &u_scale);
                     let b = bound_of.get(&leaf);
                     let ec = b.map_or(f64::INFINITY, |b| b.eps);
                     if let Some(b) = b.filter(|b| e > b.corner && b.eps > b.corner) {
@@ -189,6 +188,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             settings: &rs.check,
             target: rs.target_eps,
             seed,
+            u_scale: &u_scale,
         },
         || MpcLaw::new(cfg),
         mpc_sample,

@@ -27,10 +27,12 @@
 mod cellcheck;
 mod check;
 mod feedback;
+mod labels;
 mod outputs;
 mod progress;
 mod region;
 mod rounds;
+mod split;
 mod start;
 
 pub use crate::certify::local_summary::{Excluded, LocalSummary};
@@ -412,64 +414,6 @@ fn fnv(v: &[usize]) -> u64 {
         }
     }
     h
-}
-
-/// Labels the points `idx` of `points` (parallel, cold starts).
-fn label(cfg: &ProblemConfig, points: &mut [Point], idx: &[usize]) {
-    let xs: Vec<Vec<f64>> = idx.iter().map(|&i| points[i].x.clone()).collect();
-    let labels: Vec<Label> = xs
-        .par_iter()
-        .map_init(|| MpcLaw::new(cfg), |law, x| law.solve(x, None).0)
-        .collect();
-    for (&i, l) in idx.iter().zip(labels) {
-        set_label(&mut points[i], l);
-    }
-    // States still without a label: retried warm-started from the nearest labelled regular
-    // point (distance relative to the lattice's extent; ties: the lower index), which a
-    // failed corner gains as its cells are split around it.
-    let failed: Vec<usize> = idx
-        .iter()
-        .copied()
-        .filter(|&i| {
-            matches!(
-                points[i].status,
-                Some(SqpStatus::MaxIterations | SqpStatus::NumericalFailure)
-            )
-        })
-        .collect();
-    if failed.is_empty() {
-        return;
-    }
-    let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
-    let near: Vec<(usize, Option<usize>)> = failed
-        .iter()
-        .map(|&i| {
-            let d = |p: &Point| -> f64 {
-                (0..lo.len())
-                    .map(|k| ((p.x[k] - points[i].x[k]) / (hi[k] - lo[k])).powi(2))
-                    .sum()
-            };
-            let best = (0..points.len())
-                .filter(|&j| points[j].regular)
-                .min_by(|&a, &b| d(&points[a]).total_cmp(&d(&points[b])).then(a.cmp(&b)));
-            (i, best)
-        })
-        .collect();
-    let retried: Vec<(usize, Option<Label>)> = near
-        .par_iter()
-        .map_init(
-            || MpcLaw::new(cfg),
-            |law, &(i, j)| {
-                let l = j.and_then(|j| law.solve_from_neighbour(&points[i].x, &points[j].x));
-                (i, l)
-            },
-        )
-        .collect();
-    for (i, l) in retried {
-        if let Some(l) = l {
-            set_label(&mut points[i], l);
-        }
-    }
 }
 
 /// Stores a label in its point.

@@ -239,13 +239,13 @@ pub fn check_summary(c: &Check) -> CheckSummary {
 }
 
 /// The largest half-diagonal of a bounded cell: every state is within it of a corner.
-fn largest_half_diagonal(st: &RefineState, lat: &Lattice, nx: usize) -> f64 {
+fn largest_half_diagonal(st: &RefineState, lat: &Lattice, x_scale: &[f64]) -> f64 {
     st.bounds
         .iter()
         .map(|(n, _)| {
             let node = &st.nodes[*n];
-            (0..nx)
-                .map(|k| (0.5 * node.size[k] as f64 * lat.step[k]).powi(2))
+            (0..x_scale.len())
+                .map(|k| (0.5 * node.size[k] as f64 * lat.step[k] / x_scale[k]).powi(2))
                 .sum::<f64>()
                 .sqrt()
         })
@@ -281,15 +281,22 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
     use crate::certify::certificate::{requirement, Certificate, LnnMethod};
     use crate::certify::lipschitz;
     let st = &r.state;
-    let mlp = &r.model.mlp;
     let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
     let nx = lo.len();
+    // Every number in the certificate's norm (`[ocp] x_scale`, `u_scale`; borrowed
+    // unchanged when all scales are 1): the cells' ε_C are in it already
+    // (`certify::local`); the Theorem-1 figures beside them are those of the scaled net,
+    // labels and box ([`crate::certify::norm`]).
+    let norm = crate::certify::norm::Norm::of_problem(cfg);
+    let scaled = norm.scale_mlp(&r.model.mlp);
+    let mlp: &crate::learn::mlp::Mlp = &scaled;
+    let (slo, shi) = norm.scale_box(lo, hi);
     let eps = super::rounds::max_eps(&st.bounds);
     let eps_d = st.bounds.iter().map(|(_, b)| b.corner).fold(0.0, f64::max);
     let naive = lipschitz::naive_bound(mlp);
     let (sdp, lower) = rayon::join(
         || lipschitz::lipsdp_bound(mlp),
-        || lipschitz::sampled_lower_bound(mlp, lo, hi, 20_000, 7),
+        || lipschitz::sampled_lower_bound(mlp, &slo, &shi, 20_000, 7),
     );
     let (l_nn, method) = if sdp < naive {
         (sdp, LnnMethod::LipSdpNeuron)
@@ -304,11 +311,12 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         1,
         &Exclusion::new(rs, &Lattice::new(lo, hi, &rs.initial_counts(nx)).max),
     );
+    let set = norm.scale_set(&set);
     let (sl, q) = lipschitz::mpc_estimates(&set.x, &set.u, &set.du, &set.use_jac, nx, set.nu);
     let l_mpc = sl.max(q);
     let lat = Lattice::new(lo, hi, &rs.initial_counts(nx));
-    let radius = largest_half_diagonal(st, &lat, nx);
-    let req = requirement(eps, eps_d, l_mpc, l_nn, lo, hi);
+    let radius = largest_half_diagonal(st, &lat, &norm.x_scale);
+    let req = requirement(eps, eps_d, l_mpc, l_nn, &slo, &shi);
     let (binding, worst_cell) = binding_cell(st, &lat);
     let solves = st.points.len();
     let qp = crate::certify::critical::QpCertifier::detect(cfg).is_ok();
@@ -347,13 +355,10 @@ pub fn certificate(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined) -> Loc
         problem_hash: cfg.problem_hash(),
         dataset_hash: crate::io::sha256_hex(&dataset(cfg, st).to_bytes()),
         labels: None,
-        // The cells' bounds are computed in the unscaled norm (not yet in `[ocp] x_scale`,
-        // `u_scale`): the certificate says so.
-        scales: Some(crate::certify::norm::Norm::unscaled(
-            lo.len(),
-            cfg.system.nu(),
-        )),
-        epsilon_per_input: vec![eps; cfg.system.nu()],
+        // The cells' bounds are in the norm of `[ocp] x_scale`, `u_scale`; per input in
+        // physical units s_u,j·ε (rounded up).
+        epsilon_per_input: norm.per_input(eps),
+        scales: Some(norm),
     };
     let local = LocalSummary {
         method: "local".into(),

@@ -26,6 +26,10 @@ pub enum StopReason {
     MaxRounds,
     /// The wall-clock budget `refine.max_seconds` is spent (time-dependent result).
     MaxSeconds,
+    /// The wall-clock budget `refine.max_seconds` ran out inside a round, while its new
+    /// corners were solved: the result is the last complete round's (every cell bounded),
+    /// the checkpoint keeps the solves done (time-dependent result).
+    MaxSecondsInRound,
     /// No failing cell can be split (`refine.min_width`, `refine.min_cell`).
     NothingToSplit,
 }
@@ -41,6 +45,11 @@ impl StopReason {
             StopReason::Budget => "budget of solves spent (refine.budget, --budget)",
             StopReason::MaxRounds => "refine.max_rounds reached",
             StopReason::MaxSeconds => "wall-clock budget refine.max_seconds spent",
+            StopReason::MaxSecondsInRound => {
+                "wall-clock budget refine.max_seconds spent inside a round: its new solves \
+                 were cut off (solved first on resume); the certificate is the last complete \
+                 round's"
+            }
             StopReason::NothingToSplit => {
                 "no failing cell can be split further (refine.min_width, refine.min_cell)"
             }

@@ -3,7 +3,9 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
+use super::labels::{label, Deadline};
 use super::progress::{RoundSink, StopReason};
+use super::split::split_or_stop;
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -167,6 +169,7 @@ pub(super) fn bound_leaves(
     centre_check: bool,
     qp: Option<(&QpCertifier, f64)>,
     ex: &Exclusion,
+    u_scale: &[f64],
 ) -> Vec<(usize, CellBound)> {
     let idx = region::index(st);
     let target = qp.map_or(f64::INFINITY, |(_, t)| t);
@@ -242,6 +245,7 @@ pub(super) fn bound_leaves(
                 &nb.bounds(&lo, &hi),
                 band,
                 ls,
+                u_scale,
             );
             // A jump of κ found inside the cell: the continuity the estimate assumes fails.
             if st.jumps.iter().any(|x| region::contains(&lo, &hi, x)) {
@@ -279,6 +283,8 @@ pub fn refine(
     let ex = Exclusion::new(rs, &lat.max);
     let hash = run_hash(cfg, rs, opts);
     let band = cfg.ocp.u_bounds(0);
+    // Every cell bound is in the certificate's norm ‖S_u⁻¹·‖₂ (`[ocp] u_scale`).
+    let u_scale = crate::certify::norm::Norm::of_problem(cfg).u_scale;
     let ls = local_settings(rs);
     // Where the MPC is a QP, cells are proven exact and refinement goes on until all are.
     let qp = QpCertifier::detect(cfg).ok();
@@ -294,6 +300,11 @@ pub fn refine(
         lat: lat.clone(),
         index: HashMap::new(),
     };
+    // The cells' bounds under a net (a QP's cells proven exact where the proof succeeds).
+    let bound = |st: &RefineState, mlp: &crate::learn::mlp::Mlp| {
+        let q = qp.as_ref().map(|q| (q, rs.target_eps));
+        bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex, &u_scale)
+    };
     let resumed = resume(checkpoint, &hash, &counts, &lat, cfg.system.nu())?;
     let mut pending = Vec::new();
     if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
@@ -303,19 +314,10 @@ pub fn refine(
         let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
         if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
             let mut state = st.clone();
-            if let Some(q) = &qp {
+            if qp.is_some() {
                 // Which cells are exact is not stored: prove them again.
                 fill_active(cfg, &mut state.points);
-                state.bounds = bound_leaves(
-                    &state,
-                    &lat,
-                    &model.mlp,
-                    band,
-                    &ls,
-                    centre_check,
-                    Some((q, rs.target_eps)),
-                    &ex,
-                );
+                state.bounds = bound(&state, &model.mlp);
             }
             let stopped = finished_reason(&state, rs, met);
             return Ok(Refined {
@@ -340,22 +342,25 @@ pub fn refine(
         // The given net (with its source hash, which a checkpoint does not store).
         st.model = Some(m.clone());
     }
-    // The cells' bounds under a net (a QP's cells proven exact where the proof succeeds).
-    let bound = |st: &RefineState, mlp: &crate::learn::mlp::Mlp| {
-        let q = qp.as_ref().map(|q| (q, rs.target_eps));
-        bound_leaves(st, &lat, mlp, band, &ls, centre_check, q, &ex)
-    };
-    let started = Instant::now();
+    let deadline = Deadline::new(rs.max_seconds);
+    // The last complete round (its tree as bounded, before its splits) while a wall-clock
+    // budget is set: a round cut by it returns this one.
+    let mut last: Option<RefineState> = None;
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
-        label(cfg, &mut st.points, &pending);
-        pending.clear();
-        if centre_check {
-            // The centres of the cells that may use the second-order form (see
-            // `certify::local::centre_consistent`).
-            let new = region::add_centres(&mut ctx, &mut st, rs.budget);
-            label(cfg, &mut st.points, &new);
+        // The first round of a run (or of a resumed run) solves all its points: there is
+        // no complete round to fall back on.
+        let dl = match last {
+            Some(_) => deadline,
+            None => Deadline::new(None),
+        };
+        let complete = label_round(&mut ctx, &mut st, &mut pending, (centre_check, rs), &dl);
+        if let (false, Some(prev)) = (complete, last.take()) {
+            // Cut inside the round: its new corners are not all solved, so its cells
+            // cannot all be bounded. The checkpoint keeps the solves done (the rest are
+            // solved first on resume); the result is the last complete round's.
+            return cut_round(st, prev, checkpoint, &bound, rs.target_eps);
         }
         if qp.is_some() {
             // Resumed or imported points: their active sets, for the proofs.
@@ -370,11 +375,9 @@ pub fn refine(
         let (eps, ok) = (log.eps, log.cells_ok);
         st.log.push(log.clone());
         let improved = st.best.as_ref().is_none_or(|(e, _)| eps < *e);
-        st.best = if improved {
-            Some((eps, model.clone()))
-        } else {
-            st.best.take()
-        };
+        if improved {
+            st.best = Some((eps, model.clone()));
+        }
         report_round(opts, rs, &st, &model, improved && eps.is_finite());
         if let Some(f) = opts.on_round {
             f(&log, rs.budget);
@@ -384,14 +387,16 @@ pub fn refine(
         let met = !st.bounds.is_empty()
             && ok == st.bounds.len()
             && !st.bounds.iter().any(|(_, b)| unproven(b));
-        let out_of_time = rs
-            .max_seconds
-            .is_some_and(|s| started.elapsed().as_secs_f64() >= s);
-        let stopped = match (met, round + 1 >= rs.max_rounds, out_of_time) {
+        let stopped = match (met, round + 1 >= rs.max_rounds, deadline.spent()) {
             (true, _, _) => Some(StopReason::TargetMet),
             (_, true, _) => Some(StopReason::MaxRounds),
             (_, _, true) => Some(StopReason::MaxSeconds),
-            _ => split_or_stop(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven),
+            _ => {
+                if rs.max_seconds.is_some() {
+                    last = Some(st.clone());
+                }
+                split_or_stop(&mut ctx, &mut st, &mut pending, (&ex, rs), &unproven)
+            }
         };
         let done = stopped.is_some();
         let model = match done && !met {
@@ -402,8 +407,7 @@ pub fn refine(
         if let Some(p) = checkpoint {
             // The checkpoint holds the tree with the new (unlabelled) points: on resume,
             // they are the ones labelled first.
-            let bytes = crate::io::seal(postcard::to_allocvec(&st).unwrap_or_default());
-            write_atomic(p, &bytes)?;
+            write_checkpoint(p, &st)?;
         }
         if done {
             return Ok(Refined {
@@ -414,6 +418,58 @@ pub fn refine(
             });
         }
     }
+}
+
+/// Solves the round's `pending` points and, with the centre check, the centres of the
+/// cells that may use the second-order form (see `certify::local::centre_consistent`),
+/// within `dl`; `pending` keeps the points left unsolved. Returns whether every solve ran.
+fn label_round(
+    ctx: &mut Ctx,
+    st: &mut RefineState,
+    pending: &mut Vec<usize>,
+    (centre_check, rs): (bool, &RefineSettings),
+    dl: &Deadline,
+) -> bool {
+    let complete = label(ctx.cfg, &mut st.points, pending, dl);
+    pending.retain(|&i| st.points[i].status.is_none());
+    if !(centre_check && complete) {
+        return complete;
+    }
+    let new = region::add_centres(ctx, st, rs.budget);
+    label(ctx.cfg, &mut st.points, &new, dl)
+}
+
+/// Writes the checkpoint `p` of `st` (sealed, atomically).
+fn write_checkpoint(p: &Path, st: &RefineState) -> Result<(), RefineError> {
+    let bytes = crate::io::seal(postcard::to_allocvec(st).unwrap_or_default());
+    write_atomic(p, &bytes)?;
+    Ok(())
+}
+
+/// A round cut by the wall-clock budget while its new corners were solved: `st` (with the
+/// solves done, unfinished) is checkpointed so that a resumed run goes on where it stopped,
+/// and the result is `prev`, the last complete round — its tree, its cells' bounds and the
+/// better of its net and the best so far ([`keep_best`]) — stopped by
+/// [`StopReason::MaxSecondsInRound`]. Its certificate is consistent: every cell bounded.
+fn cut_round(
+    st: RefineState,
+    mut prev: RefineState,
+    checkpoint: Option<&Path>,
+    bound: &BoundFn,
+    target: f64,
+) -> Result<Refined, RefineError> {
+    if let Some(p) = checkpoint {
+        write_checkpoint(p, &st)?;
+    }
+    let model = prev.model.clone().expect("a complete round has a net");
+    let eps = max_eps(&prev.bounds);
+    let model = keep_best(&mut prev, model, eps, bound);
+    Ok(Refined {
+        met: certified_all(&prev.bounds, target),
+        state: prev,
+        model,
+        stopped: StopReason::MaxSecondsInRound,
+    })
 }
 
 /// The cells' bounds of a state under a net.
@@ -464,26 +520,6 @@ fn report_round(
     }
 }
 
-/// Splits the failing cells ([`split_failing`]); `None` if any was split, else why the run
-/// stops: the budget (no room for a split's new corners) or nothing left to split.
-fn split_or_stop(
-    ctx: &mut Ctx,
-    st: &mut RefineState,
-    pending: &mut Vec<usize>,
-    (ex, rs): (&Exclusion, &RefineSettings),
-    unproven: &dyn Fn(&CellBound) -> bool,
-) -> Option<StopReason> {
-    if split_failing(ctx, st, pending, (ex, rs), unproven) {
-        return None;
-    }
-    let nx = ctx.lat.max.len();
-    Some(if st.points.len() + (1usize << (nx - 1)) > rs.budget {
-        StopReason::Budget
-    } else {
-        StopReason::NothingToSplit
-    })
-}
-
 /// Why a finished run read back from its checkpoint stopped (not stored: inferred from its
 /// state and the settings).
 fn finished_reason(st: &RefineState, rs: &RefineSettings, met: bool) -> StopReason {
@@ -503,7 +539,7 @@ fn finished_reason(st: &RefineState, rs: &RefineSettings, met: bool) -> StopReas
 /// training emphasis); none before a net exists.
 fn hard_points(
     st: &RefineState,
-    band: (&[f64], &[f64]),
+    (band, u_scale): ((&[f64], &[f64]), &[f64]),
     (nx, nu): (usize, usize),
     level: f64,
 ) -> Vec<usize> {
@@ -513,52 +549,13 @@ fn hard_points(
         let (mut u, mut j) = (vec![0.0; nu], vec![0.0; nu * nx]);
         for (i, p) in st.points.iter().enumerate().filter(|(_, p)| p.labelled()) {
             m.mlp.eval(&p.x, &mut u, &mut j, &mut ws);
-            let e = (0..nu)
-                .map(|r| (p.u[r] - u[r].clamp(band.0[r], band.1[r])).powi(2))
-                .sum::<f64>()
-                .sqrt();
+            let e = crate::certify::local::clamped_error(&p.u, &u, band, u_scale);
             if e > level {
                 hard.push(i);
             }
         }
     }
     hard
-}
-
-/// The axis along which a failing cell is split, `None` when no side may be split (at
-/// `refine.min_width`, or a cell with an unlabelled corner at `refine.min_cell`).
-fn split_axis(
-    node: &Node,
-    b: &CellBound,
-    lat: &Lattice,
-    ex: &Exclusion,
-    rs: &RefineSettings,
-) -> Option<usize> {
-    let nx = node.size.len();
-    let rel = |k: usize| node.size[k] as f64 / lat.max[k] as f64;
-    // A cell with an unlabelled corner is split down to `refine.min_cell` only: at that
-    // size it is excluded (`Exclusion`), not split further.
-    let above_min = |k: usize| b.corner.is_finite() || node.size[k] > ex.min_size[k];
-    let splittable = |k: usize| node.size[k] >= 2 && rel(k) >= rs.min_width && above_min(k);
-    let cand: Vec<usize> = (0..nx).filter(|&k| splittable(k)).collect();
-    let &first = cand.first()?;
-    // Axis: the largest remainder term; ties and infinite terms: longest side relative to
-    // X. Where the fit at the corners dominates: the longest side (more data there).
-    let mut axis = first;
-    for &k in &cand[1..] {
-        let (tk, ta) = (b.axis_terms[k], b.axis_terms[axis]);
-        if tk > ta || (tk == ta && rel(k) > rel(axis)) {
-            axis = k;
-        }
-    }
-    if b.remainder < 0.25 * b.corner || !b.axis_terms[axis].is_finite() || b.eps <= rs.target_eps {
-        axis = cand
-            .iter()
-            .copied()
-            .max_by(|&a, &c| rel(a).total_cmp(&rel(c)).then(c.cmp(&a)))
-            .unwrap_or(first);
-    }
-    Some(axis)
 }
 
 /// The round's net, trained on the labelled points (a warm start from the current net for
@@ -575,7 +572,13 @@ fn retrain_net(
 ) -> Model {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     // Emphasis: points with a large error under the current net.
-    let hard = hard_points(st, band, (nx, nu), rs.emphasis_at * rs.target_eps);
+    let u_scale = crate::certify::norm::Norm::of_problem(cfg).u_scale;
+    let hard = hard_points(
+        st,
+        (band, &u_scale),
+        (nx, nu),
+        rs.emphasis_at * rs.target_eps,
+    );
     let set = train_set(st, nx, nu, &hard, rs.emphasis, ex);
     // The points before the repeated ones (those the checkpoints are measured on).
     let keep = kept_points(st, ex);
@@ -610,6 +613,7 @@ fn retrain_net(
                 hi: band.1.to_vec(),
                 points: unique,
                 threshold: rs.retrain_at * rs.target_eps,
+                u_scale: u_scale.clone(),
             }),
         },
         &set,
@@ -642,46 +646,4 @@ fn round_log(st: &RefineState, round: usize, target: f64, t0: Instant) -> RoundL
         second_order: second,
         seconds: t0.elapsed().as_secs_f64(),
     }
-}
-
-/// Splits the failing cells, worst first, within the budget: those above the target first;
-/// unproven cells of a QP (`unproven`) only once every cell meets the target (so proving
-/// never costs the budget the target needs). Cells with a corner the MPC could not label
-/// (ε_C = ∞) are split after the others, with what budget remains, once per round each:
-/// the uncertified region around a failed state halves every round instead of staying a
-/// whole cell, and the new corners are solved (and retried, warm-started from their
-/// labelled neighbours) like any other. Returns whether any cell was split.
-fn split_failing(
-    ctx: &mut Ctx,
-    st: &mut RefineState,
-    pending: &mut Vec<usize>,
-    (ex, rs): (&Exclusion, &RefineSettings),
-    unproven: &dyn Fn(&CellBound) -> bool,
-) -> bool {
-    let nx = ctx.lat.max.len();
-    let above = st.bounds.iter().any(|(_, b)| b.eps > rs.target_eps);
-    let mut bad: Vec<(usize, CellBound)> = st
-        .bounds
-        .iter()
-        .filter(|(_, b)| b.eps > rs.target_eps || (!above && unproven(b)))
-        .cloned()
-        .collect();
-    bad.sort_by(|a, b| b.1.eps.total_cmp(&a.1.eps).then(a.0.cmp(&b.0)));
-    let (failed, mut bad): (Vec<_>, Vec<_>) =
-        bad.into_iter().partition(|(_, b)| !b.corner.is_finite());
-    bad.extend(failed);
-    let mut split_any = false;
-    for (n, b) in bad {
-        let Some(axis) = split_axis(&st.nodes[n], &b, &ctx.lat, ex, rs) else {
-            continue;
-        };
-        // New points are pushed onto `st.points` as they are created.
-        let needed = 1usize << (nx - 1);
-        if st.points.len() + needed > rs.budget {
-            break;
-        }
-        ctx.split(st, n, axis, pending);
-        split_any = true;
-    }
-    split_any
 }

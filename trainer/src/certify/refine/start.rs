@@ -119,5 +119,12 @@ fn settings_hash(cfg: &ProblemConfig, rs: &RefineSettings) -> String {
         // Appended only when on: checkpoints of runs without exclusion keep their hash.
         h.update(b"exclude_infeasible");
     }
+    let norm = crate::certify::norm::Norm::of_problem(cfg);
+    if !norm.is_unit() {
+        // The cells' bounds are in this norm (`certify::local`); appended only when scaled:
+        // checkpoints of unscaled runs keep their hash.
+        h.update(b"norm");
+        h.update(postcard::to_allocvec(&norm.u_scale).unwrap_or_default());
+    }
     crate::io::hex(&h.finalize())
 }

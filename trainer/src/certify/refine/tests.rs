@@ -533,3 +533,70 @@ fn the_first_best_round_is_written_at_once() {
     assert_eq!(cert["eps"].as_f64(), report["eps"].as_f64());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `refine.max_seconds` inside a round: round 0's sink waits until just before the budget
+/// runs out, so it runs out while round 1's new corners are solved. The run stops there —
+/// not at the end of round 1 as before — with round 0's certificate (every cell bounded and
+/// finite, every corner labelled) and a checkpoint that keeps round 1's unsolved corners; a
+/// resumed run solves them first and goes on from round 1.
+#[test]
+fn a_round_cut_by_the_wall_clock_budget_keeps_the_last_round_and_resumes() {
+    use std::sync::Arc;
+    use std::time::{Duration, Instant};
+    let max = 12.0;
+    let mut cfg = ProblemConfig {
+        refine: quick_refine([13, 13], 5000, 6, 1e-9),
+        ..Default::default()
+    };
+    cfg.refine.max_seconds = Some(max);
+    let dir = std::env::temp_dir().join(format!("ampc_refine_cut_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let ck = dir.join("refine_state.bin");
+    let t0 = Instant::now();
+    let opts = RefineOptions {
+        on_result: Some(RoundSink(Arc::new(move |r: &Refined, _| {
+            if r.state.log.len() == 1 {
+                let until = t0 + Duration::from_secs_f64(max - 0.05);
+                std::thread::sleep(until.saturating_duration_since(Instant::now()));
+            }
+        }))),
+        ..Default::default()
+    };
+    let r = refine(&cfg, &cfg.refine, Some(&ck), &opts).unwrap();
+    let took = t0.elapsed().as_secs_f64();
+    assert_eq!(
+        r.stopped,
+        StopReason::MaxSecondsInRound,
+        "after {took:.1} s"
+    );
+    assert_eq!(r.state.log.len(), 1, "round 0's result");
+    assert!(!r.state.bounds.is_empty());
+    assert!(r.state.bounds.iter().all(|(_, b)| b.eps.is_finite()));
+    for (n, _) in &r.state.bounds {
+        assert!(r.state.nodes[*n].split.is_none());
+        assert!(r.state.nodes[*n]
+            .corners
+            .iter()
+            .all(|&c| r.state.points[c].labelled()));
+    }
+    assert!(
+        took < max + 5.0,
+        "stopped {took:.1} s after the start (budget {max} s)"
+    );
+    let bytes = std::fs::read(&ck).unwrap();
+    let saved = RefineState::from_bytes(&bytes, &ck).unwrap();
+    let unsolved = saved.points.iter().filter(|p| p.status.is_none()).count();
+    assert!(
+        !saved.finished && unsolved > 0,
+        "the checkpoint keeps the unsolved corners"
+    );
+    // Resumed without a wall-clock budget: round 1 goes on, its corners solved first.
+    cfg.refine.max_seconds = None;
+    cfg.refine.max_rounds = 2;
+    let resumed = refine(&cfg, &cfg.refine, Some(&ck), &RefineOptions::default()).unwrap();
+    assert_eq!(resumed.state.log.len(), 2);
+    assert!(resumed.state.log[1].solves > r.state.points.len());
+    assert!(resumed.state.points.iter().all(|p| p.status.is_some()));
+    let _ = std::fs::remove_dir_all(&dir);
+}
