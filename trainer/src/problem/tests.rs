@@ -531,7 +531,7 @@ fn the_safety_study_needs_a_sequence_net() {
         e.contains("closed_loop.safety") && e.contains("outputs = \"sequence\""),
         "{e}"
     );
-    let zero = text.replacen("safety = true", "safety = true\nsafety_runs = 0", 1);
+    let zero = text.replacen("\nsafety = true", "\nsafety = true\nsafety_runs = 0", 1);
     let e = ProblemConfig::from_toml_str(&zero, "c")
         .unwrap_err()
         .to_string();
