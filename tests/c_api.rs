@@ -466,10 +466,10 @@ fn host_c_safe_step_is_bit_identical_to_the_core() {
         for _ in 0..40 {
             k += 1;
             let mut xin = x;
-            if k % 7 == 0 {
+            if k.is_multiple_of(7) {
                 xin[0] += (0.2 * next() - 0.1) as f32;
             }
-            if k % 23 == 0 {
+            if k.is_multiple_of(23) {
                 xin[k % 2] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
             }
             let line: Vec<String> = xin

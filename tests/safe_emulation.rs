@@ -109,7 +109,7 @@ where
             let c: [[f32; NU]; N] = candidate(&plant, &cfg, &x, 0, &mut s);
             let rows: Vec<Vec<f32>> = c.iter().map(|r| r.to_vec()).collect();
             let a = real.init_with(&x, &c).ok();
-            let b = mine.init_with(&x.to_vec(), &rows);
+            let b = mine.init_with(x.as_ref(), &rows);
             assert_eq!(
                 a.map(f32::to_bits),
                 b.map(f32::to_bits),
