@@ -1,15 +1,18 @@
 /*
  * ampc_safe.h: C interface of the safety-augmented controller compiled into libampc_capi.a
- * (controller-core/capi, module `safe`): the safe controller of `pendulum_ode` written by
- * `trainer export --safe-rs` (tests/fixtures/safe-controller/pendulum_ode_safe.rs): its
- * sequence network proposes the MPC's input sequence, the f32 plant checks it online over
- * AMPC_SAFE_N steps against the last safe sequence shifted by one step (controller_core::safe).
+ * (controller-core/capi, module `safe`): the safe controller written by `trainer export
+ * --safe-rs` for `pendulum_ode` (default: tests/fixtures/safe-controller/pendulum_ode_safe.rs)
+ * or, when the library is built with the cargo feature `safe-planar-quadrotor` and this
+ * header is included with AMPC_SAFE_PLANAR_QUADROTOR defined, for the planar quadrotor
+ * (planar_quadrotor_safe.rs). Its sequence network proposes the MPC's input sequence, the
+ * f32 plant checks it online over AMPC_SAFE_N steps against the last safe sequence shifted by
+ * one step (controller_core::safe).
  *
  * Guarantee, once a safe sequence exists (flag CANDIDATE or FALLBACK without
  * SAFE_INFEASIBLE): deterministic for the nominal model: constraint satisfaction and
  * convergence. It rests on model match (the plant follows the generated f32 model), the
- * terminal set (invariance sampled, decrease "not established" for this pendulum) and the
- * f32 margins (estimated). Nothing is guaranteed while
+ * terminal set (invariance sampled; decrease "not established" for this pendulum, sampled
+ * for the quadrotor) and the f32 margins (estimated). Nothing is guaranteed while
  * NO_SAFE is returned beyond an input inside the input box.
  * Plain C99; no allocation, no global state: the caller owns struct ampc_safe.
  */
@@ -22,10 +25,17 @@
 extern "C" {
 #endif
 
-/* State dimension, input dimension and horizon of the compiled-in safe controller. */
+/* State dimension, input dimension and horizon of the compiled-in safe controller (the
+   library's: a mismatch with the library's feature is caught by tests/c_api.rs, not by C). */
+#ifdef AMPC_SAFE_PLANAR_QUADROTOR
+#define AMPC_SAFE_NX 6
+#define AMPC_SAFE_NU 2
+#define AMPC_SAFE_N 20
+#else
 #define AMPC_SAFE_NX 2
 #define AMPC_SAFE_NU 1
 #define AMPC_SAFE_N 20
+#endif
 
 /* Flag bits returned by ampc_safe_step (controller_core::safe::SafeFlags). */
 /* The network's candidate passed the check and was applied. */
@@ -58,6 +68,22 @@ struct ampc_safe {
 
 /* Forget the safe sequence. Returns 0, or AMPC_SAFE_FLAG_NULL_ARGUMENT if s is NULL. */
 uint8_t ampc_safe_init(struct ampc_safe *s);
+
+/* Adopt sequence (e.g. the MPC's solution at x) as the safe sequence if it passes the
+ * online check from x, as if applied at x (the caller applies sequence[0] at x).
+ * Returns 0 when adopted; AMPC_SAFE_FLAG_SAFE_INFEASIBLE when rejected (NaN, outside the
+ * input box, a constraint or the terminal set violated); AMPC_SAFE_FLAG_NULL_ARGUMENT if an
+ * argument is NULL. s changes only when the sequence is adopted. */
+uint8_t ampc_safe_init_with(struct ampc_safe *s, const float x[AMPC_SAFE_NX],
+                            const float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]);
+
+/* Write the terminal controller's rollout from x (v_k = the input box's projection of
+ * kappa_f(x_k), x_{k+1} = the f32 model's step): a safe sequence when x lies well inside the
+ * terminal set, e.g. to initialise near the set point. Returns 0;
+ * AMPC_SAFE_FLAG_NULL_ARGUMENT if x or sequence is NULL (nothing written);
+ * AMPC_SAFE_FLAG_NON_FINITE_STATE for a NaN/inf state (written, inside the box, meaningless). */
+uint8_t ampc_safe_terminal_sequence(const float x[AMPC_SAFE_NX],
+                                    float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]);
 
 /* One control step at state x: writes the input u, updates s, returns the flag bits.
  * u NULL: nothing read or written, returns AMPC_SAFE_FLAG_NULL_ARGUMENT.
