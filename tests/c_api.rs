@@ -10,10 +10,14 @@
 //!    (`capi/c/firmware`, arm-none-eabi-gcc, newlib + semihosting) runs the upswing in
 //!    QEMU mps2-an386; its 91 rows equal, bit for bit, those of the Rust firmware run in
 //!    QEMU; no panic symbol is reachable from `ampc_evaluate` in its ELF.
+//! 3. The safety-augmented controller (`ampc_safe.h`): host C closed loops bit-identical to
+//!    Rust; the C safe firmware for the pendulum and the quadrotor (library feature
+//!    `safe-planar-quadrotor`) on the Cortex-M4F and the Cortex-M0 (thumbv6m-none-eabi, QEMU
+//!    microbit), matched against Rust and counted.
 //!
 //! Needs `cc`, `arm-none-eabi-gcc` with newlib (`gcc-arm-none-eabi`,
 //! `libnewlib-arm-none-eabi`), `qemu-system-arm`, binutils-arm-none-eabi and the
-//! thumbv7em-none-eabihf target (`.ci/run` installs them); fails loudly without them.
+//! thumbv7em-none-eabihf and thumbv6m-none-eabi targets (`.ci/run` installs them); fails loudly without them.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write as _;
@@ -42,7 +46,13 @@ fn target_dir() -> PathBuf {
 /// Builds `libampc_capi.a` (release, own target dir) for `target` (None: the host) and
 /// returns its path.
 fn build_staticlib(target: Option<&str>, features: &[&str]) -> PathBuf {
-    let dir = target_dir().join("c-api");
+    // A library with another controller compiled in gets its own directory: the tests run
+    // in parallel, and one directory holds one `libampc_capi.a` per target.
+    let dir = if features.contains(&"safe-planar-quadrotor") {
+        target_dir().join("c-api-quadrotor")
+    } else {
+        target_dir().join("c-api")
+    };
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.args(["build", "-p", "ampc-capi", "--release", "--lib"])
@@ -290,38 +300,86 @@ fn c_firmware() -> PathBuf {
 /// A C firmware of `capi/c/firmware` (`main`: its main file; `defines`: `-D` options),
 /// linked against the thumbv7em library, written to `target/c-api/<elf>`.
 fn c_firmware_of(main: &str, elf: &str, defines: &[&str]) -> PathBuf {
-    let lib = build_staticlib(Some("thumbv7em-none-eabihf"), &["pendulum-plant"]);
+    c_firmware_for(Board::M4, &["pendulum-plant"], main, elf, defines)
+}
+
+/// The QEMU boards of the C firmware.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Board {
+    /// Cortex-M4F, QEMU mps2-an386 (`mps2_an386.ld`), thumbv7em-none-eabihf, hard float.
+    M4,
+    /// Cortex-M0, QEMU microbit (`microbit.ld`), thumbv6m-none-eabi, soft float.
+    M0,
+}
+
+impl Board {
+    fn rust_target(self) -> &'static str {
+        match self {
+            Board::M4 => "thumbv7em-none-eabihf",
+            Board::M0 => "thumbv6m-none-eabi",
+        }
+    }
+    fn gcc_flags(self) -> &'static [&'static str] {
+        match self {
+            Board::M4 => &[
+                "-mcpu=cortex-m4",
+                "-mthumb",
+                "-mfloat-abi=hard",
+                "-mfpu=fpv4-sp-d16",
+            ],
+            Board::M0 => &["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"],
+        }
+    }
+    fn linker_script(self) -> &'static str {
+        match self {
+            Board::M4 => "mps2_an386.ld",
+            Board::M0 => "microbit.ld",
+        }
+    }
+    fn qemu(self) -> [&'static str; 4] {
+        match self {
+            Board::M4 => ["-cpu", "cortex-m4", "-machine", "mps2-an386"],
+            Board::M0 => ["-cpu", "cortex-m0", "-machine", "microbit"],
+        }
+    }
+}
+
+/// A C firmware of `capi/c/firmware` for `board`, linked against the library built with
+/// `features`, written to `target/c-api/<elf>`.
+fn c_firmware_for(
+    board: Board,
+    features: &[&str],
+    main: &str,
+    elf: &str,
+    defines: &[&str],
+) -> PathBuf {
+    let lib = build_staticlib(Some(board.rust_target()), features);
     let fw = capi().join("c/firmware");
     let elf = target_dir().join("c-api").join(elf);
     let mut gcc = Command::new("arm-none-eabi-gcc");
-    gcc.args([
-        "-mcpu=cortex-m4",
-        "-mthumb",
-        "-mfloat-abi=hard",
-        "-mfpu=fpv4-sp-d16",
-    ])
-    .args(STRICT)
-    .args([
-        "-O2",
-        "-ffunction-sections",
-        "-fdata-sections",
-        "-nostartfiles",
-    ])
-    .args([
-        "--specs=nano.specs",
-        "--specs=rdimon.specs",
-        "-Wl,--gc-sections",
-    ])
-    .arg("-T")
-    .arg(fw.join("mps2_an386.ld"))
-    .arg("-I")
-    .arg(capi().join("include"))
-    .args(defines)
-    .arg(fw.join("startup.c"))
-    .arg(fw.join(main))
-    .arg(&lib)
-    .arg("-o")
-    .arg(&elf);
+    gcc.args(board.gcc_flags())
+        .args(STRICT)
+        .args([
+            "-O2",
+            "-ffunction-sections",
+            "-fdata-sections",
+            "-nostartfiles",
+        ])
+        .args([
+            "--specs=nano.specs",
+            "--specs=rdimon.specs",
+            "-Wl,--gc-sections",
+        ])
+        .arg("-T")
+        .arg(fw.join(board.linker_script()))
+        .arg("-I")
+        .arg(capi().join("include"))
+        .args(defines)
+        .arg(fw.join("startup.c"))
+        .arg(fw.join(main))
+        .arg(&lib)
+        .arg("-o")
+        .arg(&elf);
     if FAST_TANH {
         gcc.arg("-DAMPC_FAST_TANH");
     }
@@ -422,6 +480,10 @@ fn call_graph(elf: &Path) -> BTreeMap<String, BTreeSet<String>> {
 
 mod safe_pendulum {
     controller_core::include_safe_controller!("fixtures/safe-controller/pendulum_ode_safe.rs");
+}
+
+mod safe_quadrotor {
+    controller_core::include_safe_controller!("fixtures/safe-controller/planar_quadrotor_safe.rs");
 }
 
 /// `ampc_safe_step` from C (`capi/c/ampc_safe_stdin.c`, strict C99, `ampc_safe.h`): over
@@ -540,9 +602,9 @@ fn host_c_safe_step_is_bit_identical_to_the_core() {
     assert!(cand > 0 && fb > 0, "candidate {cand}, fallback {fb}");
 }
 
-/// Instructions executed by `elf` on the Cortex-M4 (QEMU mps2-an386 with the counting
-/// plugin `firmware-example/tools/insn_count.c`) and its stdout.
-fn counted_run(elf: &Path) -> (u64, String) {
+/// Instructions executed by `elf` on `board` (QEMU with the counting plugin
+/// `firmware-example/tools/insn_count.c`) and its stdout.
+fn counted_run(board: Board, elf: &Path) -> (u64, String) {
     let plugin = target_dir().join("c-api/libinsn_count.so");
     run_checked(
         Command::new("cc")
@@ -553,8 +615,13 @@ fn counted_run(elf: &Path) -> (u64, String) {
     );
     let out = Command::new("timeout")
         .args(["-k", "5", "300", "qemu-system-arm"])
-        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
-        .args(["-semihosting-config", "enable=on,target=native", "-plugin"])
+        .args(board.qemu())
+        .args([
+            "-nographic",
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-plugin",
+        ])
         .arg(&plugin)
         .args(["-d", "plugin", "-kernel"])
         .arg(elf)
@@ -572,46 +639,111 @@ fn counted_run(elf: &Path) -> (u64, String) {
     (n, String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// The C safe firmware (`capi/c/firmware/safe_bench.c`, `ampc_safe_step` of the pendulum's
-/// safe controller with its sequence network) in QEMU on the Cortex-M4: its sums of flags
-/// and of the bits of u over 1001 steps equal the Rust controller's on the host, no panic is
-/// reachable from `ampc_safe_step`, and the instructions per step are printed
-/// ((count(1001) − count(1))/1000; BENCHMARKS.md).
-#[test]
-fn c_safe_firmware_in_qemu_matches_rust_and_is_counted() {
-    let one = c_firmware_of("safe_bench.c", "c-safe-1.elf", &["-DSAFE_CALLS=1"]);
-    let many = c_firmware_of("safe_bench.c", "c-safe-1001.elf", &["-DSAFE_CALLS=1001"]);
-    let (c1, _) = counted_run(&one);
-    let (c2, out) = counted_run(&many);
-    let states = [[0.1f32, -0.1], [0.05, 0.1], [-0.1, 0.05], [0.02, -0.02]];
-    let mut ctl = safe_pendulum::safe::CONTROLLER;
+/// The host's expected output of `safe_bench.c` over `calls` steps: `init_with` the
+/// terminal rollout from the first state, then steps over the four states.
+fn safe_bench_expected<const NX: usize, const NU: usize>(
+    ctl: &mut controller_core::safe::SafeController<
+        impl controller_core::safe::Plant<NX, NU>,
+        impl controller_core::safe::SequenceSource<NX, NU, 20>,
+        NX,
+        NU,
+        20,
+    >,
+    states: &[[f32; NX]; 4],
+    calls: u32,
+) -> String {
+    use controller_core::safe::Plant as _;
+    let p = &ctl.plant;
+    let mut x = states[0];
+    let seq: [[f32; NU]; 20] = std::array::from_fn(|_| {
+        let u = p.project_input(&p.terminal_input(&x));
+        x = p.step(&x, &u);
+        u
+    });
+    let init = u32::from(ctl.init_with(&states[0], &seq).is_ok());
     let (mut fl, mut acc) = (0u32, 0u32);
-    for i in 0..1001 {
+    for i in 0..calls as usize {
         let o = ctl.step(&states[i % 4]);
         fl = fl.wrapping_add(u32::from(o.flags.0));
-        acc = acc.wrapping_add(o.u[0].to_bits());
+        acc = o.u.iter().fold(acc, |a, u| a.wrapping_add(u.to_bits()));
     }
-    assert_eq!(
-        out.trim(),
-        format!("calls=1001 flags_sum={fl} u_sum_bits={acc}")
-    );
-    let graph = call_graph(&many);
-    assert!(
-        graph.contains_key("ampc_safe_step"),
-        "ampc_safe_step not in the ELF"
-    );
-    let mut seen = BTreeSet::new();
-    let mut todo = vec!["ampc_safe_step".to_string()];
-    while let Some(f) = todo.pop() {
-        if seen.insert(f.clone()) {
-            assert!(!f.contains("panic"), "{f} reachable from ampc_safe_step");
-            todo.extend(graph.get(&f).into_iter().flatten().cloned());
+    format!("calls={calls} init={init} flags_sum={fl} u_sum_bits={acc}")
+}
+
+/// The C safe firmware (`capi/c/firmware/safe_bench.c`: `ampc_safe_init_with` the terminal
+/// rollout, then `ampc_safe_step` with the sequence network) in QEMU, for the pendulum's and
+/// the quadrotor's safe controllers, on the Cortex-M4F and the Cortex-M0: its sums of flags
+/// and of the bits of u equal the Rust controller's on the host, the safe sequence is
+/// adopted, no panic is reachable from `ampc_safe_step`, and the instructions per step are
+/// printed ((count(1 + K) − count(1))/K, K = 1000 on the M4, 100 on the M0; BENCHMARKS.md).
+#[test]
+fn c_safe_firmware_in_qemu_matches_rust_and_is_counted() {
+    const PEND: [[f32; 2]; 4] = [[0.1, -0.1], [0.05, 0.1], [-0.1, 0.05], [0.02, -0.02]];
+    const QUAD: [[f32; 6]; 4] = [
+        [0.05, -0.05, 0.02, 0.0, 0.05, 0.0],
+        [0.04, -0.04, 0.015, 0.01, 0.04, 0.0],
+        [-0.05, 0.05, -0.02, 0.0, -0.05, 0.01],
+        [0.02, 0.01, 0.0, -0.01, 0.0, 0.0],
+    ];
+    for board in [Board::M4, Board::M0] {
+        let k: u32 = if board == Board::M4 { 1000 } else { 100 };
+        for quad in [false, true] {
+            let (feats, defs): (&[&str], &[&str]) = if quad {
+                (
+                    &["safe-planar-quadrotor"],
+                    &["-DAMPC_SAFE_PLANAR_QUADROTOR"],
+                )
+            } else if board == Board::M4 {
+                (&["pendulum-plant"], &[])
+            } else {
+                (&[], &[])
+            };
+            let name = format!("c-safe-{board:?}-{}", if quad { "quad" } else { "pend" });
+            let elf_of = |calls: u32| {
+                let d = format!("-DSAFE_CALLS={calls}");
+                let mut all: Vec<&str> = defs.to_vec();
+                all.push(&d);
+                c_firmware_for(
+                    board,
+                    feats,
+                    "safe_bench.c",
+                    &format!("{name}-{calls}.elf"),
+                    &all,
+                )
+            };
+            let (one, many) = (elf_of(1), elf_of(1 + k));
+            let (c1, _) = counted_run(board, &one);
+            let (c2, out) = counted_run(board, &many);
+            let want = if quad {
+                safe_bench_expected(&mut safe_quadrotor::safe::CONTROLLER, &QUAD, 1 + k)
+            } else {
+                safe_bench_expected(&mut safe_pendulum::safe::CONTROLLER, &PEND, 1 + k)
+            };
+            assert!(want.contains(" init=1 "), "{name}: host init_with failed");
+            assert_eq!(out.trim(), want, "{name}");
+            let graph = call_graph(&many);
+            assert!(
+                graph.contains_key("ampc_safe_step"),
+                "{name}: ampc_safe_step not in the ELF"
+            );
+            let mut seen = BTreeSet::new();
+            let mut todo = vec!["ampc_safe_step".to_string()];
+            while let Some(f) = todo.pop() {
+                if seen.insert(f.clone()) {
+                    assert!(
+                        !f.contains("panic"),
+                        "{name}: {f} reachable from ampc_safe_step"
+                    );
+                    todo.extend(graph.get(&f).into_iter().flatten().cloned());
+                }
+            }
+            eprintln!(
+                "C safe firmware ({board:?}, {}): {} instructions per ampc_safe_step \
+                 (counts {c1}, {c2}); {} functions reachable",
+                if quad { "quadrotor" } else { "pendulum" },
+                (c2 - c1) / u64::from(k),
+                seen.len()
+            );
         }
     }
-    eprintln!(
-        "C safe firmware (M4): {} instructions per ampc_safe_step (counts {c1}, {c2}); \
-         {} functions reachable",
-        (c2 - c1) / 1000,
-        seen.len()
-    );
 }

@@ -1,6 +1,8 @@
 /*
- * Minimal Cortex-M4F start-up for QEMU mps2-an386: vector table, .data/.bss set-up, FPU
- * enable, newlib's semihosting handles (rdimon), main, and _exit with main's status.
+ * Minimal Cortex-M start-up for QEMU (Cortex-M4F mps2-an386 with mps2_an386.ld, Cortex-M0
+ * microbit with microbit.ld): vector table, .data/.bss set-up, FPU enable (when compiled
+ * for a core with one), newlib's semihosting handles (rdimon), main, and _exit with main's
+ * status.
  */
 #include <stdint.h>
 #include <unistd.h>
@@ -21,9 +23,11 @@ void Reset_Handler(void) {
     for (dst = &_sbss; dst < &_ebss;) {
         *dst++ = 0u;
     }
+#if defined(__ARM_FP)
     /* CPACR: full access to CP10 and CP11 (the FPU) before any floating-point code. */
     *(volatile uint32_t *)0xE000ED88u |= 0xFu << 20;
     __asm__ volatile("dsb\n\tisb" ::: "memory");
+#endif
     initialise_monitor_handles();
     _exit(main());
 }
