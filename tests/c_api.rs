@@ -642,7 +642,7 @@ fn counted_run(board: Board, elf: &Path) -> (u64, String) {
 /// The host's expected output of `safe_bench.c` over `calls` steps: `init_with` the
 /// terminal rollout from the first state, then steps over the four states.
 fn safe_bench_expected<const NX: usize, const NU: usize>(
-    ctl: &mut controller_core::safe::SafeController<
+    mut ctl: controller_core::safe::SafeController<
         impl controller_core::safe::Plant<NX, NU>,
         impl controller_core::safe::SequenceSource<NX, NU, 20>,
         NX,
@@ -652,7 +652,6 @@ fn safe_bench_expected<const NX: usize, const NU: usize>(
     states: &[[f32; NX]; 4],
     calls: u32,
 ) -> String {
-    use controller_core::safe::Plant as _;
     let p = &ctl.plant;
     let mut x = states[0];
     let seq: [[f32; NU]; 20] = std::array::from_fn(|_| {
@@ -715,9 +714,9 @@ fn c_safe_firmware_in_qemu_matches_rust_and_is_counted() {
             let (c1, _) = counted_run(board, &one);
             let (c2, out) = counted_run(board, &many);
             let want = if quad {
-                safe_bench_expected(&mut safe_quadrotor::safe::CONTROLLER, &QUAD, 1 + k)
+                safe_bench_expected(safe_quadrotor::safe::CONTROLLER, &QUAD, 1 + k)
             } else {
-                safe_bench_expected(&mut safe_pendulum::safe::CONTROLLER, &PEND, 1 + k)
+                safe_bench_expected(safe_pendulum::safe::CONTROLLER, &PEND, 1 + k)
             };
             assert!(want.contains(" init=1 "), "{name}: host init_with failed");
             assert_eq!(out.trim(), want, "{name}");
