@@ -23,6 +23,7 @@
 //! it keeps its label bit for bit.
 
 pub mod along;
+pub mod pilot;
 pub mod starts;
 
 use crate::mpc::finite::{check_label, nan_max, Failure, LabelParts, Quantity};
@@ -123,7 +124,9 @@ pub struct MpcLaw {
 }
 
 impl MpcLaw {
-    /// Builds the workspaces for a validated problem.
+    /// Builds the workspaces for a validated problem. The starts: `[solver] starts` as
+    /// written, `warm` alone for a convex OCP, else the default decided by the problem's
+    /// pilot ([`pilot`]: run once per process, about 100 × 4 solves).
     ///
     /// ```
     /// let cfg = trainer::problem::ProblemConfig::default();
@@ -137,8 +140,28 @@ impl MpcLaw {
         let starts = match &cfg.solver.starts {
             _ if convex => vec![crate::problem::solver::Start::Warm],
             Some(s) => s.clone(),
-            None => crate::problem::solver::default_starts(false),
+            None => pilot::pilot(cfg).starts,
         };
+        Self::assemble(cfg, hard, starts)
+    }
+
+    /// The law with exactly these starts (no pilot; a convex OCP still gets `warm` alone).
+    pub fn with_starts(cfg: &ProblemConfig, starts: Vec<crate::problem::solver::Start>) -> Self {
+        let hard = SqpSolver::new(cfg, false);
+        let convex = cfg.system.is_affine() && !hard.ocp.has_nonlinear_rows();
+        let starts = if convex {
+            vec![crate::problem::solver::Start::Warm]
+        } else {
+            starts
+        };
+        Self::assemble(cfg, hard, starts)
+    }
+
+    fn assemble(
+        cfg: &ProblemConfig,
+        hard: SqpSolver,
+        starts: Vec<crate::problem::solver::Start>,
+    ) -> Self {
         MpcLaw {
             cfg: cfg.clone(),
             hard,
