@@ -74,6 +74,11 @@ fn execute_with(
             out.display(),
             dataset::csv_path(out).display()
         );
+        // How the default starts were chosen (a non-convex OCP without `solver.starts`).
+        let law = trainer::mpc::law::MpcLaw::new(cfg);
+        if cfg.solver.starts.is_none() && !law.is_convex() {
+            eprintln!("{}", trainer::mpc::law::pilot::pilot(cfg).describe());
+        }
         // Where `solver.starts` reached different local optima (the label: the lowest
         // cost, ties to the warm start — continuation from the previous state).
         if !d.disagree.is_empty() {

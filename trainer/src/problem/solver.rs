@@ -26,7 +26,9 @@ pub struct SolverSettings {
     pub qp: QpSolverKind,
     /// Initial guesses of the hard problem, the lowest-cost hard optimum kept
     /// (`crate::mpc::law` `starts` module). `None` (key absent): the default of the
-    /// problem, [`default_starts`] — `["warm"]` for a convex OCP, more for a non-convex one.
+    /// problem — `["warm"]` for a convex OCP; for a non-convex one [`default_starts`] if the
+    /// problem's pilot (`crate::mpc::law::pilot`) finds them reaching another optimum, else
+    /// `["warm"]`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub starts: Option<Vec<Start>>,
 }
@@ -72,7 +74,8 @@ impl Start {
     }
 }
 
-/// The starts used when `solver.starts` is absent: `["warm"]` for a convex OCP (affine
+/// The starts a non-convex OCP's pilot tries (`crate::mpc::law::pilot`; kept when they
+/// matter there): `["warm"]` for a convex OCP (affine
 /// dynamics, no nonlinear constraint: one optimum, one start), and for a non-convex one
 /// `["warm", "u_lo", "u_hi"]` — the two bang-bang rollouts reach the other swing direction
 /// of swing-up problems (BENCHMARKS.md, "Multi-start labels": the best of the 3-start lists
