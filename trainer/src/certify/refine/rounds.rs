@@ -6,6 +6,7 @@
 use super::labels::{label, Deadline};
 use super::progress::{RoundSink, StopReason};
 use super::split::split_or_stop;
+use super::stale::Stale;
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -346,6 +347,9 @@ pub fn refine(
     // The last complete round (its tree as bounded, before its splits) while a wall-clock
     // budget is set: a round cut by it returns this one.
     let mut last: Option<RefineState> = None;
+    // Whether the last warm-started retraining kept its starting net (not stored in the
+    // checkpoint: a resumed run retrains as before).
+    let mut stale = Stale::default();
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -366,8 +370,11 @@ pub fn refine(
             // Resumed or imported points: their active sets, for the proofs.
             fill_active(cfg, &mut st.points);
         }
-        if needs_retrain(&st, rs, opts) {
-            st.model = Some(retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash));
+        if needs_retrain(&st, rs, opts) && !stale.skips(&st) {
+            let start = st.model.as_ref().map(|m| m.mlp.clone());
+            let m = retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash);
+            stale = Stale::after(start.as_ref(), &m.mlp, &st);
+            st.model = Some(m);
         }
         let model = st.model.clone().expect("trained above");
         st.bounds = bound(&st, &model.mlp);
