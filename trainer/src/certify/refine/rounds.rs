@@ -346,10 +346,8 @@ pub fn refine(
     let deadline = Deadline::new(rs.max_seconds);
     // The last complete round (its tree as bounded, before its splits) while a wall-clock
     // budget is set: a round cut by it returns this one.
-    let mut last: Option<RefineState> = None;
-    // Whether the last warm-started retraining kept its starting net (not stored in the
-    // checkpoint: a resumed run retrains as before).
-    let mut stale = Stale::default();
+    // And whether the last retraining kept its start (`Stale`; not in the checkpoint).
+    let (mut last, mut stale): (Option<RefineState>, _) = (None, Stale::default());
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -371,10 +369,8 @@ pub fn refine(
             fill_active(cfg, &mut st.points);
         }
         if needs_retrain(&st, rs, opts) && !stale.skips(&st) {
-            let start = st.model.as_ref().map(|m| m.mlp.clone());
             let m = retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash);
-            stale = Stale::after(start.as_ref(), &m.mlp, &st);
-            st.model = Some(m);
+            st.model = Some(stale.record(st.model.take(), m, &st));
         }
         let model = st.model.clone().expect("trained above");
         st.bounds = bound(&st, &model.mlp);

@@ -3,6 +3,7 @@
 //! points have grown by a factor [`Stale::GROWTH`].
 
 use super::RefineState;
+use crate::certify::Model;
 use crate::learn::mlp::Mlp;
 
 /// A warm-started retraining returns its best checkpoint, which is its starting net when no
@@ -25,8 +26,15 @@ impl Stale {
     /// again.
     const GROWTH: f64 = 1.25;
 
+    /// Records the retraining from `start` (None: a new net) on `st` that returned `net`,
+    /// and returns `net`.
+    pub(super) fn record(&mut self, start: Option<Model>, net: Model, st: &RefineState) -> Model {
+        *self = Stale::after(start.as_ref().map(|m| &m.mlp), &net.mlp, st);
+        net
+    }
+
     /// The state after a retraining from `start` (None: a new net) that returned `net`.
-    pub(super) fn after(start: Option<&Mlp>, net: &Mlp, st: &RefineState) -> Stale {
+    fn after(start: Option<&Mlp>, net: &Mlp, st: &RefineState) -> Stale {
         Stale::of(start, net, labelled(st))
     }
 
