@@ -33,6 +33,7 @@ mod progress;
 mod region;
 mod rounds;
 mod split;
+mod stale;
 mod start;
 
 pub use crate::certify::local_summary::{Excluded, LocalSummary};

@@ -6,6 +6,7 @@
 use super::labels::{label, Deadline};
 use super::progress::{RoundSink, StopReason};
 use super::split::split_or_stop;
+use super::stale::Stale;
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
@@ -345,7 +346,8 @@ pub fn refine(
     let deadline = Deadline::new(rs.max_seconds);
     // The last complete round (its tree as bounded, before its splits) while a wall-clock
     // budget is set: a round cut by it returns this one.
-    let mut last: Option<RefineState> = None;
+    // And whether the last retraining kept its start (`Stale`; not in the checkpoint).
+    let (mut last, mut stale): (Option<RefineState>, _) = (None, Stale::default());
     loop {
         let t0 = Instant::now();
         let round = st.log.len();
@@ -366,8 +368,9 @@ pub fn refine(
             // Resumed or imported points: their active sets, for the proofs.
             fill_active(cfg, &mut st.points);
         }
-        if needs_retrain(&st, rs, opts) {
-            st.model = Some(retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash));
+        if needs_retrain(&st, rs, opts) && !stale.skips(&st) {
+            let m = retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash);
+            st.model = Some(stale.record(st.model.take(), m, &st));
         }
         let model = st.model.clone().expect("trained above");
         st.bounds = bound(&st, &model.mlp);

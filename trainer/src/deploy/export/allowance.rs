@@ -28,6 +28,7 @@
 //! Both are stated in the certificate's norm ‖S_u⁻¹·‖₂ (`ExportModel::u_scale`): each
 //! output's bound divided by s_u,o (rounded up), exactly the unscaled numbers when s_u = 1.
 
+use super::lanes::{eval_f32_lanes, Lane, LANES};
 use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
 
 /// Number of random states behind [`ExportReport`]'s observed differences.
@@ -140,62 +141,120 @@ fn eval_f64_in(model: &ExportModel, x: &[f64], bufs: &mut (Vec<f64>, Vec<f64>)) 
     }
 }
 
-/// Interval bound on |computed − exact| of the folded network over the box `[a, b]`, for
-/// unit roundoff `u` and relative input error `input_rel`, rounded weights `wr` (or exact if
-/// `None`), tanh error `dt`, the per-output bounds divided by `u_scale` (the norm's S_u).
+/// Widened up by a relative 10⁻¹² (and 10⁻³⁰⁰): covers the rounding of the interval ends
+/// and magnitudes computed in f64.
+fn widen(v: f64) -> f64 {
+    v * (1.0 + 1e-12) + 1e-300
+}
+
+/// 2⁻¹⁴⁹, the smallest positive f32 (products that underflow).
+const TINY: f64 = 1.401_298_464_324_817e-45;
+
+/// The exact network's interval enclosures over a box (module doc): per layer k, its
+/// input's interval `ins[k]` (the box for k = 0, then the tanh of the previous layer's)
+/// and its pre-activation interval `pre[k]` (with the slack that covers the f64 sums). They
+/// do not depend on the rounding analysed, so one enclosure serves the f32 and the f64
+/// analysis of a box. The buffers are reused from box to box.
+#[derive(Default)]
+struct Enclosure {
+    ins: Vec<(Vec<f64>, Vec<f64>)>,
+    pre: Vec<(Vec<f64>, Vec<f64>)>,
+}
+
+impl Enclosure {
+    /// The enclosures of `layers` over the box `[a, b]`.
+    fn of(&mut self, layers: &[DenseF64], a: &[f64], b: &[f64]) {
+        let n_layers = layers.len();
+        self.ins.resize_with(n_layers, Default::default);
+        self.pre.resize_with(n_layers, Default::default);
+        set(&mut self.ins[0], a, b);
+        for (k, l) in layers.iter().enumerate() {
+            let (lo, hi) = &self.ins[k];
+            let (zlo, zhi) = &mut self.pre[k];
+            zlo.clear();
+            zhi.clear();
+            for (row, bias) in l.w.iter().zip(&l.b) {
+                let (mut s_lo, mut s_hi, mut mag) = (*bias, *bias, bias.abs());
+                for i in 0..lo.len() {
+                    let w = row[i];
+                    let (p, q) = (w * lo[i], w * hi[i]);
+                    s_lo += p.min(q);
+                    s_hi += p.max(q);
+                    mag += w.abs() * lo[i].abs().max(hi[i].abs());
+                }
+                let slack = widen(mag) * 1e-13;
+                zlo.push(s_lo - slack);
+                zhi.push(s_hi + slack);
+            }
+            if k + 1 < n_layers {
+                // The tanh layer's outputs: tanh of the interval ends.
+                let (zlo, zhi) = &self.pre[k];
+                let (nlo, nhi) = &mut self.ins[k + 1];
+                nlo.clear();
+                nhi.clear();
+                nlo.extend(zlo.iter().map(|l0| (l0.tanh() - 1e-15).max(-1.0)));
+                nhi.extend(zhi.iter().map(|h0| (h0.tanh() + 1e-15).min(1.0)));
+            }
+        }
+    }
+}
+
+/// `dst = (a, b)` in place.
+fn set(dst: &mut (Vec<f64>, Vec<f64>), a: &[f64], b: &[f64]) {
+    dst.0.clear();
+    dst.0.extend_from_slice(a);
+    dst.1.clear();
+    dst.1.extend_from_slice(b);
+}
+
+/// Interval bound on |computed − exact| of the folded network over the box of `enc` (its
+/// [`Enclosure`]), for unit roundoff `u` and relative input error `input_rel`, rounded
+/// weights `rounded` (or exact if `None`), tanh error `dt`, the per-output bounds divided by
+/// `u_scale` (the norm's S_u). `bufs` are reused error buffers.
+#[allow(clippy::too_many_arguments)]
 fn box_error(
     layers: &[DenseF64],
     rounded: Option<&[LayerF32]>,
-    a: &[f64],
-    b: &[f64],
+    enc: &Enclosure,
     (u, input_rel): (f64, f64),
     dt: &dyn Fn(f64, f64) -> f64,
     u_scale: &[f64],
+    bufs: &mut (Vec<f64>, Vec<f64>),
 ) -> f64 {
-    const TINY: f64 = 1.401_298_464_324_817e-45; // 2^-149
-    let widen = |v: f64| v * (1.0 + 1e-12) + 1e-300;
-    let mut lo: Vec<f64> = a.to_vec();
-    let mut hi: Vec<f64> = b.to_vec();
-    let mut err: Vec<f64> = lo
-        .iter()
-        .zip(&hi)
-        .map(|(l, h)| widen(input_rel * l.abs().max(h.abs()) + TINY))
-        .collect();
+    let (err, zerr) = bufs;
+    let (lo, hi) = &enc.ins[0];
+    err.clear();
+    err.extend(
+        lo.iter()
+            .zip(hi)
+            .map(|(l, h)| widen(input_rel * l.abs().max(h.abs()) + TINY)),
+    );
     let n_layers = layers.len();
     for (k, l) in layers.iter().enumerate() {
+        let (lo, hi) = &enc.ins[k];
         let n = lo.len();
         let gamma = (n as f64 + 1.0) * u / (1.0 - (n as f64 + 1.0) * u);
-        let mut zlo = Vec::with_capacity(l.b.len());
-        let mut zhi = Vec::with_capacity(l.b.len());
-        let mut zerr = Vec::with_capacity(l.b.len());
+        zerr.clear();
         for (o, (row, bias)) in l.w.iter().zip(&l.b).enumerate() {
             // The weights as computed (rounded to f32, or exact), read in place.
             let wrow = rounded.map(|r| &r[k].2[o * n..(o + 1) * n]);
             let wr = |i: usize| wrow.map_or(row[i], |w| f64::from(w[i]));
             let br = rounded.map_or(*bias, |r| f64::from(r[k].3[o]));
-            // Exact enclosure of z_o.
-            let (mut s_lo, mut s_hi, mut mag) = (*bias, *bias, bias.abs());
             let mut e = widen((br - bias).abs());
             let mut rmag = br.abs();
             for i in 0..n {
                 let w = row[i];
-                let (p, q) = (w * lo[i], w * hi[i]);
-                s_lo += p.min(q);
-                s_hi += p.max(q);
                 let m = lo[i].abs().max(hi[i].abs());
-                mag += w.abs() * m;
                 let wi = wr(i);
                 e += wi.abs() * err[i] + (wi - w).abs() * m;
                 rmag += wi.abs() * (m + err[i]);
             }
-            let slack = widen(mag) * 1e-13;
-            zlo.push(s_lo - slack);
-            zhi.push(s_hi + slack);
             zerr.push(widen(e + gamma * rmag + n as f64 * TINY));
         }
         if k + 1 < n_layers {
             // tanh layer
-            for o in 0..zlo.len() {
+            let (zlo, zhi) = &enc.pre[k];
+            for o in 0..zerr.len() {
                 let (l0, h0, e) = (zlo[o], zhi[o], zerr[o]);
                 let (cl, ch) = (l0 - e, h0 + e);
                 let m = if cl <= 0.0 && ch >= 0.0 {
@@ -206,15 +265,11 @@ fn box_error(
                 let t = m.tanh();
                 let lip = (1.0 - t * t).min(1.0) * (1.0 + 1e-12);
                 zerr[o] = widen(dt(m, cl.abs().max(ch.abs())) + lip * e);
-                zlo[o] = (l0.tanh() - 1e-15).max(-1.0);
-                zhi[o] = (h0.tanh() + 1e-15).min(1.0);
             }
         }
-        lo = zlo;
-        hi = zhi;
-        err = zerr;
+        std::mem::swap(err, zerr);
     }
-    norm2_up(&scaled_up(&err, u_scale))
+    norm2_up(&scaled_up(err, u_scale))
 }
 
 /// e_o / s_u,o rounded up (unchanged where s_u,o = 1 or no scale is given): a per-output
@@ -317,8 +372,11 @@ fn f32_allowance_of(model: &ExportModel, folded: &Folded, tanh: Tanh) -> (f64, u
     let worst = (0..boxes)
         .into_par_iter()
         .map_init(
-            || (vec![0.0; nx], vec![0.0; nx]),
-            |(a, b), n| {
+            || {
+                let bufs: (Vec<f64>, Vec<f64>) = Default::default();
+                (vec![0.0; nx], vec![0.0; nx], Enclosure::default(), bufs)
+            },
+            |(a, b, enc, bufs), n| {
                 // Box n: index (n / kⁱ) mod k along axis i.
                 let mut rest = n;
                 for i in 0..nx {
@@ -334,23 +392,25 @@ fn f32_allowance_of(model: &ExportModel, folded: &Folded, tanh: Tanh) -> (f64, u
                     };
                     // Adjacent boxes share the computed end point, so the union covers X.
                 }
+                // One enclosure for both analyses (the exact layers are the same).
+                enc.of(&folded.layers, a, b);
                 let e32 = box_error(
                     &folded.layers,
                     Some(&folded.f32_layers),
-                    a,
-                    b,
+                    enc,
                     (2f64.powi(-24), 2f64.powi(-23)),
                     &|lo, hi| tanh.max_abs_err_on(lo, hi),
                     &model.u_scale,
+                    bufs,
                 );
                 let e64 = box_error(
                     &exact,
                     None,
-                    a,
-                    b,
+                    enc,
                     (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
                     &|_, _| 1e-15,
                     &model.u_scale,
+                    bufs,
                 );
                 e32 + e64
             },
@@ -391,30 +451,42 @@ pub fn sampled_max_diff(model: &ExportModel, tanh: Tanh, n: usize, seed: u64) ->
                 *v = model.domain_lo[i] + next() * (model.domain_hi[i] - model.domain_lo[i]);
             }
         }
-        // Scratch per worker (no allocation per state): x in f32, the f32 and f64 layer
-        // buffers, the difference.
+        // Scratch per worker (no allocation per state): the lanes' inputs in f32, the f32
+        // lane buffers, the f64 layer buffers, the difference. The f32 net runs on
+        // `LANES` states at once (`lanes`: each lane has the scalar evaluation's bits).
         type Scratch = (
-            Vec<f32>,
-            (Vec<f32>, Vec<f32>),
+            Vec<Lane>,
+            (Vec<Lane>, Vec<Lane>),
             (Vec<f64>, Vec<f64>),
             Vec<f64>,
         );
         let w = xs[..m * nx]
-            .par_chunks(nx.max(1))
-            .map_init(Scratch::default, |(x32, b32, b64, d), x| {
+            .par_chunks(nx.max(1) * LANES)
+            .map_init(Scratch::default, |(x32, b32, b64, d), group| {
+                let states = group.len() / nx.max(1);
                 x32.clear();
-                x32.extend(x.iter().map(|v| *v as f32));
-                eval_f32_in(&folded, (&lo, &hi), x32, tanh, b32);
-                eval_f64_in(model, x, b64);
-                d.clear();
-                d.extend(
-                    b32.0
-                        .iter()
-                        .zip(&b64.0)
-                        .enumerate()
-                        .map(|(o, (a, b))| (f64::from(*a) - b) / model.u_scale_of(o)),
-                );
-                norm2_sampled(d)
+                x32.extend((0..nx).map(|i| {
+                    let mut v = [0.0f32; LANES];
+                    for (l, s) in group.chunks_exact(nx.max(1)).enumerate() {
+                        v[l] = s[i] as f32;
+                    }
+                    v
+                }));
+                eval_f32_lanes(&folded, (&lo, &hi), x32, tanh, b32);
+                let mut worst = 0.0f64;
+                for (l, x) in group.chunks_exact(nx.max(1)).enumerate().take(states) {
+                    eval_f64_in(model, x, b64);
+                    d.clear();
+                    d.extend(
+                        b32.0
+                            .iter()
+                            .zip(&b64.0)
+                            .enumerate()
+                            .map(|(o, (a, b))| (f64::from(a[l]) - b) / model.u_scale_of(o)),
+                    );
+                    worst = max_or_nan(worst, norm2_sampled(d));
+                }
+                worst
             })
             .reduce(|| 0.0, max_or_nan);
         worst = max_or_nan(worst, w);

@@ -42,6 +42,7 @@ mod c_header;
 mod c_lib;
 pub mod device;
 mod guarantee;
+mod lanes;
 mod placeholder;
 pub(crate) mod range;
 pub(crate) mod rust;
