@@ -552,10 +552,17 @@ fn the_default_target_eps_is_a_fraction_of_the_scaled_input_range() {
     };
     let p = load("pendulum.toml");
     assert_eq!(p.refine.target_eps, 0.75);
-    assert!(p.refine.is_default(), "the pendulum's [refine] is the default");
+    assert!(
+        p.refine.is_default(),
+        "the pendulum's [refine] is the default"
+    );
     let c = load("cstr.toml");
     assert_eq!(c.ocp.u_scale_or_default(), vec![20.0]);
-    assert!((c.refine.target_eps - 0.05).abs() < 1e-15, "{}", c.refine.target_eps);
+    assert!(
+        (c.refine.target_eps - 0.05).abs() < 1e-15,
+        "{}",
+        c.refine.target_eps
+    );
     // Per input: ε·s_u = 1 K = 2.5 % of 280..320 K.
     assert!((c.refine.target_eps * 20.0 - 1.0).abs() < 1e-12);
     let a = load("arm.toml");

@@ -615,7 +615,11 @@ fn a_cell_without_any_label_is_excluded_at_once_a_mixed_one_only_when_small() {
     let (_, mut st, lat) = grid(&cfg, [3, 3]);
     let rs = crate::problem::RefineSettings::default();
     let ex = Exclusion::new(&rs, &lat.max);
-    assert!(ex.min_size.iter().zip(&st.nodes[0].size).all(|(m, s)| m < s));
+    assert!(ex
+        .min_size
+        .iter()
+        .zip(&st.nodes[0].size)
+        .all(|(m, s)| m < s));
     // Before any solve: nothing excluded.
     assert!((0..4).all(|n| !st.all_unlabelled(n) && !st.excluded_by(n, &ex)));
     let dead: Vec<usize> = st.nodes[0].corners.clone();
