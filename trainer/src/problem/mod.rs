@@ -205,6 +205,14 @@ impl ProblemConfig {
         let mut cfg = cfg;
         cfg.validate().map_err(|e| e.in_file(origin))?;
         cfg.settle_setpoint().map_err(|e| e.in_file(origin))?;
+        // `[refine] target_eps` not given: a fraction of the input range in the
+        // certificate's norm (`refine::default_target_eps`).
+        let given = toml::from_str::<toml::Table>(text)
+            .ok()
+            .is_some_and(|t| t.get("refine").and_then(|r| r.get("target_eps")).is_some());
+        if !given {
+            cfg.refine.target_eps = refine::default_target_eps(&cfg.ocp);
+        }
         Ok(cfg)
     }
 

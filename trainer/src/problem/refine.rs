@@ -4,6 +4,36 @@
 use super::{invalid, ConfigError, Schedule, TrainSettings};
 use serde::{Deserialize, Serialize};
 
+/// The default of [`RefineSettings::target_eps`] as a fraction of the input range in the
+/// certificate's norm, ‖S_u⁻¹(u_hi − u_lo)‖₂ ([`default_target_eps`]): 2.5 %. Unscaled
+/// (`u_scale = 1`) on the pendulum's |u| ≤ 15 N·m this is the paper's 0.75 N·m; with the
+/// default scales (half-widths of U, scaled range 2√nu) it is 0.05·√nu, i.e. 2.5 % of each
+/// input's range.
+pub const DEFAULT_TARGET_FRACTION: f64 = 0.025;
+
+/// The default target ε of a problem whose `[refine]` does not give `target_eps`:
+/// [`DEFAULT_TARGET_FRACTION`] × ‖S_u⁻¹(u_hi − u_lo)‖₂ with S_u = `[ocp] u_scale` (default
+/// the half-widths of U), the range of the inputs in the norm the cells are bounded in. A
+/// fixed number (the former 0.75) means 37.5 % of the range in the default scaled norm —
+/// weak — and 2.5 % only where S_u = 1 and |u| ≤ 15. Falls back to 0.75 when the range is
+/// not finite and positive.
+pub fn default_target_eps(ocp: &super::OcpSettings) -> f64 {
+    let s = ocp.u_scale_or_default();
+    let range = ocp
+        .u_lo
+        .iter()
+        .zip(&ocp.u_hi)
+        .zip(&s)
+        .map(|((l, h), s)| ((h - l) / s).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if range.is_finite() && range > 0.0 {
+        DEFAULT_TARGET_FRACTION * range
+    } else {
+        0.75
+    }
+}
+
 /// The default of [`RefineSettings::min_cell`]: 1/64 of X per axis.
 pub const DEFAULT_MIN_CELL: f64 = 1.0 / 64.0;
 
@@ -15,8 +45,10 @@ fn is_default_min_cell(v: &f64) -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RefineSettings {
-    /// Target certified ε (default 0.75; `--target-eps` overrides), in the certificate's
-    /// norm ‖S_u⁻¹(κ − κ_NN)‖₂ (`[ocp] u_scale`; unscaled where all scales are 1).
+    /// Target certified ε (`--target-eps` overrides), in the certificate's norm
+    /// ‖S_u⁻¹(κ − κ_NN)‖₂ (`[ocp] u_scale`; unscaled where all scales are 1). Default: 2.5 %
+    /// of the input range in that norm ([`default_target_eps`], set when a problem file is
+    /// read without this key); [`RefineSettings::default`] alone holds 0.75 (the pendulum's).
     pub target_eps: f64,
     /// Budget of OCP solves (default 50 000; `--budget` overrides).
     pub budget: usize,

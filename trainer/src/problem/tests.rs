@@ -539,3 +539,41 @@ fn the_safety_study_needs_a_sequence_net() {
     let plain = toml::to_string(&ProblemConfig::default().closed_loop).unwrap();
     assert!(!plain.contains("safety"), "{plain}");
 }
+
+/// `[refine] target_eps` not given: 2.5 % of the input range in the certificate's norm —
+/// the pendulum's 0.75 N·m unscaled (|u| ≤ 15, u_scale = 1), 0.05 in the default scaled
+/// norm of the CSTR (1 K of its 40 K coolant range); given, the file's value; a problem
+/// stored and read back keeps its target.
+#[test]
+fn the_default_target_eps_is_a_fraction_of_the_scaled_input_range() {
+    let load = |f: &str| {
+        ProblemConfig::load(&std::path::PathBuf::from(DIR).join(f))
+            .unwrap_or_else(|e| panic!("{f}: {e}"))
+    };
+    let p = load("pendulum.toml");
+    assert_eq!(p.refine.target_eps, 0.75);
+    assert!(
+        p.refine.is_default(),
+        "the pendulum's [refine] is the default"
+    );
+    let c = load("cstr.toml");
+    assert_eq!(c.ocp.u_scale_or_default(), vec![20.0]);
+    assert!(
+        (c.refine.target_eps - 0.05).abs() < 1e-15,
+        "{}",
+        c.refine.target_eps
+    );
+    // Per input: ε·s_u = 1 K = 2.5 % of 280..320 K.
+    assert!((c.refine.target_eps * 20.0 - 1.0).abs() < 1e-12);
+    let a = load("arm.toml");
+    assert_eq!(a.refine.target_eps, 0.03, "the file's value");
+    // Stored and read back: the same target (written out since it is not 0.75).
+    let back = ProblemConfig::from_stored_toml(&c.to_toml_string().unwrap(), "stored").unwrap();
+    assert_eq!(back.refine.target_eps, c.refine.target_eps);
+    // Two inputs, default scales: 0.025 × 2√2.
+    let mut o = c.ocp.clone();
+    o.u_lo = vec![-1.0, 0.0];
+    o.u_hi = vec![1.0, 100.0];
+    let t = refine::default_target_eps(&o);
+    assert!((t - 0.025 * 8f64.sqrt()).abs() < 1e-15, "{t}");
+}

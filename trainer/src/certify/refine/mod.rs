@@ -152,10 +152,12 @@ impl Point {
 
 /// Which leaf cells leave the certified domain: with `infeasible`
 /// (`refine.exclude_infeasible`) those whose corners are all hard-infeasible
-/// ([`RefineState::excluded`]); always those with a corner the MPC left unlabelled once they
-/// are no larger than `min_size` ([`RefineState::unlabelled_small`], `refine.min_cell`): a
-/// cell around a state without a label can never get a finite bound, so it is split down to
-/// that size and then excluded, and ε is certified over the other cells.
+/// ([`RefineState::excluded`]); always those whose corners are all unlabelled, at any size
+/// ([`RefineState::all_unlabelled`]), and those with a corner the MPC left unlabelled once
+/// they are no larger than `min_size` ([`RefineState::unlabelled_small`], `refine.min_cell`):
+/// a cell around a state without a label can never get a finite bound, so a mixed cell
+/// (some corners labelled) is split down to that size and then excluded, and ε is certified
+/// over the other cells.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Exclusion {
     /// `refine.exclude_infeasible`.
@@ -266,9 +268,24 @@ impl RefineState {
             && node.corners.iter().any(|&c| !self.points[c].labelled())
     }
 
+    /// Whether leaf `n` has no labelled corner at all (every corner solved and left
+    /// unlabelled by the MPC): no bound can be finite there, nor can splitting it give one
+    /// soon — its new corners lie between unlabelled ones — so it is excluded at once, at any
+    /// size, instead of being split down to `refine.min_cell` corner by failing corner.
+    pub fn all_unlabelled(&self, n: usize) -> bool {
+        let node = &self.nodes[n];
+        node.split.is_none()
+            && node.corners.iter().all(|&c| {
+                let p = &self.points[c];
+                p.status.is_some() && !p.labelled()
+            })
+    }
+
     /// Whether leaf `n` is outside the certified domain under `ex` ([`Exclusion`]).
     pub fn excluded_by(&self, n: usize, ex: &Exclusion) -> bool {
-        (ex.infeasible && self.excluded(n)) || self.unlabelled_small(n, &ex.min_size)
+        (ex.infeasible && self.excluded(n))
+            || self.all_unlabelled(n)
+            || self.unlabelled_small(n, &ex.min_size)
     }
 
     /// The leaves outside the certified domain under `ex`, in node order.

@@ -164,9 +164,9 @@ fn excluded_summary(
         boxes,
         unlabelled_states,
         note: format!(
-            "A leaf cell is excluded when a corner has no MPC label (the solver found no \
-             solution there) and the cell has been split down to refine.min_cell = {} of X \
-             per axis{}: no bound can be finite there. Whether a cell is outside the MPC's \
+            "A leaf cell is excluded when no corner has an MPC label (the solver found no \
+             solution at any of them), or when a corner has none and the cell has been split \
+             down to refine.min_cell = {} of X per axis{}: no bound can be finite there. Whether a cell is outside the MPC's \
              feasible set is an estimate from its corners, not a proof; the feasible set may \
              reach into an excluded cell between its corners (`refine --check` counts fresh \
              feasible states found there). ε holds on X minus these boxes; the exported \

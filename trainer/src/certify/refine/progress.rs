@@ -118,7 +118,11 @@ pub fn infinite_causes(
             })
             .collect();
         let small = node.size.iter().zip(&ex.min_size).all(|(s, m)| s <= m);
-        let cause = if !unlabelled.is_empty() {
+        let cause = if unlabelled.len() == node.corners.len() {
+            "the MPC left every corner unlabelled: the cell is excluded from the certified \
+             domain at once"
+                .to_string()
+        } else if !unlabelled.is_empty() {
             format!(
                 "the MPC left {} corner(s) unlabelled; the cell is split down to \
                  refine.min_cell = {} of X per axis, then excluded from the certified domain{}",

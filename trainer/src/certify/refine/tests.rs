@@ -401,7 +401,11 @@ fn unlabelled_corners_are_excluded_at_the_smallest_cell_and_eps_is_finite() {
     for &n in &excluded {
         let node = &st.nodes[n];
         assert!(node.corners.iter().any(|&c| unlabelled(c)));
-        assert!(node.size.iter().zip(&ex.min_size).all(|(s, m)| s <= m));
+        // At the smallest size, or (at any size) with no labelled corner at all.
+        assert!(
+            node.size.iter().zip(&ex.min_size).all(|(s, m)| s <= m)
+                || node.corners.iter().all(|&c| unlabelled(c))
+        );
         assert!(
             !st.bounds.iter().any(|(l, _)| *l == n),
             "excluded leaf {n} bounded"
@@ -599,4 +603,49 @@ fn a_round_cut_by_the_wall_clock_budget_keeps_the_last_round_and_resumes() {
     assert!(resumed.state.log[1].solves > r.state.points.len());
     assert!(resumed.state.points.iter().all(|p| p.status.is_some()));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A cell whose corners are all unlabelled is excluded at once, at any size (it is never
+/// split down to `refine.min_cell`); a mixed cell (some corners labelled) is excluded only at
+/// that size; a corner not yet solved is not "unlabelled" (no exclusion before its solve).
+#[test]
+fn a_cell_without_any_label_is_excluded_at_once_a_mixed_one_only_when_small() {
+    let cfg = ProblemConfig::default();
+    // 3 × 3 points: cells 0 (lower left), 1, 2, 3 (row-major over the first axis).
+    let (_, mut st, lat) = grid(&cfg, [3, 3]);
+    let rs = crate::problem::RefineSettings::default();
+    let ex = Exclusion::new(&rs, &lat.max);
+    assert!(ex
+        .min_size
+        .iter()
+        .zip(&st.nodes[0].size)
+        .all(|(m, s)| m < s));
+    // Before any solve: nothing excluded.
+    assert!((0..4).all(|n| !st.all_unlabelled(n) && !st.excluded_by(n, &ex)));
+    let dead: Vec<usize> = st.nodes[0].corners.clone();
+    for (i, p) in st.points.iter_mut().enumerate() {
+        if dead.contains(&i) {
+            p.status = Some(SqpStatus::Infeasible);
+        } else {
+            p.status = Some(SqpStatus::Converged);
+            p.u = vec![0.0];
+            p.du = vec![0.0; 2];
+        }
+    }
+    assert!(st.all_unlabelled(0) && st.excluded_by(0, &ex));
+    assert_eq!(st.excluded_leaves_by(&ex), vec![0]);
+    // Cells 1 and 2 share corners with cell 0 (mixed): not excluded at the initial size.
+    for n in 1..4 {
+        assert!(!st.all_unlabelled(n) && !st.excluded_by(n, &ex), "cell {n}");
+    }
+    // One corner of cell 0 not yet solved: cell 0 waits for it.
+    st.points[dead[0]].status = None;
+    assert!(!st.all_unlabelled(0) && !st.excluded_by(0, &ex));
+    // A mixed cell at refine.min_cell is excluded (the earlier rule, unchanged).
+    st.points[dead[0]].status = Some(SqpStatus::Infeasible);
+    let big = Exclusion {
+        infeasible: false,
+        min_size: st.nodes[1].size.clone(),
+    };
+    assert!(st.excluded_by(1, &big) && !st.all_unlabelled(1));
 }
