@@ -135,3 +135,133 @@ fn the_terminal_controller_as_network_is_accepted() {
     assert!(g.safe.fallback_share < (steps - 1.0) / steps * 0.5, "{g:?}");
     assert!(g.safe.runs.iter().any(|r| r.fallback_steps == 0));
 }
+
+/// The `closed_loop.json` contract of issue 41 §6, read as plain JSON: with the study, the
+/// top-level `safe`, `plain`, `mpc` are lists of the study's runs from the same starts, each
+/// with `violation_steps`, `fallback_steps`, `cost`, `converged` (and `steps`), `safety`
+/// holds the summaries without repeating the lists, and the ordinary study's MPC runs are
+/// under `mpc_nominal`; the file reads back to the same value, and without the study it is
+/// the plain map of runs as before (the ordinary runs under `mpc`).
+#[test]
+fn closed_loop_json_has_the_issue_keys() {
+    use trainer::mpc::law::MpcLaw;
+    use trainer::study::closed_loop::{simulate, Controller, SimSettings};
+    use trainer::study::scenarios::{ClosedLoop, ClosedLoopFile, ORDINARY_MPC_KEY};
+    let mut cfg = config();
+    cfg.closed_loop.safety_runs = 5;
+    cfg.closed_loop.steps = 10;
+    let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
+    let p = &plant;
+    let n = cfg.ocp.horizon;
+    let rollout = move |x: &[f32]| {
+        let mut xk = x.to_vec();
+        (0..n)
+            .map(|_| {
+                let u = p.project_input(&p.terminal_input(&xk));
+                xk = p.step(&xk, &u);
+                u
+            })
+            .collect::<Vec<_>>()
+    };
+    let study = run(&cfg, &plant, 2, &rollout);
+    let sim = SimSettings {
+        steps: cfg.closed_loop.steps,
+        noise: vec![],
+        seed: 0,
+        mass_mismatch: 0.0,
+        mismatch_parameter: None,
+        disturbance: Default::default(),
+    };
+    let mut law = MpcLaw::new(&cfg);
+    let ordinary = simulate(&cfg, &mut law, &Controller::Mpc, &[0.5, 0.0], &sim);
+    let mut runs = ClosedLoop::new();
+    runs.insert("mpc".into(), vec![ordinary.clone()]);
+    runs.insert("mpc_noise".into(), vec![ordinary.clone()]);
+
+    // Without the study: the map of runs, `mpc` the ordinary runs.
+    let plain_file = ClosedLoopFile {
+        safety: None,
+        runs: runs.clone(),
+    };
+    let text = serde_json::to_string(&plain_file).unwrap();
+    assert_eq!(text, serde_json::to_string(&runs).unwrap());
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v.get("safe").is_none() && v.get("safety").is_none());
+    assert!(v["mpc"][0].get("x0").is_some());
+    assert_eq!(
+        serde_json::from_str::<ClosedLoopFile>(&text).unwrap(),
+        plain_file
+    );
+
+    // With it.
+    let file = ClosedLoopFile {
+        safety: Some(study.clone()),
+        runs,
+    };
+    let text = serde_json::to_string(&file).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let m = v.as_object().unwrap();
+    let keys: Vec<&str> = m.keys().map(|k| k.as_str()).collect();
+    assert_eq!(
+        keys,
+        [
+            "mpc",
+            "mpc_noise",
+            ORDINARY_MPC_KEY,
+            "plain",
+            "safe",
+            "safety"
+        ]
+    );
+    for (key, mine) in [
+        ("safe", &study.nominal.safe.runs),
+        ("plain", &study.nominal.plain.runs),
+        ("mpc", &study.nominal.mpc.runs),
+    ] {
+        let list = m[key].as_array().unwrap();
+        assert_eq!(list.len(), cfg.closed_loop.safety_runs, "{key}");
+        for (r, mine) in list.iter().zip(mine) {
+            assert_eq!(
+                r["violation_steps"].as_u64(),
+                Some(mine.violation_steps as u64)
+            );
+            assert_eq!(
+                r["fallback_steps"].as_u64(),
+                Some(mine.fallback_steps as u64)
+            );
+            assert_eq!(r["cost"].as_f64(), Some(mine.cost));
+            assert_eq!(r["converged"].as_bool(), Some(mine.converged));
+            assert_eq!(r["steps"].as_u64(), Some(cfg.closed_loop.steps as u64));
+        }
+    }
+    // The MPC's own runs carry no fallback; the safe runs' fallbacks are the summary's.
+    assert!(m["mpc"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|r| r["fallback_steps"] == 0));
+    let fb: u64 = m["safe"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["fallback_steps"].as_u64().unwrap())
+        .sum();
+    let share = m["safety"]["safe"]["fallback_share"].as_f64().unwrap();
+    let total = (cfg.closed_loop.safety_runs * cfg.closed_loop.steps) as f64;
+    assert!((share - fb as f64 / total).abs() < 1e-15);
+    // The summaries do not repeat the lists; the ordinary runs kept every field.
+    assert!(m["safety"]["safe"].get("runs").is_none());
+    assert!(m[ORDINARY_MPC_KEY][0].get("x0").is_some());
+    assert!(m["mpc_noise"][0].get("x0").is_some());
+    assert!(!text.contains("null"));
+    // Round trip: in memory nothing moved.
+    let back: ClosedLoopFile = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, file);
+    assert_eq!(back.runs["mpc"], vec![ordinary]);
+
+    // A file of the first layout (the study's lists nested under `safety`) still reads.
+    let mut old = serde_json::to_value(&file.runs).unwrap();
+    old["safety"] = serde_json::to_value(&study).unwrap();
+    let back: ClosedLoopFile = serde_json::from_value(old).unwrap();
+    assert_eq!(back, file);
+}

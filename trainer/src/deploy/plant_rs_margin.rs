@@ -113,43 +113,73 @@ pub fn eval_f32(tape: &Tape, x: &[f32], u: &[f32], regs: &mut Vec<f32>, out: &mu
 /// F(x, u) in f32 as the generated `step` computes it (RK4 over the sub-steps, or the
 /// discrete map).
 pub fn step_f32(model: &ExprModel, ts: f64, substeps: usize, x: &[f32], u: &[f32]) -> Vec<f32> {
+    let mut out = vec![0.0; x.len()];
+    step_f32_into(
+        model,
+        ts,
+        substeps,
+        (x, u),
+        &mut out,
+        &mut StepScratch::default(),
+    );
+    out
+}
+
+/// The buffers of [`step_f32_into`] (registers, RK4 stages), reused across calls.
+#[derive(Debug, Clone, Default)]
+pub struct StepScratch {
+    regs: Vec<f32>,
+    k: [Vec<f32>; 4],
+    t: Vec<f32>,
+}
+
+/// [`step_f32`] of `(x, u)` into `out` (nx entries) on the buffers `s`: the same operations
+/// in the same order, so the same bits, without allocating once `s` has grown.
+pub fn step_f32_into(
+    model: &ExprModel,
+    ts: f64,
+    substeps: usize,
+    (x, u): (&[f32], &[f32]),
+    out: &mut [f32],
+    s: &mut StepScratch,
+) {
     let nx = x.len();
-    let mut regs = Vec::new();
-    let mut f = |x: &[f32], out: &mut [f32]| eval_f32(model.tape(), x, u, &mut regs, out);
-    let mut x = x.to_vec();
-    if model.is_discrete() {
-        let mut y = vec![0.0; nx];
-        f(&x, &mut y);
-        return y;
+    let StepScratch {
+        regs,
+        k: [k1, k2, k3, k4],
+        t,
+    } = s;
+    for v in [&mut *k1, &mut *k2, &mut *k3, &mut *k4, &mut *t] {
+        v.clear();
+        v.resize(nx, 0.0);
     }
+    let mut f = |x: &[f32], o: &mut [f32]| eval_f32(model.tape(), x, u, regs, o);
+    if model.is_discrete() {
+        out.fill(0.0);
+        f(x, out);
+        return;
+    }
+    out.copy_from_slice(x);
     let h = ts / substeps.max(1) as f64;
     let (half_h, hh, h_6) = ((0.5 * h) as f32, h as f32, (h / 6.0) as f32);
-    let (mut k1, mut k2, mut k3, mut k4, mut t) = (
-        vec![0.0; nx],
-        vec![0.0; nx],
-        vec![0.0; nx],
-        vec![0.0; nx],
-        vec![0.0; nx],
-    );
     for _ in 0..substeps.max(1) {
-        f(&x, &mut k1);
+        f(out, k1);
         for i in 0..nx {
-            t[i] = x[i] + k1[i] * half_h;
+            t[i] = out[i] + k1[i] * half_h;
         }
-        f(&t, &mut k2);
+        f(t, k2);
         for i in 0..nx {
-            t[i] = x[i] + k2[i] * half_h;
+            t[i] = out[i] + k2[i] * half_h;
         }
-        f(&t, &mut k3);
+        f(t, k3);
         for i in 0..nx {
-            t[i] = x[i] + k3[i] * hh;
+            t[i] = out[i] + k3[i] * hh;
         }
-        f(&t, &mut k4);
+        f(t, k4);
         for i in 0..nx {
-            x[i] += (k1[i] + k2[i] * 2.0 + k3[i] * 2.0 + k4[i]) * h_6;
+            out[i] += (k1[i] + k2[i] * 2.0 + k3[i] * 2.0 + k4[i]) * h_6;
         }
     }
-    x
 }
 
 fn quad64(p: &[Vec<f64>], d: &[f64]) -> f64 {
@@ -192,7 +222,8 @@ pub fn estimate_margins(
     let (mut g32, mut g64, mut regs, mut scratch) =
         (vec![0.0f32; nc], vec![0.0f64; nc], Vec::new(), Vec::new());
     let (mut ds, mut df, mut full) = (0.0f64, 0.0f64, 0);
-    let mut y64 = vec![0.0; nx];
+    let (mut y64, mut y32, mut step_scratch) =
+        (vec![0.0; nx], vec![0.0f32; nx], StepScratch::default());
     for s in 0..states as u64 {
         let mut x32: Vec<f32> = (0..nx)
             .map(|i| {
@@ -219,7 +250,15 @@ pub fn estimate_margins(
                     ds = ds.max((f64::from(g32[c]) - g64[c]).abs());
                 }
             }
-            x32 = step_f32(model, o.ts, o.rk4_substeps, &x32, &u);
+            step_f32_into(
+                model,
+                o.ts,
+                o.rk4_substeps,
+                (&x32, &u),
+                &mut y32,
+                &mut step_scratch,
+            );
+            x32.copy_from_slice(&y32);
             f64_model.step(&x64, &ud, &mut y64);
             x64.clone_from(&y64);
             inside &= (0..nx).all(|i| o.x_lo[i] <= x64[i] && x64[i] <= o.x_hi[i]);

@@ -19,7 +19,7 @@
 //! definition.
 
 use super::plant_rs::{plant_model, PlantRsError};
-use super::plant_rs_margin::{eval_f32, step_f32};
+use super::plant_rs_margin::{eval_f32, step_f32, step_f32_into, StepScratch};
 use super::plant_rs_safe::{safe_plant_rs, SafePlantRs, TerminalSource};
 use crate::problem::model::expr::{ConstraintSet, ExprModel};
 use crate::problem::ProblemConfig;
@@ -213,6 +213,11 @@ impl EmulatedPlant {
         step_f32(&self.model, self.ts, self.substeps, x, u)
     }
 
+    /// F(x, u) into `out` on reused buffers (the same bits as [`Self::step`]).
+    pub fn step_into(&self, x: &[f32], u: &[f32], out: &mut [f32], s: &mut StepScratch) {
+        step_f32_into(&self.model, self.ts, self.substeps, (x, u), out, s)
+    }
+
     /// The generated `state_box_violation`.
     fn state_box_violation(&self, x: &[f32]) -> f32 {
         if x.iter().any(|v| v.is_nan()) {
@@ -370,6 +375,7 @@ impl<'a> SafeEmulation<'a> {
     pub fn check(&self, x: &[f32], v: &mut [Vec<f32>], complete: bool) -> (bool, f32) {
         let p = self.plant;
         let mut xk = x.to_vec();
+        let (mut next, mut scratch) = (vec![0.0f32; xk.len()], StepScratch::default());
         let mut cost = 0.0f32;
         let mut ok = true;
         let last = v.len().wrapping_sub(1);
@@ -380,7 +386,8 @@ impl<'a> SafeEmulation<'a> {
             ok &= p.project_input(u) == *u;
             ok &= p.stage_violation(k, &xk, u) + self.margins.0 <= 0.0;
             cost += p.stage_cost(&xk, u);
-            xk = p.step(&xk, u);
+            p.step_into(&xk, u, &mut next, &mut scratch);
+            xk.copy_from_slice(&next);
         }
         ok &= p.terminal_violation(&xk) + self.margins.1 <= 0.0;
         cost += p.terminal_cost(&xk);

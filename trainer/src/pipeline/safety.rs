@@ -1,7 +1,7 @@
 //! The closed-loop stage's safety study (`[closed_loop] safety = true`): the exported model's
 //! sequence net as the candidate source of the device's safe controller, emulated at runtime
 //! dimensions (`deploy::safe_emulation`), run by `study::safety`; its result goes into
-//! `closed_loop.json` under `safety`.
+//! `closed_loop.json` (top-level `safe`, `plain`, `mpc` and `safety`: `study::scenarios`).
 
 use super::{fail, PipelineError, Stage};
 use crate::certify::Model;

@@ -59,7 +59,8 @@ pub struct ClosedLoopSettings {
     /// The safety study (`study::safety`, issue 41 §6): Monte Carlo of closed loops of the
     /// safety-augmented controller (`controller_core::safe`, emulated bit for bit by
     /// `deploy::safe_emulation`), the plain network and the MPC from the same i.i.d. starts
-    /// in X, written to `closed_loop.json` under `safety`. Needs `[training] outputs =
+    /// in X, written to `closed_loop.json` under `safe`, `plain`, `mpc` and `safety`
+    /// (`study::scenarios::ClosedLoopFile`). Needs `[training] outputs =
     /// "sequence"`. Default false; not serialised when false.
     #[serde(skip_serializing_if = "is_false")]
     pub safety: bool,

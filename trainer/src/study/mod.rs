@@ -17,6 +17,6 @@ pub mod plots;
 pub mod report;
 pub(crate) mod robust;
 pub mod safety;
-pub(crate) mod scenarios;
+pub mod scenarios;
 pub(crate) mod seeds;
 pub mod statistical_loop;

@@ -17,9 +17,11 @@
 //! **Violation** (per step, [`step_violation`]): x_{k+1} outside the OCP's state box, or an
 //! `[ocp]` path constraint violated where the OCP imposes it (states-only ones at x_{k+1},
 //! inputs-only ones at u_k, mixed ones at (x_k, u_k) from k = 1), by more than
-//! [`VIOLATION_TOL`], evaluated on the **true (f64 model) trajectory**; a step whose next
-//! state is not finite or leaves X by more than [`DIVERGED_MARGIN`] of its width counts as
-//! violating and ends the run (`diverged`). Terminal constraints are not checked along the
+//! [`VIOLATION_TOL`], evaluated on the **true (f64 model) trajectory**, and a step whose next
+//! state or cost is not finite. A run ends (`diverged`) when its next state is not finite
+//! or leaves the hull of X and the finite state bounds widened by [`DIVERGED_MARGIN`] × X's
+//! width (`stop_box`); that step counts as violating exactly when it violates by the rule
+//! above (leaving the state box does; an unconstrained angle beyond the widened X does not). Terminal constraints are not checked along the
 //! loop. **Converged**: the last state within [`CONVERGE_TOL`] of x_ref in the scaled
 //! ∞-norm ([`distance_to_setpoint`]). **Cost**: Σ_k ℓ(x_k, u_k) in f64 over the simulated
 //! steps. The cost ratio of a run is its cost over the MPC's from the same x₀ (runs where the
@@ -61,11 +63,14 @@ pub struct SafetyRun {
     pub fallback_steps: usize,
     /// Steps without a safe sequence (flag `NO_SAFE`); 0 for plain and MPC.
     pub no_safe_steps: usize,
+    /// Steps simulated (`[closed_loop] steps`, fewer when the run diverged).
+    #[serde(default)]
+    pub steps: usize,
     /// Σ ℓ(x_k, u_k) over the simulated steps.
     pub cost: f64,
     /// The last state within `CONVERGE_TOL` of x_ref (scaled ∞-norm), and not diverged.
     pub converged: bool,
-    /// Stopped early: the next state was not finite or left X by `DIVERGED_MARGIN` × width.
+    /// Stopped early: the next state was not finite or left the stop box (module doc).
     #[serde(default, skip_serializing_if = "is_false")]
     pub diverged: bool,
 }
@@ -81,7 +86,7 @@ pub struct ControllerRuns {
     pub total_violations: u64,
     /// Runs with at least one violating step.
     pub violating_runs: u64,
-    /// Σ fallback_steps / Σ simulated steps.
+    /// Σ fallback_steps / Σ steps (the steps simulated).
     pub fallback_share: f64,
     /// Σ no_safe_steps.
     pub no_safe_steps: u64,
@@ -93,7 +98,9 @@ pub struct ControllerRuns {
     pub median_cost_ratio: Option<f64>,
     /// Runs entering the median (MPC cost > 0, both finite).
     pub cost_ratio_runs: u64,
-    /// The runs, in the order of the starts.
+    /// The runs, in the order of the starts (in `closed_loop.json` the nominal group's lists
+    /// are the top-level `safe`, `plain`, `mpc`: `study::scenarios::ClosedLoopFile`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub runs: Vec<SafetyRun>,
 }
 
@@ -114,7 +121,8 @@ pub struct SafetyGroup {
     pub runs_without_safe_sequence: u64,
 }
 
-/// The study (`closed_loop.json`, key `safety`).
+/// The study (`closed_loop.json`: key `safety`, its nominal runs the top-level `safe`,
+/// `plain`, `mpc` — `study::scenarios::ClosedLoopFile`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SafetyStudy {
     /// Runs per controller (nominal).
@@ -189,41 +197,69 @@ fn stage_cost(cfg: &ProblemConfig, x: &[f64], u: &[f64]) -> f64 {
 /// reports ((fallback, no safe)).
 type Policy<'p> = dyn FnMut(usize, &[f64]) -> (Vec<f64>, bool, bool) + 'p;
 
-/// One closed loop of `policy` on `model` from `x0` (module doc's rules).
-fn run_loop(s: &Setup, model: &Discrete, x0: &[f64], policy: &mut Policy) -> SafetyRun {
-    let cfg = s.cfg;
-    let nx = x0.len();
+/// The box beyond which a run stops as diverged: the hull of X and the OCP's finite state
+/// bounds, widened by [`DIVERGED_MARGIN`] × X's width per axis. (X alone is too small a
+/// reference: the cart-pole's X has |ṗ|, |θ̇| ≤ 1 inside a state box of 5 and 10, and the
+/// MPC's own swing-ups leave 3 × X within a few steps without violating anything.)
+fn stop_box(cfg: &ProblemConfig) -> (Vec<f64>, Vec<f64>) {
     let (dlo, dhi) = (&cfg.domain.lo, &cfg.domain.hi);
+    let (xlo, xhi) = (&cfg.ocp.x_lo, &cfg.ocp.x_hi);
+    (0..dlo.len())
+        .map(|i| {
+            let m = DIVERGED_MARGIN * (dhi[i] - dlo[i]);
+            let lo = if xlo[i].is_finite() {
+                dlo[i].min(xlo[i])
+            } else {
+                dlo[i]
+            };
+            let hi = if xhi[i].is_finite() {
+                dhi[i].max(xhi[i])
+            } else {
+                dhi[i]
+            };
+            (lo - m, hi + m)
+        })
+        .unzip()
+}
+
+/// One closed loop of `policy` on `model` from `x0` (module doc's rules).
+fn run_loop(
+    cfg: &ProblemConfig,
+    cs: Option<&ConstraintSet>,
+    model: &Discrete,
+    x0: &[f64],
+    policy: &mut Policy,
+) -> SafetyRun {
+    let nx = x0.len();
+    let (slo, shi) = stop_box(cfg);
     let mut x = x0.to_vec();
     let mut next = vec![0.0; nx];
     let mut run = SafetyRun {
         violation_steps: 0,
         fallback_steps: 0,
         no_safe_steps: 0,
+        steps: 0,
         cost: 0.0,
         converged: false,
         diverged: false,
     };
     for k in 0..cfg.closed_loop.steps {
+        run.steps = k + 1;
         let (u, fallback, no_safe) = policy(k, &x);
         run.fallback_steps += usize::from(fallback);
         run.no_safe_steps += usize::from(no_safe);
         model.step(&x, &u, &mut next);
         let cost = run.cost + stage_cost(cfg, &x, &u);
-        let out = (0..nx).any(|i| {
-            let m = DIVERGED_MARGIN * (dhi[i] - dlo[i]);
-            !(next[i] >= dlo[i] - m && next[i] <= dhi[i] + m)
-        });
-        if out || !cost.is_finite() {
+        let v = step_violation(cfg, cs, k, &x, &u, &next);
+        let finite = cost.is_finite() && next.iter().all(|v| v.is_finite());
+        if !finite || v.is_nan() || v > VIOLATION_TOL {
             run.violation_steps += 1;
+        }
+        if !finite || (0..nx).any(|i| !(next[i] >= slo[i] && next[i] <= shi[i])) {
             run.diverged = true;
             return run;
         }
         run.cost = cost;
-        let v = step_violation(cfg, s.cs.as_ref(), k, &x, &u, &next);
-        if v.is_nan() || v > VIOLATION_TOL {
-            run.violation_steps += 1;
-        }
         x.copy_from_slice(&next);
     }
     run.converged = distance_to_setpoint(cfg, &x) <= CONVERGE_TOL;
@@ -268,7 +304,8 @@ fn triple(
     let mut along = Along::default();
     let mut first_seq: Option<Vec<f64>> = None;
     let mut last = vec![0.0; nu];
-    let mpc = run_loop(s, model, x0, &mut |k, x| {
+    let cs = s.cs.as_ref();
+    let mpc = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
         let l = law.solve_next(x, &mut along);
         if k == 0 && l.status.is_labelled() {
             first_seq = Some(l.seq.clone());
@@ -289,7 +326,7 @@ fn triple(
     } else {
         Init::Never
     };
-    let safe = run_loop(s, model, x0, &mut |k, x| {
+    let safe = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
         if let (0, Some(u0)) = (k, &init) {
             return (to64(&s.plant.project_input(u0)), false, false);
         }
@@ -303,7 +340,7 @@ fn triple(
             out.flags.contains(SafeFlags::NO_SAFE),
         )
     });
-    let plain = run_loop(s, model, x0, &mut |_, x| {
+    let plain = run_loop(s.cfg, cs, model, x0, &mut |_, x| {
         let c = (s.source)(&to32(x));
         let first = c.first().cloned().unwrap_or_default();
         (to64(&s.plant.project_input(&first)), false, false)
@@ -325,8 +362,8 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
 }
 
 /// The summary of `runs` against the MPC's `mpc` runs from the same starts.
-pub fn summarise(runs: Vec<SafetyRun>, mpc: &[SafetyRun], steps: usize) -> ControllerRuns {
-    let total_steps: usize = runs.len() * steps;
+pub fn summarise(runs: Vec<SafetyRun>, mpc: &[SafetyRun]) -> ControllerRuns {
+    let total_steps: usize = runs.iter().map(|r| r.steps).sum();
     let ratios: Vec<f64> = runs
         .iter()
         .zip(mpc)
@@ -360,7 +397,6 @@ fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
             |law, i| triple(s, law, model, &start(cfg, i)),
         )
         .collect();
-    let steps = cfg.closed_loop.steps;
     let count = |w: Init| out.iter().filter(|t| t.3 == w).count() as u64;
     let (init_mpc, init_candidate, never) =
         (count(Init::Mpc), count(Init::Candidate), count(Init::Never));
@@ -373,9 +409,9 @@ fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
         mpc.push(c);
     }
     SafetyGroup {
-        safe: summarise(safe, &mpc, steps),
-        plain: summarise(plain, &mpc, steps),
-        mpc: summarise(mpc.clone(), &mpc, steps),
+        safe: summarise(safe, &mpc),
+        plain: summarise(plain, &mpc),
+        mpc: summarise(mpc.clone(), &mpc),
         init_mpc,
         init_candidate,
         runs_without_safe_sequence: never,
@@ -435,9 +471,10 @@ pub fn safety_study(
         violation_rule: format!(
             "a step violates when the true (f64 model) x_(k+1) leaves the OCP's state box or an \
              [ocp] path constraint is violated where the OCP imposes it, by more than \
-             {VIOLATION_TOL:e}; a next state not finite or beyond X by {DIVERGED_MARGIN} x its \
-             width counts and ends the run; converged: last state within {CONVERGE_TOL} of \
-             x_ref in the scaled max-norm"
+             {VIOLATION_TOL:e}, or its next state or cost is not finite; a run stops \
+             (diverged) when its next state is not finite or leaves the hull of X and the \
+             finite state bounds widened by {DIVERGED_MARGIN} x the width of X; converged: \
+             last state within {CONVERGE_TOL} of x_ref in the scaled max-norm"
         ),
         guarantee: GUARANTEE.into(),
         rests_on: format!(
@@ -465,6 +502,7 @@ mod tests {
             violation_steps: v,
             fallback_steps: f,
             no_safe_steps: 0,
+            steps: 10,
             cost,
             converged,
             diverged: false,
@@ -487,7 +525,7 @@ mod tests {
             r(0, 1, 7.0, true),
             r(1, 0, 3.0, true),
         ];
-        let s = summarise(runs, &mpc, 10);
+        let s = summarise(runs, &mpc);
         assert_eq!(s.total_violations, 3);
         assert_eq!(s.violating_runs, 2);
         assert!((s.fallback_share - 4.0 / 40.0).abs() < 1e-15);
@@ -497,6 +535,35 @@ mod tests {
         assert!((s.median_cost_ratio.unwrap() - 1.1).abs() < 1e-12);
         assert_eq!(median(vec![]), None);
         assert_eq!(median(vec![3.0, 1.0]), Some(2.0));
+    }
+
+    /// The double integrator pushed by u = 1 from rest (v_k = 0.1·k) in an X much smaller than
+    /// its state box: the run continues while inside the box's widened hull, counts exactly
+    /// the steps with v > 1 (the box), and stops at v = 1.3 > 1.2; with v unbounded it
+    /// stops at the widened X (|v| ≤ 0.3) and counts nothing.
+    #[test]
+    fn divergence_stops_a_run_without_inventing_violations() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
+        );
+        let mut cfg = ProblemConfig::load(std::path::Path::new(path)).unwrap();
+        cfg.domain.lo = vec![-0.5, -0.1];
+        cfg.domain.hi = vec![0.5, 0.1];
+        cfg.closed_loop.steps = 40;
+        let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+        let mut push = |_: usize, _: &[f64]| (vec![1.0], false, false);
+        let r = run_loop(&cfg, None, &model, &[0.0, 0.0], &mut push);
+        assert!(r.diverged, "{r:?}");
+        assert_eq!(r.steps, 13, "{r:?}");
+        assert_eq!(r.violation_steps, 3, "v = 1.1, 1.2, 1.3: {r:?}");
+        cfg.ocp.x_lo[1] = f64::NEG_INFINITY;
+        cfg.ocp.x_hi[1] = f64::INFINITY;
+        let r = run_loop(&cfg, None, &model, &[0.0, 0.0], &mut push);
+        assert!(
+            r.diverged && r.steps == 4 && r.violation_steps == 0,
+            "{r:?}"
+        );
     }
 
     /// The starts are a pure function of the index, inside X.

@@ -10,6 +10,7 @@ use crate::data::sampling::Sampler;
 use crate::mpc::law::MpcLaw;
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::closed_loop::{simulate, Controller, Run, SimSettings};
+use crate::study::safety::{SafetyRun, SafetyStudy};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -17,17 +18,107 @@ use std::collections::BTreeMap;
 pub type ClosedLoop = BTreeMap<String, Vec<Run>>;
 
 /// The whole of `closed_loop.json`: the runs keyed by controller name, and the safety study
-/// (`[closed_loop] safety = true`) under the key `safety` when it ran. A file without it is
-/// exactly the map of runs (files written before the safety study read unchanged, and the
-/// study's absence writes them byte for byte as before).
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+/// (`[closed_loop] safety = true`) when it ran.
+///
+/// On disk (the issue 41 §6 contract, documented in docs/commands.md):
+/// - **without the safety study** the file is exactly the map of runs (files written before
+///   the safety study read unchanged, and are written byte for byte as before);
+/// - **with it**, the top-level keys `safe`, `plain` and `mpc` are the safety study's nominal
+///   runs from the same starts (lists of [`SafetyRun`]: `violation_steps`, `fallback_steps`,
+///   `no_safe_steps`, `steps`, `cost`, `converged`, `diverged` when set), `safety` holds the
+///   study's settings, summaries and mismatch groups (its nominal lists left out, they are
+///   the top-level ones), and the ordinary study's MPC runs from the initial states move to
+///   [`ORDINARY_MPC_KEY`]; every other key is unchanged.
+///
+/// In memory nothing moves: `runs["mpc"]` is the ordinary study's MPC runs and
+/// `safety.nominal` the study's runs, whichever file they came from.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ClosedLoopFile {
     /// The safety study (`study::safety`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub safety: Option<crate::study::safety::SafetyStudy>,
+    pub safety: Option<SafetyStudy>,
     /// The runs keyed by controller name.
-    #[serde(flatten)]
     pub runs: ClosedLoop,
+}
+
+/// The key of the ordinary study's MPC runs (`runs["mpc"]` in memory) in a file with the
+/// safety study, whose top-level `mpc` is the study's MPC runs.
+pub const ORDINARY_MPC_KEY: &str = "mpc_nominal";
+
+/// One top-level value of a file with the safety study.
+#[derive(serde::Serialize)]
+#[serde(untagged)]
+enum Entry<'a> {
+    Runs(&'a [Run]),
+    Safety(&'a [SafetyRun]),
+    Study(&'a SafetyStudy),
+}
+
+impl serde::Serialize for ClosedLoopFile {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let Some(study) = &self.safety else {
+            return serde::Serialize::serialize(&self.runs, s);
+        };
+        let mut meta = study.clone();
+        let g = &mut meta.nominal;
+        for c in [&mut g.safe, &mut g.plain, &mut g.mpc] {
+            c.runs = Vec::new();
+        }
+        let mut out: BTreeMap<&str, Entry> = BTreeMap::new();
+        for (k, v) in &self.runs {
+            let key = if k == "mpc" { ORDINARY_MPC_KEY } else { k };
+            out.insert(key, Entry::Runs(v));
+        }
+        let n = &study.nominal;
+        out.insert("safe", Entry::Safety(&n.safe.runs));
+        out.insert("plain", Entry::Safety(&n.plain.runs));
+        out.insert("mpc", Entry::Safety(&n.mpc.runs));
+        out.insert("safety", Entry::Study(&meta));
+        serde::Serialize::serialize(&out, s)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for ClosedLoopFile {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut raw: BTreeMap<String, serde_json::Value> = serde::Deserialize::deserialize(d)?;
+        let take = |raw: &mut BTreeMap<String, serde_json::Value>, k: &str| raw.remove(k);
+        let safety = match take(&mut raw, "safety") {
+            None => None,
+            Some(v) => {
+                let mut study: SafetyStudy = serde_json::from_value(v)
+                    .map_err(|e| D::Error::custom(format!("key `safety`: {e}")))?;
+                let g = &mut study.nominal;
+                // A file of the first layout (the study's lists nested under `safety`, the
+                // top level the ordinary runs alone) reads as it was written.
+                let nested = [&g.safe, &g.plain, &g.mpc]
+                    .iter()
+                    .any(|c| !c.runs.is_empty());
+                if !nested {
+                    for (k, c) in [
+                        ("safe", &mut g.safe),
+                        ("plain", &mut g.plain),
+                        ("mpc", &mut g.mpc),
+                    ] {
+                        if let Some(v) = take(&mut raw, k) {
+                            c.runs = serde_json::from_value(v)
+                                .map_err(|e| D::Error::custom(format!("key `{k}`: {e}")))?;
+                        }
+                    }
+                    if let Some(v) = take(&mut raw, ORDINARY_MPC_KEY) {
+                        raw.insert("mpc".into(), v);
+                    }
+                }
+                Some(study)
+            }
+        };
+        let mut runs = ClosedLoop::new();
+        for (k, v) in raw {
+            let r: Vec<Run> = serde_json::from_value(v)
+                .map_err(|e| D::Error::custom(format!("key `{k}`: {e}")))?;
+            runs.insert(k, r);
+        }
+        Ok(ClosedLoopFile { safety, runs })
+    }
 }
 
 /// Initial states of the closed-loop study: `closed_loop.x0` (default: the paper's
