@@ -145,18 +145,6 @@ impl MpcLaw {
         Self::assemble(cfg, hard, starts)
     }
 
-    /// The law with exactly these starts (no pilot; a convex OCP still gets `warm` alone).
-    pub fn with_starts(cfg: &ProblemConfig, starts: Vec<crate::problem::solver::Start>) -> Self {
-        let hard = SqpSolver::new(cfg, false);
-        let convex = cfg.system.is_affine() && !hard.ocp.has_nonlinear_rows();
-        let starts = if convex {
-            vec![crate::problem::solver::Start::Warm]
-        } else {
-            starts
-        };
-        Self::assemble(cfg, hard, starts)
-    }
-
     fn assemble(
         cfg: &ProblemConfig,
         hard: SqpSolver,

@@ -78,6 +78,16 @@ fn names(s: &[Start]) -> String {
     format!("[{}]", v.join(", "))
 }
 
+impl MpcLaw {
+    /// The law with exactly these starts (no pilot; a convex OCP still gets `warm` alone).
+    pub fn with_starts(cfg: &ProblemConfig, starts: Vec<Start>) -> Self {
+        let hard = crate::mpc::sqp::SqpSolver::new(cfg, false);
+        let convex = cfg.system.is_affine() && !hard.ocp.has_nonlinear_rows();
+        let starts = if convex { vec![Start::Warm] } else { starts };
+        Self::assemble(cfg, hard, starts)
+    }
+}
+
 /// The cache key: what the labels depend on.
 fn key(cfg: &ProblemConfig) -> String {
     serde_json::to_string(&(&cfg.system, &cfg.ocp, &cfg.domain, &cfg.solver))
