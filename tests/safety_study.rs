@@ -105,13 +105,9 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
     assert_eq!(run(&cfg, &plant, 1, &nan), s);
 }
 
-#[test]
-fn the_terminal_controller_as_network_is_accepted() {
-    let cfg = config();
-    let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
-    let n = cfg.ocp.horizon;
-    let p = &plant;
-    let rollout = move |x: &[f32]| {
+/// The terminal controller's rollout over `n` steps as a candidate source.
+fn terminal_rollout(p: &EmulatedPlant, n: usize) -> impl Fn(&[f32]) -> Vec<Vec<f32>> + Sync + '_ {
+    move |x: &[f32]| {
         let mut xk = x.to_vec();
         (0..n)
             .map(|_| {
@@ -119,8 +115,15 @@ fn the_terminal_controller_as_network_is_accepted() {
                 xk = p.step(&xk, &u);
                 u
             })
-            .collect::<Vec<_>>()
-    };
+            .collect()
+    }
+}
+
+#[test]
+fn the_terminal_controller_as_network_is_accepted() {
+    let cfg = config();
+    let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
+    let rollout = terminal_rollout(&plant, cfg.ocp.horizon);
     let s = run(&cfg, &plant, 2, &rollout);
     let g = &s.nominal;
     // Nothing is guaranteed before a safe sequence exists (NO_SAFE steps apply the
@@ -151,18 +154,7 @@ fn closed_loop_json_has_the_issue_keys() {
     cfg.closed_loop.safety_runs = 5;
     cfg.closed_loop.steps = 10;
     let (plant, _) = EmulatedPlant::new(&cfg).unwrap();
-    let p = &plant;
-    let n = cfg.ocp.horizon;
-    let rollout = move |x: &[f32]| {
-        let mut xk = x.to_vec();
-        (0..n)
-            .map(|_| {
-                let u = p.project_input(&p.terminal_input(&xk));
-                xk = p.step(&xk, &u);
-                u
-            })
-            .collect::<Vec<_>>()
-    };
+    let rollout = terminal_rollout(&plant, cfg.ocp.horizon);
     let study = run(&cfg, &plant, 2, &rollout);
     let sim = SimSettings {
         steps: cfg.closed_loop.steps,
