@@ -113,7 +113,6 @@ pub fn mpc_estimates(
             max_sens = max_sens.max(jacobian_norm(&du[i * nu * nx..(i + 1) * nu * nx], nu, nx));
         }
     }
-    let mut max_q = 0.0f64;
     let k = (2 * nx).min(n.saturating_sub(1));
     let stride = if n > 20_000 { n / 20_000 } else { 1 };
     let dist = |i: usize, j: usize| -> f64 {
@@ -122,24 +121,31 @@ pub fn mpc_estimates(
             .sum::<f64>()
             .sqrt()
     };
-    for i in (0..n).step_by(stride) {
-        let mut near: Vec<(f64, usize)> = (0..n)
-            .filter(|&j| j != i)
-            .map(|j| (dist(i, j), j))
-            .collect();
-        if near.len() > k {
-            near.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
-            near.truncate(k);
-        }
-        for (d, j) in near {
-            if d > 0.0 {
-                let du: f64 = (0..nu)
-                    .map(|r| (u[i * nu + r] - u[j * nu + r]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                max_q = max_q.max(du / d);
+    // Each point's neighbours on its own (in parallel, a buffer per worker): the largest
+    // quotient does not depend on the order, so the result is the same for every thread count.
+    use rayon::prelude::*;
+    let rows: Vec<usize> = (0..n).step_by(stride).collect();
+    let max_q = rows
+        .par_iter()
+        .map_init(Vec::new, |near: &mut Vec<(f64, usize)>, &i| {
+            near.clear();
+            near.extend((0..n).filter(|&j| j != i).map(|j| (dist(i, j), j)));
+            if near.len() > k {
+                near.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+                near.truncate(k);
             }
-        }
-    }
+            let mut q = 0.0f64;
+            for &(d, j) in near.iter() {
+                if d > 0.0 {
+                    let du: f64 = (0..nu)
+                        .map(|r| (u[i * nu + r] - u[j * nu + r]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    q = q.max(du / d);
+                }
+            }
+            q
+        })
+        .reduce(|| 0.0f64, f64::max);
     (max_sens, max_q)
 }

@@ -190,7 +190,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             seed,
             u_scale: &u_scale,
         },
-        || MpcLaw::new(cfg),
+        || (MpcLaw::new(cfg), NeighbourCache::default()),
         mpc_sample,
     );
     Check {
@@ -329,8 +329,28 @@ fn slope_check(
     }
 }
 
-/// A check state solved by the MPC: cold, and (converged) warm-started from `near`.
-fn mpc_sample(law: &mut MpcLaw, x: &[f64], near: &[f64]) -> super::cellcheck::Sample {
+/// The neighbours' solutions one worker of the per-cell check has solved
+/// ([`MpcLaw::neighbour_solution`], keyed by the corner's bits; `None`: not converged): a
+/// corner is the nearest corner of several check states (the extra states of a cell, the
+/// cells around it), and its cold solve is a pure function of the corner, so it is solved
+/// once per worker. Cleared when it holds [`NeighbourCache::CAP`] corners (memory stays
+/// bounded; the results never depend on it).
+#[derive(Default)]
+pub(super) struct NeighbourCache(HashMap<Vec<u64>, Option<(crate::mpc::sqp::PrimalDual, usize)>>);
+
+impl NeighbourCache {
+    /// Largest number of corners kept.
+    const CAP: usize = 4096;
+}
+
+/// A check state solved by the MPC: cold, and (converged) warm-started from `near`'s
+/// solution (the same label as [`MpcLaw::solve_from_neighbour`], the neighbour solved once
+/// per worker: [`NeighbourCache`]).
+fn mpc_sample(
+    (law, cache): &mut (MpcLaw, NeighbourCache),
+    x: &[f64],
+    near: &[f64],
+) -> super::cellcheck::Sample {
     let (l, _) = law.solve(x, None);
     let mut s = super::cellcheck::Sample::default();
     if !l.u.iter().all(|v| v.is_finite()) {
@@ -341,8 +361,17 @@ fn mpc_sample(law: &mut MpcLaw, x: &[f64], near: &[f64]) -> super::cellcheck::Sa
         s.du = Some(l.du_dx.clone());
     }
     if hard {
-        s.warm = law
-            .solve_from_neighbour(x, near)
+        let key: Vec<u64> = near.iter().map(|v| v.to_bits()).collect();
+        if !cache.0.contains_key(&key) {
+            if cache.0.len() >= NeighbourCache::CAP {
+                cache.0.clear();
+            }
+            let n = law.neighbour_solution(near);
+            cache.0.insert(key.clone(), n);
+        }
+        s.warm = cache.0[&key]
+            .as_ref()
+            .and_then(|n| law.solve_from_solution(x, n))
             .filter(|w| w.status == SqpStatus::Converged)
             .map(|w| w.u);
     }

@@ -183,17 +183,36 @@ impl MpcLaw {
     /// globalisation: the retry for a state that stayed unlabelled after [`solve`](Self::solve)
     /// once a neighbour has a label. `None` if either solve fails.
     pub fn solve_from_neighbour(&mut self, xs: &[f64], near: &[f64]) -> Option<Label> {
+        let n = self.neighbour_solution(near)?;
+        self.solve_from_solution(xs, &n)
+    }
+
+    /// The first half of [`solve_from_neighbour`](Self::solve_from_neighbour): the hard
+    /// problem at `near` from its cold start, with the SQP iterations it took (`None`: not
+    /// converged, or `near` not a finite state of length nx). A pure function of `near`
+    /// (every SQP solve starts from the given point), so a caller that warm-starts several
+    /// states from one neighbour may solve it once and keep it.
+    pub fn neighbour_solution(&mut self, near: &[f64]) -> Option<(PrimalDual, usize)> {
         let nx = self.hard.ocp.nx;
-        if xs.len() != nx || near.len() != nx || xs.iter().chain(near).any(|v| !v.is_finite()) {
+        if near.len() != nx || near.iter().any(|v| !v.is_finite()) {
             return None;
         }
         let n = self.hard.solve(near, self.hard.cold_start(near));
-        if n.status != SqpStatus::Converged {
+        (n.status == SqpStatus::Converged).then_some((n.point, n.info.iterations))
+    }
+
+    /// The second half of [`solve_from_neighbour`](Self::solve_from_neighbour): the hard
+    /// problem at `xs` warm-started from a neighbour's solution `n` (of
+    /// [`neighbour_solution`](Self::neighbour_solution)) with x₀ replaced by `xs`, default
+    /// then conservative globalisation.
+    pub fn solve_from_solution(&mut self, xs: &[f64], n: &(PrimalDual, usize)) -> Option<Label> {
+        let nx = self.hard.ocp.nx;
+        if xs.len() != nx || xs.iter().any(|v| !v.is_finite()) {
             return None;
         }
-        let mut spent = n.info.iterations;
+        let mut spent = n.1;
         for g in [Globalisation::Default, Globalisation::Conservative] {
-            let mut start = n.point.clone();
+            let mut start = n.0.clone();
             start.z[..nx].copy_from_slice(xs);
             self.hard.set_globalisation(g);
             let r = self.hard.solve(xs, start);
@@ -465,6 +484,28 @@ mod tests {
             }
         }
         assert!(feasible > 0 && infeasible > 0, "{feasible} / {infeasible}");
+    }
+
+    /// A neighbour's solution solved once and reused (the per-cell check's cache) gives
+    /// each state the label `solve_from_neighbour` gives it on a fresh law — also after
+    /// other solves on the same law in between (every SQP solve starts from its given point).
+    #[test]
+    fn neighbour_solution_reused_is_the_one_call_label() {
+        let cfg = ProblemConfig::default();
+        let near = [0.5, 0.2];
+        let mut law = MpcLaw::new(&cfg);
+        let n = law.neighbour_solution(&near).expect("the corner converges");
+        let mut labelled = 0;
+        for x in [[0.55, 0.25], [0.45, 0.1], [3.0, -0.9], [0.6, 0.3]] {
+            let want = MpcLaw::new(&cfg).solve_from_neighbour(&x, &near);
+            let _ = law.solve(&[-2.0, 0.7], None);
+            let got = law.solve_from_solution(&x, &n);
+            assert_eq!(got, want, "{x:?}");
+            labelled += got.is_some() as usize;
+        }
+        assert!(labelled >= 3, "{labelled}");
+        assert_eq!(law.neighbour_solution(&[f64::NAN, 0.0]), None);
+        assert_eq!(law.neighbour_solution(&[0.0]), None);
     }
 
     /// `solver.starts` is validated: empty or repeated lists are errors naming the key.
