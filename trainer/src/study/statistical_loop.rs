@@ -203,6 +203,9 @@ fn settling(cfg: &ProblemConfig, x0: &[f64], t: &[(f64, f64)]) -> Option<usize> 
     )
 }
 
+/// A run step by step ([`trace_of`]): (largest violation so far, distance to x_ref).
+type Trace = Vec<(f64, f64)>;
+
 /// The run of the input law `input` (its output saturated to U; a non-finite output is the
 /// centre of U) from `x0` for `steps` steps, step by step: entry k is (the largest
 /// violation of steps 0..=k, the scaled distance of x_{k+1} to the setpoint). A run that
@@ -214,7 +217,7 @@ fn trace_of(
     input: &mut dyn FnMut(&[f64]) -> Vec<f64>,
     x0: &[f64],
     steps: usize,
-) -> Vec<(f64, f64)> {
+) -> Trace {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let constraints = cfg.constraint_set().ok().flatten();
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
@@ -287,7 +290,7 @@ fn mpc_reference(
 ) -> (usize, Option<usize>, u64, u64) {
     let steps = cfg.closed_loop.steps;
     let cap = LENGTH_CAP * steps;
-    let runs: Vec<(Vec<f64>, Vec<(f64, f64)>)> = (0..m as u64)
+    let runs: Vec<(Vec<f64>, Trace)> = (0..m as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(cfg),
@@ -529,7 +532,8 @@ mod tests {
         // The MPC from the 30 starts of the length draw, 12 steps each.
         let length_seed = statistical_seed("model\0closed loop length", 3);
         let mut law = MpcLaw::new(&cfg);
-        let mpc: Vec<(Vec<f64>, (bool, Vec<f64>))> = (0..30u64)
+        type HandRun = (bool, Vec<f64>);
+        let mpc: Vec<(Vec<f64>, HandRun)> = (0..30u64)
             .map(|i| {
                 let x0 = start(&cfg, length_seed, i);
                 let r = by_hand(&cfg, &mut |x| law.solve(x, None).0.u[0], x0.clone(), 12);
