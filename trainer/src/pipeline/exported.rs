@@ -324,13 +324,21 @@ pub(super) fn closed_loop_statistical(env: &Env, d: &RunDir) -> Result<String, P
     );
     let mpc = match (&s.mpc_failing, s.controller_failing_same) {
         (Some(m), Some(c)) => format!(
-            "; the MPC itself from the first {} of the same starts: {} fail (controller: {c})",
+            "; the MPC itself from {} other i.i.d. starts: {} fail (controller on those: {c})",
             m.trajectories, m.violating
         ),
         _ => String::new(),
     };
+    let offset = match s.setpoint_offset {
+        Some(o) if o > crate::study::statistical_loop::CONVERGE_TOL => format!(
+            "; the controller has a steady offset at the setpoint ({o:.3} scaled, above the \
+             tolerance {}): its runs cannot converge",
+            crate::study::statistical_loop::CONVERGE_TOL
+        ),
+        _ => String::new(),
+    };
     Ok(format!(
-        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}{mpc}",
-        ff.p_violation_upper, ff.violating, ff.trajectories, f.p_violation_upper, f.violating, f.trajectories, s.confidence
+        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}, {} steps{mpc}{offset}",
+        ff.p_violation_upper, ff.violating, ff.trajectories, f.p_violation_upper, f.violating, f.trajectories, s.confidence, s.steps
     ))
 }

@@ -17,7 +17,21 @@
 //! than [`VIOLATION_TOL`] ([`step_violation`], the closed-loop study's rule), and as failing
 //! if it violates or does not converge: its last state is farther than [`CONVERGE_TOL`]
 //! from the setpoint in the scaled ∞-norm, max_i |x_N,i − x_ref,i| / s_x,i (s_x: `[ocp]
-//! x_scale`, default the half-widths of X). With k
+//! x_scale`, default the half-widths of X), or it left the closed-loop study's
+//! [`stop_box`] (a runaway: it does not converge).
+//!
+//! **The run length N comes from the MPC's own convergence** ([`run_length`]): a fixed
+//! `closed_loop.steps` can be too short for the plant (the pendulum with |ω| ≤ 1 needs
+//! ≥ 2π s ≈ 126 steps to come round from θ = 2π, and 90 steps made the MPC itself "fail" on
+//! 44 of 100 starts). The MPC is run in closed loop from [`MPC_STARTS`] further i.i.d.
+//! starts (their own seed stream, independent of the tested starts) for up to
+//! [`LENGTH_CAP`] × `closed_loop.steps`; its slowest settling step s (after which every
+//! state stays within [`CONVERGE_TOL`]) gives N = min(max(steps, ⌈[`LENGTH_FACTOR`]·s⌉),
+//! cap). The MPC's failures at N on those starts and the controller's on the same starts
+//! are reported side by side; the bound itself is over the tested starts only, whose
+//! length N does not depend on them. A controller with a steady offset at the setpoint
+//! (run from x_ref for N steps, it ends farther than [`CONVERGE_TOL`] away) cannot
+//! converge in this sense: [`ClosedLoopStatistical::setpoint_offset`] says so. With k
 //! violating trajectories, the Clopper–Pearson upper bound p̄ on
 //! p = P(trajectory violates) at confidence 1 − β is
 //! [`clopper_pearson_upper`](crate::certify::statistical::clopper_pearson_upper)(n, k, 1 − β).
@@ -32,7 +46,7 @@ use crate::mpc::law::MpcLaw;
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
-use crate::study::closed_loop::{step_violation, VIOLATION_TOL};
+use crate::study::closed_loop::{step_violation, stop_box, VIOLATION_TOL};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -40,9 +54,28 @@ use serde::{Deserialize, Serialize};
 /// ∞-norm (5 % of each state's scale).
 pub const CONVERGE_TOL: f64 = 0.05;
 
-/// The MPC's own closed loop is run from this many of the initial states (the first ones
-/// of the draw): a solve per step makes it far costlier than the controller's.
+/// The MPC's own closed loop is run from this many initial states (a draw of their own,
+/// [`run_length`]): a solve per step makes it far costlier than the controller's.
 pub const MPC_STARTS: usize = 100;
+
+/// The MPC's runs that fix the run length last up to this many times `closed_loop.steps`.
+pub const LENGTH_CAP: usize = 3;
+
+/// The run length is this many times the MPC's slowest settling step (the network, an
+/// approximation of the MPC, is given half as long again).
+pub const LENGTH_FACTOR: f64 = 1.5;
+
+/// The run length N (module doc): `configured` (`closed_loop.steps`) when no MPC run
+/// settled, else ⌈[`LENGTH_FACTOR`]·slowest⌉, at least `configured` and at most
+/// [`LENGTH_CAP`] × `configured`.
+pub fn run_length(configured: usize, slowest: Option<usize>) -> usize {
+    let cap = LENGTH_CAP * configured;
+    slowest.map_or(configured, |s| {
+        ((LENGTH_FACTOR * s as f64).ceil() as usize)
+            .max(configured)
+            .min(cap)
+    })
+}
 
 /// A Clopper–Pearson bound from n trials with k events.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -83,20 +116,36 @@ pub struct ClosedLoopStatistical {
     #[serde(default)]
     pub not_converged: u64,
     /// The MPC's own closed loop (solved along the run at every step, its input saturated to U;
-    /// no label: the centre of U) from the first [`MPC_STARTS`] of the same initial states,
-    /// with the same rule "violates or does not converge": how often the reference law
-    /// itself fails within `steps` — the scale against which the controller's failure
-    /// bound is read. Absent in files written before it existed.
+    /// no label: the centre of U) from [`MPC_STARTS`] i.i.d. uniform starts of their own
+    /// draw (module doc), with the same rule "violates or does not converge" after `steps`
+    /// steps: how often the reference law itself fails — the scale against which the
+    /// controller's failure bound is read. Absent in files written before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mpc_failing: Option<Bound>,
-    /// Of the same first [`MPC_STARTS`] initial states: how many runs of the deployed
-    /// controller fail (the like-for-like count beside [`ClosedLoopStatistical::mpc_failing`]).
+    /// Of the MPC's starts: how many runs of the deployed controller fail (the like-for-like
+    /// count beside [`ClosedLoopStatistical::mpc_failing`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub controller_failing_same: Option<u64>,
+    /// The slowest settling step of the MPC's runs within [`LENGTH_CAP`] ×
+    /// `steps_configured` (`None`: no run settled, or files written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mpc_slowest_settling: Option<usize>,
+    /// The deployed controller started at x_ref and run `steps` steps: the scaled ∞-norm
+    /// distance to x_ref where it ends (above [`CONVERGE_TOL`]: a steady offset at the
+    /// setpoint, no run can converge). Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setpoint_offset: Option<f64>,
     /// 1 − β.
     pub confidence: f64,
-    /// Steps per trajectory.
+    /// Steps per trajectory: the run length N of [`run_length`].
     pub steps: usize,
+    /// `closed_loop.steps` of the problem file (0 in files written before the run length
+    /// was derived: there `steps` is it).
+    #[serde(default)]
+    pub steps_configured: usize,
+    /// The convergence rule and the run length's origin, in words (empty in older files).
+    #[serde(default)]
+    pub convergence: String,
     /// Seed of the initial states (`crate::rng::uniform` streams), derived from the model's
     /// hash and `user_seed`.
     pub seed: u64,
@@ -112,32 +161,72 @@ pub struct ClosedLoopStatistical {
     pub rests_on: String,
 }
 
-/// One trajectory of the deployed `controller`: its largest violation and its final
-/// distance to the setpoint.
+/// One trajectory of the deployed `controller` of `steps` steps: its largest violation and
+/// its final distance to the setpoint ([`outcome`]).
 fn trajectory(
     cfg: &ProblemConfig,
     plant: &Discrete,
     controller: &dyn TestedController,
     x0: &[f64],
+    steps: usize,
 ) -> (f64, f64) {
-    trajectory_of(cfg, plant, &mut |x| controller.input(x), x0)
+    let t = trace_of(cfg, plant, &mut |x| controller.input(x), x0, steps);
+    outcome(cfg, x0, &t, steps)
 }
 
-/// One trajectory of the input law `input` (its output saturated to U; a non-finite output
-/// is the centre of U): its largest violation and its final distance to the setpoint.
-fn trajectory_of(
+/// (largest violation, distance to the setpoint) after `n` steps of the trace `t` from `x0`.
+fn outcome(cfg: &ProblemConfig, x0: &[f64], t: &[(f64, f64)], n: usize) -> (f64, f64) {
+    match n.checked_sub(1).and_then(|k| t.get(k)) {
+        Some(r) => *r,
+        None => (0.0, distance_to_setpoint(cfg, x0)),
+    }
+}
+
+/// Whether a run's (violation, distance) fails: violates, or does not converge.
+fn fails((v, d): (f64, f64)) -> bool {
+    v > VIOLATION_TOL || d > CONVERGE_TOL
+}
+
+/// The first step after which every state of the trace (x₀ = `x0` included) stays within
+/// [`CONVERGE_TOL`] of the setpoint; `None` when its last state is not.
+fn settling(cfg: &ProblemConfig, x0: &[f64], t: &[(f64, f64)]) -> Option<usize> {
+    let d: Vec<f64> = std::iter::once(distance_to_setpoint(cfg, x0))
+        .chain(t.iter().map(|r| r.1))
+        .collect();
+    if d.last().is_some_and(|v| *v > CONVERGE_TOL) {
+        return None;
+    }
+    Some(
+        d.iter()
+            .rposition(|v| *v > CONVERGE_TOL)
+            .map_or(0, |k| k + 1),
+    )
+}
+
+/// A run step by step ([`trace_of`]): (largest violation so far, distance to x_ref).
+type Trace = Vec<(f64, f64)>;
+
+/// The run of the input law `input` (its output saturated to U; a non-finite output is the
+/// centre of U) from `x0` for `steps` steps, step by step: entry k is (the largest
+/// violation of steps 0..=k, the scaled distance of x_{k+1} to the setpoint). A run that
+/// leaves the [`stop_box`] stops there; its remaining entries keep its violation with
+/// distance +∞ (a runaway does not converge; no solve is spent on it).
+fn trace_of(
     cfg: &ProblemConfig,
     plant: &Discrete,
     input: &mut dyn FnMut(&[f64]) -> Vec<f64>,
     x0: &[f64],
-) -> (f64, f64) {
+    steps: usize,
+) -> Trace {
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let constraints = cfg.constraint_set().ok().flatten();
     let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
+    let (slo, shi) = stop_box(cfg);
     let mut x = x0.to_vec();
     let mut next = vec![0.0; nx];
     let mut worst = 0.0f64;
-    for k in 0..cfg.closed_loop.steps {
+    let mut out = Vec::with_capacity(steps);
+    for k in 0..steps {
         let mut u = input(&x);
         u.resize(nu, f64::NAN);
         for j in 0..nu {
@@ -153,8 +242,13 @@ fn trajectory_of(
         let v = step_violation(cfg, constraints.as_ref(), k, &x, &u, &next);
         worst = worst.max(if v.is_nan() { f64::INFINITY } else { v });
         x.copy_from_slice(&next);
+        if (0..nx).any(|i| !(x[i] >= slo[i] && x[i] <= shi[i])) {
+            out.resize(steps, (worst, f64::INFINITY));
+            return out;
+        }
+        out.push((worst, distance_to_setpoint(cfg, &x)));
     }
-    (worst, distance_to_setpoint(cfg, &x))
+    out
 }
 
 /// max_i |x_i − x_ref,i| / s_x,i (NaN → +∞): how far from the setpoint a trajectory ends.
@@ -175,9 +269,63 @@ pub fn distance_to_setpoint(cfg: &ProblemConfig, x: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The i-th state of the uniform draw on X of stream `seed`.
+fn uniform_start(cfg: &ProblemConfig, seed: u64, i: u64) -> Vec<f64> {
+    (0..cfg.system.nx())
+        .map(|k| {
+            let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
+            lo + (hi - lo) * uniform(seed, i, k as u64)
+        })
+        .collect()
+}
+
+/// The MPC's closed loop and the controller's from the `m` starts of the length draw
+/// `seed`, each `cap` steps: (the run length N, the MPC's slowest settling, the MPC's
+/// failures at N, the controller's failures at N on the same starts).
+fn mpc_reference(
+    cfg: &ProblemConfig,
+    plant: &Discrete,
+    controller: &dyn TestedController,
+    (m, seed): (usize, u64),
+) -> (usize, Option<usize>, u64, u64) {
+    let steps = cfg.closed_loop.steps;
+    let cap = LENGTH_CAP * steps;
+    let runs: Vec<(Vec<f64>, Trace)> = (0..m as u64)
+        .into_par_iter()
+        .map_init(
+            || MpcLaw::new(cfg),
+            |law, i| {
+                let x0 = uniform_start(cfg, seed, i);
+                // Solved along the run (`MpcLaw::solve_next`), as the closed-loop study does.
+                let mut along = crate::mpc::law::along::Along::default();
+                let t = trace_of(
+                    cfg,
+                    plant,
+                    &mut |x| law.solve_next(x, &mut along).u,
+                    &x0,
+                    cap,
+                );
+                (x0, t)
+            },
+        )
+        .collect();
+    let slowest = runs.iter().filter_map(|(x0, t)| settling(cfg, x0, t)).max();
+    let n = run_length(steps, slowest);
+    let mpc_fail = runs
+        .iter()
+        .filter(|(x0, t)| fails(outcome(cfg, x0, t, n)))
+        .count() as u64;
+    let same = runs
+        .par_iter()
+        .filter(|(x0, _)| fails(trajectory(cfg, plant, controller, x0, n)))
+        .count() as u64;
+    (n, slowest, mpc_fail, same)
+}
+
 /// Runs `n` trajectories of the deployed `controller` (of the model with content hash
 /// `model_hash`) from uniform initial states drawn from the model's hash and `user_seed`,
-/// and bounds the violation probability at `confidence`.
+/// and bounds the violation probability at `confidence`; the run length comes from the
+/// MPC's own closed loop (module doc).
 pub fn closed_loop_statistical(
     cfg: &ProblemConfig,
     controller: &dyn TestedController,
@@ -187,30 +335,27 @@ pub fn closed_loop_statistical(
     confidence: f64,
 ) -> ClosedLoopStatistical {
     let seed = statistical_seed(&format!("{model_hash}\0closed loop"), user_seed);
-    let nx = cfg.system.nx();
+    let length_seed = statistical_seed(&format!("{model_hash}\0closed loop length"), user_seed);
     let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
-    // The i-th initial state of the draw: uniform in X.
-    let start = |i: u64| -> Vec<f64> {
-        (0..nx)
-            .map(|k| {
-                let (lo, hi) = (cfg.domain.lo[k], cfg.domain.hi[k]);
-                lo + (hi - lo) * uniform(seed, i, k as u64)
-            })
-            .collect()
+    let m = n.min(MPC_STARTS);
+    let configured = cfg.closed_loop.steps;
+    let (steps, slowest, mpc_fail, same) = if m > 0 {
+        mpc_reference(cfg, &plant, controller, (m, length_seed))
+    } else {
+        (configured, None, 0, 0)
     };
     let results: Vec<(bool, (f64, f64))> = (0..n as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(cfg),
             |law, i| {
-                let x0 = start(i);
+                let x0 = uniform_start(cfg, seed, i);
                 let feasible = law.is_hard_feasible(&x0);
-                (feasible, trajectory(cfg, &plant, controller, &x0))
+                (feasible, trajectory(cfg, &plant, controller, &x0, steps))
             },
         )
         .collect();
     let violates = |(v, _): (f64, f64)| v > VIOLATION_TOL;
-    let fails = |(v, d): (f64, f64)| v > VIOLATION_TOL || d > CONVERGE_TOL;
     let count = |rs: &mut dyn Iterator<Item = (f64, f64)>, f: &dyn Fn((f64, f64)) -> bool| {
         rs.filter(|r| f(*r)).count() as u64
     };
@@ -218,22 +363,33 @@ pub fn closed_loop_statistical(
     let feas = || results.iter().filter(|(f, _)| *f).map(|(_, r)| *r);
     let n_feas = feas().count() as u64;
     let not_converged = count(&mut all(), &|(_, d)| d > CONVERGE_TOL);
-    // The MPC's own closed loop from the first starts of the same draw.
-    let m = n.min(MPC_STARTS);
-    let mpc: Vec<(f64, f64)> = (0..m as u64)
-        .into_par_iter()
-        .map_init(
-            || MpcLaw::new(cfg),
-            |law, i| {
-                let x0 = start(i);
-                // Solved along the run (`MpcLaw::solve_next`), as the closed-loop study does.
-                let mut along = crate::mpc::law::along::Along::default();
-                trajectory_of(cfg, &plant, &mut |x| law.solve_next(x, &mut along).u, &x0)
-            },
-        )
-        .collect();
-    let mpc_fail = count(&mut mpc.iter().copied(), &fails);
-    let same = count(&mut results[..m].iter().map(|(_, r)| *r), &fails);
+    let x_ref = cfg.ocp.x_ref_or_origin(cfg.system.nx());
+    let setpoint_offset = trajectory(cfg, &plant, controller, &x_ref, steps).1;
+    let convergence = format!(
+        "a run converges when its last state (after {steps} steps) is within {CONVERGE_TOL} \
+         of x_ref in the scaled ∞-norm max_i |x_i − x_ref,i| / s_x,i and it never left X \
+         and the state bounds widened by ten widths of X; {steps} steps = {}",
+        match slowest {
+            Some(s) if steps > configured => format!(
+                "{LENGTH_FACTOR} × the slowest settling ({s} steps) of the MPC's own closed \
+                 loop from {m} i.i.d. starts (closed_loop.steps = {configured}{})",
+                if steps == LENGTH_CAP * configured {
+                    format!(", capped at {LENGTH_CAP} × it")
+                } else {
+                    String::new()
+                }
+            ),
+            Some(s) => format!(
+                "closed_loop.steps (the MPC's own closed loop from {m} i.i.d. starts settles \
+                 within {s} steps)"
+            ),
+            None => format!(
+                "closed_loop.steps (no run of the MPC's own closed loop from {m} i.i.d. \
+                 starts settled within {} steps)",
+                LENGTH_CAP * configured
+            ),
+        }
+    );
     ClosedLoopStatistical {
         all: Bound::new(n as u64, count(&mut all(), &violates), confidence),
         feasible_starts: Bound::new(n_feas, count(&mut feas(), &violates), confidence),
@@ -242,8 +398,11 @@ pub fn closed_loop_statistical(
         not_converged,
         mpc_failing: (m > 0).then(|| Bound::new(m as u64, mpc_fail, confidence)),
         controller_failing_same: (m > 0).then_some(same),
+        mpc_slowest_settling: slowest,
+        setpoint_offset: Some(setpoint_offset),
         confidence,
-        steps: cfg.closed_loop.steps,
+        steps,
+        steps_configured: configured,
         seed,
         user_seed,
         function: controller.describe(),
@@ -252,13 +411,12 @@ pub fn closed_loop_statistical(
         rests_on: format!(
             "initial states i.i.d. uniform on X (seed {seed}, from the model's hash and the \
              user seed {user_seed}); the nominal plant model; {}, then the actuator \
-             saturation; {} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a \
-             state bound or path constraint; a run converges when its last state is within \
-             {CONVERGE_TOL} of x_ref in the scaled ∞-norm; a start is MPC-feasible when the \
+             saturation; {steps} steps per trajectory; a violation is > {VIOLATION_TOL:e} of a \
+             state bound or path constraint; {convergence}; a start is MPC-feasible when the \
              hard OCP converges there",
             controller.describe(),
-            cfg.closed_loop.steps
         ),
+        convergence,
     }
 }
 
@@ -278,86 +436,141 @@ mod tests {
         }
     }
 
+    /// The i-th start of stream `seed`, written out again.
+    fn start(cfg: &ProblemConfig, seed: u64, i: u64) -> Vec<f64> {
+        (0..2)
+            .map(|j| {
+                let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
+                lo + (hi - lo) * uniform(seed, i, j as u64)
+            })
+            .collect()
+    }
+
+    /// The pendulum stepped by hand for `n` steps of `law` from `x`: (violated a bound by
+    /// more than 1e-6, the scaled distance of each state x_0..x_n to the origin).
+    fn by_hand(
+        cfg: &ProblemConfig,
+        law: &mut dyn FnMut(&[f64]) -> f64,
+        mut x: Vec<f64>,
+        n: usize,
+    ) -> (bool, Vec<f64>) {
+        let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+        let scale = cfg.ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+        let dist = |x: &[f64]| (0..2).map(|j| x[j].abs() / scale[j]).fold(0.0, f64::max);
+        let (mut bad, mut next, mut d) = (false, vec![0.0; 2], vec![dist(&x)]);
+        for _ in 0..n {
+            let (lo, hi) = (cfg.ocp.u_lo[0], cfg.ocp.u_hi[0]);
+            let u = law(&x);
+            let u = if u.is_finite() {
+                u.clamp(lo, hi)
+            } else {
+                0.5 * (lo + hi)
+            };
+            plant.step(&x, &[u], &mut next);
+            bad |= (0..2)
+                .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
+            x.copy_from_slice(&next);
+            d.push(dist(&x));
+        }
+        (bad, d)
+    }
+
+    /// The run length: the configured steps unless the MPC settles slower, then 1.5 × its
+    /// slowest settling, capped at three times the configured steps.
+    #[test]
+    fn run_length_follows_the_slowest_settling() {
+        assert_eq!(run_length(90, None), 90);
+        assert_eq!(run_length(90, Some(20)), 90);
+        assert_eq!(run_length(90, Some(61)), 92);
+        assert_eq!(run_length(90, Some(100)), 150);
+        assert_eq!(run_length(90, Some(260)), 270);
+    }
+
     /// Counted against an independent count: every trajectory re-simulated here with the
     /// plant stepped by hand, and the bound against the closed form of k = 0.
     #[test]
     fn counts_match_a_direct_simulation() {
         let mut cfg = ProblemConfig::default();
-        cfg.closed_loop.steps = 30;
+        cfg.closed_loop.steps = 20;
         for u in [0.0, 15.0] {
-            let s = closed_loop_statistical(&cfg, &Constant(u), "model", 40, 7, 0.99);
+            let s = closed_loop_statistical(&cfg, &Constant(u), "model", 20, 7, 0.99);
             assert_eq!(s.seed, statistical_seed("model\0closed loop", 7));
             assert_eq!(s.user_seed, 7);
-            let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
+            assert_eq!(s.steps_configured, 20);
+            assert!((20..=60).contains(&s.steps), "{}", s.steps);
             let mut k = 0;
-            for i in 0..40u64 {
-                let mut x: Vec<f64> = (0..2)
-                    .map(|j| {
-                        let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-                        lo + (hi - lo) * uniform(s.seed, i, j as u64)
-                    })
-                    .collect();
-                let mut bad = false;
-                let mut next = vec![0.0; 2];
-                for _ in 0..30 {
-                    plant.step(&x, &[u], &mut next);
-                    bad |= (0..2).any(|j| {
-                        next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6
-                    });
-                    x.copy_from_slice(&next);
-                }
+            for i in 0..20u64 {
+                let (bad, _) = by_hand(&cfg, &mut |_| u, start(&cfg, s.seed, i), s.steps);
                 k += bad as u64;
             }
             assert_eq!(s.all.violating, k, "u = {u}");
-            assert_eq!(s.all.trajectories, 40);
-            assert!(s.feasible_starts.trajectories <= 40);
+            assert_eq!(s.all.trajectories, 20);
+            assert!(s.feasible_starts.trajectories <= 20);
             assert!(s.feasible_starts.violating <= s.all.violating);
             if k == 0 {
-                assert!((s.all.p_violation_upper - (1.0 - 0.01f64.powf(1.0 / 40.0))).abs() < 1e-12);
+                assert!((s.all.p_violation_upper - (1.0 - 0.01f64.powf(1.0 / 20.0))).abs() < 1e-12);
             }
         }
         // A constant full torque drives the pendulum's velocity out of its bound from
         // most states: the two inputs cannot both give no violations.
-        let full = closed_loop_statistical(&cfg, &Constant(15.0), "model", 40, 7, 0.99);
+        let full = closed_loop_statistical(&cfg, &Constant(15.0), "model", 20, 7, 0.99);
         assert!(full.all.violating > 0, "{full:?}");
         // Another model: other initial states.
-        let other = closed_loop_statistical(&cfg, &Constant(15.0), "other", 40, 7, 0.99);
+        let other = closed_loop_statistical(&cfg, &Constant(15.0), "other", 20, 7, 0.99);
         assert_ne!(other.seed, full.seed);
     }
 
-    /// A run that stays inside the constraints but ends far from the setpoint fails: the
-    /// count of failing runs is checked against a hand-stepped simulation of each start.
+    /// A run that stays inside the constraints but ends far from the setpoint fails; the
+    /// run length and the MPC's count come from the MPC's own runs on the length draw. All
+    /// checked against hand-stepped simulations: the MPC's runs of 3 × 4 steps, their
+    /// settling steps, N = run_length(4, slowest), and every count at N.
     #[test]
     fn a_run_that_does_not_converge_fails() {
         let mut cfg = ProblemConfig::default();
-        cfg.closed_loop.steps = 3;
+        cfg.closed_loop.steps = 4;
         let s = closed_loop_statistical(&cfg, &Constant(0.0), "model", 30, 3, 0.99);
-        let plant = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
-        let scale = cfg.ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+        // The MPC from the 30 starts of the length draw, 12 steps each.
+        let length_seed = statistical_seed("model\0closed loop length", 3);
+        let mut law = MpcLaw::new(&cfg);
+        type HandRun = (bool, Vec<f64>);
+        let mpc: Vec<(Vec<f64>, HandRun)> = (0..30u64)
+            .map(|i| {
+                let x0 = start(&cfg, length_seed, i);
+                let r = by_hand(&cfg, &mut |x| law.solve(x, None).0.u[0], x0.clone(), 12);
+                (x0, r)
+            })
+            .collect();
+        let settle = |d: &[f64]| {
+            (d[d.len() - 1] <= CONVERGE_TOL)
+                .then(|| (0..d.len()).find(|&k| d[k..].iter().all(|v| *v <= CONVERGE_TOL)))
+                .flatten()
+        };
+        let slowest = mpc.iter().filter_map(|(_, (_, d))| settle(d)).max();
+        assert_eq!(s.mpc_slowest_settling, slowest);
+        let n = run_length(4, slowest);
+        assert_eq!(s.steps, n);
+        // The MPC's failures at N (a violation within N steps, or far at step N).
+        let mut mpc_failing = 0;
+        let mut same = 0;
+        for (x0, _) in &mpc {
+            let (bad, d) = by_hand(&cfg, &mut |x| law.solve(x, None).0.u[0], x0.clone(), n);
+            mpc_failing += u64::from(bad || d[n] > CONVERGE_TOL);
+            let (bad, d) = by_hand(&cfg, &mut |_| 0.0, x0.clone(), n);
+            same += u64::from(bad || d[n] > CONVERGE_TOL);
+        }
+        let m = s.mpc_failing.as_ref().unwrap();
+        assert_eq!((m.trajectories, m.violating), (30, mpc_failing));
+        assert_eq!(s.controller_failing_same, Some(same));
+        // The tested starts, N steps of u = 0.
         let (mut failing, mut far) = (0, 0);
         for i in 0..30u64 {
-            let mut x: Vec<f64> = (0..2)
-                .map(|j| {
-                    let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-                    lo + (hi - lo) * uniform(s.seed, i, j as u64)
-                })
-                .collect();
-            let mut bad = false;
-            let mut next = vec![0.0; 2];
-            for _ in 0..3 {
-                plant.step(&x, &[0.0], &mut next);
-                bad |= (0..2)
-                    .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
-                x.copy_from_slice(&next);
-            }
-            // The pendulum's setpoint is the origin.
-            let d = (0..2).map(|j| x[j].abs() / scale[j]).fold(0.0, f64::max);
-            far += u64::from(d > CONVERGE_TOL);
-            failing += u64::from(bad || d > CONVERGE_TOL);
+            let (bad, d) = by_hand(&cfg, &mut |_| 0.0, start(&cfg, s.seed, i), n);
+            far += u64::from(d[n] > CONVERGE_TOL);
+            failing += u64::from(bad || d[n] > CONVERGE_TOL);
         }
         assert!(
             far > 0,
-            "three steps of u = 0 leave most starts far from the origin"
+            "a few steps of u = 0 leave most starts far from the origin"
         );
         assert_eq!(s.not_converged, far);
         let f = s.failing.as_ref().unwrap();
@@ -367,36 +580,29 @@ mod tests {
         let ff = s.failing_feasible.as_ref().unwrap();
         assert_eq!(ff.trajectories, s.feasible_starts.trajectories);
         assert!(ff.violating >= s.feasible_starts.violating);
-        // The controller's count on the MPC's starts (all 30 here) is its failing count.
-        assert_eq!(s.controller_failing_same, Some(failing));
-        // The MPC's own closed loop from the same starts, re-simulated by hand.
-        let mut law = MpcLaw::new(&cfg);
-        let mut mpc_failing = 0;
-        for i in 0..30u64 {
-            let mut x: Vec<f64> = (0..2)
-                .map(|j| {
-                    let (lo, hi) = (cfg.domain.lo[j], cfg.domain.hi[j]);
-                    lo + (hi - lo) * uniform(s.seed, i, j as u64)
-                })
-                .collect();
-            let (mut bad, mut next) = (false, vec![0.0; 2]);
-            for _ in 0..3 {
-                let u = law.solve(&x, None).0.u[0];
-                let (lo, hi) = (cfg.ocp.u_lo[0], cfg.ocp.u_hi[0]);
-                let u = if u.is_finite() {
-                    u.clamp(lo, hi)
-                } else {
-                    0.5 * (lo + hi)
-                };
-                plant.step(&x, &[u], &mut next);
-                bad |= (0..2)
-                    .any(|j| next[j] > cfg.ocp.x_hi[j] + 1e-6 || next[j] < cfg.ocp.x_lo[j] - 1e-6);
-                x.copy_from_slice(&next);
-            }
-            let d = (0..2).map(|j| x[j].abs() / scale[j]).fold(0.0, f64::max);
-            mpc_failing += u64::from(bad || d > CONVERGE_TOL);
-        }
-        let m = s.mpc_failing.as_ref().unwrap();
-        assert_eq!((m.trajectories, m.violating), (30, mpc_failing));
+        assert!(s.convergence.contains("within 0.05"), "{}", s.convergence);
+    }
+
+    /// The setpoint offset: u = 0 holds the upright pendulum at the origin (offset at
+    /// rounding level: sin(0 + π) is 1.2e-16 in f64); a constant torque of 1 pushes it away
+    /// (the offset is the hand-stepped distance, above the tolerance): such a controller
+    /// cannot converge.
+    #[test]
+    fn the_setpoint_offset_is_the_run_from_x_ref() {
+        let mut cfg = ProblemConfig::default();
+        cfg.closed_loop.steps = 10;
+        let held = closed_loop_statistical(&cfg, &Constant(0.0), "model", 2, 1, 0.99);
+        let held_off = held.setpoint_offset.unwrap();
+        assert!(held_off < 1e-12, "{held_off}");
+        let pushed = closed_loop_statistical(&cfg, &Constant(1.0), "model", 2, 1, 0.99);
+        let n = pushed.steps;
+        let (_, d) = by_hand(&cfg, &mut |_| 1.0, vec![0.0, 0.0], n);
+        let off = pushed.setpoint_offset.unwrap();
+        assert!(off > CONVERGE_TOL, "{off}");
+        assert!(
+            (off - d[n]).abs() <= 1e-12 * d[n].max(1.0),
+            "{off} vs {}",
+            d[n]
+        );
     }
 }

@@ -178,6 +178,25 @@ fn closed_loop_statement(cl: &serde_json::Value) -> String {
         cl["steps"].as_u64().unwrap_or(0),
         cl["not_converged"].as_u64().unwrap_or(0),
     ) + &mpc_beside(cl)
+        + &convergence_rule(cl)
+}
+
+/// The convergence rule, the run length's origin and a steady offset at the setpoint
+/// (empty in files written before they were stated).
+fn convergence_rule(cl: &serde_json::Value) -> String {
+    let mut out = String::new();
+    if let Some(c) = cl["convergence"].as_str().filter(|c| !c.is_empty()) {
+        out += &format!(" Convergence: {c}.");
+    }
+    let tol = crate::study::statistical_loop::CONVERGE_TOL;
+    if let Some(o) = cl["setpoint_offset"].as_f64().filter(|o| *o > tol) {
+        out += &format!(
+            " The exported controller has a steady offset at the setpoint: started at x_ref it \
+             ends {o:.3} away (scaled), above the tolerance {tol}, so its runs cannot converge \
+             in this sense (a bias correction would be a new net, to be certified anew)."
+        );
+    }
+    out
 }
 
 /// The MPC's own failures from the same starts, beside the controller's (empty in files
@@ -192,9 +211,9 @@ fn mpc_beside(cl: &serde_json::Value) -> String {
         return String::new();
     };
     format!(
-        " The MPC itself, run in closed loop from the first {n} of the same starts for the \
-         same {} steps, fails on {k} of them ({:.1} %; P ≤ {:.3e}); the exported controller \
-         fails on {c} of those {n}.",
+        " The MPC itself, run in closed loop from {n} further i.i.d. starts for the same {} \
+         steps, fails on {k} of them ({:.1} %; P ≤ {:.3e}); the exported controller fails on \
+         {c} of those {n}.",
         cl["steps"].as_u64().unwrap_or(0),
         100.0 * k as f64 / n.max(1) as f64,
         m["p_violation_upper"].as_f64().unwrap_or(f64::NAN),
