@@ -16,7 +16,9 @@ use trainer::problem::ProblemConfig;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).ok_or("usage: safe_mpc_check CONFIG [N] [plain]")?;
+    let path = args
+        .get(1)
+        .ok_or("usage: safe_mpc_check CONFIG [N] [plain]")?;
     let n: u64 = args.get(2).map_or(Ok(400), |s| s.parse())?;
     let mut base = ProblemConfig::load(std::path::Path::new(path))?;
     if args.get(3).map(String::as_str) == Some("plain") {
@@ -28,7 +30,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "{}: online check {} ({:.1} s); margins m_s {:e}, m_f {:e}",
         cfg.name,
-        if cfg.ocp.online_check.is_some() { "imposed on the MPC" } else { "not imposed" },
+        if cfg.ocp.online_check.is_some() {
+            "imposed on the MPC"
+        } else {
+            "not imposed"
+        },
         t.elapsed().as_secs_f64(),
         plant.margins.0,
         plant.margins.1

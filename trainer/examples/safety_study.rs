@@ -33,13 +33,21 @@ fn group(title: &str, g: &SafetyGroup) {
     println!(
         "{title} ({runs} runs): MPC hard-feasible starts {}; safe initialised by the MPC {}, \
          the terminal rollout {}, a candidate {}, never {}",
-        g.mpc_feasible_starts, g.init_mpc, g.init_terminal, g.init_candidate,
+        g.mpc_feasible_starts,
+        g.init_mpc,
+        g.init_terminal,
+        g.init_candidate,
         g.runs_without_safe_sequence
     );
     line("safe", &g.safe, runs);
     line("plain", &g.plain, runs);
     line("mpc", &g.mpc, runs);
-    let from_start: Vec<_> = g.safe.runs.iter().filter(|r| r.no_safe_steps == 0).collect();
+    let from_start: Vec<_> = g
+        .safe
+        .runs
+        .iter()
+        .filter(|r| r.no_safe_steps == 0)
+        .collect();
     let steps: usize = from_start.iter().map(|r| r.steps).sum();
     let fb: usize = from_start.iter().map(|r| r.fallback_steps).sum();
     println!(
@@ -64,7 +72,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::temp_dir().join(format!("safety_study_{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let data = trainer::sample(&cfg, &dir.join("dataset.bin"))?;
-    println!("sample: {} states, {:.1} s", data.records.len(), t.elapsed().as_secs_f64());
+    println!(
+        "sample: {} states, {:.1} s",
+        data.records.len(),
+        t.elapsed().as_secs_f64()
+    );
     let t = Instant::now();
     let model = trainer::train(&cfg, &data, &data, false)?;
     println!("train: {:.1} s", t.elapsed().as_secs_f64());

@@ -14,8 +14,8 @@
 
 use super::{fail, PipelineError, Stage};
 use crate::certify::Model;
-use crate::deploy::safe_emulation::{EmulatedPlant, EmulatedSequenceNet};
 use crate::deploy::plant_rs_safe::TerminalSource;
+use crate::deploy::safe_emulation::{EmulatedPlant, EmulatedSequenceNet};
 use crate::problem::{OnlineCheck, ProblemConfig};
 use crate::study::safety::{safety_study as study, SafetyStudy};
 
@@ -54,9 +54,7 @@ pub fn labelling_problem(cfg: &ProblemConfig) -> Result<ProblemConfig, PipelineE
         }
         TerminalSource::Nominal(t) => (t.x_ref.clone(), t.p.clone()),
     };
-    let scale = cfg
-        .ocp
-        .x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
+    let scale = cfg.ocp.x_scale_or_default(&cfg.domain.lo, &cfg.domain.hi);
     let margin = |m: f64| scale.iter().map(|s| (m + CHECK_SLACK) * s).collect();
     let mut out = cfg.clone();
     out.ocp.online_check = Some(OnlineCheck {

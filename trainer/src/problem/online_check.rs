@@ -224,7 +224,10 @@ mod tests {
         let mut cfg = ProblemConfig::default();
         let cases: Vec<(Box<dyn Fn(&mut OnlineCheck)>, &str)> = vec![
             (Box::new(|c| c.alpha = 0.0), "ocp.online_check.alpha"),
-            (Box::new(|c| c.centre.pop().map(|_| ()).unwrap_or(())), "ocp.online_check.centre"),
+            (
+                Box::new(|c| c.centre.pop().map(|_| ()).unwrap_or(())),
+                "ocp.online_check.centre",
+            ),
             (Box::new(|c| c.p_f[0][0] = -1.0), "ocp.online_check.p_f"),
             (
                 Box::new(|c| c.stage_box_margin[1] = f64::NAN),
