@@ -87,8 +87,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fails: Vec<_> = hard.iter().filter(|o| !o.1).collect();
     println!(
         "hard optima failing: terminal set/box {} , stage box {}, inputs outside U {}",
-        fails.iter().filter(|o| !(o.2 <= 0.0)).count(),
-        fails.iter().filter(|o| !(o.3 <= 0.0)).count(),
+        fails.iter().filter(|o| o.2.is_nan() || o.2 > 0.0).count(),
+        fails.iter().filter(|o| o.3.is_nan() || o.3 > 0.0).count(),
         fails.iter().filter(|o| !o.4).count()
     );
     let worst = fails.iter().map(|o| o.2).fold(f32::NEG_INFINITY, f32::max);

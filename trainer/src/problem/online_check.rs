@@ -218,11 +218,13 @@ mod tests {
         m.validate().unwrap();
     }
 
+    type Case = (Box<dyn Fn(&mut OnlineCheck)>, &'static str);
+
     /// Bad blocks are refused naming the key.
     #[test]
     fn a_bad_block_names_its_key() {
         let mut cfg = ProblemConfig::default();
-        let cases: Vec<(Box<dyn Fn(&mut OnlineCheck)>, &str)> = vec![
+        let cases: Vec<Case> = vec![
             (Box::new(|c| c.alpha = 0.0), "ocp.online_check.alpha"),
             (
                 Box::new(|c| c.centre.pop().map(|_| ()).unwrap_or(())),
