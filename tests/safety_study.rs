@@ -3,9 +3,10 @@
 //! candidate sources whose outcome is known in advance, so that a wrong count fails:
 //!
 //! - **a network that only outputs NaN**: every candidate fails the online check. A run whose
-//!   start the MPC labels with a sequence that passes the check is initialised by it (step 0
-//!   applies its first input) and then falls back at every later step; a run without one
-//!   never has a safe sequence (every step `NO_SAFE`). So Σ fallback = init_mpc · (steps − 1),
+//!   start the MPC labels with a sequence that passes the check (or whose terminal rollout
+//!   passes it) is initialised by it (step 0 applies its first input) and then falls back at
+//!   every later step; a run without one never has a safe sequence (every step `NO_SAFE`). So
+//!   Σ fallback = (init_mpc + init_terminal) · (steps − 1),
 //!   Σ no-safe = runs_without_safe_sequence · steps, no run initialised by a candidate, and
 //!   — the nominal guarantee, the fallback replaying the MPC's plan completed by κ_f — no
 //!   violation in every initialised run. The plain network applies Π_U(NaN) =
@@ -15,12 +16,15 @@
 //!   network would give inside X_f): accepted where feasible, so fewer fallbacks than the
 //!   NaN network, and no violation in the runs that have a safe sequence from the start;
 //! - the MPC's own cost ratio is exactly 1, the JSON has no null, and the result does not
-//!   depend on the number of threads.
+//!   depend on the number of threads;
+//! - **the terminal ingredients shared by the MPC and the check** (`[ocp.online_check]`, what
+//!   `trainer run` imposes with `safety = true`): every hard optimum's sequence passes the
+//!   emulated online check, while without them some do not.
 
 use std::path::{Path, PathBuf};
 use trainer::deploy::safe_emulation::EmulatedPlant;
 use trainer::problem::ProblemConfig;
-use trainer::study::safety::{safety_study, SafetyStudy};
+use trainer::study::safety::{safety_study, terminal_rollout as rollout, SafetyStudy};
 
 fn config() -> ProblemConfig {
     let root: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -56,7 +60,7 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
     let runs = cfg.closed_loop.safety_runs as u64;
     assert_eq!(g.safe.runs.len() as u64, runs);
     assert_eq!(
-        g.init_mpc + g.init_candidate + g.runs_without_safe_sequence,
+        g.init_mpc + g.init_terminal + g.init_candidate + g.runs_without_safe_sequence,
         runs
     );
     assert_eq!(g.init_candidate, 0, "a NaN candidate never initialises");
@@ -67,7 +71,8 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
         "{g:?}"
     );
     let fallback: usize = g.safe.runs.iter().map(|r| r.fallback_steps).sum();
-    assert_eq!(fallback as u64, g.init_mpc * (steps as u64 - 1));
+    let init = g.init_mpc + g.init_terminal;
+    assert_eq!(fallback as u64, init * (steps as u64 - 1));
     assert_eq!(
         g.safe.no_safe_steps,
         g.runs_without_safe_sequence * steps as u64
@@ -107,16 +112,67 @@ fn a_nan_network_always_falls_back_and_the_counts_say_so() {
 
 /// The terminal controller's rollout over `n` steps as a candidate source.
 fn terminal_rollout(p: &EmulatedPlant, n: usize) -> impl Fn(&[f32]) -> Vec<Vec<f32>> + Sync + '_ {
-    move |x: &[f32]| {
-        let mut xk = x.to_vec();
-        (0..n)
-            .map(|_| {
-                let u = p.project_input(&p.terminal_input(&xk));
-                xk = p.step(&xk, &u);
-                u
-            })
-            .collect()
+    move |x: &[f32]| rollout(p, n, x)
+}
+
+/// The MPC's sequence at each of the study's first starts handed to the emulated
+/// `init_with`: (hard optima, of which pass).
+fn mpc_passes(cfg: &ProblemConfig, plant: &EmulatedPlant, starts: u64) -> (usize, usize) {
+    use trainer::deploy::safe_emulation::SafeEmulation;
+    use trainer::mpc::sqp::SqpStatus;
+    let (nu, n) = (cfg.system.nu(), cfg.ocp.horizon);
+    let mut law = trainer::mpc::law::MpcLaw::new(cfg);
+    let (mut hard, mut pass) = (0, 0);
+    for i in 0..starts {
+        let x0 = trainer::study::safety::start(cfg, i);
+        let (l, _) = law.solve(&x0, None);
+        if l.status != SqpStatus::Converged {
+            continue;
+        }
+        hard += 1;
+        let rows: Vec<Vec<f32>> = l
+            .seq
+            .chunks(nu)
+            .map(|r| r.iter().map(|v| *v as f32).collect())
+            .collect();
+        let x32: Vec<f32> = x0.iter().map(|v| *v as f32).collect();
+        pass += usize::from(
+            SafeEmulation::new(plant, n)
+                .init_with(&x32, &rows)
+                .is_some(),
+        );
     }
+    (hard, pass)
+}
+
+/// Hose et al.'s consistency: with the check's terminal set, terminal cost and margins imposed
+/// on the MPC (`pipeline::labelling_problem`), the MPC's sequence passes the device's check at
+/// every start where the MPC is (hard) feasible; the problem file's own OCP, without them,
+/// fails it at some of the same starts — so the count can fail. The device's plant is the same
+/// for both (generated from the problem without the block).
+#[test]
+fn the_mpc_sequence_passes_the_online_check_with_the_shared_terminal_ingredients() {
+    let mut base = config();
+    base.training.outputs = trainer::problem::Outputs::Sequence;
+    base.closed_loop.safety = true;
+    let cfg = trainer::pipeline::labelling_problem(&base).unwrap();
+    let c = cfg.ocp.online_check.as_ref().expect("the block is filled");
+    let (plant, g) = EmulatedPlant::new(&base).unwrap();
+    assert!(c.alpha < g.terminal.alpha() * (1.0 - f64::from(plant.margins.1)));
+    let (plant2, _) = EmulatedPlant::new(&cfg).unwrap();
+    assert_eq!(
+        format!("{plant:?}"),
+        format!("{plant2:?}"),
+        "the check is unchanged"
+    );
+    let (hard, pass) = mpc_passes(&cfg, &plant, 24);
+    assert!(hard >= 6, "{hard} hard optima");
+    assert_eq!(pass, hard);
+    base.closed_loop.safety_terminal = false;
+    let same = trainer::pipeline::labelling_problem(&base).unwrap();
+    assert!(same.ocp.online_check.is_none());
+    let (hard, pass) = mpc_passes(&same, &plant, 24);
+    assert!(pass < hard, "{pass} of {hard}");
 }
 
 #[test]

@@ -11,9 +11,17 @@ use trainer::problem::ProblemConfig;
 /// pendulum, said on stderr ([`embedded_pendulum`]).
 pub(super) fn load_config(path: Option<&Path>) -> Result<ProblemConfig> {
     Ok(match path {
-        Some(p) => warn_plant(ProblemConfig::load(p)?),
+        Some(p) => load(p)?,
         None => embedded_pendulum(),
     })
+}
+
+/// The problem file at `p` as the pipeline labels it: with `[closed_loop] safety = true`, its
+/// MPC imposes the safe controller's online check (`trainer::pipeline::labelling_problem`), so
+/// that `trainer sample` / `eval` / `certify` on it use the labels `trainer run` uses.
+pub(super) fn load(p: &Path) -> Result<ProblemConfig> {
+    let cfg = warn_plant(ProblemConfig::load(p)?);
+    Ok(trainer::pipeline::labelling_problem(&cfg)?)
 }
 
 /// The embedded pendulum, for a command given no `--config` and no input that names a
@@ -37,7 +45,7 @@ pub(super) fn problem_for_model(
     m: &Model,
 ) -> Result<Option<ProblemConfig>> {
     if let Some(p) = config {
-        let cfg = warn_plant(ProblemConfig::load(p)?);
+        let cfg = load(p)?;
         if (m.mlp.nx(), m.mlp.nu()) != (cfg.system.nx(), cfg.system.nu()) {
             bail!(
                 "{}: the network maps {} states to {} inputs; problem `{}` of {} has {} and {}",
@@ -116,7 +124,7 @@ pub(super) fn problem_for_data(
     data: &Dataset,
 ) -> Result<ProblemConfig> {
     match config {
-        Some(p) => Ok(warn_plant(ProblemConfig::load(p)?)),
+        Some(p) => load(p),
         None => {
             let origin = format!("{} (its stored problem file)", data_path.display());
             let cfg = ProblemConfig::from_stored_toml(&data.header.config_toml, &origin)?;

@@ -151,7 +151,7 @@ impl MpcLaw {
         starts: Vec<crate::problem::solver::Start>,
     ) -> Self {
         MpcLaw {
-            cfg: cfg.clone(),
+            cfg: cfg.mpc_problem().into_owned(),
             hard,
             soft: None,
             soft_warm: None,

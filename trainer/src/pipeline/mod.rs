@@ -33,6 +33,7 @@ mod exported;
 pub mod manifest;
 pub mod robust;
 mod safety;
+pub use safety::{labelling_problem, CHECK_SLACK};
 mod stages;
 pub use stages::validation_config;
 mod tiers;
@@ -256,6 +257,9 @@ pub fn run(
     same_problem(&dir, cfg, opts)?;
     let dir = RunDir::new(dir);
     write_atomic(&dir.problem(), config_text.as_bytes()).map_err(|e| fail("setup", e))?;
+    // With the safety study, the MPC imposes the device's online check (`labelling_problem`).
+    let labelling = labelling_problem(cfg)?;
+    let cfg = &labelling;
     let mut cx = Ctx {
         dir,
         opts,

@@ -22,6 +22,7 @@ mod certify;
 pub(crate) mod limits;
 pub mod model;
 pub(crate) mod ocp;
+pub(crate) mod online_check;
 pub(crate) mod refine;
 pub(crate) mod robust;
 pub(crate) mod sampling;
@@ -33,6 +34,7 @@ mod validate;
 
 pub use certify::{CertifySettings, DEFAULT_STATISTICAL};
 pub use ocp::{MatrixSpec, OcpSettings, StageBounds};
+pub use online_check::OnlineCheck;
 pub use refine::{CheckSettings, RefineSettings, RefineSwitch};
 pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};

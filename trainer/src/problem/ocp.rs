@@ -110,6 +110,12 @@ pub struct OcpSettings {
     /// problem hash and not serialised when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_scale: Option<Vec<f64>>,
+    /// The safety-augmented controller's online check imposed on the MPC only (terminal set,
+    /// terminal cost, the check's box margins; [`super::online_check`]): filled by `trainer
+    /// run` when `[closed_loop] safety = true` (and `safety_terminal`); absent by default, and
+    /// then not serialised, so hashes of existing problems are unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub online_check: Option<super::online_check::OnlineCheck>,
 }
 
 fn default_setpoint_tol() -> f64 {

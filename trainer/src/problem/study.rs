@@ -71,6 +71,13 @@ pub struct ClosedLoopSettings {
     /// 1 000; 0 = none). The scenarios are [`mismatch_scenarios`](Self::mismatch_scenarios).
     #[serde(skip_serializing_if = "is_default_safety_mismatch_runs")]
     pub safety_mismatch_runs: usize,
+    /// With [`safety`](Self::safety): the MPC that labels the data and runs in the study
+    /// imposes the safe controller's online check — its terminal set, terminal cost and
+    /// margins (`[ocp.online_check]`, filled by `trainer run` from the generated safe plant) —
+    /// so that the MPC's own sequence passes the check wherever the OCP is feasible (the
+    /// method of Hose et al.). Default true; not serialised when true.
+    #[serde(skip_serializing_if = "is_true")]
+    pub safety_terminal: bool,
 }
 
 /// Default of [`ClosedLoopSettings::safety_runs`].
@@ -81,6 +88,10 @@ pub const SAFETY_MISMATCH_RUNS: usize = 1_000;
 
 fn is_false(v: &bool) -> bool {
     !*v
+}
+
+fn is_true(v: &bool) -> bool {
+    *v
 }
 
 fn is_default_safety_runs(v: &usize) -> bool {
@@ -105,6 +116,7 @@ impl Default for ClosedLoopSettings {
             safety: false,
             safety_runs: SAFETY_RUNS,
             safety_mismatch_runs: SAFETY_MISMATCH_RUNS,
+            safety_terminal: true,
         }
     }
 }

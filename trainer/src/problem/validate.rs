@@ -159,6 +159,7 @@ impl ProblemConfig {
         self.ocp.validate(nx, nu)?;
         self.constraint_set()
             .map_err(|e| invalid(e.key.clone(), e.reason()))?;
+        self.validate_online_check()?;
         self.domain.validate(nx)?;
         self.validate_setpoint()?;
         self.solver.validate()?;

@@ -11,8 +11,12 @@
 //!
 //! The safe controller is initialised with `init_with` by the MPC's sequence at x₀ (the first
 //! solve of the MPC's own run from that x₀) when the MPC has one and it passes the online
-//! check — the step then applies its first input; otherwise the first feasible candidate
-//! becomes the safe sequence (`SafetyStudy::init_mpc` / `init_candidate` count which).
+//! check — the step then applies its first input; else by the terminal controller's f32
+//! rollout Π_U(κ_f) when that passes (x₀ in the terminal set, as a rule); otherwise the first
+//! feasible candidate becomes the safe sequence (`SafetyGroup::init_mpc` / `init_terminal` /
+//! `init_candidate` count which). `mpc_feasible_starts` counts the starts whose first MPC
+//! solve is a hard optimum: with `[ocp.online_check]` (the default of a safety problem in
+//! `trainer run`) each of them should pass the check, so `init_mpc` ≈ `mpc_feasible_starts`.
 //!
 //! **Violation** (per step, [`step_violation`]): x_{k+1} outside the OCP's state box, or an
 //! `[ocp]` path constraint violated where the OCP imposes it (states-only ones at x_{k+1},
@@ -113,8 +117,14 @@ pub struct SafetyGroup {
     pub plain: ControllerRuns,
     /// The MPC.
     pub mpc: ControllerRuns,
+    /// Starts whose first MPC solve is a hard optimum (status `converged`).
+    #[serde(default)]
+    pub mpc_feasible_starts: u64,
     /// Safe runs initialised by the MPC's sequence at x₀ (`init_with`).
     pub init_mpc: u64,
+    /// Safe runs initialised by the terminal controller's rollout (`init_with`).
+    #[serde(default)]
+    pub init_terminal: u64,
     /// Safe runs whose first safe sequence was a feasible candidate.
     pub init_candidate: u64,
     /// Safe runs in which no safe sequence ever existed.
@@ -297,25 +307,39 @@ fn to64(u: &[f32]) -> Vec<f64> {
 enum Init {
     Never,
     Mpc,
+    Terminal,
     Candidate,
 }
 
-/// The three runs from `x0` on `model`: (safe, plain, mpc, the safe run's initialisation).
-fn triple(
-    s: &Setup,
-    law: &mut MpcLaw,
-    model: &Discrete,
-    x0: &[f64],
-) -> (SafetyRun, SafetyRun, SafetyRun, Init) {
+/// The terminal controller's f32 rollout from `x`: v_k = Π_U(κ_f(x_k)), x_{k+1} = F32(x_k, v_k).
+pub fn terminal_rollout(p: &EmulatedPlant, n: usize, x: &[f32]) -> Vec<Vec<f32>> {
+    let mut xk = x.to_vec();
+    (0..n)
+        .map(|_| {
+            let u = p.project_input(&p.terminal_input(&xk));
+            xk = p.step(&xk, &u);
+            u
+        })
+        .collect()
+}
+
+/// One start's runs: (safe, plain, mpc, the safe run's initialisation, the MPC's first solve
+/// a hard optimum).
+type Triple = (SafetyRun, SafetyRun, SafetyRun, Init, bool);
+
+/// The three runs from `x0` on `model` ([`Triple`]).
+fn triple(s: &Setup, law: &mut MpcLaw, model: &Discrete, x0: &[f64]) -> Triple {
     let (nu, n) = (s.cfg.system.nu(), s.cfg.ocp.horizon);
     let mut along = Along::default();
     let mut first_seq: Option<Vec<f64>> = None;
+    let mut hard = false;
     let mut last = vec![0.0; nu];
     let cs = s.cs.as_ref();
     let mpc = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
         let l = law.solve_next(x, &mut along);
         if k == 0 && l.status.is_labelled() {
             first_seq = Some(l.seq.clone());
+            hard = l.status == crate::mpc::sqp::SqpStatus::Converged;
         }
         if l.status.is_labelled() {
             last = saturate(s.cfg, &l.u);
@@ -324,15 +348,20 @@ fn triple(
     });
     let mut emu = SafeEmulation::new(s.plant, n);
     let x32 = to32(x0);
-    let init = first_seq.filter(|q| q.len() == n * nu).and_then(|q| {
+    let mut how = Init::Never;
+    let mut init = first_seq.filter(|q| q.len() == n * nu).and_then(|q| {
         let rows: Vec<Vec<f32>> = q.chunks(nu).map(to32).collect();
         emu.init_with(&x32, &rows).map(|_| rows[0].clone())
     });
-    let mut how = if init.is_some() {
-        Init::Mpc
+    if init.is_some() {
+        how = Init::Mpc;
     } else {
-        Init::Never
-    };
+        let rows = terminal_rollout(s.plant, n, &x32);
+        init = emu.init_with(&x32, &rows).map(|_| rows[0].clone());
+        if init.is_some() {
+            how = Init::Terminal;
+        }
+    }
     let safe = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
         if let (0, Some(u0)) = (k, &init) {
             return (to64(&s.plant.project_input(u0)), false, false);
@@ -352,7 +381,7 @@ fn triple(
         let first = c.first().cloned().unwrap_or_default();
         (to64(&s.plant.project_input(&first)), false, false)
     });
-    (safe, plain, mpc, how)
+    (safe, plain, mpc, how, hard)
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -397,7 +426,7 @@ pub fn summarise(runs: Vec<SafetyRun>, mpc: &[SafetyRun]) -> ControllerRuns {
 /// `n` triples from the first `n` starts on `model`.
 fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
     let cfg = s.cfg;
-    let out: Vec<(SafetyRun, SafetyRun, SafetyRun, Init)> = (0..n as u64)
+    let out: Vec<Triple> = (0..n as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(cfg),
@@ -405,12 +434,17 @@ fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
         )
         .collect();
     let count = |w: Init| out.iter().filter(|t| t.3 == w).count() as u64;
-    let (init_mpc, init_candidate, never) =
-        (count(Init::Mpc), count(Init::Candidate), count(Init::Never));
+    let mpc_feasible_starts = out.iter().filter(|t| t.4).count() as u64;
+    let (init_mpc, init_terminal, init_candidate, never) = (
+        count(Init::Mpc),
+        count(Init::Terminal),
+        count(Init::Candidate),
+        count(Init::Never),
+    );
     let mut safe = Vec::new();
     let mut plain = Vec::new();
     let mut mpc = Vec::new();
-    for (a, b, c, _) in out {
+    for (a, b, c, _, _) in out {
         safe.push(a);
         plain.push(b);
         mpc.push(c);
@@ -419,7 +453,9 @@ fn group(s: &Setup, model: &Discrete, n: usize) -> SafetyGroup {
         safe: summarise(safe, &mpc),
         plain: summarise(plain, &mpc),
         mpc: summarise(mpc.clone(), &mpc),
+        mpc_feasible_starts,
         init_mpc,
+        init_terminal,
         init_candidate,
         runs_without_safe_sequence: never,
     }
@@ -472,8 +508,9 @@ pub fn safety_study(
         seed: SAFETY_SEED,
         initialisation: "init_with the MPC's optimal sequence at x0 (its first solve along the \
                          run) when the MPC labels x0 and the sequence passes the online check; \
-                         else the first feasible network candidate (before it: NO_SAFE steps, \
-                         the candidate's first input projected onto U)"
+                         else init_with the terminal controller's rollout when it passes; else \
+                         the first feasible network candidate (before it: NO_SAFE steps, the \
+                         candidate's first input projected onto U)"
             .into(),
         violation_rule: format!(
             "a step violates when the true (f64 model) x_(k+1) leaves the OCP's state box or an \

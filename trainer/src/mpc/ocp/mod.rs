@@ -84,8 +84,12 @@ pub struct Ocp {
 }
 
 impl Ocp {
-    /// Transcribes a validated problem; `soft` selects the exact-penalty variant.
+    /// Transcribes a validated problem; `soft` selects the exact-penalty variant. The OCP is
+    /// [`ProblemConfig::mpc_problem`]: with `ocp.online_check`, its terminal set, terminal cost
+    /// and tightened state bounds are part of it.
     pub fn new(cfg: &ProblemConfig, soft: bool) -> Self {
+        let cfg = cfg.mpc_problem();
+        let cfg = cfg.as_ref();
         let model = Discrete::new(cfg.system.clone(), cfg.ocp.ts, cfg.ocp.rk4_substeps);
         let (nx, nu, n) = (model.nx(), model.nu(), cfg.ocp.horizon);
         let nw = n * (nx + nu) + nx;

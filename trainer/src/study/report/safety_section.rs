@@ -53,7 +53,8 @@ pub(super) fn section(s: &SafetyStudy) -> Vec<Block> {
         Block::Para(format!(
             "{} closed loops of {} steps per controller from i.i.d. uniform starts in X (seed \
              {}), nominal model. Guarantee of the safe controller: **{}** — resting on {}. \
-             Initialisation: {}: {} runs by the MPC's sequence, {} by a feasible candidate, {} \
+             Initialisation: {}: {} runs by the MPC's sequence (the MPC's first solve a hard \
+             optimum at {} starts), {} by the terminal rollout, {} by a feasible candidate, {} \
              without a safe sequence ({} steps without one in all). Violation: {}.",
             s.runs,
             s.steps,
@@ -62,6 +63,8 @@ pub(super) fn section(s: &SafetyStudy) -> Vec<Block> {
             s.rests_on,
             s.initialisation,
             g.init_mpc,
+            g.mpc_feasible_starts,
+            g.init_terminal,
             g.init_candidate,
             g.runs_without_safe_sequence,
             g.safe.no_safe_steps,
