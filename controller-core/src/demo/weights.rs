@@ -242,7 +242,7 @@ pub const CERTIFICATE_FAST: Certificate<2, 1> = Certificate {
     l_mpc_is_estimate: true,
     covering_radius: 0.21563060843241086,
     f32_allowance: 0.0018261673280086134,
-    f32_observed: 0.00024140422067020495,
+    f32_observed: 0.00024144191551300764,
     tanh: "fast",
     tanh_max_abs_err: 3.3e-6,
     domain_lo: [-6.283185307179586, -1.0],
