@@ -168,9 +168,16 @@ mod tests {
             ),
         ];
         let mut plain = MpcLaw::with_starts(&cfg, default_starts(false));
+        // The start by its name in a problem file.
+        let text = std::fs::read_to_string(path).unwrap().replace(
+            "[sampling]",
+            "[solver]\nstarts = [\"warm\", \"u_lo\", \"u_hi\", \"barrier\"]\n\n[sampling]",
+        );
+        let listed = ProblemConfig::from_toml_str(&text, "p.toml").unwrap();
+        let mut law = MpcLaw::new(&listed);
         let mut with = default_starts(false);
         with.push(Start::Barrier);
-        let mut law = MpcLaw::with_starts(&cfg, with);
+        assert_eq!(law.starts(), with.as_slice());
         let mut alone = MpcLaw::with_starts(&cfg, vec![Start::Barrier]);
         for (x, ipopt) in cases {
             let (p, _) = plain.solve(&x, None);
@@ -182,7 +189,12 @@ mod tests {
             let sol = sol.expect("a hard label returns its point");
             assert!(law.hard_solver().kkt_residual(&x, &sol).max() <= cfg.solver.tol);
             let (a, _) = alone.solve(&x, None);
-            assert!((a.cost - l.cost).abs() <= 1e-7 * l.cost, "{} {}", a.cost, l.cost);
+            assert!(
+                (a.cost - l.cost).abs() <= 1e-7 * l.cost,
+                "{} {}",
+                a.cost,
+                l.cost
+            );
             assert!(law.hard_solver().ocp.barrier.is_none());
             let fresh = MpcLaw::with_starts(&cfg, vec![Start::Warm]).solve_single(&x, None);
             assert_eq!(law.solve_single(&x, None), fresh);
