@@ -23,6 +23,7 @@
 //! it keeps its label bit for bit.
 
 pub mod along;
+pub mod homotopy;
 pub mod pilot;
 pub mod starts;
 

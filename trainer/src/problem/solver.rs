@@ -57,6 +57,11 @@ pub enum Start {
     /// Every input at its upper bound, rolled out from x₀ (the other direction).
     #[serde(rename = "u_hi")]
     UHi,
+    /// A barrier homotopy (`crate::mpc::law::homotopy`): from the inputs at the middle of
+    /// their bounds, the OCP with the input bounds replaced by a log barrier μ·Σ −ln(slack)
+    /// solved for geometrically decreasing μ, each solve warm-started from the last, its
+    /// last solution the guess of the true OCP (an interior-point method's path).
+    Barrier,
 }
 
 impl Start {
@@ -70,6 +75,7 @@ impl Start {
             Start::Neighbour => "neighbour",
             Start::ULo => "u_lo",
             Start::UHi => "u_hi",
+            Start::Barrier => "barrier",
         }
     }
 }

@@ -243,6 +243,7 @@ impl MpcLaw {
         let mut z = vec![0.0; ocp.n_var];
         match s {
             Start::Warm => return None,
+            Start::Barrier => return self.barrier_guess(xs),
             Start::Neighbour => {
                 let mut p = near?.clone();
                 p.z[..nx].copy_from_slice(xs);
@@ -296,7 +297,12 @@ impl MpcLaw {
 
     /// Fills `z` with the rollout from `xs` of the input `law(k, x_k, u_k)`, clamped to the
     /// input bounds (states clamped to the state bounds, a non-finite step keeps x_k).
-    fn rollout(&self, xs: &[f64], z: &mut [f64], law: impl Fn(usize, &[f64], &mut [f64])) {
+    pub(super) fn rollout(
+        &self,
+        xs: &[f64],
+        z: &mut [f64],
+        law: impl Fn(usize, &[f64], &mut [f64]),
+    ) {
         let ocp = &self.hard.ocp;
         let (nx, nu) = (ocp.nx, ocp.nu);
         let (mut x, mut xn, mut u) = (xs.to_vec(), vec![0.0; nx], vec![0.0; nu]);

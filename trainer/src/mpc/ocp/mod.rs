@@ -27,8 +27,10 @@
 //! row's slack `h − aᵀz̄` is always −g(z̄)). The Lagrangian is `L = f + λᵀc + νᵀ(Gz − h)`,
 //! ν ≥ 0, and its Hessian includes `Σ ν_r ∇²g_r` ([`Ocp::hessian_blocks`]).
 
+mod barrier;
 mod rows;
 
+pub use barrier::InputBarrier;
 pub use rows::{LinRow, MAX_ROW};
 
 use crate::problem::model::expr::ConstraintSet;
@@ -81,6 +83,9 @@ pub struct Ocp {
     nl_rows: Vec<NlRow>,
     /// The rows of all `[ocp]` constraints.
     constraint_rows: Vec<usize>,
+    /// The log barrier of the input bounds added to the objective (`barrier` module), `None`
+    /// for the true OCP.
+    pub barrier: Option<InputBarrier>,
 }
 
 impl Ocp {
@@ -121,6 +126,7 @@ impl Ocp {
             constraints,
             nl_rows,
             constraint_rows,
+            barrier: None,
         }
     }
 
@@ -165,6 +171,11 @@ impl Ocp {
                 f += sp.l1 * s + sp.l2 * s * s;
             }
         }
+        if let Some(b) = &self.barrier {
+            for k in 0..self.horizon {
+                f += b.value(&z[self.iu(k)..self.iu(k) + nu]);
+            }
+        }
         f
     }
 
@@ -189,6 +200,12 @@ impl Ocp {
         if let Some(sp) = self.soft {
             for i in self.is()..self.n_var {
                 g[i] = sp.l1 + 2.0 * sp.l2 * z[i];
+            }
+        }
+        if let Some(b) = &self.barrier {
+            for k in 0..self.horizon {
+                let iu = self.iu(k);
+                b.add_gradient(&z[iu..iu + nu], &mut g[iu..iu + nu]);
             }
         }
     }
@@ -273,6 +290,12 @@ impl Ocp {
             for i in 0..nu {
                 for j in 0..nu {
                     blk[(nx + i) * nz + nx + j] += 2.0 * self.r[(i, j)];
+                }
+            }
+            if let Some(b) = &self.barrier {
+                let u = &z[self.iu(k)..self.iu(k) + nu];
+                for i in 0..nu {
+                    blk[(nx + i) * nz + nx + i] += b.curvature(u, i);
                 }
             }
         }
