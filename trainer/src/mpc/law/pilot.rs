@@ -2,9 +2,10 @@
 //! only where they can matter"):
 //! ```text
 //! P = {x_1 … x_M} ⊂ X,  M = PILOT_STATES, x_i uniform in X (counter-based, PILOT_SEED)
-//! starts = ["warm", "u_lo", "u_hi"]   if some x_i ∈ P has two distinct hard optima among the
-//!                                      starts, or a hard optimum only from a start other than warm
-//!        = ["warm"]                   otherwise
+//! starts = ["warm", "u_lo", "u_hi", "barrier"]
+//!                          if some x_i ∈ P has two distinct hard optima among ["warm", "u_lo",
+//!                          "u_hi"], or a hard optimum only from a start other than warm
+//!        = ["warm"]       otherwise
 //! ```
 //! The extra starts cost about three `warm` solves per state (the bang-bang rollouts are poor
 //! guesses), and on many plants they never reach another optimum (the pendulum: none in 2,000
@@ -12,7 +13,11 @@
 //! X solved from every start decides, once per problem and process, whether they can matter:
 //! when they never did on the pilot, the rate of states where they would is below 3 % at
 //! 95 % confidence (rule of three, 3/M), and labels come from `warm` alone. Swing-up
-//! problems, whose starts disagree on a sizeable share of X, keep all three.
+//! problems, whose starts disagree on a sizeable share of X, keep all three and add the
+//! barrier start (`super::homotopy`): where the starts disagree, the interior-point-like path
+//! reaches the lower optimum at most of the states the three miss (the acados swing-up: 8 of
+//! 540 states above IPOPT's cost instead of 26, at about 2.8× the CPU per state —
+//! BENCHMARKS.md); the pilot itself probes with the three cheaper starts only.
 //!
 //! Only the default is decided here: a problem file's `[solver] starts` is used as written,
 //! and a convex OCP has one start whatever is listed. The pilot is deterministic (fixed
@@ -112,6 +117,14 @@ pub fn pilot(cfg: &ProblemConfig) -> Pilot {
     p
 }
 
+/// The starts kept where the pilot finds that extra starts matter: the probed ones, then the
+/// barrier start (skipped by the law when U has no finite bound).
+pub fn extra_starts() -> Vec<Start> {
+    let mut s = default_starts(false);
+    s.push(Start::Barrier);
+    s
+}
+
 /// The pilot itself (uncached).
 pub fn run(cfg: &ProblemConfig) -> Pilot {
     let all = default_starts(false);
@@ -133,7 +146,7 @@ pub fn run(cfg: &ProblemConfig) -> Pilot {
                 states: i + 1,
                 disagreed,
                 rescued,
-                starts: all,
+                starts: extra_starts(),
             };
         }
     }

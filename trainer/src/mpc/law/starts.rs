@@ -400,10 +400,7 @@ mod tests {
         let mut law = MpcLaw::new(&cfg);
         assert!(!law.is_convex());
         // The default starts, decided by the pilot: the swing-up's extra starts matter.
-        assert_eq!(
-            law.starts(),
-            crate::problem::solver::default_starts(false).as_slice()
-        );
+        assert_eq!(law.starts(), super::super::pilot::extra_starts().as_slice());
         let pilot = super::super::pilot::pilot(&cfg);
         assert!(pilot.disagreed + pilot.rescued > 0, "{pilot:?}");
         for (x, ipopt) in cases {
