@@ -371,7 +371,11 @@ mod tests {
         for i in 0..=120 {
             for j in 0..=40 {
                 let x: [f32; SAFE_NX] = core::array::from_fn(|k| {
-                    let t = if k == 0 { i as f32 / 120.0 } else { j as f32 / 40.0 };
+                    let t = if k == 0 {
+                        i as f32 / 120.0
+                    } else {
+                        j as f32 / 40.0
+                    };
                     let (a, b) = (
                         compiled::safe::plant::X_LO[k],
                         compiled::safe::plant::X_HI[k],

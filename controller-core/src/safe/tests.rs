@@ -305,7 +305,10 @@ fn a_candidate_slightly_outside_u_is_clamped_then_checked() {
     for u in over.iter_mut().filter(|u| u[0] <= -1.0) {
         u[0] = -1.0001;
     }
-    assert!(!c.check(&x1, &mut over.clone(), false).feasible, "unclamped: fails");
+    assert!(
+        !c.check(&x1, &mut over.clone(), false).feasible,
+        "unclamped: fails"
+    );
     let o = c.step_with(&x1, over);
     assert_eq!(o.flags, SafeFlags::CANDIDATE, "{o:?}");
     assert_eq!(o.u, [-1.0]);

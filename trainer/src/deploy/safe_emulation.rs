@@ -477,10 +477,7 @@ impl<'a> SafeEmulation<'a> {
         } else {
             (false, f32::INFINITY)
         };
-        let diagnosis = CandidateDiagnosis {
-            outside_u,
-            detail,
-        };
+        let diagnosis = CandidateDiagnosis { outside_u, detail };
         let Some(previous) = self.safe.take() else {
             if c_ok {
                 let out = self.output(
