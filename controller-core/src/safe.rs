@@ -7,7 +7,8 @@
 //! state: ū = (ū_0 … ū_{N−1})  the sequence applied at the previous step (the "safe" one),
 //!        or none yet
 //! step(x):
-//!   c  = network(x) = (c_0 … c_{N−1})                    candidate
+//!   c  = Π_U(network(x)) = (Π_U(c_0) … Π_U(c_{N−1}))      candidate, each input clamped to
+//!        its box (a candidate with a NaN or ±inf component is left as is: it fails)
 //!   s  = (ū_1 … ū_{N−1}, κ_f(x̂_{N−1}))                    safe candidate: ū shifted by one,
 //!        x̂_{N−1} = F^{N−1}(x; ū_1 … ū_{N−1})              completed by the terminal controller
 //!   check(x, v): x_0 = x, x_{k+1} = F(x_k, v_k)           forward simulation (the plant's f32 RK4)
@@ -21,6 +22,14 @@
 //!   else s                                                          flag FALLBACK
 //!   u = Π_U(v_0); ū ← v  (shifted at the next step)
 //! ```
+//!
+//! **The projection of the candidate.** A network fitted to MPC sequences that sit on an
+//! input bound puts entries slightly beyond it; unprojected, such a candidate fails
+//! `Π_U(v) = v` however good it is. The candidate is therefore clamped to U entry by entry
+//! before the check. This does not weaken the check: the clamped sequence is what is
+//! simulated, checked and (if chosen) applied and stored, so every guarantee below is about
+//! the sequence actually used. A candidate with a non-finite component is not projected (Π_U
+//! would turn NaN into u_ref): it fails the check, flag `NON_FINITE_CANDIDATE`.
 //!
 //! κ_f(x) = u_ref + K(x − x_ref) is projected onto the input box by [`Plant::project_input`]
 //! (the identity inside the terminal set, where κ_f is admissible), so the stored sequence
@@ -140,7 +149,8 @@ impl SafeFlags {
     pub const SAFE_INFEASIBLE: SafeFlags = SafeFlags(16);
     /// A state component was NaN or ±inf (every check then fails).
     pub const NON_FINITE_STATE: SafeFlags = SafeFlags(32);
-    /// A candidate component was NaN or ±inf (the candidate then fails the check).
+    /// A candidate component was NaN or ±inf (the candidate is then not projected onto U
+    /// and fails the check).
     pub const NON_FINITE_CANDIDATE: SafeFlags = SafeFlags(64);
 
     /// Whether every flag in `other` is set.
@@ -343,7 +353,13 @@ where
         if !x.iter().all(|v| v.is_finite()) {
             flags = flags.union(SafeFlags::NON_FINITE_STATE);
         }
-        if !candidate.as_flattened().iter().all(|v| v.is_finite()) {
+        if candidate.as_flattened().iter().all(|v| v.is_finite()) {
+            // Π_U on each input: a finite candidate is clamped to the input box before the
+            // check (which then simulates the clamped sequence like any other).
+            for u in candidate.iter_mut() {
+                *u = self.plant.project_input(u);
+            }
+        } else {
             flags = flags.union(SafeFlags::NON_FINITE_CANDIDATE);
         }
         let c = self.check(x, &mut candidate, false);

@@ -40,6 +40,23 @@ fn group(title: &str, g: &SafetyGroup) {
         g.runs_without_safe_sequence
     );
     line("safe", &g.safe, runs);
+    if let Some(c) = &g.safe.candidate {
+        println!(
+            "  safe candidate: checked {}, taken {}, outside U {} (then taken {}), stage \
+             violation {}, terminal miss {}, non-finite {}, costlier {} (in X_f {}; rel. excess \
+             buckets <=1e-4,1e-3,1e-2,1e-1,more: {:?})",
+            c.checked,
+            c.taken,
+            c.outside_u,
+            c.outside_u_taken,
+            c.stage_violation,
+            c.terminal_miss,
+            c.non_finite,
+            c.costlier,
+            c.costlier_in_xf,
+            c.costlier_rel
+        );
+    }
     line("plain", &g.plain, runs);
     line("mpc", &g.mpc, runs);
     let from_start: Vec<_> = g

@@ -21,7 +21,8 @@
 //! [`controller_core::SafeController::step`] and writes it back; it returns the
 //! [`SafeFlags`] bits. A sequence the caller altered is re-checked like any other
 //! (`SafeController::restore`): it is applied only if it passes, else flagged
-//! `SAFE_INFEASIBLE`. Initialisation (issue 41 §5): `ampc_safe_init` then steps (the first
+//! `SAFE_INFEASIBLE`. The network's candidate is clamped to the input box before the check
+//! (`SafeController::step_with`; tested below). Initialisation (issue 41 §5): `ampc_safe_init` then steps (the first
 //! candidate that passes the check becomes the safe sequence; flag `NO_SAFE` until then), or
 //! `ampc_safe_init_with` an MPC solution at x₀ ([`SafeController::init_with`]: adopted only
 //! if it passes the online check from x₀, as if applied at x₀; the caller applies its first
@@ -222,6 +223,7 @@ pub unsafe extern "C" fn ampc_safe_step(s: *mut AmpcSafe, x: *const f32, u: *mut
 #[cfg(test)]
 mod tests {
     use super::*;
+    use controller_core::safe::SequenceSource;
 
     /// A start away from the set point (the pendulum's, or the quadrotor's).
     #[cfg(not(feature = "safe-planar-quadrotor"))]
@@ -352,6 +354,61 @@ mod tests {
         let f = unsafe { ampc_safe_terminal_sequence(nan.as_ptr(), seq.as_mut_ptr().cast()) };
         assert_eq!(f, SafeFlags::NON_FINITE_STATE.0);
         assert!(seq.as_flattened().iter().all(|v| v.is_finite()));
+    }
+
+    /// `ampc_safe_step` clamps the network's candidate to U before the check: over a grid of
+    /// X (fresh memory, so a candidate that passes becomes the safe sequence), the step
+    /// accepts (`CANDIDATE`) exactly when the clamped candidate passes the check, and stores
+    /// it clamped; every accepted raw candidate outside U is counted as rescued by the
+    /// projection (its unclamped check fails). The committed fixture nets give no such state
+    /// (0 rescued; the discriminating test is controller-core's
+    /// `a_candidate_slightly_outside_u_is_clamped_then_checked`, the same `step_with`).
+    #[test]
+    fn the_candidate_is_clamped_to_u_before_the_check() {
+        let ctl = SAFE_CONTROLLER;
+        let (lo, hi) = (compiled::safe::plant::U_LO, compiled::safe::plant::U_HI);
+        let (mut rescued, mut accepted) = (0, 0);
+        for i in 0..=120 {
+            for j in 0..=40 {
+                let x: [f32; SAFE_NX] = core::array::from_fn(|k| {
+                    let t = if k == 0 {
+                        i as f32 / 120.0
+                    } else {
+                        j as f32 / 40.0
+                    };
+                    let (a, b) = (
+                        compiled::safe::plant::X_LO[k],
+                        compiled::safe::plant::X_HI[k],
+                    );
+                    a + (b - a) * t
+                });
+                let raw = ctl.source.sequence(&x);
+                let clamped = raw.map(|u| ctl.plant.project_input(&u));
+                let mut mem = fresh();
+                let mut u = [0.0f32; SAFE_NU];
+                // SAFETY: live, aligned arrays of the right lengths.
+                let f = SafeFlags(unsafe { ampc_safe_step(&mut mem, x.as_ptr(), u.as_mut_ptr()) });
+                let passes = ctl.check(&x, &mut clamped.clone(), false).feasible;
+                assert_eq!(f.contains(SafeFlags::CANDIDATE), passes, "x = {x:?}");
+                if !passes {
+                    continue;
+                }
+                accepted += 1;
+                assert_eq!(mem.sequence, clamped);
+                let outside = raw
+                    .iter()
+                    .any(|v| (0..SAFE_NU).any(|k| v[k] < lo[k] || v[k] > hi[k]));
+                if outside {
+                    assert!(!ctl.check(&x, &mut raw.clone(), false).feasible);
+                    rescued += 1;
+                }
+            }
+        }
+        // The quadrotor's small net finds no safe sequence by itself (test above).
+        assert!(
+            accepted > 0 || cfg!(feature = "safe-planar-quadrotor"),
+            "{rescued} rescued of {accepted}"
+        );
     }
 
     #[test]

@@ -287,3 +287,36 @@ fn restore_puts_back_a_sequence_and_a_corrupt_one_is_flagged_not_applied_silentl
     c.restore(None);
     assert_eq!(c.safe_sequence(), None);
 }
+
+/// The candidate is clamped to U before the check: a good sequence pushed 1e-4 beyond the
+/// input bound (what a network fitted to saturated MPC inputs outputs) fails the check as it
+/// is, but is clamped, passes and is applied and stored clamped; a sequence whose clamped
+/// version still violates (full throttle beyond the bound) is rejected as before.
+#[test]
+fn a_candidate_slightly_outside_u_is_clamped_then_checked() {
+    let mut c = ctl();
+    let x0 = [1.0, 0.0];
+    let poor = saturated_k(x0, 2);
+    c.init_with(&x0, &poor).unwrap();
+    let x1 = Di.step(&x0, &poor[0]);
+    let good = saturated_k(x1, 0);
+    assert_eq!(good[0], [-1.0], "the good sequence starts on the bound");
+    let mut over = good;
+    for u in over.iter_mut().filter(|u| u[0] <= -1.0) {
+        u[0] = -1.0001;
+    }
+    assert!(
+        !c.check(&x1, &mut over.clone(), false).feasible,
+        "unclamped: fails"
+    );
+    let o = c.step_with(&x1, over);
+    assert_eq!(o.flags, SafeFlags::CANDIDATE, "{o:?}");
+    assert_eq!(o.u, [-1.0]);
+    assert_eq!(c.safe_sequence(), Some(&good), "stored clamped");
+    // Clamped to +1 for all N steps the velocity leaves |v| ≤ 2: still rejected.
+    let x2 = Di.step(&x1, &o.u);
+    let o = c.step_with(&x2, [[1.5]; N]);
+    assert_eq!(o.flags, SafeFlags::FALLBACK, "{o:?}");
+    assert_eq!(o.candidate_cost, f32::INFINITY);
+    assert_eq!(o.u, good[1]);
+}

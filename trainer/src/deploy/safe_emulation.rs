@@ -8,7 +8,8 @@
 //! ```text
 //! check(x, v):  x_0 = x, x_{k+1} = F32(x_k, v_k);  feasible ⇔ Π_U(v_k) = v_k ∧ g_k + m_s ≤ 0
 //!               ∧ g_N(x_N) + m_f ≤ 0 ∧ J finite,  J = Σ ℓ32(x_k, v_k) + V_f32(x_N)
-//! step(x, c):   s = shift(ū) completed by Π_U(κ_f(x_{N−1}));  c if c feasible ∧ (s infeasible
+//! step(x, c):   c ← Π_U(c) (finite c);  s = shift(ū) completed by Π_U(κ_f(x_{N−1}));
+//!               c if c feasible ∧ (s infeasible
 //!               ∨ J(c) ≤ J(s)), else s;  u = Π_U(v_0)
 //! ```
 //!
@@ -340,6 +341,38 @@ pub struct EmulatedOutput {
     pub candidate_cost: f32,
     /// J of the safe candidate (+∞ if it failed or none existed).
     pub safe_cost: f32,
+    /// Why the candidate passed or failed (not part of the device's output).
+    pub diagnosis: CandidateDiagnosis,
+}
+
+/// The parts of one online check's verdict, kept apart for the study's diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckDetail {
+    /// Π_U(v_k) = v_k for every k.
+    pub input_box: bool,
+    /// g_k(x_k, v_k) + m_s ≤ 0 for every k (state box from k = 1, path constraints).
+    pub stage: bool,
+    /// g_N(x_N) + m_f ≤ 0 (state box, terminal constraints, terminal set).
+    pub terminal: bool,
+    /// J(x, v) = Σ ℓ + V_f as simulated (finite or not, feasible or not).
+    pub cost: f32,
+}
+
+impl CheckDetail {
+    /// The check's verdict: every part holds and the cost is finite.
+    pub fn feasible(&self) -> bool {
+        self.input_box && self.stage && self.terminal && self.cost.is_finite()
+    }
+}
+
+/// What happened to the network's candidate in one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CandidateDiagnosis {
+    /// The candidate as the network gave it (finite) had an input outside U, clamped
+    /// before the check.
+    pub outside_u: bool,
+    /// The check of the clamped candidate.
+    pub detail: CheckDetail,
 }
 
 /// `controller_core::safe::SafeController` at runtime dimensions (module doc).
@@ -373,29 +406,40 @@ impl<'a> SafeEmulation<'a> {
     /// `SafeController::check`: feasibility and cost of `v` from `x` (with `complete`, the
     /// last input is first set to Π_U(κ_f(x_{N−1}))).
     pub fn check(&self, x: &[f32], v: &mut [Vec<f32>], complete: bool) -> (bool, f32) {
+        let d = self.check_detail(x, v, complete);
+        if d.feasible() {
+            (true, d.cost)
+        } else {
+            (false, f32::INFINITY)
+        }
+    }
+
+    /// [`Self::check`] with each part of the verdict kept apart ([`CheckDetail`]); the same
+    /// operations in the same order, so `feasible()` and the cost are `check`'s.
+    pub fn check_detail(&self, x: &[f32], v: &mut [Vec<f32>], complete: bool) -> CheckDetail {
         let p = self.plant;
         let mut xk = x.to_vec();
         let (mut next, mut scratch) = (vec![0.0f32; xk.len()], StepScratch::default());
-        let mut cost = 0.0f32;
-        let mut ok = true;
+        let mut d = CheckDetail {
+            input_box: true,
+            stage: true,
+            terminal: true,
+            cost: 0.0,
+        };
         let last = v.len().wrapping_sub(1);
         for (k, u) in v.iter_mut().enumerate() {
             if complete && k == last {
                 *u = p.project_input(&p.terminal_input(&xk));
             }
-            ok &= p.project_input(u) == *u;
-            ok &= p.stage_violation(k, &xk, u) + self.margins.0 <= 0.0;
-            cost += p.stage_cost(&xk, u);
+            d.input_box &= p.project_input(u) == *u;
+            d.stage &= p.stage_violation(k, &xk, u) + self.margins.0 <= 0.0;
+            d.cost += p.stage_cost(&xk, u);
             p.step_into(&xk, u, &mut next, &mut scratch);
             xk.copy_from_slice(&next);
         }
-        ok &= p.terminal_violation(&xk) + self.margins.1 <= 0.0;
-        cost += p.terminal_cost(&xk);
-        if ok && cost.is_finite() {
-            (true, cost)
-        } else {
-            (false, f32::INFINITY)
-        }
+        d.terminal = p.terminal_violation(&xk) + self.margins.1 <= 0.0;
+        d.cost += p.terminal_cost(&xk);
+        d
     }
 
     /// `SafeController::init_with`: adopts `sequence` (N rows of nu) if it passes the check
@@ -417,10 +461,23 @@ impl<'a> SafeEmulation<'a> {
         if !x.iter().all(|v| v.is_finite()) {
             flags = flags.union(SafeFlags::NON_FINITE_STATE);
         }
-        if !candidate.iter().flatten().all(|v| v.is_finite()) {
+        let mut outside_u = false;
+        if candidate.iter().flatten().all(|v| v.is_finite()) {
+            for u in candidate.iter_mut() {
+                let q = self.plant.project_input(u);
+                outside_u |= q != *u;
+                *u = q;
+            }
+        } else {
             flags = flags.union(SafeFlags::NON_FINITE_CANDIDATE);
         }
-        let (c_ok, c_cost) = self.check(x, &mut candidate, false);
+        let detail = self.check_detail(x, &mut candidate, false);
+        let (c_ok, c_cost) = if detail.feasible() {
+            (true, detail.cost)
+        } else {
+            (false, f32::INFINITY)
+        };
+        let diagnosis = CandidateDiagnosis { outside_u, detail };
         let Some(previous) = self.safe.take() else {
             if c_ok {
                 let out = self.output(
@@ -428,8 +485,8 @@ impl<'a> SafeEmulation<'a> {
                     flags
                         .union(SafeFlags::CANDIDATE)
                         .union(SafeFlags::INITIALISED),
-                    c_cost,
-                    f32::INFINITY,
+                    (c_cost, f32::INFINITY),
+                    diagnosis,
                 );
                 self.safe = Some(candidate);
                 return out;
@@ -437,8 +494,8 @@ impl<'a> SafeEmulation<'a> {
             return self.output(
                 &candidate,
                 flags.union(SafeFlags::NO_SAFE),
-                c_cost,
-                f32::INFINITY,
+                (c_cost, f32::INFINITY),
+                diagnosis,
             );
         };
         let nu = self.plant.dims().1;
@@ -454,12 +511,18 @@ impl<'a> SafeEmulation<'a> {
         } else {
             (shifted, SafeFlags::FALLBACK)
         };
-        let out = self.output(&chosen, flags.union(flag), c_cost, s_cost);
+        let out = self.output(&chosen, flags.union(flag), (c_cost, s_cost), diagnosis);
         self.safe = Some(chosen);
         out
     }
 
-    fn output(&self, v: &[Vec<f32>], flags: SafeFlags, cand: f32, safe: f32) -> EmulatedOutput {
+    fn output(
+        &self,
+        v: &[Vec<f32>],
+        flags: SafeFlags,
+        (cand, safe): (f32, f32),
+        diagnosis: CandidateDiagnosis,
+    ) -> EmulatedOutput {
         let nu = self.plant.dims().1;
         let first = v.first().cloned().unwrap_or(vec![f32::NAN; nu]);
         EmulatedOutput {
@@ -467,6 +530,7 @@ impl<'a> SafeEmulation<'a> {
             flags,
             candidate_cost: cand,
             safe_cost: safe,
+            diagnosis,
         }
     }
 }

@@ -17,6 +17,7 @@ pub mod plots;
 pub mod report;
 pub(crate) mod robust;
 pub mod safety;
+pub mod safety_diagnosis;
 pub mod scenarios;
 pub(crate) mod seeds;
 pub mod statistical_loop;

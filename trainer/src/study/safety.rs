@@ -45,6 +45,7 @@ use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
 use crate::rng::uniform;
 use crate::study::closed_loop::{step_violation, VIOLATION_TOL};
+use crate::study::safety_diagnosis::CandidateCounts;
 use crate::study::statistical_loop::{distance_to_setpoint, CONVERGE_TOL};
 use controller_core::safe::SafeFlags;
 use rayon::prelude::*;
@@ -77,6 +78,10 @@ pub struct SafetyRun {
     /// Stopped early: the next state was not finite or left the stop box (module doc).
     #[serde(default, skip_serializing_if = "is_false")]
     pub diverged: bool,
+    /// The safe controller's candidate, step by step (`study::safety_diagnosis`); absent for
+    /// plain and MPC.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub candidate: Option<CandidateCounts>,
 }
 
 fn is_false(v: &bool) -> bool {
@@ -102,6 +107,10 @@ pub struct ControllerRuns {
     pub median_cost_ratio: Option<f64>,
     /// Runs entering the median (MPC cost > 0, both finite).
     pub cost_ratio_runs: u64,
+    /// The safe controller's candidate counts summed over the runs
+    /// (`study::safety_diagnosis`); absent for plain and MPC.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub candidate: Option<CandidateCounts>,
     /// The runs, in the order of the starts (in `closed_loop.json` the nominal group's lists
     /// are the top-level `safe`, `plain`, `mpc`: `study::scenarios::ClosedLoopFile`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -259,6 +268,7 @@ fn run_loop(
         cost: 0.0,
         converged: false,
         diverged: false,
+        candidate: None,
     };
     for k in 0..cfg.closed_loop.steps {
         run.steps = k + 1;
@@ -362,11 +372,14 @@ fn triple(s: &Setup, law: &mut MpcLaw, model: &Discrete, x0: &[f64]) -> Triple {
             how = Init::Terminal;
         }
     }
-    let safe = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
+    let mut counts = CandidateCounts::default();
+    let mut safe = run_loop(s.cfg, cs, model, x0, &mut |k, x| {
         if let (0, Some(u0)) = (k, &init) {
             return (to64(&s.plant.project_input(u0)), false, false);
         }
-        let out = emu.step_with(&to32(x), (s.source)(&to32(x)));
+        let x32 = to32(x);
+        let out = emu.step_with(&x32, (s.source)(&x32));
+        counts.record(s.plant, &x32, &out);
         if out.flags.contains(SafeFlags::INITIALISED) {
             how = Init::Candidate;
         }
@@ -376,6 +389,7 @@ fn triple(s: &Setup, law: &mut MpcLaw, model: &Discrete, x0: &[f64]) -> Triple {
             out.flags.contains(SafeFlags::NO_SAFE),
         )
     });
+    safe.candidate = Some(counts);
     let plain = run_loop(s.cfg, cs, model, x0, &mut |_, x| {
         let c = (s.source)(&to32(x));
         let first = c.first().cloned().unwrap_or_default();
@@ -419,6 +433,7 @@ pub fn summarise(runs: Vec<SafetyRun>, mpc: &[SafetyRun]) -> ControllerRuns {
         converged: runs.iter().filter(|r| r.converged).count() as u64,
         cost_ratio_runs: ratios.len() as u64,
         median_cost_ratio: median(ratios),
+        candidate: CandidateCounts::total(runs.iter().map(|r| r.candidate.as_ref())),
         runs,
     }
 }
@@ -550,6 +565,7 @@ mod tests {
             cost,
             converged,
             diverged: false,
+            candidate: None,
         }
     }
 
