@@ -24,14 +24,14 @@
 //!
 //! **Budget.** Rungs 1–2 may spend at most `solver.retry_budget × max_iter` SQP iterations
 //! on one state (summed; each solve capped at what is left, the rungs skipped once it is
-//! spent; rung 3 keeps its own limits — `ladder` module): a state in an infeasible or runaway
+//! spent; rung 3 keeps its own limits; 0: no ladder at all — [`ladder`] module): a state in an infeasible or runaway
 //! region, where every rung fails, costs a bounded number of iterations more than its plain
 //! solve instead of the thousands the two continuations can take (BENCHMARKS.md, "Retry
 //! budget"). A state the ladder gives up on keeps its plain solve's status (no label),
 //! counted and located by the stages as before.
 
 pub mod along;
-mod ladder;
+pub mod ladder;
 pub mod pilot;
 pub mod starts;
 

@@ -13,8 +13,8 @@ pub struct SolverSettings {
     pub max_iter: usize,
     /// SQP iterations the hard rungs of the retry ladder (`crate::mpc::law`: conservative
     /// solve, continuations) may spend on one state that the plain solve left without a
-    /// label, as a multiple of `max_iter` (default [`DEFAULT_RETRY_BUDGET`]; 0: those rungs
-    /// skipped, the soft rung still runs). A state the ladder gives up on is reported
+    /// label, as a multiple of `max_iter` (default [`DEFAULT_RETRY_BUDGET`]; the soft rung
+    /// keeps its own limits; 0: no ladder at all). A state the ladder gives up on is reported
     /// unlabelled with its plain solve's status, counted and located like any other.
     pub retry_budget: usize,
     /// Label hard-infeasible states with the exact-penalty (soft) problem (default true).

@@ -7,21 +7,41 @@
 //! each solve capped at what is left ([`crate::mpc::sqp::SqpSolver::set_iteration_cap`]),
 //! the hard rungs skipped as soon as nothing is left. Rung 3 (the soft problem, which
 //! decides soft labels and infeasibility) runs after them with its own limits (two solves of
-//! at most 3·max_iter). A state the ladder gives up on keeps the plain solve's status (no
-//! label).
+//! at most 3·max_iter). A budget of 0 skips the whole ladder, rung 3 included. A state the
+//! ladder gives up on keeps the plain solve's status (no label).
+//!
+//! **Counting stages.** The stages that only count the states the MPC leaves unlabelled
+//! (validation, the statistical tier's states, the closed-loop statistical starts) label
+//! with [`counting_problem`]: no ladder at all. On the CSTR a failing state's cost is
+//! proportional to its SQP iterations, and most of them were the ladder's (rung 3 alone up
+//! to 6·max_iter); a state converged by the plain solve keeps its label bit for bit, a state
+//! only the ladder would label is counted unlabelled there (BENCHMARKS.md, "Retry
+//! budget").
 
 use super::{Label, MpcLaw, Retry, SLACK_TOL};
 use crate::mpc::finite::nan_max;
 use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
+use crate::problem::ProblemConfig;
 
 /// Step of the continuation parameter θ below which the continuation gives up.
 const MIN_THETA_STEP: f64 = 1.0 / 256.0;
 /// Hard solves one continuation may spend.
 const MAX_CONTINUATION_SOLVES: usize = 40;
 
+/// The labelling problem of a stage that only counts unlabelled states: `cfg` with
+/// `solver.retry_budget = 0` (no retry ladder; module doc).
+pub fn counting_problem(cfg: &ProblemConfig) -> ProblemConfig {
+    let mut c = cfg.clone();
+    c.solver.retry_budget = 0;
+    c
+}
+
 impl MpcLaw {
     /// The retry ladder (module doc) for a state the plain solve left without a label.
     pub(super) fn retry(&mut self, xs: &[f64]) -> Option<(Label, Option<PrimalDual>, Retry)> {
+        if self.cfg.solver.retry_budget == 0 {
+            return None;
+        }
         let budget = self.retry_budget();
         let mut spent = 0;
         let hard = self.retry_hard(xs, budget, &mut spent);
@@ -250,5 +270,44 @@ mod tests {
         assert!(one <= max_iter + 10, "budget {max_iter}: spent {one}");
         assert!(one > 0);
         assert_eq!(spent_with(0), 0);
+    }
+
+    /// The counting stages' problem has no ladder: the cart-pole state only a retry labels
+    /// (`law` tests, `a_state_the_plain_solve_fails_is_labelled_by_a_retry`) stays
+    /// unlabelled, with the plain solve's status, while states the plain solve labels get
+    /// the very same label as with the ladder.
+    #[test]
+    fn counting_labels_without_the_ladder_and_keeps_plain_labels() {
+        let path = std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/cartpole.toml"
+        ));
+        let mut cfg = ProblemConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        // The `warm` start alone: the ladder is its (no other start to label the state).
+        cfg.solver.starts = Some(vec![Start::Warm]);
+        let counting = super::counting_problem(&cfg);
+        assert_eq!(counting.solver.retry_budget, 0);
+        let (mut full, mut count) = (MpcLaw::new(&cfg), MpcLaw::new(&counting));
+        let xs = [
+            -0.9926724302168126,
+            -0.5835645472878936,
+            0.6658719350262772,
+            -0.8970441797758042,
+        ];
+        let (with, _) = full.solve(&xs, None);
+        assert!(with.status.is_labelled() && with.retry.is_some());
+        let (without, _) = count.solve(&xs, None);
+        assert!(!without.status.is_labelled(), "{:?}", without.status);
+        assert!(without.retry.is_none());
+        let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+        for i in 0..10u64 {
+            let x: Vec<f64> = (0..4)
+                .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(43, i, k as u64))
+                .collect();
+            let (a, _) = full.solve(&x, None);
+            if a.status.is_labelled() && a.retry.is_none() {
+                assert_eq!(a, count.solve(&x, None).0, "{x:?}");
+            }
+        }
     }
 }
