@@ -413,13 +413,15 @@ impl StatisticalOptions {
 
 /// The labelling problem of the statistical states: `cfg` with `n` uniform random states
 /// (from the seed `seed`, [`statistical_seed`]) and cold starts, so that each label depends
-/// on its own state only.
+/// on its own state only, and no retry ladder
+/// ([`counting_problem`](crate::mpc::law::ladder::counting_problem)).
 pub fn sampling_problem(
     cfg: &ProblemConfig,
     opts: &StatisticalOptions,
     seed: u64,
 ) -> ProblemConfig {
-    let mut c = cfg.clone();
+    // (The tier counts the states the MPC leaves unlabelled: no retry ladder.)
+    let mut c = crate::mpc::law::ladder::counting_problem(cfg);
     c.sampling = SamplingSettings {
         sampler: SamplerKind::Random,
         counts: c.sampling.counts.clone(),

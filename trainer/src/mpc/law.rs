@@ -10,7 +10,7 @@
 //!
 //! A state that still has no label (`max_iterations` or `numerical_failure`) climbs a retry
 //! ladder before it is reported ([`Retry`] records the rung that labelled it):
-//! 1. the hard problem with the conservative globalisation ([`Globalisation::Conservative`]);
+//! 1. the hard problem with the conservative globalisation ([`Globalisation::Conservative`](crate::mpc::sqp::Globalisation::Conservative));
 //! 2. continuation from the setpoint x_c (x_ref, or the origin): the hard problem at
 //!    x_c + θ(x_s − x_c) for θ = 0 → 1, each solve warm-started from the last solved θ
 //!    (step doubled on success, halved on failure), first with the default globalisation,
@@ -21,15 +21,24 @@
 //!
 //! The ladder runs only where the plain solve found no label, so every state labelled without
 //! it keeps its label bit for bit.
+//!
+//! **Budget.** Rungs 1–2 may spend at most `solver.retry_budget × max_iter` SQP iterations
+//! on one state (summed; each solve capped at what is left, the rungs skipped once it is
+//! spent; rung 3 keeps its own limits; 0: no ladder at all — [`ladder`] module): a state in an infeasible or runaway
+//! region, where every rung fails, costs a bounded number of iterations more than its plain
+//! solve instead of the thousands the two continuations can take (BENCHMARKS.md, "Retry
+//! budget"). A state the ladder gives up on keeps its plain solve's status (no label),
+//! counted and located by the stages as before.
 
 pub mod along;
 pub mod homotopy;
+pub mod ladder;
 pub mod pilot;
 pub mod starts;
 
 use crate::mpc::finite::{check_label, nan_max, Failure, LabelParts, Quantity};
 use crate::mpc::sensitivity::{sensitivity, Degeneracy};
-use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
+use crate::mpc::sqp::{PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
 use crate::problem::ProblemConfig;
 
 /// Slack size above which the soft optimum proves the hard OCP infeasible.
@@ -62,11 +71,6 @@ impl Retry {
         }
     }
 }
-
-/// Step of the continuation parameter θ below which the continuation gives up.
-const MIN_THETA_STEP: f64 = 1.0 / 256.0;
-/// Hard solves one continuation may spend.
-const MAX_CONTINUATION_SOLVES: usize = 40;
 
 /// One labelled state (x, κ(x), ∂κ/∂x) with its provenance.
 #[derive(Debug, Clone, PartialEq)]
@@ -403,131 +407,6 @@ impl MpcLaw {
             .take()
             .filter(|_| label.status == SqpStatus::Soft);
         (label, sol, soft)
-    }
-}
-
-impl MpcLaw {
-    /// The retry ladder (module doc) for a state the plain solve left without a label.
-    fn retry(&mut self, xs: &[f64]) -> Option<(Label, Option<PrimalDual>, Retry)> {
-        let mut spent = 0;
-        // 1. Conservative globalisation, cold start.
-        self.hard.set_globalisation(Globalisation::Conservative);
-        let r = self.hard.solve(xs, self.hard.cold_start(xs));
-        self.hard.set_globalisation(Globalisation::Default);
-        spent += r.info.iterations;
-        if r.status == SqpStatus::Converged {
-            let (mut l, point) = self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
-            l.info.iterations = spent;
-            return Some((l, point, Retry::Conservative));
-        }
-        // 2. Continuation from the setpoint.
-        for (g, rung) in [
-            (Globalisation::Default, Retry::Continuation),
-            (Globalisation::Conservative, Retry::ContinuationConservative),
-        ] {
-            self.hard.set_globalisation(g);
-            let c = self.continuation(xs, &mut spent);
-            self.hard.set_globalisation(Globalisation::Default);
-            if let Some(r) = c {
-                let (mut l, point) =
-                    self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
-                l.info.iterations = spent;
-                return Some((l, point, rung));
-            }
-        }
-        // 3. The soft problem, conservative globalisation.
-        let cfg = &self.cfg;
-        let soft = self.soft.get_or_insert_with(|| SqpSolver::new(cfg, true));
-        soft.set_globalisation(Globalisation::Conservative);
-        let s = soft.solve(xs, soft.cold_start(xs));
-        soft.set_globalisation(Globalisation::Default);
-        spent += s.info.iterations;
-        if s.status != SqpStatus::Converged {
-            return None;
-        }
-        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
-        let max_slack = s.point.z[soft.ocp.is()..]
-            .iter()
-            .fold(0.0, |m, v| nan_max(m, *v));
-        if max_slack <= SLACK_TOL {
-            let nw = self.hard.ocp.n_var;
-            let start = PrimalDual {
-                z: s.point.z[..nw].to_vec(),
-                lam: s.point.lam.clone(),
-                nu: vec![0.0; self.hard.ocp.rows.len()],
-            };
-            self.hard.set_globalisation(Globalisation::Conservative);
-            let h = self.hard.solve(xs, start);
-            self.hard.set_globalisation(Globalisation::Default);
-            spent += h.info.iterations;
-            if h.status != SqpStatus::Converged {
-                return None;
-            }
-            let (mut l, point) = self.finish_with_point(&self.hard, xs, h, SqpStatus::Converged);
-            l.info.iterations = spent;
-            return Some((l, point, Retry::Soft));
-        }
-        let status = if self.cfg.solver.soft_fallback {
-            SqpStatus::Soft
-        } else {
-            SqpStatus::Infeasible
-        };
-        if status == SqpStatus::Infeasible {
-            let info = SqpInfo {
-                iterations: spent,
-                ..s.info
-            };
-            return Some((self.unlabelled(xs, status, info), None, Retry::Soft));
-        }
-        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
-        let mut l = self.finish(soft, xs, &s, SqpStatus::Soft);
-        l.info.iterations = spent;
-        Some((l, None, Retry::Soft))
-    }
-
-    /// The hard problem at x_c + θ(x_s − x_c), θ = 0 → 1, each solve warm-started from the
-    /// last solved θ. Returns the solve at θ = 1, or `None` if a step below
-    /// [`MIN_THETA_STEP`] fails or the solves run out.
-    fn continuation(&mut self, xs: &[f64], spent: &mut usize) -> Option<SqpResult> {
-        let nx = xs.len();
-        let centre: Vec<f64> = if self.hard.ocp.x_ref.len() == nx {
-            self.hard.ocp.x_ref.clone()
-        } else {
-            vec![0.0; nx]
-        };
-        let mut r = self.hard.solve(&centre, self.hard.cold_start(&centre));
-        *spent += r.info.iterations;
-        if r.status != SqpStatus::Converged {
-            return None;
-        }
-        let (mut theta, mut step) = (0.0f64, 0.25f64);
-        let mut x = vec![0.0; nx];
-        for _ in 0..MAX_CONTINUATION_SOLVES {
-            let t = (theta + step).min(1.0);
-            for i in 0..nx {
-                x[i] = centre[i] + t * (xs[i] - centre[i]);
-            }
-            if t == 1.0 {
-                x.copy_from_slice(xs);
-            }
-            let mut start = r.point.clone();
-            start.z[..nx].copy_from_slice(&x);
-            let next = self.hard.solve(&x, start);
-            *spent += next.info.iterations;
-            if next.status == SqpStatus::Converged {
-                if t == 1.0 {
-                    return Some(next);
-                }
-                (theta, r) = (t, next);
-                step = (2.0 * step).min(0.5);
-            } else {
-                step *= 0.5;
-                if step < MIN_THETA_STEP {
-                    return None;
-                }
-            }
-        }
-        None
     }
 }
 

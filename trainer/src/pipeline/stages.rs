@@ -212,7 +212,8 @@ fn sample(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
 /// --validation` labels it (or one shard of it, `--shard K/M`; `trainer merge` of the M
 /// shards is byte-identical to the stage's `validation.bin`).
 pub fn validation_config(cfg: &ProblemConfig) -> ProblemConfig {
-    let mut vcfg = cfg.clone();
+    // (Validation only counts the states the MPC leaves unlabelled: no retry ladder.)
+    let mut vcfg = crate::mpc::law::ladder::counting_problem(cfg);
     vcfg.sampling = SamplingSettings {
         sampler: SamplerKind::Random,
         n: cfg.training.validation_n.max(1),

@@ -11,6 +11,15 @@ pub struct SolverSettings {
     pub tol: f64,
     /// Maximum SQP iterations (default 100).
     pub max_iter: usize,
+    /// SQP iterations the hard rungs of the retry ladder (`crate::mpc::law`: conservative
+    /// solve, continuations) may spend on one state that the plain solve left without a
+    /// label, as a multiple of `max_iter` (default [`DEFAULT_RETRY_BUDGET`]; the soft rung
+    /// keeps its own limits; 0: no ladder at all). A state the ladder gives up on is reported
+    /// unlabelled with its plain solve's status, counted and located like any other.
+    // (Not written at its default, so the problem hashes of files that do not set it stay
+    // those of before the key existed.)
+    #[serde(skip_serializing_if = "is_default_retry_budget")]
+    pub retry_budget: usize,
     /// Label hard-infeasible states with the exact-penalty (soft) problem (default true).
     pub soft_fallback: bool,
     /// ℓ₁ weight of the state-bound slacks in the soft problem (default 1e4).
@@ -94,11 +103,20 @@ pub fn default_starts(convex: bool) -> Vec<Start> {
     }
 }
 
+/// Default `solver.retry_budget`: the retry ladder's SQP iterations per state, in units of
+/// `max_iter` (BENCHMARKS.md, "Retry budget").
+pub const DEFAULT_RETRY_BUDGET: usize = 4;
+
+fn is_default_retry_budget(b: &usize) -> bool {
+    *b == DEFAULT_RETRY_BUDGET
+}
+
 impl Default for SolverSettings {
     fn default() -> Self {
         SolverSettings {
             tol: 1e-8,
             max_iter: 100,
+            retry_budget: DEFAULT_RETRY_BUDGET,
             soft_fallback: true,
             soft_l1: 1e4,
             soft_l2: 1e2,

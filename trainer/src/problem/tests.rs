@@ -115,6 +115,10 @@ fn validation_names_the_key_at_fault() {
     );
     assert_eq!(err_key(|c| c.solver.tol = 0.0), "solver.tol");
     assert_eq!(
+        err_key(|c| c.solver.retry_budget = 1001),
+        "solver.retry_budget"
+    );
+    assert_eq!(
         err_key(
             |c| c.system = System::Pendulum(crate::problem::model::Pendulum {
                 m: -1.0,

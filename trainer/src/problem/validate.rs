@@ -372,7 +372,7 @@ impl Domain {
 }
 
 impl SolverSettings {
-    /// `[solver]`: tolerance, iterations, soft-constraint weights, degeneracy tolerance.
+    /// `[solver]`: tolerance, iterations, retry budget, soft-constraint weights, degeneracy tolerance.
     fn validate(&self) -> Result<(), ConfigError> {
         let s = self;
         if !(s.tol.is_finite() && s.tol > 0.0 && s.tol < 1.0) {
@@ -383,6 +383,12 @@ impl SolverSettings {
         }
         if s.max_iter == 0 {
             return Err(invalid("solver.max_iter", "must be at least 1"));
+        }
+        if s.retry_budget > 1000 {
+            return Err(invalid(
+                "solver.retry_budget",
+                format!("must be at most 1000 (× max_iter), got {}", s.retry_budget),
+            ));
         }
         for (k, v) in [("solver.soft_l1", s.soft_l1), ("solver.soft_l2", s.soft_l2)] {
             if !(v.is_finite() && v >= 0.0) {

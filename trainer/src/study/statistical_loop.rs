@@ -344,10 +344,12 @@ pub fn closed_loop_statistical(
     } else {
         (configured, None, 0, 0)
     };
+    // The starts' feasibility only counts: no retry ladder.
+    let counting = crate::mpc::law::ladder::counting_problem(cfg);
     let results: Vec<(bool, (f64, f64))> = (0..n as u64)
         .into_par_iter()
         .map_init(
-            || MpcLaw::new(cfg),
+            || MpcLaw::new(&counting),
             |law, i| {
                 let x0 = uniform_start(cfg, seed, i);
                 let feasible = law.is_hard_feasible(&x0);

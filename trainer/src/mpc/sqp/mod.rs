@@ -266,12 +266,22 @@ pub struct SqpSolver {
     /// doc): not for an OCP that is itself a QP (affine plant, linear rows), whose first QP
     /// is its solution, nor for the soft problem.
     inexact_qp: bool,
+    /// A cap on the iterations of the following solves below their own limit (`None`:
+    /// none), set by the retry ladder's budget ([`crate::mpc::law`]).
+    iteration_cap: Option<usize>,
 }
 
 impl SqpSolver {
     /// Sets how the following solves globalise (until set again).
     pub fn set_globalisation(&mut self, g: Globalisation) {
         self.globalisation = g;
+    }
+
+    /// Caps the iterations of the following solves (until set again) at `cap`, below the
+    /// limit of their globalisation (`max_iter`, or `3·max_iter` when conservative); `None`
+    /// lifts the cap. A solve that reaches the cap ends `max_iterations`.
+    pub fn set_iteration_cap(&mut self, cap: Option<usize>) {
+        self.iteration_cap = cap;
     }
 
     /// The structured QP solver factorises by the band LU only (tests).
@@ -305,6 +315,7 @@ impl SqpSolver {
             globalisation: Globalisation::Default,
             polish_layout: None,
             inexact_qp: !(soft || is_qp),
+            iteration_cap: None,
         }
     }
 

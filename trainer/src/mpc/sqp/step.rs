@@ -52,6 +52,7 @@ impl Work {
         } else {
             s.settings.max_iter
         };
+        let max_iter = s.iteration_cap.map_or(max_iter, |c| c.min(max_iter));
         let ocp = &s.ocp;
         let ev = Evals::new(ocp);
         let n_var = ocp.n_var;

@@ -147,10 +147,13 @@ impl ErrorGrid {
                 x
             })
             .collect();
+        // (The map only shows the error where the MPC labels a point: no retry ladder,
+        // whose failing climbs dominated the CSTR's plots stage.)
+        let counting = crate::mpc::law::ladder::counting_problem(cfg);
         let err = pts
             .par_iter()
             .map_init(
-                || crate::mpc::law::MpcLaw::new(cfg),
+                || crate::mpc::law::MpcLaw::new(&counting),
                 |law, x| {
                     let (l, _) = law.solve(x, None);
                     if !l.status.is_labelled() {
