@@ -211,6 +211,29 @@ pub fn clopper_pearson_upper(n: u64, k: u64, confidence: f64) -> f64 {
     hi
 }
 
+/// The draw that aims at `target` **labelled** states when an independent, earlier sample
+/// (the validation set: `u` unlabelled of `n`) shows part of X unlabelled:
+/// ```text
+/// ū = clopper_pearson_upper(n, u, confidence),  draw = ⌈target / (1 − ū)⌉,  target ≤ draw ≤ 4·target
+/// ```
+/// The conditional bound ([`GivenLabelled`]) counts only the labelled states, so a default
+/// sized for P ≤ p with zero exceedances (4603 for 1e-3 at 99 %) needs that many labelled
+/// ones. The size is fixed before the statistical states are drawn and from other states, so
+/// the bounds keep their meaning (they are computed from whatever n and n_L result). `target`
+/// when the earlier sample is empty or fully labelled.
+pub fn draw_for_labelled(target: usize, n: u64, u: u64, confidence: f64) -> usize {
+    if target == 0 || n == 0 || u == 0 {
+        return target;
+    }
+    let ub = clopper_pearson_upper(n, u, confidence);
+    let cap = target.saturating_mul(4);
+    if ub.is_nan() || ub >= 0.75 {
+        return cap;
+    }
+    let draw = (target as f64 / (1.0 - ub)).ceil();
+    (draw as usize).clamp(target, cap)
+}
+
 /// The smallest level ε_p among the observed errors such that counting exceedances of
 /// ε_p gives a bound ≤ `p_target`: with the errors sorted decreasingly e₍₁₎ ≥ e₍₂₎ ≥ …,
 /// ε_p = e₍k*+1₎ where k* is the largest k with `clopper_pearson_upper(n, k) ≤ p_target`

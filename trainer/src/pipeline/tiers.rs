@@ -5,7 +5,8 @@
 //!              → refine/ (model.bin, certificate.json: the local bound max_C ε_C), refine.json
 //! statistical  the deployed controller of the best candidate so far (when every band is
 //!              vacuous: of the best-fitting net), on n i.i.d. uniform
-//!              states ([certify] statistical = n; 0 = off) → certificate_statistical.json
+//!              states ([certify] statistical = n; 0 = off; n drawn ⌈n/(1 − ū)⌉ when the
+//!              validation set has unlabelled states, ū their share's upper bound) → certificate_statistical.json
 //!              (that certificate with its "statistical" block), statistical.json
 //! ```
 //!
@@ -486,8 +487,18 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         model_hash: &hash,
         training: &training,
     };
+    // Aim at `statistical` labelled states (the conditional bound counts those): the draw is
+    // sized from the validation set's unlabelled share (`draw_for_labelled`).
+    let (vn, vu) = crate::data::dataset::Dataset::load(&d.validation())
+        .map(|v| {
+            let u = crate::data::unlabelled::Unlabelled::of(&v);
+            (u.states as u64, u.unlabelled as u64)
+        })
+        .unwrap_or((0, 0));
+    let samples =
+        crate::certify::statistical::draw_for_labelled(set.statistical, vn, vu, set.confidence);
     let opts = crate::certify::statistical::StatisticalOptions {
-        samples: set.statistical,
+        samples,
         confidence: set.confidence,
         seed: set.seed,
         p_target: set.p_target,
@@ -549,8 +560,16 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         ),
         (None, _) => "no finite level (too few states or every one exceeding)".into(),
     };
+    let drawn = if samples > set.statistical {
+        format!(
+            " (drawn for {} labelled: {vu} of {vn} validation states unlabelled)",
+            set.statistical
+        )
+    } else {
+        String::new()
+    };
     Ok(format!(
-        "{} states of the {} net's deployed controller: {} exceed ε {:.4}, max error {:.4}; {level} at P ≤ {:e}, confidence {}",
+        "{} states{drawn} of the {} net's deployed controller: {} exceed ε {:.4}, max error {:.4}; {level} at P ≤ {:e}, confidence {}",
         st.samples,
         best.net.name(),
         st.exceedances,

@@ -159,3 +159,25 @@ fn bounding_box_of_states() {
     assert_eq!(b, (vec![0.5, 340.0], vec![0.7, 360.0]));
     assert_eq!(bounding_box(std::iter::empty::<&[f64]>()), None);
 }
+
+/// The draw aims at `target` labelled states: unchanged without unlabelled states, larger
+/// than target / (1 − u/n) (the upper bound on the share is above the observed one), capped
+/// at 4·target; and with the CSTR's validation share (149 of 1000) enough that the expected
+/// labelled count reaches the target.
+#[test]
+fn the_draw_aims_at_the_target_of_labelled_states() {
+    assert_eq!(draw_for_labelled(4603, 1000, 0, 0.99), 4603);
+    assert_eq!(draw_for_labelled(4603, 0, 0, 0.99), 4603);
+    assert_eq!(draw_for_labelled(0, 1000, 10, 0.99), 0);
+    let d = draw_for_labelled(4603, 1000, 149, 0.99);
+    let observed = (4603.0 / (1.0 - 0.149_f64)).ceil() as usize;
+    assert!(d > observed, "{d} vs {observed}");
+    let ub = clopper_pearson_upper(1000, 149, 0.99);
+    assert!((d as f64) * (1.0 - ub) >= 4603.0 - 1e-9, "{d}");
+    assert!(
+        (d as f64 - 1.0) * (1.0 - ub) < 4603.0,
+        "{d}: not the smallest"
+    );
+    assert_eq!(draw_for_labelled(4603, 1000, 900, 0.99), 4 * 4603);
+    assert_eq!(draw_for_labelled(100, 10, 10, 0.99), 400);
+}
