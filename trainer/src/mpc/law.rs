@@ -129,6 +129,21 @@ pub struct MpcLaw {
 }
 
 impl MpcLaw {
+    /// The hard problem's start from a soft optimum `s` whose slacks all vanish
+    /// (≤ [`SLACK_TOL`]): its primal variables and stage multipliers; None when a slack is
+    /// positive (the hard problem is then infeasible at that point).
+    fn hard_start_from_soft(&self, s: &SqpResult) -> Option<PrimalDual> {
+        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
+        let max_slack = s.point.z[soft.ocp.is()..]
+            .iter()
+            .fold(0.0, |m, v| nan_max(m, *v));
+        (max_slack <= SLACK_TOL).then(|| PrimalDual {
+            z: s.point.z[..self.hard.ocp.n_var].to_vec(),
+            lam: s.point.lam.clone(),
+            nu: vec![0.0; self.hard.ocp.rows.len()],
+        })
+    }
+
     /// Builds the workspaces for a validated problem. The starts: `[solver] starts` as
     /// written, `warm` alone for a convex OCP, else the default decided by the problem's
     /// pilot ([`pilot`]: run once per process, about 100 × 4 solves).
@@ -356,18 +371,8 @@ impl MpcLaw {
             };
             return (self.unlabelled(xs, status, info), None);
         }
-        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
-        let max_slack = s.point.z[soft.ocp.is()..]
-            .iter()
-            .fold(0.0, |m, v| nan_max(m, *v));
-        if max_slack <= SLACK_TOL {
+        if let Some(start) = self.hard_start_from_soft(&s) {
             // Feasible after all: re-solve the hard problem from the soft optimum.
-            let nw = self.hard.ocp.n_var;
-            let start = PrimalDual {
-                z: s.point.z[..nw].to_vec(),
-                lam: s.point.lam.clone(),
-                nu: vec![0.0; self.hard.ocp.rows.len()],
-            };
             let mut h = self.hard.solve(xs, start);
             h.info.iterations += s.info.iterations;
             if h.status == SqpStatus::Converged {

@@ -18,8 +18,7 @@
 //! only the ladder would label is counted unlabelled there (BENCHMARKS.md, "Retry
 //! budget").
 
-use super::{Label, MpcLaw, Retry, SLACK_TOL};
-use crate::mpc::finite::nan_max;
+use super::{Label, MpcLaw, Retry};
 use crate::mpc::sqp::{Globalisation, PrimalDual, SqpInfo, SqpResult, SqpSolver, SqpStatus};
 use crate::problem::ProblemConfig;
 
@@ -123,17 +122,7 @@ impl MpcLaw {
         if s.status != SqpStatus::Converged {
             return None;
         }
-        let soft = self.soft.as_ref().map_or(&self.hard, |s| s);
-        let max_slack = s.point.z[soft.ocp.is()..]
-            .iter()
-            .fold(0.0, |m, v| nan_max(m, *v));
-        if max_slack <= SLACK_TOL {
-            let nw = self.hard.ocp.n_var;
-            let start = PrimalDual {
-                z: s.point.z[..nw].to_vec(),
-                lam: s.point.lam.clone(),
-                nu: vec![0.0; self.hard.ocp.rows.len()],
-            };
+        if let Some(start) = self.hard_start_from_soft(&s) {
             self.hard.set_globalisation(Globalisation::Conservative);
             let h = self.hard.solve(xs, start);
             self.hard.set_globalisation(Globalisation::Default);
