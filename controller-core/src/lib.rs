@@ -41,7 +41,8 @@ pub mod safe;
 pub use certificate::{Certificate, Guarantee};
 pub use controller::{Controller, Flags, InvalidController, Output};
 pub use safe::{
-    Margins, Plant, SafeController, SafeFlags, SafeOutput, SequenceNet, SequenceSource,
+    CandidateForm, Margins, Plant, SafeController, SafeFlags, SafeOutput, SequenceNet,
+    SequenceSource,
 };
 
 /// Version of the weight/certificate format this core understands.

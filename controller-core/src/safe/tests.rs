@@ -320,3 +320,69 @@ fn a_candidate_slightly_outside_u_is_clamped_then_checked() {
     assert_eq!(o.candidate_cost, f32::INFINITY);
     assert_eq!(o.u, good[1]);
 }
+
+fn feedback_ctl() -> Ctl {
+    ctl().with_form(CandidateForm::Feedback)
+}
+
+#[test]
+fn a_feedback_candidate_of_zero_offsets_is_the_saturated_terminal_controller() {
+    // v_0 = c_0, then v_k = Π_U(κ_f(x̂_k) + 0): the rollout of saturated_k after one step.
+    let x0 = [1.0, 0.0];
+    let mut c = feedback_ctl();
+    let mut cand = [[0.0]; N];
+    cand[0] = [-1.0];
+    let o = c.step_with(&x0, cand);
+    assert_eq!(o.flags, SafeFlags::CANDIDATE.union(SafeFlags::INITIALISED));
+    assert_eq!(o.u, [-1.0]);
+    let want = saturated_k(x0, 0);
+    assert_eq!(want[0], [-1.0]);
+    // The stored sequence is the realised one, not the offsets.
+    assert_eq!(c.safe_sequence(), Some(&want));
+    // The same candidate in the open form is "brake once, then coast": a different sequence.
+    let mut open = ctl();
+    open.step_with(&x0, cand);
+    assert_ne!(open.safe_sequence(), Some(&want));
+}
+
+#[test]
+fn feedback_offsets_are_projected_after_the_terminal_controller_is_added() {
+    // From x = 0, κ_f = 0 along rest: offsets of ±5 are clamped to ±1 after adding κ_f, and
+    // the realised sequence (inside U) is what is checked and stored.
+    let c = feedback_ctl();
+    let x0 = [0.0, 0.0];
+    let mut v = [[0.0]; N];
+    v[1] = [5.0];
+    let mut realised = v;
+    let r = c.check_as(&x0, &mut realised, false, true);
+    assert_eq!(realised[1], [1.0], "Π_U(κ_f(x̂_1) + 5) = Π_U(0 + 5)");
+    let mut x = x0;
+    let mut expect = [[0.0f32]; N];
+    for (k, u) in expect.iter_mut().enumerate() {
+        if k >= 1 {
+            *u = Di.project_input(&[Di.terminal_input(&x)[0] + v[k][0]]);
+        }
+        x = Di.step(&x, u);
+    }
+    assert_eq!(realised, expect);
+    assert_eq!(r, c.check(&x0, &mut expect.clone(), false));
+    // An offset only the open form would clamp: the step does not clamp c_k (k ≥ 1) first.
+    let mut c = feedback_ctl();
+    let o = c.step_with(&x0, v);
+    assert!(o.flags.contains(SafeFlags::CANDIDATE), "{:?}", o.flags);
+    assert_eq!(c.safe_sequence(), Some(&expect));
+}
+
+#[test]
+fn a_non_finite_feedback_offset_fails_the_check() {
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let mut c = feedback_ctl();
+        let mut cand = [[0.0]; N];
+        cand[3] = [bad];
+        let o = c.step_with(&[0.1, 0.0], cand);
+        assert!(o.flags.contains(SafeFlags::NON_FINITE_CANDIDATE));
+        assert!(o.flags.contains(SafeFlags::NO_SAFE), "{:?}", o.flags);
+        assert_eq!(o.candidate_cost, f32::INFINITY);
+        assert!(c.safe_sequence().is_none());
+    }
+}
