@@ -9,11 +9,12 @@
 //! of every kind: the terminal controller's f32 rollout (often feasible), the same slightly
 //! perturbed, uniform inputs in U, inputs just outside U, NaN entries; some loops start with
 //! `init_with`; every seventh step the state is kicked (a disturbance, so that the shifted
-//! sequence can fail its check). At every step the applied input, the flags and both costs must be
+//! sequence can fail its check). Both candidate forms run (the feedback form with the same
+//! candidates written as offsets from κ_f). At every step the applied input, the flags and both costs must be
 //! bit-identical, and every kind of outcome (candidate, fallback, no safe sequence,
 //! initialised, infeasible fallback) must occur, so that the comparison covers each branch.
 
-use controller_core::safe::{Margins, Plant, SafeController, SafeFlags};
+use controller_core::safe::{CandidateForm, Margins, Plant, SafeController, SafeFlags};
 use std::path::{Path, PathBuf};
 use trainer::deploy::safe_emulation::{EmulatedPlant, SafeEmulation};
 use trainer::problem::ProblemConfig;
@@ -41,17 +42,20 @@ fn next(s: &mut u64) -> f64 {
 }
 
 /// A candidate of kind `kind` at `x` (module doc).
+/// With `feedback`, entries 1 … N−1 are then written as offsets from κ_f along the open
+/// simulation (the feedback form's coordinates; the realised sequence is then close to it).
 fn candidate<P: Plant<NX, NU>, const NX: usize, const NU: usize, const N: usize>(
     p: &P,
     cfg: &ProblemConfig,
     x: &[f32; NX],
     kind: u64,
     s: &mut u64,
+    feedback: bool,
 ) -> [[f32; NU]; N] {
     let (lo, hi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
     let mut xk = *x;
     let mut c = [[0.0f32; NU]; N];
-    for row in c.iter_mut() {
+    for (k, row) in c.iter_mut().enumerate() {
         let kf = p.project_input(&p.terminal_input(&xk));
         for j in 0..NU {
             let w = (hi[j] - lo[j]) as f32;
@@ -69,7 +73,14 @@ fn candidate<P: Plant<NX, NU>, const NX: usize, const NU: usize, const N: usize>
                 }
             };
         }
-        xk = p.step(&xk, row);
+        let next_x = p.step(&xk, row);
+        if feedback && k >= 1 {
+            let kf = p.terminal_input(&xk);
+            for j in 0..NU {
+                row[j] -= kf[j];
+            }
+        }
+        xk = next_x;
     }
     c
 }
@@ -82,6 +93,7 @@ fn compare<P, const NX: usize, const NU: usize, const N: usize>(
     margins: Margins,
     loops: usize,
     steps: usize,
+    form: CandidateForm,
 ) -> [usize; 5]
 where
     P: Plant<NX, NU> + Copy,
@@ -103,10 +115,12 @@ where
             };
             v as f32
         });
-        let mut real = SafeController::<P, (), NX, NU, N>::new(plant, (), margins);
-        let mut mine = SafeEmulation::new(&emu, N);
+        let mut real = SafeController::<P, (), NX, NU, N>::new(plant, (), margins).with_form(form);
+        let mut mine = SafeEmulation::new(&emu, N).with_form(form);
+        let feedback = form == CandidateForm::Feedback;
         if l % 3 == 0 {
-            let c: [[f32; NU]; N] = candidate(&plant, &cfg, &x, 0, &mut s);
+            // init_with takes inputs in both forms.
+            let c: [[f32; NU]; N] = candidate(&plant, &cfg, &x, 0, &mut s, false);
             let rows: Vec<Vec<f32>> = c.iter().map(|r| r.to_vec()).collect();
             let a = real.init_with(&x, &c).ok();
             let b = mine.init_with(x.as_ref(), &rows);
@@ -118,7 +132,7 @@ where
         }
         for k in 0..steps {
             let kind = (next(&mut s) * 5.0) as u64 % 5;
-            let c: [[f32; NU]; N] = candidate(&plant, &cfg, &x, kind, &mut s);
+            let c: [[f32; NU]; N] = candidate(&plant, &cfg, &x, kind, &mut s, feedback);
             let rows: Vec<Vec<f32>> = c.iter().map(|r| r.to_vec()).collect();
             let a = real.step_with(&x, c);
             let b = mine.step_with(&x, rows);
@@ -155,7 +169,9 @@ where
             }
         }
     }
-    eprintln!("{name}: candidate, fallback, no safe, initialised, safe infeasible: {seen:?}");
+    eprintln!(
+        "{name} ({form:?}): candidate, fallback, no safe, initialised, safe infeasible: {seen:?}"
+    );
     for (i, n) in seen.iter().enumerate() {
         assert!(*n > 0, "{name}: outcome {i} never occurred: {seen:?}");
     }
@@ -170,6 +186,7 @@ fn double_integrator_emulation_is_the_safe_controller_bit_for_bit() {
         di::MARGINS,
         200,
         40,
+        CandidateForm::Open,
     );
 }
 
@@ -181,5 +198,26 @@ fn quadrotor_emulation_is_the_safe_controller_bit_for_bit() {
         quad::MARGINS,
         200,
         40,
+        CandidateForm::Open,
+    );
+}
+
+#[test]
+fn feedback_form_emulation_is_the_safe_controller_bit_for_bit() {
+    compare::<di::SafePlant, 2, 1, 20>(
+        "double_integrator_ode",
+        di::SafePlant,
+        di::MARGINS,
+        120,
+        40,
+        CandidateForm::Feedback,
+    );
+    compare::<quad::SafePlant, 6, 2, 20>(
+        "planar_quadrotor",
+        quad::SafePlant,
+        quad::MARGINS,
+        120,
+        40,
+        CandidateForm::Feedback,
     );
 }

@@ -24,7 +24,7 @@ use super::plant_rs_margin::{eval_f32, step_f32, step_f32_into, StepScratch};
 use super::plant_rs_safe::{safe_plant_rs, SafePlantRs, TerminalSource};
 use crate::problem::model::expr::{ConstraintSet, ExprModel};
 use crate::problem::ProblemConfig;
-use controller_core::safe::SafeFlags;
+use controller_core::safe::{CandidateForm, SafeFlags};
 
 /// The generated `SafePlant` of a problem, evaluated as the generated code evaluates it.
 #[derive(Debug, Clone)]
@@ -369,7 +369,8 @@ impl CheckDetail {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CandidateDiagnosis {
     /// The candidate as the network gave it (finite) had an input outside U, clamped
-    /// before the check.
+    /// before the check (in the feedback form: its first input c_0, the only entry that is
+    /// an input before the check).
     pub outside_u: bool,
     /// The check of the clamped candidate.
     pub detail: CheckDetail,
@@ -384,6 +385,8 @@ pub struct SafeEmulation<'a> {
     pub n: usize,
     /// (m_s, m_f).
     pub margins: (f32, f32),
+    /// How a candidate's entries become inputs (`SafeController::form`; default open).
+    pub form: CandidateForm,
     safe: Option<Vec<Vec<f32>>>,
 }
 
@@ -394,8 +397,15 @@ impl<'a> SafeEmulation<'a> {
             plant,
             n,
             margins: plant.margins,
+            form: CandidateForm::Open,
             safe: None,
         }
+    }
+
+    /// The same controller with candidates of form `form` (`SafeController::with_form`).
+    pub fn with_form(mut self, form: CandidateForm) -> Self {
+        self.form = form;
+        self
     }
 
     /// Whether a safe sequence exists.
@@ -417,6 +427,18 @@ impl<'a> SafeEmulation<'a> {
     /// [`Self::check`] with each part of the verdict kept apart ([`CheckDetail`]); the same
     /// operations in the same order, so `feasible()` and the cost are `check`'s.
     pub fn check_detail(&self, x: &[f32], v: &mut [Vec<f32>], complete: bool) -> CheckDetail {
+        self.check_detail_as(x, v, complete, false)
+    }
+
+    /// [`Self::check_detail`]; with `feedback`, entries 1 … N−1 are first realised as
+    /// Π_U(κ_f(x̂_k) + v_k) (`SafeController`'s `check_as`; `v` holds the realised sequence).
+    pub fn check_detail_as(
+        &self,
+        x: &[f32],
+        v: &mut [Vec<f32>],
+        complete: bool,
+        feedback: bool,
+    ) -> CheckDetail {
         let p = self.plant;
         let mut xk = x.to_vec();
         let (mut next, mut scratch) = (vec![0.0f32; xk.len()], StepScratch::default());
@@ -430,6 +452,17 @@ impl<'a> SafeEmulation<'a> {
         for (k, u) in v.iter_mut().enumerate() {
             if complete && k == last {
                 *u = p.project_input(&p.terminal_input(&xk));
+            } else if feedback && k >= 1 {
+                let w: Vec<f32> = u
+                    .iter()
+                    .zip(p.terminal_input(&xk))
+                    .map(|(c, kf)| *c + kf)
+                    .collect();
+                *u = if w.iter().all(|v| v.is_finite()) {
+                    p.project_input(&w)
+                } else {
+                    w
+                };
             }
             d.input_box &= p.project_input(u) == *u;
             d.stage &= p.stage_violation(k, &xk, u) + self.margins.0 <= 0.0;
@@ -462,8 +495,11 @@ impl<'a> SafeEmulation<'a> {
             flags = flags.union(SafeFlags::NON_FINITE_STATE);
         }
         let mut outside_u = false;
+        let feedback = self.form == CandidateForm::Feedback;
         if candidate.iter().flatten().all(|v| v.is_finite()) {
-            for u in candidate.iter_mut() {
+            // The feedback form's offsets are projected after κ_f is added (in the check).
+            let inputs = if feedback { 1 } else { candidate.len() };
+            for u in candidate.iter_mut().take(inputs) {
                 let q = self.plant.project_input(u);
                 outside_u |= q != *u;
                 *u = q;
@@ -471,7 +507,7 @@ impl<'a> SafeEmulation<'a> {
         } else {
             flags = flags.union(SafeFlags::NON_FINITE_CANDIDATE);
         }
-        let detail = self.check_detail(x, &mut candidate, false);
+        let detail = self.check_detail_as(x, &mut candidate, false, feedback);
         let (c_ok, c_cost) = if detail.feasible() {
             (true, detail.cost)
         } else {
