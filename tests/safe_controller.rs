@@ -84,7 +84,12 @@ fn committed_files_are_what_the_exporter_writes() {
         );
         // The library call gives the same file from the fixture's problem file.
         let seq = model(name).sequence.unwrap();
-        let (lib, _) = trainer::deploy::safe_rs::render_safe_rs(&config(name), &seq).unwrap();
+        let (lib, _) = trainer::deploy::safe_rs::render_safe_rs(
+            &config(name),
+            &seq,
+            trainer::problem::SequenceForm::Open,
+        )
+        .unwrap();
         assert!(lib == text, "{name}: CLI and library differ");
     }
 }

@@ -221,7 +221,8 @@ fn write_safe_rs(config: Option<&Path>, model: &Path, file: &Path) -> Result<()>
             model.display()
         );
     };
-    let (text, g) = trainer::deploy::safe_rs::render_safe_rs(&cfg, seq).with_context(|| {
+    let (text, g) = trainer::deploy::safe_rs::render_safe_rs(&cfg, seq, m.settings.sequence_form)
+        .with_context(|| {
         format!(
             "cannot generate the safe controller of {} for `{}`",
             model.display(),

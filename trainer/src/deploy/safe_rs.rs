@@ -9,7 +9,8 @@
 //! N, NX, NU     N = the OCP's horizon = the sequence net's steps (checked here)
 //! Controller  = SafeController<SafePlant, SequenceNet<&'static sequence::Net>, NX, NU, N>
 //! CONTROLLER  = Controller::new(SafePlant, SequenceNet(&sequence::NET), MARGINS)
-//!               (no safe sequence yet; the net's weights stay in flash)
+//!               (no safe sequence yet; the net's weights stay in flash), with
+//!               `.with_form(CandidateForm::Feedback)` for a net of sequence_form "feedback"
 //! ```
 //! The file states what the guarantee rests on (`GUARANTEE`, `TERMINAL_INVARIANCE`,
 //! `TERMINAL_DECREASE`, the estimated `MARGINS`). The net and the problem must agree: nx,
@@ -19,7 +20,7 @@ use super::plant_rs::PlantRsError;
 use super::plant_rs_safe::{safe_plant_rs, SafePlantRs};
 use super::sequence_rs::render_sequence_rs;
 use crate::learn::mlp::Mlp;
-use crate::problem::ProblemConfig;
+use crate::problem::{ProblemConfig, SequenceForm};
 use std::fmt::Write as _;
 
 /// Why the safe controller of a model is not generated.
@@ -51,6 +52,7 @@ pub enum SafeRsError {
 pub fn render_safe_rs(
     cfg: &ProblemConfig,
     seq: &Mlp,
+    form: SequenceForm,
 ) -> Result<(String, SafePlantRs), SafeRsError> {
     let (nx, nu, horizon) = (cfg.system.nx(), cfg.system.nu(), cfg.ocp.horizon);
     if seq.nx() != nx || seq.nu() != horizon * nu {
@@ -101,12 +103,20 @@ pub fn render_safe_rs(
          pub const CONTROLLER: Controller = controller_core::safe::SafeController::new(\n    \
          plant::SafePlant,\n    \
          controller_core::safe::SequenceNet(&sequence::NET),\n    \
-         plant::MARGINS,\n);\n\n\
+         plant::MARGINS,\n){form};\n\n\
          const _: () = assert!(\n    CONTROLLER.validate().is_ok(),\n    \
          \"invalid safe controller file: a margin is not finite and >= 0\"\n);\n\n\
          /// The plant of the online check (deploy::plant_rs_safe).\n\
          pub mod plant {{\n",
         name = cfg.name,
+        form = match form {
+            SequenceForm::Open => "",
+            SequenceForm::Feedback => {
+                "\n// The net's outputs 1 … N−1 are offsets from the terminal controller \
+                 (sequence_form = \"feedback\").\n\
+                 .with_form(controller_core::safe::CandidateForm::Feedback)"
+            }
+        },
     );
     o.push_str(&plant.source);
     o.push_str("}\n\n");
@@ -140,11 +150,19 @@ mod tests {
     #[test]
     fn shapes_are_checked_and_the_file_has_every_part() {
         let cfg = config();
-        let e = render_safe_rs(&cfg, &net(2, 19)).unwrap_err().to_string();
+        let open = SequenceForm::Open;
+        let e = render_safe_rs(&cfg, &net(2, 19), open)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("19 outputs") && e.contains("20·1 = 20"), "{e}");
-        let e = render_safe_rs(&cfg, &net(3, 20)).unwrap_err().to_string();
+        let e = render_safe_rs(&cfg, &net(3, 20), open)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("maps 3 states"), "{e}");
-        let (text, plant) = render_safe_rs(&cfg, &net(2, 20)).unwrap();
+        let (text, plant) = render_safe_rs(&cfg, &net(2, 20), open).unwrap();
+        assert!(!text.contains("with_form"));
+        let (fb, _) = render_safe_rs(&cfg, &net(2, 20), SequenceForm::Feedback).unwrap();
+        assert!(fb.contains(".with_form(controller_core::safe::CandidateForm::Feedback);"));
         for part in [
             "pub mod plant {",
             "pub mod sequence {",

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! flags = saturation_aware · 1 + hold_setpoint · 2 + (precision = f32) · 4
-//!       + (outputs = sequence) · 8
+//!       + (outputs = sequence) · 8 + (sequence_form = feedback) · 16
 //! ```
 //! (`sequence_weights` is not stored here: the model's problem file trailer has it.)
 //!
@@ -14,7 +14,7 @@
 //! through `#[serde(with)]`; every other encoding of the settings (TOML, JSON) is the
 //! derived one.
 
-use crate::problem::{Activation, Outputs, Precision, Schedule, TrainSettings};
+use crate::problem::{Activation, Outputs, Precision, Schedule, SequenceForm, TrainSettings};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Format 3's layout of the settings; `flags` in place of `saturation_aware`.
@@ -39,6 +39,7 @@ const SATURATION_AWARE: u8 = 1;
 const HOLD_SETPOINT: u8 = 2;
 const PRECISION_F32: u8 = 4;
 const SEQUENCE: u8 = 8;
+const FEEDBACK: u8 = 16;
 
 /// Encodes `s` in the stored layout.
 pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::Ok, S::Error> {
@@ -58,7 +59,8 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
         flags: u8::from(s.saturation_aware) * SATURATION_AWARE
             + u8::from(s.hold_setpoint) * HOLD_SETPOINT
             + u8::from(s.precision == Precision::F32) * PRECISION_F32
-            + u8::from(s.outputs == Outputs::Sequence) * SEQUENCE,
+            + u8::from(s.outputs == Outputs::Sequence) * SEQUENCE
+            + u8::from(s.sequence_form == SequenceForm::Feedback) * FEEDBACK,
     }
     .serialize(ser)
 }
@@ -66,7 +68,7 @@ pub(super) fn serialize<S: Serializer>(s: &TrainSettings, ser: S) -> Result<S::O
 /// Decodes the stored layout; unknown flag bits are an error.
 pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSettings, D::Error> {
     let s = Stored::deserialize(de)?;
-    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT | PRECISION_F32 | SEQUENCE) != 0 {
+    if s.flags & !(SATURATION_AWARE | HOLD_SETPOINT | PRECISION_F32 | SEQUENCE | FEEDBACK) != 0 {
         return Err(serde::de::Error::custom(format!(
             "unknown training flags {:#04x}",
             s.flags
@@ -98,6 +100,11 @@ pub(super) fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<TrainSetti
             Outputs::First
         },
         sequence_weights: None,
+        sequence_form: if s.flags & FEEDBACK != 0 {
+            SequenceForm::Feedback
+        } else {
+            SequenceForm::Open
+        },
     })
 }
 
@@ -170,8 +177,17 @@ mod tests {
         let bytes = postcard::to_allocvec(&Wrap(seq.clone())).unwrap();
         assert_eq!(*bytes.last().unwrap(), 8 | 4 | 2);
         assert_eq!(postcard::from_bytes::<Wrap>(&bytes).unwrap().0, seq);
+        // The feedback form round trips (flag 16); an old sequence net (no flag) is open.
+        let fb = TrainSettings {
+            outputs: Outputs::Sequence,
+            sequence_form: SequenceForm::Feedback,
+            ..TrainSettings::default()
+        };
+        let bytes = postcard::to_allocvec(&Wrap(fb.clone())).unwrap();
+        assert_eq!(*bytes.last().unwrap(), 16 | 8 | 4 | 2);
+        assert_eq!(postcard::from_bytes::<Wrap>(&bytes).unwrap().0, fb);
         let mut bad = postcard::to_allocvec(&Wrap(TrainSettings::default())).unwrap();
-        *bad.last_mut().unwrap() = 16;
+        *bad.last_mut().unwrap() = 32;
         assert!(postcard::from_bytes::<Wrap>(&bad).is_err());
     }
 }

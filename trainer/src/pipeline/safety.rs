@@ -87,6 +87,16 @@ pub(super) fn safety_study(
              outputs = \"sequence\"`)",
         )
     })?;
+    if model.settings.sequence_form != cfg.training.sequence_form {
+        return Err(fail(
+            Stage::ClosedLoop,
+            format!(
+                "closed_loop.safety: the model's sequence net is in the {:?} form, the \
+                 problem's training.sequence_form is {:?}: train it again",
+                model.settings.sequence_form, cfg.training.sequence_form
+            ),
+        ));
+    }
     let (plant, g) = EmulatedPlant::new(cfg)
         .map_err(|e| fail(Stage::ClosedLoop, format!("closed_loop.safety: {e}")))?;
     let nu = cfg.system.nu();

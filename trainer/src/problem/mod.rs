@@ -40,7 +40,7 @@ pub use robust::{RobustMethod, RobustSettings};
 pub use sampling::{Domain, SamplerKind, SamplingSettings};
 pub use solver::{default_starts, QpSolverKind, SolverSettings, Start};
 pub use study::{ClosedLoopSettings, Mismatch, MismatchScenario, PlotSettings};
-pub use training::{Activation, Outputs, Precision, Schedule, TrainSettings};
+pub use training::{Activation, Outputs, Precision, Schedule, SequenceForm, TrainSettings};
 pub(crate) use validate::check_matrix;
 
 use crate::io::hex;
@@ -205,6 +205,13 @@ impl ProblemConfig {
                 message: problem_first(&e),
             })?;
         let mut cfg = cfg;
+        // `sequence_form` defaults to feedback in a file, but means nothing (and is not
+        // stored) without a sequence net.
+        for t in [&mut cfg.training, &mut cfg.refine.training] {
+            if t.outputs.is_first() {
+                t.sequence_form = SequenceForm::Open;
+            }
+        }
         cfg.validate().map_err(|e| e.in_file(origin))?;
         cfg.settle_setpoint().map_err(|e| e.in_file(origin))?;
         // `[refine] target_eps` not given: a fraction of the input range in the
@@ -223,7 +230,8 @@ impl ProblemConfig {
     /// `training.hold_setpoint` means off: it is written only when on, and copies stored
     /// before it existed come from runs without the hold. (In a file a user writes, a
     /// missing key means the default, on.) The same for `refine.training` when `[refine]`
-    /// was stored. Likewise a missing `training.precision` means f64 (written only when f32).
+    /// was stored. Likewise a missing `training.precision` means f64 (written only when f32),
+    /// and a missing `training.sequence_form` means open (written only when feedback).
     pub fn from_stored_toml(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let mut cfg = Self::from_toml_str(text, origin)?;
         let table: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -242,11 +250,20 @@ impl ProblemConfig {
             Some("f32") => Precision::F32,
             _ => Precision::F64,
         };
+        let form = |t: Option<&toml::Value>| match t
+            .and_then(|t| t.get("sequence_form"))
+            .and_then(toml::Value::as_str)
+        {
+            Some("feedback") => SequenceForm::Feedback,
+            _ => SequenceForm::Open,
+        };
         cfg.training.hold_setpoint = hold(table.get("training"));
         cfg.training.precision = precision(table.get("training"));
+        cfg.training.sequence_form = form(table.get("training"));
         if let Some(r) = table.get("refine") {
             cfg.refine.training.hold_setpoint = hold(r.get("training"));
             cfg.refine.training.precision = precision(r.get("training"));
+            cfg.refine.training.sequence_form = form(r.get("training"));
         }
         Ok(cfg)
     }

@@ -581,3 +581,37 @@ fn the_default_target_eps_is_a_fraction_of_the_scaled_input_range() {
     let t = refine::default_target_eps(&o);
     assert!((t - 0.025 * 8f64.sqrt()).abs() < 1e-15, "{t}");
 }
+
+/// `[training] sequence_form`: feedback by default for a sequence net in a file, open (and
+/// not written) otherwise; a stored copy without it is open (models made before it); an
+/// explicit form round-trips through a stored copy; a feedback form set in code without a
+/// sequence net is refused naming the key.
+#[test]
+fn sequence_form_defaults_and_stored_copies() {
+    use crate::problem::SequenceForm;
+    let text = format!("{PENDULUM_TOML}\n[training]\noutputs = \"sequence\"\n");
+    let c = ProblemConfig::from_toml_str(&text, "x").unwrap();
+    assert_eq!(c.training.sequence_form, SequenceForm::Feedback);
+    let stored = c.to_toml_string().unwrap();
+    assert!(stored.contains("sequence_form = \"feedback\""));
+    assert_eq!(ProblemConfig::from_stored_toml(&stored, "s").unwrap(), c);
+    let old = stored.replace("sequence_form = \"feedback\"\n", "");
+    assert_eq!(
+        ProblemConfig::from_stored_toml(&old, "s")
+            .unwrap()
+            .training
+            .sequence_form,
+        SequenceForm::Open
+    );
+    let open = format!("{text}sequence_form = \"open\"\n");
+    let c = ProblemConfig::from_toml_str(&open, "x").unwrap();
+    assert_eq!(c.training.sequence_form, SequenceForm::Open);
+    assert!(!c.to_toml_string().unwrap().contains("sequence_form"));
+    let first = ProblemConfig::from_toml_str(PENDULUM_TOML, "x").unwrap();
+    assert_eq!(first.training.sequence_form, SequenceForm::Open);
+    assert!(!first.to_toml_string().unwrap().contains("sequence_form"));
+    assert_eq!(
+        err_key(|c| c.training.sequence_form = SequenceForm::Feedback),
+        "training.sequence_form"
+    );
+}

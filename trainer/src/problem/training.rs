@@ -76,6 +76,44 @@ pub struct TrainSettings {
     /// `outputs = "sequence"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sequence_weights: Option<Vec<f64>>,
+    /// How a sequence net's outputs become the input sequence on the device
+    /// (`controller_core::safe::CandidateForm`). `"feedback"` (the default in a problem
+    /// file with `outputs = "sequence"`): outputs 1 … N−1 are offsets from the terminal
+    /// controller along the simulated trajectory, v_k = Π_U(κ_f(x̂_k) + c_k), trained on
+    /// c_k* = u_k* − κ_f(x_k*) along the MPC's predicted trajectory — the net's errors then
+    /// pass through the stabilised loop, not the open-loop plant. `"open"`: the outputs are
+    /// the inputs. Only with `outputs = "sequence"`; written into stored copies only when
+    /// `"feedback"` (a stored copy without it, and `TrainSettings::default()`, mean open: the
+    /// only form before it existed).
+    #[serde(
+        default = "SequenceForm::file_default",
+        skip_serializing_if = "SequenceForm::is_open"
+    )]
+    pub sequence_form: SequenceForm,
+}
+
+/// `[training] sequence_form`: the candidate form of a sequence net (see the field).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SequenceForm {
+    /// The outputs are the inputs u_0 … u_{N−1}.
+    #[default]
+    Open,
+    /// u_0, then offsets c_k from κ_f: v_k = Π_U(κ_f(x̂_k) + c_k).
+    Feedback,
+}
+
+impl SequenceForm {
+    /// Whether this is [`SequenceForm::Open`].
+    pub fn is_open(&self) -> bool {
+        *self == SequenceForm::Open
+    }
+
+    /// The default of a problem file that does not name it (normalised to open by the
+    /// validation when the net is not a sequence net).
+    pub fn file_default() -> Self {
+        SequenceForm::Feedback
+    }
 }
 
 /// What the network predicts (`[training] outputs`).
@@ -151,6 +189,7 @@ impl Default for TrainSettings {
             precision: Precision::F32,
             outputs: Outputs::First,
             sequence_weights: None,
+            sequence_form: SequenceForm::Open,
         }
     }
 }

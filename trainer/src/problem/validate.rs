@@ -180,6 +180,12 @@ impl ProblemConfig {
     /// `training.sequence_weights`: only with `outputs = "sequence"`, exactly `ocp.horizon`
     /// values, each finite and ≥ 0, the first > 0.
     fn validate_sequence_weights(&self) -> Result<(), ConfigError> {
+        if self.training.outputs.is_first() && !self.training.sequence_form.is_open() {
+            return Err(invalid(
+                "training.sequence_form",
+                "needs training.outputs = \"sequence\"",
+            ));
+        }
         let Some(w) = &self.training.sequence_weights else {
             return Ok(());
         };

@@ -277,3 +277,16 @@ pub fn nominal_terminal(cfg: &ProblemConfig, samples: usize) -> Option<NominalTe
 #[cfg(test)]
 #[path = "terminal_nominal_tests.rs"]
 mod tests;
+
+/// The terminal controller's gain K of the safety-augmented controller of `cfg`, chosen as
+/// `deploy::plant_rs_safe` chooses it: the robust design's ancillary gain when the design
+/// has a terminal region, else the nominal ingredients' gain ([`nominal_terminal`]); None
+/// when neither exists. The sequence net's feedback form is trained with it.
+pub fn safe_terminal_gain(cfg: &ProblemConfig) -> Option<Vec<Vec<f64>>> {
+    if let Ok(d) = super::design::design(cfg) {
+        if d.terminal.is_some() {
+            return Some(d.tube.k.clone());
+        }
+    }
+    nominal_terminal(cfg, NOMINAL_SAMPLES).map(|t| t.k)
+}

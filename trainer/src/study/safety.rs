@@ -42,12 +42,12 @@ use crate::mpc::law::along::Along;
 use crate::mpc::law::MpcLaw;
 use crate::problem::model::expr::ConstraintSet;
 use crate::problem::model::Discrete;
-use crate::problem::ProblemConfig;
+use crate::problem::{ProblemConfig, SequenceForm};
 use crate::rng::uniform;
 use crate::study::closed_loop::{step_violation, VIOLATION_TOL};
 use crate::study::safety_diagnosis::CandidateCounts;
 use crate::study::statistical_loop::{distance_to_setpoint, CONVERGE_TOL};
-use controller_core::safe::SafeFlags;
+use controller_core::safe::{CandidateForm, SafeFlags};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -356,7 +356,7 @@ fn triple(s: &Setup, law: &mut MpcLaw, model: &Discrete, x0: &[f64]) -> Triple {
         }
         (last.clone(), false, false)
     });
-    let mut emu = SafeEmulation::new(s.plant, n);
+    let mut emu = SafeEmulation::new(s.plant, n).with_form(candidate_form(s.cfg));
     let x32 = to32(x0);
     let mut how = Init::Never;
     let mut init = first_seq.filter(|q| q.len() == n * nu).and_then(|q| {
@@ -485,6 +485,14 @@ fn perturbed(cfg: &ProblemConfig, parameter: Option<&str>, rel: f64) -> Discrete
     }
     .unwrap_or_else(|| cfg.system.clone());
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
+}
+
+/// The device's candidate form of `cfg`'s sequence net (`[training] sequence_form`).
+pub fn candidate_form(cfg: &ProblemConfig) -> CandidateForm {
+    match cfg.training.sequence_form {
+        SequenceForm::Open => CandidateForm::Open,
+        SequenceForm::Feedback => CandidateForm::Feedback,
+    }
 }
 
 /// The study of `cfg` with the candidate source `source` (the sequence net, or any other in

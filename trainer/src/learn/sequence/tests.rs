@@ -185,7 +185,7 @@ fn a_sequence_model_trains_round_trips_and_binds_its_u0_rows() {
     assert_eq!(m.mlp, first_rows(&seq, cfg.system.nu()));
     assert!(m.train_stats.max.is_finite() && m.train_stats.n == d.records.len());
     // The later steps are learned too: better than predicting zero.
-    let set = sequence_set(&d, n, &cfg.training.step_weights(n), "d").unwrap();
+    let set = sequence_set(&d, n, &cfg.training.step_weights(n), None, "d").unwrap();
     let (_, st) = errors(&seq, &set);
     let zero: f64 = (0..set.len())
         .map(|i| {
@@ -206,5 +206,61 @@ fn a_sequence_model_trains_round_trips_and_binds_its_u0_rows() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("m.bin") && err.contains("first"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The feedback form's targets: u₀* unchanged, c_k* = u_k* − κ_f(x_k*) along the MPC's
+/// predicted trajectory (zero for the terminal controller's own rollout), and the
+/// realisation v_k = κ_f(x̂_k) + c_k gives the labels back.
+#[test]
+fn feedback_targets_are_offsets_from_the_terminal_controller_and_realise_back() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/double_integrator.toml"
+    );
+    let mut cfg = ProblemConfig::load(std::path::Path::new(path)).unwrap();
+    cfg.sampling.counts = vec![5, 4];
+    cfg.training.outputs = Outputs::Sequence;
+    assert!(
+        Feedback::of(&cfg).unwrap().is_none(),
+        "open by default in code"
+    );
+    cfg.training.sequence_form = crate::problem::SequenceForm::Feedback;
+    let f = Feedback::of(&cfg)
+        .unwrap()
+        .expect("the double integrator has κ_f");
+    let (n, nu) = (cfg.ocp.horizon, cfg.system.nu());
+    // The terminal controller's own rollout (unsaturated, near x_ref): all offsets 0.
+    let x0 = vec![0.01, -0.01];
+    let (mut xk, mut next, mut roll) = (x0.clone(), vec![0.0; 2], Vec::new());
+    for _ in 0..n {
+        let u = f.terminal_input(&xk);
+        f.model.step(&xk, &u, &mut next);
+        std::mem::swap(&mut xk, &mut next);
+        roll.extend(u);
+    }
+    let c = f.offsets(&x0, &roll, nu);
+    assert_eq!(c[..nu], roll[..nu]);
+    assert!(c[nu..].iter().all(|v| v.abs() < 1e-15), "{c:?}");
+    // Labels of the MPC: offsets then realisation give them back.
+    let dir = std::env::temp_dir().join(format!("ampc-seqfb-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = generate(&cfg, &dir.join("d.bin"), &GenerateOptions::default()).unwrap();
+    let w = cfg.training.step_weights(n);
+    let open = sequence_set(&d, n, &w, None, "d").unwrap();
+    let fb = sequence_set(&d, n, &w, Some(&f), "d").unwrap();
+    let mut moved = 0;
+    for (i, r) in d.records.iter().filter(|r| r.is_labelled()).enumerate() {
+        let row = &fb.u[i * n * nu..(i + 1) * n * nu];
+        assert_eq!(row, &f.offsets(&r.x, &r.seq, nu)[..]);
+        assert_eq!(row[..nu], open.u[i * n * nu..i * n * nu + nu]);
+        let back = f.realise(&r.x, row, nu);
+        for (a, b) in back.iter().zip(&r.seq) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
+        moved += usize::from(row != &open.u[i * n * nu..(i + 1) * n * nu]);
+    }
+    assert!(moved > 0);
     let _ = std::fs::remove_dir_all(&dir);
 }
