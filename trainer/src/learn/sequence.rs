@@ -27,6 +27,8 @@
 use crate::data::dataset::Dataset;
 use crate::learn::metrics::{errors, TrainSet};
 use crate::learn::mlp::Mlp;
+use crate::learn::setpoint::Hold;
+use crate::mpc::law::MpcLaw;
 use crate::learn::train::{train_from, TrainOptions, TrainedModel};
 use crate::problem::model::Discrete;
 use crate::problem::ProblemConfig;
@@ -245,11 +247,45 @@ pub fn train_sequence<C>(
         dataset_hash,
     );
     let nu = cfg.system.nu();
+    if let Some(h) = &opts.hold {
+        hold_sequence(cfg, fb.as_ref(), &h.x_ref, &mut m.mlp);
+    }
     let first = first_rows(&m.mlp, nu);
     m.train_stats = errors(&first, &TrainSet::from_dataset(data)).1;
     m.validation_stats = errors(&first, &TrainSet::from_dataset(validation)).1;
     m.sequence = Some(std::mem::replace(&mut m.mlp, first));
     Ok(m)
+}
+
+/// The setpoint hold of the later steps (`learn::setpoint`, which holds u₀): the outputs
+/// 1 … N−1 of `seq` at x_ref are set to their targets there — the MPC's own sequence at
+/// x_ref (its offsets from κ_f in the feedback form, 0 when the MPC's plan at x_ref is
+/// κ_f's). Near x_ref the online check compares costs that vanish like |x − x_ref|²; a net
+/// whose later steps miss their targets at x_ref by a constant loses every comparison
+/// there. u₀'s rows are left as the u₀ hold made them (the certified net's bits). Nothing
+/// changes when the MPC gives no sequence at x_ref.
+fn hold_sequence(cfg: &ProblemConfig, fb: Option<&Feedback>, x_ref: &[f64], seq: &mut Mlp) {
+    let (n, nu) = (cfg.ocp.horizon, cfg.system.nu());
+    let (label, _) = MpcLaw::new(cfg).solve(x_ref, None);
+    if !label.status.is_labelled() || label.seq.len() != n * nu {
+        return;
+    }
+    let target = match fb {
+        Some(f) => f.offsets(x_ref, &label.seq, nu),
+        None => label.seq,
+    };
+    let Some(last) = seq.layers.last() else {
+        return;
+    };
+    let kept: Vec<f64> = last.b.iter().take(nu).copied().collect();
+    Hold {
+        x_ref: x_ref.to_vec(),
+        u: target,
+    }
+    .apply(seq);
+    if let Some(l) = seq.layers.last_mut() {
+        l.b[..kept.len()].copy_from_slice(&kept);
+    }
 }
 
 #[cfg(test)]
