@@ -10,7 +10,8 @@
 //! perturbed, uniform inputs in U, inputs just outside U, NaN entries; some loops start with
 //! `init_with`; every seventh step the state is kicked (a disturbance, so that the shifted
 //! sequence can fail its check). Both candidate forms run (the feedback form with the same
-//! candidates written as offsets from κ_f). At every step the applied input, the flags and both costs must be
+//! candidates written as offsets from κ_f, and the relaxed decrease σ = 0.5, whose bound β
+//! must agree bit for bit too). At every step the applied input, the flags and both costs must be
 //! bit-identical, and every kind of outcome (candidate, fallback, no safe sequence,
 //! initialised, infeasible fallback) must occur, so that the comparison covers each branch.
 
@@ -93,7 +94,7 @@ fn compare<P, const NX: usize, const NU: usize, const N: usize>(
     margins: Margins,
     loops: usize,
     steps: usize,
-    form: CandidateForm,
+    (form, decrease): (CandidateForm, Option<f32>),
 ) -> [usize; 5]
 where
     P: Plant<NX, NU> + Copy,
@@ -116,7 +117,12 @@ where
             v as f32
         });
         let mut real = SafeController::<P, (), NX, NU, N>::new(plant, (), margins).with_form(form);
-        let mut mine = SafeEmulation::new(&emu, N).with_form(form);
+        if let Some(sigma) = decrease {
+            real = real.with_decrease(sigma);
+        }
+        let mut mine = SafeEmulation::new(&emu, N)
+            .with_form(form)
+            .with_decrease(decrease);
         let feedback = form == CandidateForm::Feedback;
         if l % 3 == 0 {
             // init_with takes inputs in both forms.
@@ -144,6 +150,7 @@ where
                 "{what}"
             );
             assert_eq!(a.safe_cost.to_bits(), b.safe_cost.to_bits(), "{what}");
+            assert_eq!(real.bound().to_bits(), mine.bound().to_bits(), "{what}");
             let ua: Vec<u32> = a.u.iter().map(|v| v.to_bits()).collect();
             let ub: Vec<u32> = b.u.iter().map(|v| v.to_bits()).collect();
             assert_eq!(ua, ub, "{what}");
@@ -186,7 +193,7 @@ fn double_integrator_emulation_is_the_safe_controller_bit_for_bit() {
         di::MARGINS,
         200,
         40,
-        CandidateForm::Open,
+        (CandidateForm::Open, None),
     );
 }
 
@@ -198,19 +205,19 @@ fn quadrotor_emulation_is_the_safe_controller_bit_for_bit() {
         quad::MARGINS,
         200,
         40,
-        CandidateForm::Open,
+        (CandidateForm::Open, None),
     );
 }
 
 #[test]
-fn feedback_form_emulation_is_the_safe_controller_bit_for_bit() {
+fn feedback_form_and_relaxed_decrease_emulation_is_the_safe_controller_bit_for_bit() {
     compare::<di::SafePlant, 2, 1, 20>(
         "double_integrator_ode",
         di::SafePlant,
         di::MARGINS,
         120,
         40,
-        CandidateForm::Feedback,
+        (CandidateForm::Feedback, Some(0.5)),
     );
     compare::<quad::SafePlant, 6, 2, 20>(
         "planar_quadrotor",
@@ -218,6 +225,6 @@ fn feedback_form_emulation_is_the_safe_controller_bit_for_bit() {
         quad::MARGINS,
         120,
         40,
-        CandidateForm::Feedback,
+        (CandidateForm::Feedback, Some(0.5)),
     );
 }

@@ -18,10 +18,22 @@
 //!                                                         the terminal set (x−x_ref)ᵀP(x−x_ref) ≤ α
 //!                  ∧ J(x, v) finite
 //!        J(x, v) = Σ_k ℓ(x_k, v_k) + V_f(x_N)
-//!   apply c if c feasible ∧ (s infeasible ∨ J(x, c) ≤ J(x, s))      flag CANDIDATE
+//!   apply c if c feasible ∧ (s infeasible ∨ J(x, c) ≤ J(x, s) ∨ J(x, c) ≤ β)   flag CANDIDATE
 //!   else s                                                          flag FALLBACK
 //!   u = Π_U(v_0); ū ← v  (shifted at the next step)
+//!   β ← J(x, v) − σ·ℓ(x, v_0) if v passed its check and σ is set, else −∞
 //! ```
+//!
+//! **The relaxed decrease** ([`SafeController::with_decrease`], σ ∈ (0, 1]; off by default:
+//! β = −∞, the strict rule J(c) ≤ J(s)). In the nominal case the safe candidate satisfies
+//! J(s) ≤ J_prev − ℓ(x_prev, u_prev) (the terminal decrease), so a fresh candidate rarely
+//! beats a shifted optimal plan — it only has to match it within its own errors. Accepting
+//! a feasible candidate whenever J(c) ≤ J_prev − σ·ℓ(x_prev, u_prev) keeps every step's
+//! cost decrease at least σ·ℓ (each branch gives V_{t+1} ≤ V_t − σℓ_t with V_t the cost of
+//! the sequence applied at t), hence Σ_t σ·ℓ(x_t, u_t) ≤ V_0 and convergence, with the
+//! closed-loop cost at most V_0/σ (relaxed dynamic programming). Constraint satisfaction is
+//! unaffected: the candidate still passes the full check. β is part of the controller's
+//! state (the C API's `struct ampc_safe` carries it).
 //!
 //! **The feedback form of the candidate** ([`CandidateForm::Feedback`], the trainer's default
 //! for sequence nets, `[training] sequence_form`): the network's entries c_1 … c_{N−1} are
@@ -254,6 +266,8 @@ pub enum InitRejected {
 pub enum InvalidMargins {
     /// A margin is NaN, infinite or negative.
     NotFiniteNonNegative,
+    /// The relaxed decrease σ is not in (0, 1].
+    Decrease,
 }
 
 /// The safety-augmented controller: plant, candidate source, margins and the last safe
@@ -268,6 +282,10 @@ pub struct SafeController<P, S, const NX: usize, const NU: usize, const N: usize
     pub margins: Margins,
     /// How the candidate's entries become inputs (default [`CandidateForm::Open`]).
     pub form: CandidateForm,
+    /// σ of the relaxed decrease (module doc); `None`: the strict rule J(c) ≤ J(s).
+    pub decrease: Option<f32>,
+    /// β = J_prev − σ·ℓ(x_prev, u_prev), −∞ when not applicable.
+    bound: f32,
     /// The sequence applied at the last step (shifted at the next), if any.
     safe: Option<[[f32; NU]; N]>,
 }
@@ -283,8 +301,23 @@ where
             source,
             margins,
             form: CandidateForm::Open,
+            decrease: None,
+            bound: f32::NEG_INFINITY,
             safe: None,
         }
+    }
+
+    /// The same controller with the relaxed decrease σ (module doc; σ ∈ (0, 1], checked by
+    /// [`Self::validate`]).
+    pub const fn with_decrease(mut self, sigma: f32) -> Self {
+        self.decrease = Some(sigma);
+        self
+    }
+
+    /// β, the cost bound a candidate may meet instead of the safe candidate's cost (−∞ when
+    /// none: no safe sequence, a failed check, or the strict rule).
+    pub const fn bound(&self) -> f32 {
+        self.bound
     }
 
     /// The same controller with candidates of form `form` (module doc).
@@ -296,10 +329,12 @@ where
     /// Checks that both margins are finite and ≥ 0.
     pub const fn validate(&self) -> Result<(), InvalidMargins> {
         let (s, t) = (self.margins.stage, self.margins.terminal);
-        if s.is_finite() && t.is_finite() && s >= 0.0 && t >= 0.0 {
-            Ok(())
-        } else {
-            Err(InvalidMargins::NotFiniteNonNegative)
+        if !(s.is_finite() && t.is_finite() && s >= 0.0 && t >= 0.0) {
+            return Err(InvalidMargins::NotFiniteNonNegative);
+        }
+        match self.decrease {
+            Some(sigma) if !(sigma > 0.0 && sigma <= 1.0) => Err(InvalidMargins::Decrease),
+            _ => Ok(()),
         }
     }
 
@@ -311,6 +346,7 @@ where
     /// Forgets the safe sequence (e.g. after a reset of the plant).
     pub fn reset(&mut self) {
         self.safe = None;
+        self.bound = f32::NEG_INFINITY;
     }
 
     /// Puts back a safe sequence kept elsewhere (what [`Self::safe_sequence`] returned after
@@ -319,8 +355,30 @@ where
     /// given like any other, and flags [`SafeFlags::SAFE_INFEASIBLE`] when it fails — so a
     /// sequence that is not the one last returned voids the guarantee but is never applied
     /// unflagged.
+    /// β is unknown afterwards (−∞: the strict rule for the next step); see
+    /// [`Self::restore_with_bound`].
     pub fn restore(&mut self, sequence: Option<[[f32; NU]; N]>) {
+        self.restore_with_bound(sequence, f32::NEG_INFINITY);
+    }
+
+    /// [`Self::restore`] with the bound β that [`Self::bound`] returned after the last step.
+    /// A β that is not the one returned changes which candidates are accepted (a larger one
+    /// voids the convergence argument, never the constraint check); NaN acts as −∞.
+    pub fn restore_with_bound(&mut self, sequence: Option<[[f32; NU]; N]>, bound: f32) {
         self.safe = sequence;
+        self.bound = if sequence.is_some() {
+            bound
+        } else {
+            f32::NEG_INFINITY
+        };
+    }
+
+    /// β after applying the feasible sequence `v` (cost `cost`) at `x`.
+    fn next_bound(&self, x: &[f32; NX], v: &[[f32; NU]; N], cost: f32) -> f32 {
+        match (self.decrease, v.first()) {
+            (Some(sigma), Some(v0)) => cost - sigma * self.plant.stage_cost(x, v0),
+            _ => f32::NEG_INFINITY,
+        }
     }
 
     /// Adopts `sequence` (an MPC solution at state `x`) as the safe sequence, as if it had
@@ -335,6 +393,7 @@ where
         let c = self.check(x, &mut v, false);
         if c.feasible {
             self.safe = Some(v);
+            self.bound = self.next_bound(x, &v, c.cost);
             Ok(c.cost)
         } else {
             Err(InitRejected::Infeasible)
@@ -426,6 +485,7 @@ where
         let Some(previous) = self.safe else {
             if c.feasible {
                 self.safe = Some(candidate);
+                self.bound = self.next_bound(x, &candidate, c.cost);
                 return self.output(
                     &candidate,
                     flags
@@ -449,10 +509,17 @@ where
         if !s.feasible {
             flags = flags.union(SafeFlags::SAFE_INFEASIBLE);
         }
-        let (chosen, flag) = if c.feasible && (!s.feasible || c.cost <= s.cost) {
-            (candidate, SafeFlags::CANDIDATE)
+        let (chosen, flag, cost) =
+            if c.feasible && (!s.feasible || c.cost <= s.cost || c.cost <= self.bound) {
+                (candidate, SafeFlags::CANDIDATE, c.cost)
+            } else {
+                (shifted, SafeFlags::FALLBACK, s.cost)
+            };
+        // β only after a sequence that passed its check (an infeasible fallback has cost +∞).
+        self.bound = if cost.is_finite() {
+            self.next_bound(x, &chosen, cost)
         } else {
-            (shifted, SafeFlags::FALLBACK)
+            f32::NEG_INFINITY
         };
         self.safe = Some(chosen);
         self.output(&chosen, flags.union(flag), c.cost, s.cost)

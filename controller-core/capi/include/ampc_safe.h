@@ -62,6 +62,9 @@ extern "C" {
    flagged SAFE_INFEASIBLE if it fails, never applied unflagged). */
 struct ampc_safe {
     float sequence[AMPC_SAFE_N][AMPC_SAFE_NU];
+    /* The relaxed decrease's bound (controller_core SafeController::bound; -INFINITY when
+       none). A larger value accepts costlier candidates: do not alter it. */
+    float bound;
     /* 0: no safe sequence yet. */
     uint8_t has_safe;
 };

@@ -8,7 +8,7 @@
 //! before including `ampc_safe.h`).
 //!
 //! ```text
-//! struct ampc_safe { float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]; uint8_t has_safe; };
+//! struct ampc_safe { float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]; float bound; uint8_t has_safe; };
 //! uint8_t ampc_safe_init(struct ampc_safe *s);                         // no safe sequence yet
 //! uint8_t ampc_safe_init_with(struct ampc_safe *s, const float x[AMPC_SAFE_NX],
 //!                             const float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]); // adopt if safe
@@ -16,7 +16,8 @@
 //!                                     float sequence[AMPC_SAFE_N][AMPC_SAFE_NU]);
 //! uint8_t ampc_safe_step(struct ampc_safe *s, const float x[AMPC_SAFE_NX], float u[AMPC_SAFE_NU]);
 //! ```
-//! The caller owns the controller's memory (`struct ampc_safe`, the last safe sequence): no
+//! The caller owns the controller's memory (`struct ampc_safe`, the last safe sequence and
+//! the relaxed decrease's bound β, `SafeController::bound`): no
 //! allocation, no static state. `ampc_safe_step` restores it, runs
 //! [`controller_core::SafeController::step`] and writes it back; it returns the
 //! [`SafeFlags`] bits. A sequence the caller altered is re-checked like any other
@@ -86,6 +87,8 @@ const _: () = assert!(
 pub struct AmpcSafe {
     /// The sequence applied at the last step (valid when `has_safe` ≠ 0).
     pub sequence: [[f32; SAFE_NU]; SAFE_N],
+    /// β of the relaxed decrease (`SafeController::bound`; −∞ when none).
+    pub bound: f32,
     /// 0: no safe sequence yet; otherwise `sequence` is the last safe sequence.
     pub has_safe: u8,
 }
@@ -102,6 +105,7 @@ pub unsafe extern "C" fn ampc_safe_init(s: *mut AmpcSafe) -> u8 {
     }
     let fresh = AmpcSafe {
         sequence: [[0.0; SAFE_NU]; SAFE_N],
+        bound: f32::NEG_INFINITY,
         has_safe: 0,
     };
     // SAFETY: s is non-null and points to one writable, aligned AmpcSafe (contract).
@@ -145,6 +149,7 @@ pub unsafe extern "C" fn ampc_safe_init_with(
     unsafe {
         s.write(AmpcSafe {
             sequence: adopted,
+            bound: ctl.bound(),
             has_safe: 1,
         })
     };
@@ -200,15 +205,20 @@ pub unsafe extern "C" fn ampc_safe_step(s: *mut AmpcSafe, x: *const f32, u: *mut
     }
     // SAFETY: s and x are non-null and point to one AmpcSafe and SAFE_NX f32 (contract).
     let (memory, state) = unsafe { (s.read(), x.cast::<[f32; SAFE_NX]>().read()) };
-    ctl.restore((memory.has_safe != 0).then_some(memory.sequence));
+    ctl.restore_with_bound(
+        (memory.has_safe != 0).then_some(memory.sequence),
+        memory.bound,
+    );
     let out = ctl.step(&state);
     let after = match ctl.safe_sequence() {
         Some(q) => AmpcSafe {
             sequence: *q,
+            bound: ctl.bound(),
             has_safe: 1,
         },
         None => AmpcSafe {
             sequence: [[0.0; SAFE_NU]; SAFE_N],
+            bound: f32::NEG_INFINITY,
             has_safe: 0,
         },
     };
@@ -234,6 +244,7 @@ mod tests {
     fn fresh() -> AmpcSafe {
         AmpcSafe {
             sequence: [[0.0; SAFE_NU]; SAFE_N],
+            bound: f32::NEG_INFINITY,
             has_safe: 0,
         }
     }
@@ -243,11 +254,13 @@ mod tests {
     fn steps_through_pointers_are_the_core() {
         let mut mem = AmpcSafe {
             sequence: [[9.0; SAFE_NU]; SAFE_N],
+            bound: 3.0,
             has_safe: 7,
         };
         // SAFETY: a live AmpcSafe.
         assert_eq!(unsafe { ampc_safe_init(&mut mem) }, 0);
         assert_eq!(mem.has_safe, 0);
+        assert_eq!(mem.bound, f32::NEG_INFINITY);
         let mut ctl = SAFE_CONTROLLER;
         let p = ctl.plant;
         let mut x = X0;
@@ -259,6 +272,7 @@ mod tests {
             assert_eq!(u.map(f32::to_bits), want.u.map(f32::to_bits));
             assert_eq!(f, want.flags.0);
             assert_eq!(mem.has_safe != 0, ctl.safe_sequence().is_some());
+            assert_eq!(mem.bound.to_bits(), ctl.bound().to_bits());
             x = p.step(&x, &u);
         }
         // The pendulum's net finds a safe sequence by itself from X0; the quadrotor's small

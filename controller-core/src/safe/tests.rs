@@ -386,3 +386,83 @@ fn a_non_finite_feedback_offset_fails_the_check() {
         assert!(c.safe_sequence().is_none());
     }
 }
+
+#[test]
+fn the_relaxed_decrease_accepts_a_candidate_within_its_bound_and_only_then() {
+    let x0 = [1.0, 0.0];
+    let safe = saturated_k(x0, 0);
+    let x1 = Di.step(&x0, &safe[0]);
+    let strict_c = ctl();
+    let mut sh: [[f32; 1]; N] = core::array::from_fn(|k| safe.get(k + 1).copied().unwrap_or([0.0]));
+    let j_s = strict_c.check(&x1, &mut sh, true);
+    // The safe candidate with a small wiggle near its end: feasible, costlier.
+    let mut late = sh;
+    late[N - 3][0] += 0.05;
+    late[N - 2][0] -= 0.05;
+    let j_late = strict_c.check(&x1, &mut late.clone(), false);
+    assert!(j_late.feasible && j_s.feasible);
+    assert!(
+        j_late.cost > j_s.cost,
+        "the test needs a costlier candidate: {} vs {}",
+        j_late.cost,
+        j_s.cost
+    );
+    for (sigma, accepted) in [(None, false), (Some(1.0), false), (Some(0.05), true)] {
+        let mut c = ctl();
+        if let Some(s) = sigma {
+            c = c.with_decrease(s);
+        }
+        let j0 = c.init_with(&x0, &safe).unwrap();
+        let l0 = Di.stage_cost(&x0, &safe[0]);
+        match sigma {
+            Some(s) => assert_eq!(c.bound(), j0 - s * l0),
+            None => assert_eq!(c.bound(), f32::NEG_INFINITY),
+        }
+        let within = j_late.cost <= c.bound();
+        assert_eq!(
+            within,
+            accepted,
+            "σ {sigma:?}: J(c) {} β {}",
+            j_late.cost,
+            c.bound()
+        );
+        let o = c.step_with(&x1, late);
+        let want = if accepted {
+            SafeFlags::CANDIDATE
+        } else {
+            SafeFlags::FALLBACK
+        };
+        assert_eq!(o.flags, want, "σ {sigma:?}");
+        // β after the step: the applied sequence's cost minus σ·ℓ at x1.
+        let (j, v0) = if accepted {
+            (j_late.cost, late[0])
+        } else {
+            (j_s.cost, sh[0])
+        };
+        match sigma {
+            Some(s) => assert_eq!(c.bound(), j - s * Di.stage_cost(&x1, &v0)),
+            None => assert_eq!(c.bound(), f32::NEG_INFINITY),
+        }
+        // restore forgets β; restore_with_bound keeps it; reset forgets it.
+        let (q, b) = (c.safe_sequence().copied(), c.bound());
+        c.restore(q);
+        assert_eq!(c.bound(), f32::NEG_INFINITY);
+        c.restore_with_bound(q, b);
+        assert_eq!(c.bound().to_bits(), b.to_bits());
+        c.reset();
+        assert_eq!(c.bound(), f32::NEG_INFINITY);
+    }
+}
+
+#[test]
+fn validate_checks_the_relaxed_decrease() {
+    assert!(ctl().with_decrease(0.5).validate().is_ok());
+    assert!(ctl().with_decrease(1.0).validate().is_ok());
+    for bad in [0.0, -0.1, 1.01, f32::NAN, f32::INFINITY] {
+        assert_eq!(
+            ctl().with_decrease(bad).validate(),
+            Err(InvalidMargins::Decrease),
+            "{bad}"
+        );
+    }
+}

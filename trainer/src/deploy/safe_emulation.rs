@@ -387,6 +387,10 @@ pub struct SafeEmulation<'a> {
     pub margins: (f32, f32),
     /// How a candidate's entries become inputs (`SafeController::form`; default open).
     pub form: CandidateForm,
+    /// σ of the relaxed decrease (`SafeController::decrease`; default none).
+    pub decrease: Option<f32>,
+    /// β (`SafeController::bound`).
+    bound: f32,
     safe: Option<Vec<Vec<f32>>>,
 }
 
@@ -398,7 +402,27 @@ impl<'a> SafeEmulation<'a> {
             n,
             margins: plant.margins,
             form: CandidateForm::Open,
+            decrease: None,
+            bound: f32::NEG_INFINITY,
             safe: None,
+        }
+    }
+
+    /// The same controller with the relaxed decrease σ (`SafeController::with_decrease`).
+    pub fn with_decrease(mut self, sigma: Option<f32>) -> Self {
+        self.decrease = sigma;
+        self
+    }
+
+    /// β (`SafeController::bound`).
+    pub fn bound(&self) -> f32 {
+        self.bound
+    }
+
+    fn next_bound(&self, x: &[f32], v: &[Vec<f32>], cost: f32) -> f32 {
+        match (self.decrease, v.first()) {
+            (Some(sigma), Some(v0)) => cost - sigma * self.plant.stage_cost(x, v0),
+            _ => f32::NEG_INFINITY,
         }
     }
 
@@ -481,6 +505,7 @@ impl<'a> SafeEmulation<'a> {
         let mut v = sequence.to_vec();
         let (ok, cost) = self.check(x, &mut v, false);
         if ok {
+            self.bound = self.next_bound(x, &v, cost);
             self.safe = Some(v);
             Some(cost)
         } else {
@@ -516,6 +541,7 @@ impl<'a> SafeEmulation<'a> {
         let diagnosis = CandidateDiagnosis { outside_u, detail };
         let Some(previous) = self.safe.take() else {
             if c_ok {
+                self.bound = self.next_bound(x, &candidate, c_cost);
                 let out = self.output(
                     &candidate,
                     flags
@@ -542,10 +568,15 @@ impl<'a> SafeEmulation<'a> {
         if !s_ok {
             flags = flags.union(SafeFlags::SAFE_INFEASIBLE);
         }
-        let (chosen, flag) = if c_ok && (!s_ok || c_cost <= s_cost) {
-            (candidate, SafeFlags::CANDIDATE)
+        let (chosen, flag, cost) = if c_ok && (!s_ok || c_cost <= s_cost || c_cost <= self.bound) {
+            (candidate, SafeFlags::CANDIDATE, c_cost)
         } else {
-            (shifted, SafeFlags::FALLBACK)
+            (shifted, SafeFlags::FALLBACK, s_cost)
+        };
+        self.bound = if cost.is_finite() {
+            self.next_bound(x, &chosen, cost)
+        } else {
+            f32::NEG_INFINITY
         };
         let out = self.output(&chosen, flags.union(flag), (c_cost, s_cost), diagnosis);
         self.safe = Some(chosen);

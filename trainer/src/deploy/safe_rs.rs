@@ -109,13 +109,24 @@ pub fn render_safe_rs(
          /// The plant of the online check (deploy::plant_rs_safe).\n\
          pub mod plant {{\n",
         name = cfg.name,
-        form = match form {
-            SequenceForm::Open => "",
-            SequenceForm::Feedback => {
-                "\n// The net's outputs 1 … N−1 are offsets from the terminal controller \
-                 (sequence_form = \"feedback\").\n\
-                 .with_form(controller_core::safe::CandidateForm::Feedback)"
+        form = {
+            let mut f = String::new();
+            if form == SequenceForm::Feedback {
+                f.push_str(
+                    "\n// The net's outputs 1 … N−1 are offsets from the terminal controller \
+                     (sequence_form = \"feedback\").\n\
+                     .with_form(controller_core::safe::CandidateForm::Feedback)",
+                );
             }
+            if let Some(sigma) = cfg.closed_loop.decrease() {
+                let _ = write!(
+                    f,
+                    "\n// The relaxed decrease (closed_loop.safety_decrease).\n\
+                     .with_decrease({})",
+                    super::plant_rs::lit(f64::from(sigma))
+                );
+            }
+            f
         },
     );
     o.push_str(&plant.source);
@@ -161,8 +172,13 @@ mod tests {
         assert!(e.contains("maps 3 states"), "{e}");
         let (text, plant) = render_safe_rs(&cfg, &net(2, 20), open).unwrap();
         assert!(!text.contains("with_form"));
+        assert!(text.contains(".with_decrease(0.5_f32);"), "the default σ");
         let (fb, _) = render_safe_rs(&cfg, &net(2, 20), SequenceForm::Feedback).unwrap();
-        assert!(fb.contains(".with_form(controller_core::safe::CandidateForm::Feedback);"));
+        assert!(fb.contains(".with_form(controller_core::safe::CandidateForm::Feedback)"));
+        let mut strict = cfg.clone();
+        strict.closed_loop.safety_decrease = 0.0;
+        let (st, _) = render_safe_rs(&strict, &net(2, 20), open).unwrap();
+        assert!(!st.contains("with_decrease") && !st.contains("with_form"));
         for part in [
             "pub mod plant {",
             "pub mod sequence {",

@@ -78,6 +78,28 @@ pub struct ClosedLoopSettings {
     /// method of Hose et al.). Default true; not serialised when true.
     #[serde(skip_serializing_if = "is_true")]
     pub safety_terminal: bool,
+    /// σ of the safe controller's relaxed decrease (`controller_core::safe`, module doc): a
+    /// feasible candidate is applied when its cost is at most the safe candidate's, or at
+    /// most J_prev − σ·ℓ(x_prev, u_prev); every step then lowers the applied sequence's cost
+    /// by at least σ·ℓ (convergence; closed-loop cost ≤ V_0/σ). Default 0.5, in [0, 1];
+    /// 0 = the strict rule J(c) ≤ J(s) only. Written into the exported safe controller
+    /// (`export --safe-rs`) and used by the safety study. Not serialised at its default.
+    #[serde(skip_serializing_if = "is_default_safety_decrease")]
+    pub safety_decrease: f64,
+}
+
+/// Default of [`ClosedLoopSettings::safety_decrease`].
+pub const SAFETY_DECREASE: f64 = 0.5;
+
+fn is_default_safety_decrease(v: &f64) -> bool {
+    *v == SAFETY_DECREASE
+}
+
+impl ClosedLoopSettings {
+    /// σ as the device takes it: `None` for 0 (the strict rule), else `Some(σ)` in f32.
+    pub fn decrease(&self) -> Option<f32> {
+        (self.safety_decrease > 0.0).then_some(self.safety_decrease as f32)
+    }
 }
 
 /// Default of [`ClosedLoopSettings::safety_runs`].
@@ -117,6 +139,7 @@ impl Default for ClosedLoopSettings {
             safety_runs: SAFETY_RUNS,
             safety_mismatch_runs: SAFETY_MISMATCH_RUNS,
             safety_terminal: true,
+            safety_decrease: SAFETY_DECREASE,
         }
     }
 }

@@ -615,3 +615,23 @@ fn sequence_form_defaults_and_stored_copies() {
         "training.sequence_form"
     );
 }
+
+/// `closed_loop.safety_decrease`: default 0.5 (not serialised), 0 = the strict rule (no σ on
+/// the device), outside [0, 1] refused naming the key.
+#[test]
+fn safety_decrease_default_range_and_device_value() {
+    let c = ProblemConfig::default();
+    assert_eq!(c.closed_loop.safety_decrease, 0.5);
+    assert_eq!(c.closed_loop.decrease(), Some(0.5));
+    assert!(!toml::to_string(&c).unwrap().contains("safety_decrease"));
+    let mut strict = c.clone();
+    strict.closed_loop.safety_decrease = 0.0;
+    assert_eq!(strict.closed_loop.decrease(), None);
+    strict.validate().unwrap();
+    for bad in [-0.1, 1.5, f64::NAN] {
+        assert_eq!(
+            err_key(|c| c.closed_loop.safety_decrease = bad),
+            "closed_loop.safety_decrease"
+        );
+    }
+}

@@ -516,9 +516,16 @@ impl ClosedLoopSettings {
 impl ProblemConfig {
     /// `closed_loop.safety`: needs `[training] outputs = "sequence"` (the online check runs
     /// the network's whole sequence); `closed_loop.safety_runs` in 1 ..= 10⁷,
-    /// `closed_loop.safety_mismatch_runs` ≤ 10⁷.
+    /// `closed_loop.safety_mismatch_runs` ≤ 10⁷; `closed_loop.safety_decrease` in [0, 1].
     fn validate_safety(&self) -> Result<(), ConfigError> {
         let c = &self.closed_loop;
+        let sigma = c.safety_decrease;
+        if !(0.0..=1.0).contains(&sigma) {
+            return Err(invalid(
+                "closed_loop.safety_decrease",
+                format!("must be in [0, 1] (0: the strict rule), got {sigma}"),
+            ));
+        }
         if !c.safety {
             return Ok(());
         }

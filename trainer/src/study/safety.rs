@@ -356,7 +356,9 @@ fn triple(s: &Setup, law: &mut MpcLaw, model: &Discrete, x0: &[f64]) -> Triple {
         }
         (last.clone(), false, false)
     });
-    let mut emu = SafeEmulation::new(s.plant, n).with_form(candidate_form(s.cfg));
+    let mut emu = SafeEmulation::new(s.plant, n)
+        .with_form(candidate_form(s.cfg))
+        .with_decrease(s.cfg.closed_loop.decrease());
     let x32 = to32(x0);
     let mut how = Init::Never;
     let mut init = first_seq.filter(|q| q.len() == n * nu).and_then(|q| {
