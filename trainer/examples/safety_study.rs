@@ -104,6 +104,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
     let mut s = safety_study(&cfg, &plant, (g.invariance(), g.decrease), &source);
     println!("study: {:.1} s", t.elapsed().as_secs_f64());
+    println!("choice: {}", s.choice);
     group("nominal", &s.nominal);
     for (k, m) in &s.mismatch {
         group(&format!("mismatch {k}"), m);

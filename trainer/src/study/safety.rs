@@ -164,6 +164,10 @@ pub struct SafetyStudy {
     pub terminal_decrease: String,
     /// The online check's margins (m_s, m_f), estimated.
     pub margins: [f64; 2],
+    /// The candidate's form and the choice rule (relaxed decrease σ), in words (empty in
+    /// studies written before them: the open form and the strict rule).
+    #[serde(default)]
+    pub choice: String,
     /// Nominal model: the keys `safe`, `plain`, `mpc`.
     #[serde(flatten)]
     pub nominal: SafetyGroup,
@@ -489,6 +493,26 @@ fn perturbed(cfg: &ProblemConfig, parameter: Option<&str>, rel: f64) -> Discrete
     Discrete::new(sys, cfg.ocp.ts, cfg.ocp.rk4_substeps)
 }
 
+/// The candidate's form and the choice rule of `cfg`'s safe controller, in words.
+pub fn choice_rule(cfg: &ProblemConfig) -> String {
+    let form = match cfg.training.sequence_form {
+        SequenceForm::Open => "the candidate's entries are the inputs (open form)",
+        SequenceForm::Feedback => {
+            "the candidate's entries 1 … N−1 are offsets from the terminal controller, \
+             realised along the check's simulation as v_k = Π_U(κ_f(x̂_k) + c_k) (feedback form)"
+        }
+    };
+    let rule = match cfg.closed_loop.decrease() {
+        None => "a feasible candidate is applied when J(c) ≤ J(s) (strict rule)".to_string(),
+        Some(sigma) => format!(
+            "a feasible candidate is applied when J(c) ≤ J(s) or J(c) ≤ J_prev − {sigma}·ℓ(x_prev, \
+             u_prev) (relaxed decrease σ = {sigma}: every step lowers the applied sequence's \
+             cost by at least σ·ℓ, so convergence holds with closed-loop cost ≤ V_0/σ)"
+        ),
+    };
+    format!("{form}; {rule}")
+}
+
 /// The device's candidate form of `cfg`'s sequence net (`[training] sequence_form`).
 pub fn candidate_form(cfg: &ProblemConfig) -> CandidateForm {
     match cfg.training.sequence_form {
@@ -557,6 +581,7 @@ pub fn safety_study(
         terminal_invariance: tiers.0.into(),
         terminal_decrease: tiers.1.into(),
         margins: [f64::from(m_s), f64::from(m_f)],
+        choice: choice_rule(cfg),
         nominal,
         mismatch,
     }

@@ -86,7 +86,7 @@ pub(super) fn section(s: &SafetyStudy) -> Vec<Block> {
              {}), nominal model. Guarantee of the safe controller: **{}** — resting on {}. \
              Initialisation: {}: {} runs by the MPC's sequence (the MPC's first solve a hard \
              optimum at {} starts), {} by the terminal rollout, {} by a feasible candidate, {} \
-             without a safe sequence ({} steps without one in all). Violation: {}.",
+             without a safe sequence ({} steps without one in all). Violation: {}.{}",
             s.runs,
             s.steps,
             s.seed,
@@ -99,7 +99,12 @@ pub(super) fn section(s: &SafetyStudy) -> Vec<Block> {
             g.init_candidate,
             g.runs_without_safe_sequence,
             g.safe.no_safe_steps,
-            s.violation_rule
+            s.violation_rule,
+            if s.choice.is_empty() {
+                String::new()
+            } else {
+                format!(" Choice: {}.", s.choice)
+            }
         )),
         group_table(g),
     ];
