@@ -87,7 +87,7 @@ fn committed_files_are_what_the_exporter_writes() {
         let (lib, _) = trainer::deploy::safe_rs::render_safe_rs(
             &config(name),
             &seq,
-            trainer::problem::SequenceForm::Open,
+            model(name).settings.sequence_form,
         )
         .unwrap();
         assert!(lib == text, "{name}: CLI and library differ");

@@ -233,7 +233,7 @@ pub unsafe extern "C" fn ampc_safe_step(s: *mut AmpcSafe, x: *const f32, u: *mut
 #[cfg(test)]
 mod tests {
     use super::*;
-    use controller_core::safe::SequenceSource;
+    use controller_core::safe::{CandidateForm, SequenceSource};
 
     /// A start away from the set point (the pendulum's, or the quadrotor's).
     #[cfg(not(feature = "safe-planar-quadrotor"))]
@@ -370,10 +370,32 @@ mod tests {
         assert!(seq.as_flattened().iter().all(|v| v.is_finite()));
     }
 
+    /// The sequence the controller checks for the finite candidate `raw` at `x`: Π_U of each
+    /// entry (open form), or Π_U(c_0) then Π_U(κ_f(x̂_k) + c_k) along the plant's simulation
+    /// (feedback form; `controller_core::safe`).
+    fn realised(x: &[f32; SAFE_NX], raw: &[[f32; SAFE_NU]; SAFE_N]) -> [[f32; SAFE_NU]; SAFE_N] {
+        let ctl = SAFE_CONTROLLER;
+        let p = ctl.plant;
+        if ctl.form == CandidateForm::Open {
+            return raw.map(|u| p.project_input(&u));
+        }
+        let mut xk = *x;
+        core::array::from_fn(|k| {
+            let v = if k == 0 {
+                p.project_input(&raw[0])
+            } else {
+                let kf = p.terminal_input(&xk);
+                p.project_input(&core::array::from_fn(|j| raw[k][j] + kf[j]))
+            };
+            xk = p.step(&xk, &v);
+            v
+        })
+    }
+
     /// `ampc_safe_step` clamps the network's candidate to U before the check: over a grid of
     /// X (fresh memory, so a candidate that passes becomes the safe sequence), the step
     /// accepts (`CANDIDATE`) exactly when the clamped candidate passes the check, and stores
-    /// it clamped; every accepted raw candidate outside U is counted as rescued by the
+    /// it clamped (realised, in the feedback form); every accepted raw candidate outside U is counted as rescued by the
     /// projection (its unclamped check fails). The committed fixture nets give no such state
     /// (0 rescued; the discriminating test is controller-core's
     /// `a_candidate_slightly_outside_u_is_clamped_then_checked`, the same `step_with`).
@@ -397,7 +419,7 @@ mod tests {
                     a + (b - a) * t
                 });
                 let raw = ctl.source.sequence(&x);
-                let clamped = raw.map(|u| ctl.plant.project_input(&u));
+                let clamped = realised(&x, &raw);
                 let mut mem = fresh();
                 let mut u = [0.0f32; SAFE_NU];
                 // SAFETY: live, aligned arrays of the right lengths.
@@ -409,7 +431,14 @@ mod tests {
                 }
                 accepted += 1;
                 assert_eq!(mem.sequence, clamped);
-                let outside = raw
+                // The entries that are inputs before the check (all, or c_0 in the feedback
+                // form, whose offsets are projected after κ_f is added).
+                let inputs = if ctl.form == CandidateForm::Feedback {
+                    1
+                } else {
+                    SAFE_N
+                };
+                let outside = raw[..inputs]
                     .iter()
                     .any(|v| (0..SAFE_NU).any(|k| v[k] < lo[k] || v[k] > hi[k]));
                 if outside {
@@ -418,7 +447,7 @@ mod tests {
                 }
             }
         }
-        // The quadrotor's small net finds no safe sequence by itself (test above).
+        // The quadrotor's small net may find no safe sequence by itself on this grid.
         assert!(
             accepted > 0 || cfg!(feature = "safe-planar-quadrotor"),
             "{rescued} rescued of {accepted}"
