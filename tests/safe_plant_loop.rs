@@ -57,6 +57,12 @@ fn generated_safe_plants_are_the_committed_fixtures() {
     ] {
         let cfg = config(name);
         let g = safe_plant_rs(&cfg).unwrap();
+        // The feedback form trains with the gain the device's plant gets (both branches).
+        assert_eq!(
+            trainer::robust::terminal_nominal::safe_terminal_gain(&cfg).as_ref(),
+            Some(&g.k),
+            "{name}: the sequence net's K is not the generated plant's"
+        );
         let from = match &g.terminal {
             TerminalSource::Robust(t) => format!("robust, rho_f {:e} ({:?})", t.rho_local, t.check),
             TerminalSource::Nominal(t) => format!("nominal, P_f {:?}", t.cost),
