@@ -2,7 +2,7 @@
 //! only where they can matter"):
 //! ```text
 //! P = {x_1 … x_M} ⊂ X,  M = PILOT_STATES, x_i uniform in X (counter-based, PILOT_SEED)
-//! starts = ["warm", "u_lo", "u_hi", "barrier"]
+//! starts = ["warm", "u_lo", "u_hi", "barrier", "repeat_x0", "lqr", "zero"]
 //!                          if some x_i ∈ P has two distinct hard optima among ["warm", "u_lo",
 //!                          "u_hi"], or a hard optimum only from a start other than warm
 //!        = ["warm"]       otherwise
@@ -13,11 +13,19 @@
 //! X solved from every start decides, once per problem and process, whether they can matter:
 //! when they never did on the pilot, the rate of states where they would is below 3 % at
 //! 95 % confidence (rule of three, 3/M), and labels come from `warm` alone. Swing-up
-//! problems, whose starts disagree on a sizeable share of X, keep all three and add the
-//! barrier start (`super::homotopy`): where the starts disagree, the interior-point-like path
-//! reaches the lower optimum at most of the states the three miss (the acados swing-up: 8 of
-//! 540 states above IPOPT's cost instead of 26, at about 2.8× the CPU per state —
-//! BENCHMARKS.md); the pilot itself probes with the three cheaper starts only.
+//! problems, whose starts disagree on a sizeable share of X, keep all three and add:
+//! - the barrier start (`super::homotopy`): where the starts disagree, the interior-point-like
+//!   path reaches the lower optimum at most of the states the three miss (the acados
+//!   swing-up: 8 of 540 states above IPOPT's cost instead of 26, at about 2.8× the CPU per
+//!   state — BENCHMARKS.md);
+//! - three guesses that are not open-loop rollouts — x₀ repeated, the terminal-LQR rollout
+//!   and the setpoint. Every other start rolls inputs out open loop, and on an unstable plant
+//!   over a long horizon (the safe cart-pole, N = 40) the pole falls in all of them, so the
+//!   SQP starts beside a swing-down manoeuvre: J = 1,802 where these reach 2.5. They take the
+//!   acados swing-up from 8 to 6 of 540 states above IPOPT's cost (and 1 unlabelled to 0), at
+//!   about 2.4× the CPU per state again; the CSTR's labels are unchanged at 1.16× its CPU.
+//!
+//! The pilot itself probes with the three cheaper starts only.
 //!
 //! Only the default is decided here: a problem file's `[solver] starts` is used as written,
 //! and a convex OCP has one start whatever is listed. The pilot is deterministic (fixed
@@ -118,10 +126,12 @@ pub fn pilot(cfg: &ProblemConfig) -> Pilot {
 }
 
 /// The starts kept where the pilot finds that extra starts matter: the probed ones, then the
-/// barrier start (skipped by the law when U has no finite bound).
+/// barrier start (skipped by the law when U has no finite bound), then the three guesses that
+/// are not open-loop rollouts (module doc). Later starts only replace a label by a strictly
+/// cheaper optimum (ties go to the earlier start).
 pub fn extra_starts() -> Vec<Start> {
     let mut s = default_starts(false);
-    s.push(Start::Barrier);
+    s.extend([Start::Barrier, Start::RepeatX0, Start::Lqr, Start::Zero]);
     s
 }
 
