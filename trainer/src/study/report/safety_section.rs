@@ -15,7 +15,13 @@ pub(super) fn candidate_para(c: Option<&CandidateCounts>) -> Option<Block> {
     let pct = |v: u64| 100.0 * v as f64 / c.checked.max(1) as f64;
     let r = c.costlier_rel;
     Some(Block::Para(format!(
-        "The network's candidate at the {} steps that had a safe sequence: applied at {} ({:.2} %). Outside U before clamping at {} ({:.2} %; clamped and then applied at {}). The clamped candidate violated a state or path constraint at {} ({:.2} %), missed the terminal set at {} ({:.2} %), was not finite at {}, and was feasible but costlier than the safe fallback at {} ({:.2} %; {} of them with the state already in the terminal set) — relative excess (J(c) − J(s)) / J(s) ≤ 1e-4: {}, ≤ 1e-3: {}, ≤ 1e-2: {}, ≤ 1e-1: {}, larger: {}.",
+        "The network's candidate at the {} steps that had a safe sequence: applied at {} ({:.2} %). \
+         Outside U before clamping at {} ({:.2} %; clamped and then applied at {}). \
+         The clamped candidate violated a state or path constraint at {} ({:.2} %), missed \
+         the terminal set at {} ({:.2} %), was not finite at {}, and was feasible but costlier \
+         than the safe fallback at {} ({:.2} %; {} of them with the state already in the \
+         terminal set) — relative excess (J(c) − J(s)) / J(s) ≤ 1e-4: {}, ≤ 1e-3: {}, \
+         ≤ 1e-2: {}, ≤ 1e-1: {}, larger: {}.",
         c.checked,
         c.taken,
         pct(c.taken),
