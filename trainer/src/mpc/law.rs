@@ -191,8 +191,41 @@ impl MpcLaw {
     /// returned point and the sensitivity finite, the residual ≤ tol. Otherwise the state is
     /// unlabelled, `numerical_failure`, with the failure in `info.failure`.
     fn finish(&self, solver: &SqpSolver, xs: &[f64], r: &SqpResult, status: SqpStatus) -> Label {
-        let ocp = &solver.ocp;
         let sens = sensitivity(solver, xs, &r.point, self.cfg.solver.degeneracy_tol);
+        self.finish_with(solver, xs, r, status, Some(sens))
+    }
+
+    /// [`finish`](Self::finish) without the sensitivity, for a step of a simulated closed
+    /// loop, which uses κ(x) and the solution only: `du_dx` is NaN, `active` empty,
+    /// `degeneracy` none; the gate checks the rest (solution, cost, re-computed KKT
+    /// residual). The sensitivity (a KKT factorisation and nx solves) was a fifth of the
+    /// quadrotor's closed-loop step.
+    fn finish_input(
+        &self,
+        solver: &SqpSolver,
+        xs: &[f64],
+        r: &SqpResult,
+        status: SqpStatus,
+    ) -> Label {
+        self.finish_with(solver, xs, r, status, None)
+    }
+
+    /// The label of `r` with the sensitivity `sens` ([`finish`](Self::finish)), or without
+    /// one ([`finish_input`](Self::finish_input)).
+    fn finish_with(
+        &self,
+        solver: &SqpSolver,
+        xs: &[f64],
+        r: &SqpResult,
+        status: SqpStatus,
+        sens: Option<crate::mpc::sensitivity::Sensitivity>,
+    ) -> Label {
+        let ocp = &solver.ocp;
+        let gated = sens.is_some();
+        let (du0_dx, degeneracy, active) = match sens {
+            Some(s) => (s.du0_dx, s.degeneracy, s.active),
+            None => (vec![f64::NAN; ocp.nu * ocp.nx], None, Vec::new()),
+        };
         let iu = ocp.iu(0);
         let cost = ocp.objective(&r.point.z);
         let res = solver.residual_at_solution(xs, &r.point);
@@ -200,7 +233,7 @@ impl MpcLaw {
             z: &r.point.z,
             cost,
             residual: [res.stationarity, res.primal, res.dual, res.complementarity],
-            sensitivity: &sens.du0_dx,
+            sensitivity: if gated { &du0_dx } else { &[] },
             tol: self.cfg.solver.tol,
         });
         if let Err(f) = gate {
@@ -214,15 +247,15 @@ impl MpcLaw {
         Label {
             x: xs.to_vec(),
             u: r.point.z[iu..iu + ocp.nu].to_vec(),
-            du_dx: sens.du0_dx,
+            du_dx: du0_dx,
             cost,
             status,
             info: r.info,
-            degeneracy: sens.degeneracy,
+            degeneracy,
             max_slack: r.point.z[ocp.is()..]
                 .iter()
                 .fold(0.0, |m, v| nan_max(m, *v)),
-            active: sens.active,
+            active,
             retry: None,
             optima: 0,
             seq: (0..ocp.horizon)

@@ -58,6 +58,8 @@ impl MpcLaw {
     /// κ at the next state `xs` of a trajectory (module doc): warm from the shifted previous
     /// solution, the extra starts and the retry ladder only where that warm start does not
     /// converge, hard-infeasible states decided by the soft problem alone. Updates `along`.
+    /// A step that the warm start decides carries no sensitivity (`du_dx` NaN, `active`
+    /// empty): a closed loop needs u and the solution only.
     pub fn solve_next(&mut self, xs: &[f64], along: &mut Along) -> Label {
         along.steps += 1;
         let valid = xs.len() == self.hard.ocp.nx && xs.iter().all(|v| v.is_finite());
@@ -71,9 +73,10 @@ impl MpcLaw {
             let start = shifted(&self.hard, prev, xs);
             let r = self.hard.solve(xs, start);
             if r.status == SqpStatus::Converged {
-                let (l, p) = self.finish_with_point(&self.hard, xs, r, SqpStatus::Converged);
+                // κ(x_k) alone: a closed loop uses no sensitivity (`finish_input`).
+                let l = self.finish_input(&self.hard, xs, &r, SqpStatus::Converged);
                 if l.status.is_labelled() {
-                    along.hard = p;
+                    along.hard = Some(r.point);
                     along.last_soft = false;
                     return l;
                 }
@@ -175,7 +178,8 @@ mod tests {
     }
 
     /// The quadrotor's MPC closed loop from the study's first state: every step labelled
-    /// with the input of a fresh multi-start label of the same state (1e-6), the extra starts
+    /// with the input of a fresh multi-start label of the same state (1e-6; the warm steps
+    /// without a sensitivity, the fresh labels with one), the extra starts
     /// used at the first step only, and fewer SQP iterations in all than the unshifted warm
     /// start of `solve_along` (the closed loop before the shift).
     #[test]
@@ -197,6 +201,11 @@ mod tests {
             for (a, b) in l.u.iter().zip(&cold.u) {
                 assert!((a - b).abs() <= 1e-6, "{x:?}: {:?} vs {:?}", l.u, cold.u);
             }
+            // A warm step is decided without the sensitivity (`finish_input`); the first
+            // (a label's solve) and a fresh label have it.
+            let warm_step = along.steps > 1 && along.extra_start_steps == 1;
+            assert_eq!(l.du_dx.iter().all(|v| v.is_nan()), warm_step, "{x:?}");
+            assert!(cold.du_dx.iter().all(|v| v.is_finite()), "{x:?}");
             shifted_iters += l.info.iterations;
             unshifted_iters += old.info.iterations;
             law.hard_solver().ocp.model.step(&x, &l.u, &mut next);
