@@ -348,15 +348,13 @@ fn certify_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let data = load_dataset(Stage::Certify, &d.dataset())?;
     let val = load_dataset(Stage::Certify, &d.validation())?;
     let extra = Some(TrainSet::from_dataset(&val));
-    let mut out = String::new();
-    for (file, json) in [
-        (RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE),
-        (RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL),
-    ] {
+    // Theorem 1 with the deployed controller's f32 allowance (libm tanh, 2-norm) stored
+    // beside ε, as `trainer certify` writes it. The two nets are certified side by side
+    // (each certificate a pure function of its net and the data; their serial parts, e.g.
+    // the covering radius's branch and bound, overlap), then written in order.
+    let one = |file: &str| {
         let m = load_model(Stage::Certify, &d.join(file))?;
-        // Theorem 1 with the deployed controller's f32 allowance (libm tanh, 2-norm) stored
-        // beside ε, as `trainer certify` writes it.
-        let (c, _) = crate::deploy::export::certify_deployed(
+        crate::deploy::export::certify_deployed(
             &env.cfg.name,
             &m,
             &data,
@@ -366,13 +364,25 @@ fn certify_both(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
                 ..Default::default()
             },
         )
+        .map(|(c, _)| c)
         .map_err(|e| {
             fail_in(
                 Stage::Certify,
                 format_args!("{file} on {}", RunDir::DATASET),
                 e,
             )
-        })?;
+        })
+    };
+    let (reg, nom) = rayon::join(
+        || one(RunDir::MODEL_REGULARIZED),
+        || one(RunDir::MODEL_NOMINAL),
+    );
+    let mut out = String::new();
+    for (file, json, c) in [
+        (RunDir::MODEL_REGULARIZED, RunDir::CERTIFICATE, reg),
+        (RunDir::MODEL_NOMINAL, RunDir::CERTIFICATE_NOMINAL, nom),
+    ] {
+        let c = c?;
         crate::certify::file::write_certificate(
             &d.join(json),
             &CertificateFile::theorem1(c.clone()),
