@@ -21,6 +21,13 @@ fn run_writes_artifacts_and_skips_unchanged_stages() {
     let args = ["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
     let o = trainer(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The seed study ran beside the stages after train and was handed to `seeds`.
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.lines()
+            .any(|l| l.contains("[      seeds] done") && l.contains("computed beside")),
+        "{err}"
+    );
     let run = out.join("double_integrator");
     for f in [
         "problem.toml",

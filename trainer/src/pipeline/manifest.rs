@@ -165,6 +165,20 @@ impl Ctx<'_> {
         Ok(())
     }
 
+    /// Whether [`stage`](Self::stage) would run `stage` on these inputs (forced, or not
+    /// [`unchanged`](Self::unchanged)) rather than skip it.
+    pub(super) fn will_run(
+        &self,
+        stage: Stage,
+        inputs: &BTreeMap<String, String>,
+        outputs: &[&str],
+    ) -> bool {
+        self.opts.force.contains(&stage)
+            || self
+                .unchanged(&self.dir.manifest(stage.name()), inputs, outputs)
+                .is_err()
+    }
+
     /// The manifest at `mpath` if it records these inputs and this version, and every
     /// output is present with the hash it was written with.
     fn unchanged(

@@ -17,7 +17,8 @@
 
 //!
 //! Files: `stages` (each stage as a value: name, inputs, outputs, body), [`manifest`]
-//! (skip-if-unchanged), [`robust`] (the Corollary 1 design loop, which runs these stages on
+//! (skip-if-unchanged), `beside` (the seed study on its own thread from the end of `train`
+//! on, handed to `seeds` when its inputs are unchanged), [`robust`] (the Corollary 1 design loop, which runs these stages on
 //! the tightened problem). `pipeline` and the CLI are the only places that know every stage.
 //!
 //! **Library use.** [`run`] takes a problem file's text; [`run_problem`] a problem held in
@@ -28,6 +29,7 @@
 //! can ([`ProblemConfig::from_toml_str_with`]).
 
 pub(crate) mod api;
+mod beside;
 mod choice;
 mod exported;
 pub mod manifest;
@@ -265,13 +267,20 @@ pub fn run(
         opts,
         reports: Vec::new(),
     };
+    // The seed study, started beside the later stages once `train` is done (`beside`).
+    let mut beside: Option<beside::Beside> = None;
     for stage in &stages::ALL {
         let inputs = (stage.inputs)(&cx, cfg)?;
         let outputs = (stage.outputs)();
         let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
+        let seeds = match stage.stage {
+            Stage::Seeds => beside.take().and_then(|b| b.take(&inputs)),
+            _ => None,
+        };
         let env = Env {
             cfg,
             progress: opts.progress,
+            seeds: std::cell::RefCell::new(seeds),
             timings: cx
                 .reports
                 .iter()
@@ -286,8 +295,25 @@ pub fn run(
         if opts.until == Some(stage.stage) {
             break;
         }
+        if stage.stage == Stage::Train && opts.until.is_none_or(|u| u >= Stage::Seeds) {
+            beside = start_seeds(&cx, cfg)?;
+        }
     }
     Ok(cx.reports)
+}
+
+/// The seed study on its own thread ([`beside`]) when the `seeds` stage will run (forced,
+/// or its inputs changed), else `None`.
+fn start_seeds(cx: &Ctx, cfg: &ProblemConfig) -> Result<Option<beside::Beside>, PipelineError> {
+    let Some(step) = stages::ALL.iter().find(|s| s.stage == Stage::Seeds) else {
+        return Ok(None);
+    };
+    let inputs = (step.inputs)(cx, cfg)?;
+    let outputs = (step.outputs)();
+    let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
+    Ok(cx
+        .will_run(Stage::Seeds, &inputs, &outputs)
+        .then(|| beside::Beside::start(cfg, &cx.dir, inputs)))
 }
 
 /// Removes the temporary files (`.<name>.<pid>.tmp`, see `io::write_atomic`) that a run
@@ -390,6 +416,9 @@ pub(super) struct Env<'a> {
     pub(super) cfg: &'a ProblemConfig,
     pub(super) progress: bool,
     pub(super) timings: Vec<Timing>,
+    /// For the `seeds` stage: the study computed beside the earlier stages and its own
+    /// seconds ([`beside`]), when it started from the stage's inputs.
+    pub(super) seeds: std::cell::RefCell<Option<(Result<beside::Study, PipelineError>, f64)>>,
 }
 
 #[cfg(test)]

@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-type Inputs = BTreeMap<String, String>;
+pub(super) type Inputs = BTreeMap<String, String>;
 
 /// One stage of the pipeline: what it reads, writes and does.
 pub(super) struct Step {
@@ -541,6 +541,30 @@ fn seeds_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
 }
 
 fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
+    // The study computed beside the stages since `train` (`beside`), else here.
+    let pre = env.seeds.borrow_mut().take();
+    let (study, note) = match pre {
+        Some((r, secs)) => (
+            r?,
+            format!(" (computed beside certify … closed_loop: {secs:.2} s of its own)"),
+        ),
+        None => (seed_study_of(env.cfg, d, env.progress)?, String::new()),
+    };
+    let text = serde_json::to_string(&study).map_err(|e| fail(Stage::Seeds, e))?;
+    write_atomic(&d.seeds(), text.as_bytes()).map_err(|e| fail(Stage::Seeds, e))?;
+    Ok(format!(
+        "{} seeds × 2 nets from x₀ = {:?}{note}",
+        study.len(),
+        initial_states(env.cfg)[0]
+    ))
+}
+
+/// The seed study on the files of `d` (dataset, validation set, both nets).
+pub(super) fn seed_study_of(
+    cfg: &ProblemConfig,
+    d: &RunDir,
+    progress: bool,
+) -> Result<super::beside::Study, PipelineError> {
     let data = load_dataset(Stage::Seeds, &d.dataset())?;
     let val = load_dataset(Stage::Seeds, &d.validation())?;
     let own = [
@@ -548,15 +572,16 @@ fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         load_model(Stage::Seeds, &d.model_regularized())?,
     ];
     let dh = sha_file(&d.dataset()).map_err(|e| fail(Stage::Seeds, e))?;
-    let hold = Hold::if_enabled(env.cfg, env.cfg.training.hold_setpoint)
-        .map_err(|e| fail(Stage::Seeds, e))?;
-    let study = seed_study(env.cfg, &data, &val, &dh, &own, hold.as_ref(), env.progress);
-    let text = serde_json::to_string(&study).map_err(|e| fail(Stage::Seeds, e))?;
-    write_atomic(&d.seeds(), text.as_bytes()).map_err(|e| fail(Stage::Seeds, e))?;
-    Ok(format!(
-        "{} seeds × 2 nets from x₀ = {:?}",
-        study.len(),
-        initial_states(env.cfg)[0]
+    let hold =
+        Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Seeds, e))?;
+    Ok(seed_study(
+        cfg,
+        &data,
+        &val,
+        &dh,
+        &own,
+        hold.as_ref(),
+        progress,
     ))
 }
 

@@ -1,0 +1,109 @@
+//! The seed study computed beside the stages between `train` and `seeds` ([`Beside`]).
+//!
+//! `seeds` reads only what `train` leaves (the dataset, the validation set, both nets) and
+//! none of what `certify` … `closed_loop` write, and those stages leave a core idle for
+//! seconds at a time (the refinement's serial retrainings). So once `train` is done, a
+//! thread starts the study (`study::seeds::seed_study`, no progress bar) on the files as
+//! they are then:
+//! ```text
+//! train ─┬─ certify → refine → statistical → export → closed_loop ─┬─ seeds (join) → plots
+//!        └─ seed study (thread) ────────────────────────────────────┘
+//! ```
+//! The `seeds` stage takes the result only if its inputs (the hashes of those files and the
+//! settings) are the ones the thread started from; otherwise it computes the study itself.
+//! Each seed's nets and runs are pure functions of their inputs, so the file is the same
+//! bytes either way. A run that fails in between leaves the thread to finish on its own
+//! (it writes nothing).
+
+use super::stages::Inputs;
+use super::{fail, PipelineError, Stage};
+use crate::io::RunDir;
+use crate::problem::ProblemConfig;
+use crate::study::seeds::SeedRun;
+use std::time::Instant;
+
+/// The seed study: one pair of runs (nominal, regularized) per seed.
+pub(super) type Study = Vec<[SeedRun; 2]>;
+
+/// A seed study running on its own thread, and the `seeds` inputs it started from.
+pub(super) struct Beside {
+    inputs: Inputs,
+    handle: std::thread::JoinHandle<(Result<Study, PipelineError>, f64)>,
+}
+
+impl Beside {
+    /// Starts the study on the files of `dir` (the `seeds` stage's inputs `inputs`).
+    pub(super) fn start(cfg: &ProblemConfig, dir: &RunDir, inputs: Inputs) -> Beside {
+        let (cfg, dir) = (cfg.clone(), RunDir::new(dir.path().to_path_buf()));
+        let handle = std::thread::spawn(move || {
+            let t = Instant::now();
+            // One thread of its own: on the shared pool its long jobs (a seed's training)
+            // would hold the workers that the stages' short parallel jobs wait for.
+            let r = match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
+                Ok(pool) => pool.install(|| super::stages::seed_study_of(&cfg, &dir, false)),
+                Err(_) => super::stages::seed_study_of(&cfg, &dir, false),
+            };
+            (r, t.elapsed().as_secs_f64())
+        });
+        Beside { inputs, handle }
+    }
+
+    /// The study and its own seconds if it started from `inputs`, else `None` (after the
+    /// thread ends: no second study competes with it).
+    pub(super) fn take(self, inputs: &Inputs) -> Option<(Result<Study, PipelineError>, f64)> {
+        let joined = self.handle.join();
+        if self.inputs != *inputs {
+            return None;
+        }
+        Some(match joined {
+            Ok(r) => r,
+            Err(_) => (
+                Err(fail(
+                    Stage::Seeds.name(),
+                    "the seed study's thread panicked",
+                )),
+                0.0,
+            ),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The study on its own one-thread pool (`Beside`) is the same bytes as the study on the
+    /// shared pool, and it is handed over only for the inputs it started from.
+    #[test]
+    fn the_study_beside_is_the_study_in_place() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/double_integrator.toml"
+        );
+        let text = std::fs::read_to_string(path)
+            .unwrap()
+            .replace("counts = [21, 11]", "counts = [9, 5]")
+            + "\n[training]\nepochs = 60\nbatch_size = 9\nvalidation_n = 40\n"
+            + "\n[closed_loop]\nsteps = 30\nseeds = 3\n";
+        let cfg = ProblemConfig::from_toml_str(&text, "small double integrator").unwrap();
+        let root = std::env::temp_dir().join(format!("ampc-beside-{}", std::process::id()));
+        let opts = crate::pipeline::RunOptions {
+            root: root.clone(),
+            until: Some(Stage::Train),
+            ..Default::default()
+        };
+        crate::pipeline::run(&cfg, &text, &opts).unwrap();
+        let dir = RunDir::new(root.join(&cfg.name));
+        let here = super::super::stages::seed_study_of(&cfg, &dir, false).unwrap();
+        let inputs: Inputs = [("a".to_string(), "1".to_string())].into();
+        let (there, secs) = Beside::start(&cfg, &dir, inputs.clone())
+            .take(&inputs)
+            .expect("the same inputs");
+        let json = |s: &Study| serde_json::to_string(s).unwrap();
+        assert_eq!(json(&there.unwrap()), json(&here));
+        assert!(secs > 0.0);
+        let other: Inputs = [("a".to_string(), "2".to_string())].into();
+        assert!(Beside::start(&cfg, &dir, inputs).take(&other).is_none());
+        let _ = std::fs::remove_dir_all(&root);
+    }
+}
