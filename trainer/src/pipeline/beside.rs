@@ -15,12 +15,18 @@
 //! bytes either way. A run that fails in between leaves the thread to finish on its own
 //! (it writes nothing).
 
-use super::stages::Inputs;
+use super::manifest::sha_file;
 use super::{fail, PipelineError, Stage};
+use crate::certify::Model;
+use crate::data::dataset::Dataset;
 use crate::io::RunDir;
+use crate::learn::setpoint::Hold;
 use crate::problem::ProblemConfig;
-use crate::study::seeds::SeedRun;
+use crate::study::seeds::{seed_study, SeedRun};
 use std::time::Instant;
+
+/// A stage's inputs: name → hash (as `stages` computes them).
+pub(super) type Inputs = std::collections::BTreeMap<String, String>;
 
 /// The seed study: one pair of runs (nominal, regularized) per seed.
 pub(super) type Study = Vec<[SeedRun; 2]>;
@@ -40,8 +46,8 @@ impl Beside {
             // One thread of its own: on the shared pool its long jobs (a seed's training)
             // would hold the workers that the stages' short parallel jobs wait for.
             let r = match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
-                Ok(pool) => pool.install(|| super::stages::seed_study_of(&cfg, &dir, false)),
-                Err(_) => super::stages::seed_study_of(&cfg, &dir, false),
+                Ok(pool) => pool.install(|| seed_study_of(&cfg, &dir, false)),
+                Err(_) => seed_study_of(&cfg, &dir, false),
             };
             (r, t.elapsed().as_secs_f64())
         });
@@ -66,6 +72,34 @@ impl Beside {
             ),
         })
     }
+}
+
+/// The seed study on the files of `d` (dataset, validation set, both nets), as the `seeds`
+/// stage computes it in place.
+pub(super) fn seed_study_of(
+    cfg: &ProblemConfig,
+    d: &RunDir,
+    progress: bool,
+) -> Result<Study, PipelineError> {
+    let at = |p: &std::path::Path, e: &dyn std::fmt::Display| {
+        fail(Stage::Seeds.name(), format!("{}: {e}", p.display()))
+    };
+    let dataset = |p: std::path::PathBuf| Dataset::load(&p).map_err(|e| fail(Stage::Seeds, e));
+    let model = |p: std::path::PathBuf| Model::load(&p).map_err(|e| fail(Stage::Seeds, e));
+    let (data, val) = (dataset(d.dataset())?, dataset(d.validation())?);
+    let own = [model(d.model_nominal())?, model(d.model_regularized())?];
+    let dh = sha_file(&d.dataset()).map_err(|e| at(&d.dataset(), &e))?;
+    let hold =
+        Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Seeds, e))?;
+    Ok(seed_study(
+        cfg,
+        &data,
+        &val,
+        &dh,
+        &own,
+        hold.as_ref(),
+        progress,
+    ))
 }
 
 #[cfg(test)]
@@ -94,7 +128,7 @@ mod tests {
         };
         crate::pipeline::run(&cfg, &text, &opts).unwrap();
         let dir = RunDir::new(root.join(&cfg.name));
-        let here = super::super::stages::seed_study_of(&cfg, &dir, false).unwrap();
+        let here = seed_study_of(&cfg, &dir, false).unwrap();
         let inputs: Inputs = [("a".to_string(), "1".to_string())].into();
         let (there, secs) = Beside::start(&cfg, &dir, inputs.clone())
             .take(&inputs)

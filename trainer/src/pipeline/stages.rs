@@ -19,12 +19,11 @@ use crate::learn::train::{train, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use crate::study::plots::{FigureEntry, PLOTS};
 use crate::study::scenarios::{closed_loop, initial_states, ClosedLoop, ClosedLoopFile};
-use crate::study::seeds::seed_study;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-pub(super) type Inputs = BTreeMap<String, String>;
+type Inputs = BTreeMap<String, String>;
 
 /// One stage of the pipeline: what it reads, writes and does.
 pub(super) struct Step {
@@ -548,7 +547,10 @@ fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             r?,
             format!(" (computed beside certify … closed_loop: {secs:.2} s of its own)"),
         ),
-        None => (seed_study_of(env.cfg, d, env.progress)?, String::new()),
+        None => (
+            super::beside::seed_study_of(env.cfg, d, env.progress)?,
+            String::new(),
+        ),
     };
     let text = serde_json::to_string(&study).map_err(|e| fail(Stage::Seeds, e))?;
     write_atomic(&d.seeds(), text.as_bytes()).map_err(|e| fail(Stage::Seeds, e))?;
@@ -556,32 +558,6 @@ fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         "{} seeds × 2 nets from x₀ = {:?}{note}",
         study.len(),
         initial_states(env.cfg)[0]
-    ))
-}
-
-/// The seed study on the files of `d` (dataset, validation set, both nets).
-pub(super) fn seed_study_of(
-    cfg: &ProblemConfig,
-    d: &RunDir,
-    progress: bool,
-) -> Result<super::beside::Study, PipelineError> {
-    let data = load_dataset(Stage::Seeds, &d.dataset())?;
-    let val = load_dataset(Stage::Seeds, &d.validation())?;
-    let own = [
-        load_model(Stage::Seeds, &d.model_nominal())?,
-        load_model(Stage::Seeds, &d.model_regularized())?,
-    ];
-    let dh = sha_file(&d.dataset()).map_err(|e| fail(Stage::Seeds, e))?;
-    let hold =
-        Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Seeds, e))?;
-    Ok(seed_study(
-        cfg,
-        &data,
-        &val,
-        &dh,
-        &own,
-        hold.as_ref(),
-        progress,
     ))
 }
 
