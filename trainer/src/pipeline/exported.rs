@@ -283,8 +283,10 @@ pub(super) fn export(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
 /// The closed loop's statistical statement when the exported band is statistical (else a
 /// file saying why not): `[certify] closed_loop` runs of the exported controller from i.i.d.
 /// uniform starts (`study::statistical_loop`). Returns the stage line's part.
-pub(super) fn closed_loop_statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
-    let cfg = env.cfg;
+pub(super) fn closed_loop_statistical(
+    cfg: &ProblemConfig,
+    d: &RunDir,
+) -> Result<String, PipelineError> {
     let x = choose(Stage::ClosedLoop, (d, cfg))?;
     let p = d.join(CLOSED_LOOP_STATISTICAL);
     let n = cfg.certify.closed_loop;

@@ -20,6 +20,16 @@
 //! after which ‖x − x_ref‖∞ stays ≤ 0.05) and the final offset |x_steps − x_ref| per state
 //! (x_ref, u_ref: the OCP's setpoint, the origin unless `ocp.x_ref`, `ocp.u_ref` say).
 //!
+//! **A network's reference is the plain solve.** In a network's run the MPC is solved only
+//! for the divergence, and without the retry ladder (as the counting stages label:
+//! [`crate::mpc::law::ladder::counting_problem`]): the warm start, the starts and the soft
+//! fallback as above; a state they leave unlabelled counts in `mpc_failures` and records no
+//! divergence. A network that drives the plant out of X reaches states where every rung
+//! fails, and there the ladder's up to `(retry_budget + 6) × max_iter` SQP iterations per
+//! state cost 1 s a step: one diverging run of the quadrotor's regularized net took 4.8 s of
+//! the stage's 5.2 s (BENCHMARKS.md, "Session 2026-12-07"). The MPC's own runs keep the
+//! ladder.
+//!
 //! A run that diverges stops with status `diverged` ([`RunStatus`]): when the plant's next
 //! state is not finite, or leaves the [`stop_box`] — the hull of X and the OCP's finite state
 //! bounds widened by [`DIVERGED_MARGIN`] × X's width on some axis (x_i ∉ [l_i − m·w_i,
@@ -470,6 +480,9 @@ pub fn simulate(
     let outside = |v: &[f64]| (0..nx).find(|&i| !(v[i] >= slo[i] && v[i] <= shi[i]));
     let constraints = cfg.constraint_set().ok().flatten();
     let mut along = Along::default();
+    // A network's divergence reference is the MPC's plain solve (no retry ladder: module
+    // doc); the law's own budget comes back when the run ends.
+    let budget = matches!(ctrl, Controller::Net(..)).then(|| law.set_retry_budget(0));
     let mut last_u = vec![0.0; nu];
     let mut next = vec![0.0; nx];
     for k in 0..s.steps {
@@ -561,6 +574,9 @@ pub fn simulate(
         run.max_violation = run.max_violation.max(viol);
         run.u.push(u);
         run.x.push(x.clone());
+    }
+    if let Some(b) = budget {
+        law.set_retry_budget(b);
     }
     run.violation_percent = 100.0 * run.violation_steps as f64 / s.steps.max(1) as f64;
     let settled = |v: &Vec<f64>| v.iter().zip(&x_ref).all(|(c, r)| (c - r).abs() <= 0.05);
@@ -660,6 +676,47 @@ mod tests {
         // axis 1: hull [−2, 3], width of X 4 → [−42, 43]; axis 2: hull [0.5, 4], width 1.
         assert_eq!(lo, vec![-42.0, -9.5]);
         assert_eq!(hi, vec![43.0, 14.0]);
+    }
+
+    /// A network's run solves its divergence reference without the retry ladder and gives
+    /// the law its budget back: every divergence is ‖κ_plain(x) − κ_NN(x)‖ of a plain solve
+    /// (worked again here with a law of budget 0 on the recorded states), and an MPC run
+    /// with the same law afterwards is the run of a fresh law.
+    #[test]
+    fn a_network_run_uses_the_plain_solve_and_restores_the_budget() {
+        use crate::learn::mlp::Activation;
+        let cfg = ProblemConfig::default();
+        let (lo, hi) = (&cfg.domain.lo, &cfg.domain.hi);
+        let (ulo, uhi) = (&cfg.ocp.u_lo, &cfg.ocp.u_hi);
+        let net = Mlp::new(&[2, 8, 1], Activation::Tanh, 5, lo, hi, ulo, uhi);
+        let s = SimSettings {
+            steps: 12,
+            noise: vec![],
+            seed: 0,
+            mass_mismatch: 0.0,
+            mismatch_parameter: None,
+            disturbance: Disturbance::None,
+        };
+        let budget = cfg.solver.retry_budget;
+        assert!(budget > 0);
+        let mut law = MpcLaw::new(&cfg);
+        let x0 = [1.0, 0.3];
+        let r = simulate(&cfg, &mut law, &Controller::Net(&net, 1e9, None), &x0, &s);
+        assert_eq!(law.set_retry_budget(budget), budget);
+        let mut plain = MpcLaw::new(&crate::mpc::law::ladder::counting_problem(&cfg));
+        let mut along = Along::default();
+        assert_eq!(r.divergence.len(), r.u.len());
+        for (k, d) in r.divergence.iter().enumerate() {
+            let kappa = plain.solve_next(&r.x[k], &mut along).u;
+            let want = (kappa[0] - net.predict(&r.x[k])[0]).abs();
+            assert!(
+                (d - want).abs() <= 1e-9 * want.max(1.0),
+                "step {k}: {d} vs {want}"
+            );
+        }
+        let after = simulate(&cfg, &mut law, &Controller::Mpc, &x0, &s);
+        let fresh = simulate(&cfg, &mut MpcLaw::new(&cfg), &Controller::Mpc, &x0, &s);
+        assert_eq!(after.u, fresh.u);
     }
 
     #[test]

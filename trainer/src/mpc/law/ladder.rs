@@ -48,6 +48,12 @@ impl MpcLaw {
         hard.or_else(|| self.retry_soft(xs, &mut spent))
     }
 
+    /// Sets `solver.retry_budget` of this law (0: no ladder, as [`counting_problem`]) and
+    /// returns the one it replaces; nothing else about the law changes.
+    pub fn set_retry_budget(&mut self, budget: usize) -> usize {
+        std::mem::replace(&mut self.cfg.solver.retry_budget, budget)
+    }
+
     /// The SQP iterations the retry ladder may spend on one state: `solver.retry_budget ×
     /// max_iter`.
     fn retry_budget(&self) -> usize {
