@@ -32,7 +32,7 @@ use super::lanes::{eval_f32_lanes, Lane, LANES};
 use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
 
 /// Number of random states behind [`ExportReport`]'s observed differences.
-pub const SAMPLES: usize = 1_000_000;
+pub const SAMPLES: usize = 1 << 18;
 /// Largest f32 ≤ v.
 pub(super) fn f32_down(v: f64) -> f32 {
     let c = v as f32;
