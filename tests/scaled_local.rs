@@ -4,8 +4,10 @@
 //! in the unscaled norm and in the default one (the half-widths of X and U):
 //! - unscaled, ε = ‖(e_f, e_g)‖₂ adds mm/s and m/s, so the bound it gives on g is the error
 //!   on f in mm/s — beyond g's whole range (meaningless);
-//! - scaled, ε = ‖(e_f/1000, e_g/1)‖₂ and the per-input bounds s_u,j·ε are tight for both
-//!   inputs;
+//! - scaled, ε = ‖(e_f/1000, e_g/1)‖₂ and the per-input bounds s_u,j·ε stay within each
+//!   input's range, the bound on g within 2× of g's sampled error (one norm for both
+//!   inputs: f's scaled bound, s_u,f·ε, is then looser than its unscaled one, since ε is
+//!   set by g's error);
 //! - a second method: at fresh states the sampled error of each input never exceeds its
 //!   per-input bound (in either norm), nor the scaled error the scaled ε.
 
@@ -117,12 +119,12 @@ fn local_cells_in_the_scaled_norm_are_tight_per_input_and_cover_fresh_states() {
         "scaled bound on g {gs} not far below unscaled {gu}"
     );
     assert!(
-        gs < 0.2,
-        "scaled bound on g {gs} m/s is not tight (range 2)"
+        gs < 2.0,
+        "scaled bound on g {gs} m/s is not below g's range (2)"
     );
     assert!(
-        fs < 200.0,
-        "scaled bound on f {fs} mm/s is not tight (range 2000)"
+        fs < 2000.0,
+        "scaled bound on f {fs} mm/s is not below f's range (2000)"
     );
 
     // Second method: fresh states (another seed), the MPC's label against the clamped net.
@@ -147,6 +149,19 @@ fn local_cells_in_the_scaled_norm_are_tight_per_input_and_cover_fresh_states() {
     eprintln!(
         "sampled at {n} fresh states: f {:.3}, g {:.5}, scaled {worst_scaled:.5}",
         worst[0], worst[1]
+    );
+    // Tight per input where it matters: the scaled bound on g is within 2× of g's sampled
+    // error (the net fits g poorly: its training loss is in physical units, where g's
+    // errors weigh 10⁻⁶ of f's), the unscaled one over 100× above it.
+    assert!(
+        gs <= 2.0 * worst[1],
+        "g: bound {gs} vs sampled {}",
+        worst[1]
+    );
+    assert!(
+        gu >= 100.0 * worst[1],
+        "g: unscaled {gu} vs sampled {}",
+        worst[1]
     );
     for (j, w) in worst.iter().enumerate() {
         assert!(
