@@ -32,7 +32,7 @@ pub(super) type Inputs = std::collections::BTreeMap<String, String>;
 pub(super) type Study = Vec<[SeedRun; 2]>;
 
 /// A seed study running on its own thread, and the `seeds` inputs it started from.
-pub(super) struct Beside {
+pub(crate) struct Beside {
     inputs: Inputs,
     handle: std::thread::JoinHandle<(Result<Study, PipelineError>, f64)>,
 }

@@ -274,7 +274,7 @@ pub fn run(
         let outputs = (stage.outputs)();
         let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
         let seeds = match stage.stage {
-            Stage::Seeds => beside.take().and_then(|b| b.take(&inputs)),
+            Stage::Seeds => beside.take().map(|b| (b, inputs.clone())),
             _ => None,
         };
         let env = Env {
@@ -416,9 +416,10 @@ pub(super) struct Env<'a> {
     pub(super) cfg: &'a ProblemConfig,
     pub(super) progress: bool,
     pub(super) timings: Vec<Timing>,
-    /// For the `seeds` stage: the study computed beside the earlier stages and its own
-    /// seconds ([`beside`]), when it started from the stage's inputs.
-    pub(super) seeds: std::cell::RefCell<Option<(Result<beside::Study, PipelineError>, f64)>>,
+    /// For the `seeds` stage: the study running beside the earlier stages ([`beside`]) and
+    /// the stage's inputs, to be joined inside the stage (its wait counts in the stage's
+    /// seconds) and taken if it started from those inputs.
+    pub(super) seeds: std::cell::RefCell<Option<(beside::Beside, beside::Inputs)>>,
 }
 
 #[cfg(test)]

@@ -548,8 +548,13 @@ fn seeds_inputs(cx: &Ctx, cfg: &ProblemConfig) -> Result<Inputs, PipelineError> 
 }
 
 fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
-    // The study computed beside the stages since `train` (`beside`), else here.
-    let pre = env.seeds.borrow_mut().take();
+    // The study computed beside the stages since `train` (`beside`; the wait for it is
+    // this stage's time), else here.
+    let pre = env
+        .seeds
+        .borrow_mut()
+        .take()
+        .and_then(|(b, inputs)| b.take(&inputs));
     let (study, note) = match pre {
         Some((r, secs)) => (
             r?,
