@@ -83,6 +83,34 @@ fn every_stage_completes_and_diverged_runs_are_stopped() {
         unlabelled > 0,
         "no unlabelled state: not an infeasible region\n{data}"
     );
+    // The statistical tier: the exported statement is conditional on hard-feasible states
+    // (status `converged`); unlabelled and soft-labelled states form the infeasible share.
+    let csv = std::fs::read_to_string(run.join("statistical.csv")).unwrap();
+    let status = |l: &str| l.split(',').nth(7).unwrap_or_default().to_string();
+    let statuses: Vec<String> = csv.lines().skip(1).map(status).collect();
+    let n = statuses.len() as u64;
+    let conv = statuses.iter().filter(|s| *s == "converged").count() as u64;
+    let soft = statuses.iter().filter(|s| *s == "soft").count() as u64;
+    let cert: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("certificate_statistical.json")).unwrap(),
+    )
+    .unwrap();
+    let st = &cert["statistical"];
+    assert_eq!(st["samples"].as_u64(), Some(n), "{st}");
+    assert_eq!(st["given_feasible"]["samples"].as_u64(), Some(conv), "{st}");
+    assert_eq!(
+        st["infeasible_share"]["unlabelled"].as_u64(),
+        Some(n - conv),
+        "{st}"
+    );
+    if soft > 0 {
+        assert_eq!(st["soft_labelled"]["states"].as_u64(), Some(soft), "{st}");
+    }
+    let outcome: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("statistical.json")).unwrap())
+            .unwrap();
+    assert_eq!(outcome["infeasible"].as_u64(), Some(n - conv), "{outcome}");
+    assert_eq!(outcome["soft"].as_u64(), Some(soft), "{outcome}");
     // The closed loop: no null anywhere, the runs from the runaway corner diverged.
     let text = std::fs::read_to_string(run.join("closed_loop.json")).unwrap();
     assert!(!text.contains("null"), "null in closed_loop.json");

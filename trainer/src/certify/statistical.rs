@@ -37,11 +37,23 @@
 //! u unlabelled states of n give P(x ∉ X_L) ≤ p̄(n, u). The unconditional bound above
 //! (an unlabelled state an exceedance) is kept: it is the conjunction's worst case.
 //!
+//! **Feasible, not merely labelled.** A state labelled by the soft problem (`soft`: the
+//! hard OCP has no solution, the exact-penalty problem's optimum is the label) is labelled
+//! but not MPC-feasible. The statement the pipeline exports is conditional on the
+//! hard-feasible part X_F ⊆ X_L (status `converged`, the same test as the closed loop's
+//! feasible starts): [`Statistical::given_feasible`] counts the n_F hard-feasible states
+//! and their k_F exceedances, P(‖κ − κ̂‖ > ε | x ∈ X_F) ≤ p̄(n_F, k_F), and
+//! [`Statistical::infeasible_share`] bounds P(x ∉ X_F) ≤ p̄(n, n − n_F) with the box of the
+//! states outside X_F. The soft states' errors are reported apart
+//! ([`Statistical::soft_labelled`]): the soft law near a runaway region is a penalty
+//! optimum a regression net is not asked to match, and no bound rests on it.
+//!
 //! [`eps_for_probability`] turns it around: the smallest observed-error level ε_p such that
 //! the bound for ε_p is ≤ a target p (the (k*+1)-th largest error, k* the largest count
 //! whose bound is ≤ p).
 
-use crate::data::dataset::{self, Dataset, DatasetError, GenerateOptions};
+use crate::data::dataset::{self, Dataset, DatasetError, GenerateOptions, Record};
+use crate::mpc::sqp::SqpStatus;
 use crate::problem::{ProblemConfig, SamplerKind, SamplingSettings};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -110,6 +122,29 @@ pub struct Statistical {
     /// written before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unlabelled_share: Option<UnlabelledShare>,
+    /// The bound conditional on the states where the MPC's hard OCP is feasible (module
+    /// doc: soft labels excluded; absent in files written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub given_feasible: Option<GivenLabelled>,
+    /// The bound on the share of X where the MPC's hard OCP has no solution (unlabelled or
+    /// soft-labelled states; absent in files written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub infeasible_share: Option<UnlabelledShare>,
+    /// The soft-labelled states and the controller's largest error there (module doc; no
+    /// bound rests on them). Absent when there are none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub soft_labelled: Option<SoftLabelled>,
+}
+
+/// The states labelled by the soft problem only (the hard OCP infeasible) and the
+/// controller's largest error against those labels, in the certificate's norm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SoftLabelled {
+    /// States labelled by the soft problem.
+    pub states: u64,
+    /// Largest error there (+∞ for a non-finite output).
+    #[serde(with = "inf::value")]
+    pub max_error: f64,
 }
 
 impl Statistical {
@@ -316,6 +351,53 @@ pub fn from_errors(
         eps_at_p_target_per_input: None,
         given_labelled: Some(given_labelled),
         unlabelled_share: Some(unlabelled_share),
+        given_feasible: None,
+        infeasible_share: None,
+        soft_labelled: None,
+    }
+}
+
+impl Statistical {
+    /// Adds the bound given hard-feasible states, the share of X outside them and the
+    /// soft-labelled states' errors (module doc). `errors` are those of [`from_errors`];
+    /// `feasible[i]`: whether state i's hard OCP has a solution (a feasible state is
+    /// labelled; a labelled state that is not feasible is soft-labelled).
+    pub fn with_feasibility(mut self, errors: &[f64], feasible: &[bool]) -> Self {
+        let bad = |e: &f64| !e.is_finite();
+        let hard: Vec<f64> = errors
+            .iter()
+            .zip(feasible)
+            .filter(|(_, f)| **f)
+            .map(|(e, _)| if e.is_nan() { f64::INFINITY } else { *e })
+            .collect();
+        let (n, n_f) = (errors.len() as u64, hard.len() as u64);
+        let k_f = hard.iter().filter(|e| bad(e) || **e > self.eps).count() as u64;
+        self.given_feasible = Some(GivenLabelled {
+            samples: n_f,
+            exceedances: k_f,
+            p_exceed_upper: clopper_pearson_upper(n_f, k_f, self.confidence),
+            eps_at_p_target: eps_for_probability(&hard, self.p_target, self.confidence),
+        });
+        self.infeasible_share = Some(UnlabelledShare {
+            unlabelled: n - n_f,
+            samples: n,
+            p_upper: clopper_pearson_upper(n, n - n_f, self.confidence),
+            bounding_box: None,
+        });
+        // Labelled (not NaN) but not hard-feasible: the soft labels.
+        let soft: Vec<f64> = errors
+            .iter()
+            .zip(feasible)
+            .filter(|(e, f)| !**f && !e.is_nan())
+            .map(|(e, _)| *e)
+            .collect();
+        self.soft_labelled = (!soft.is_empty()).then(|| SoftLabelled {
+            states: soft.len() as u64,
+            max_error: soft.iter().fold(0.0f64, |m, e| {
+                m.max(if bad(e) { f64::INFINITY } else { *e })
+            }),
+        });
+        self
     }
 }
 
@@ -571,15 +653,29 @@ pub fn certify_statistically(
             }
         })
         .collect();
-    let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target).in_norm(norm);
+    // Hard-feasible: the hard OCP converged (the closed loop's test of a feasible start).
+    let kept: Vec<_> = data.records.iter().filter(|r| !inside(&r.x)).collect();
+    let unlabelled = |r: &&Record| !r.is_labelled() || r.u.iter().any(|v| !v.is_finite());
+    let feasible: Vec<bool> = kept
+        .iter()
+        .map(|r| r.status == SqpStatus::Converged && !unlabelled(r))
+        .collect();
+    let mut s = from_errors(&errors, eps, opts.confidence, seed, opts.p_target)
+        .with_feasibility(&errors, &feasible)
+        .in_norm(norm);
     if let Some(share) = s.unlabelled_share.as_mut() {
         share.bounding_box = bounding_box(
-            data.records
-                .iter()
-                .filter(|r| {
-                    !inside(&r.x) && (!r.is_labelled() || r.u.iter().any(|v| !v.is_finite()))
-                })
+            kept.iter()
+                .filter(|r| unlabelled(r))
                 .map(|r| r.x.as_slice()),
+        );
+    }
+    if let Some(share) = s.infeasible_share.as_mut() {
+        share.bounding_box = bounding_box(
+            kept.iter()
+                .zip(&feasible)
+                .filter(|(_, f)| !**f)
+                .map(|(r, _)| r.x.as_slice()),
         );
     }
     s.user_seed = opts.seed;
@@ -600,7 +696,9 @@ pub fn certify_statistically(
     s.rests_on = format!(
         "{domain}, drawn from the model's hash (none is a training state), labelled by the MPC \
          (an unlabelled state counts as an exceedance here; `given_labelled` bounds the \
-         error on the labelled states alone, `unlabelled_share` the share left unlabelled); \
+         error on the labelled states alone, `unlabelled_share` the share left unlabelled; \
+         `given_feasible` on the states where the hard OCP is feasible, soft labels \
+         excluded, `infeasible_share` the share where it is not); \
          the errors are those of {}; Clopper–Pearson bound, no Lipschitz or cell assumption",
         s.function
     );

@@ -417,4 +417,38 @@ pub(super) fn print_statistical(s: &Statistical) {
             );
         }
     }
+    if let (Some(g), Some(u)) = (&s.given_feasible, &s.infeasible_share) {
+        if u.unlabelled > 0 {
+            println!(
+                "    given feasible   P(error > eps | the MPC's hard problem is feasible at x) ≤ \
+                 {:.3e} ({} exceedances in {} feasible states)",
+                g.p_exceed_upper, g.exceedances, g.samples
+            );
+            match g.eps_at_p_target {
+                Some(e) => println!(
+                    "    eps at P ≤ {:.1e} given feasible  {e:.6}   (statistical, confidence {})",
+                    s.p_target, s.confidence
+                ),
+                None => println!(
+                    "    eps at P ≤ {:.1e} given feasible  not reachable with {} states",
+                    s.p_target, g.samples
+                ),
+            }
+            let place = u.bounding_box.as_ref().map_or(String::new(), |(lo, hi)| {
+                format!(", all inside the box {lo:?} … {hi:?}")
+            });
+            println!(
+                "    infeasible       P(the hard problem has no solution at x) ≤ {:.3e} ({} of {} \
+                 states{place}: unlabelled or soft-labelled; Clopper–Pearson, confidence {})",
+                u.p_upper, u.unlabelled, u.samples, s.confidence
+            );
+        }
+    }
+    if let Some(soft) = &s.soft_labelled {
+        println!(
+            "    soft-labelled    {} states, max error {:.6} (the soft problem's labels: no bound \
+             rests on them)",
+            soft.states, soft.max_error
+        );
+    }
 }

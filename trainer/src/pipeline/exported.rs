@@ -115,11 +115,10 @@ fn export_model(
         .map_or_else(Vec::new, |e| e.boxes.clone());
     if best.source == "statistical" {
         let block = best.file.statistical.as_ref();
-        // Conditional on an MPC label: the claim counts the labelled states it rests on.
-        let samples = match (
-            st.conditional,
-            block.and_then(|b| b.given_labelled.as_ref()),
-        ) {
+        // Conditional on a hard-feasible state: the claim counts the states it rests on
+        // (older files: the labelled ones) and the infeasible share's bound.
+        let given = block.and_then(|b| b.given_feasible.as_ref().or(b.given_labelled.as_ref()));
+        let samples = match (st.conditional, given) {
             (true, Some(g)) => g.samples,
             _ => st.samples,
         };
@@ -127,7 +126,10 @@ fn export_model(
             p_exceed_upper: st.p_target,
             confidence: st.confidence,
             samples,
-            unlabelled_p_upper: st.conditional.then_some(st.unlabelled_p_upper).flatten(),
+            unlabelled_p_upper: st
+                .conditional
+                .then_some(st.infeasible_p_upper.or(st.unlabelled_p_upper))
+                .flatten(),
         };
         em = em.with_statistical_eps(best.eps, claim)?;
     }
@@ -150,17 +152,24 @@ fn verdict(
             st.p_target,
             st.confidence,
             if st.conditional {
-                " given that the MPC has a solution"
+                " given that the MPC's hard problem has a solution"
             } else {
                 ""
             },
             st.samples,
             best.net.name(),
-            match (st.conditional, st.unlabelled_p_upper) {
+            match (
+                st.conditional,
+                st.infeasible_p_upper.or(st.unlabelled_p_upper)
+            ) {
                 (true, Some(p)) => format!(
-                    "; the MPC has no solution on a share ≤ {p:.3e} of X ({} of {} states, \
-                     its own Clopper–Pearson bound)",
-                    st.unlabelled, st.samples
+                    "; the MPC has no solution on a share ≤ {p:.3e} of X ({} of {} states: {} \
+                     unlabelled, {} labelled only by the soft problem; its own Clopper–Pearson \
+                     bound)",
+                    st.infeasible.max(st.unlabelled),
+                    st.samples,
+                    st.unlabelled,
+                    st.soft
                 ),
                 _ => String::new(),
             }

@@ -120,13 +120,24 @@ pub(super) struct StatisticalOutcome {
     pub net: Option<Net>,
     /// The exported level ε_p (scaled norm), when there is a finite one.
     pub eps_p: Option<f64>,
-    /// Whether ε_p is the level conditional on MPC-labelled states (unlabelled states in
-    /// the draw: unconditionally the level is ∞).
+    /// Whether ε_p is the level conditional on MPC-feasible states (the hard OCP has a
+    /// solution; unlabelled states in the draw: unconditionally the level is ∞).
     pub conditional: bool,
     /// P(the MPC leaves a uniform state unlabelled) ≤ this (its own Clopper–Pearson bound).
     pub unlabelled_p_upper: Option<f64>,
     /// Unlabelled states of the draw.
     pub unlabelled: u64,
+    /// P(the MPC's hard OCP has no solution at a uniform state: unlabelled or soft-labelled)
+    /// ≤ this (its own Clopper–Pearson bound); the share the conditional ε_p says nothing
+    /// about. Absent in files written before it existed.
+    #[serde(default)]
+    pub infeasible_p_upper: Option<f64>,
+    /// States of the draw where the hard OCP has no solution (unlabelled or soft-labelled).
+    #[serde(default)]
+    pub infeasible: u64,
+    /// Of those, the soft-labelled ones.
+    #[serde(default)]
+    pub soft: u64,
     /// n: states drawn.
     pub samples: u64,
     /// p of ε_p.
@@ -458,6 +469,9 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         conditional: false,
         unlabelled_p_upper: None,
         unlabelled: 0,
+        infeasible_p_upper: None,
+        infeasible: 0,
+        soft: 0,
         samples: 0,
         p_target: set.p_target,
         confidence: set.confidence,
@@ -487,12 +501,14 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         model_hash: &hash,
         training: &training,
     };
-    // Aim at `statistical` labelled states (the conditional bound counts those): the draw is
-    // sized from the validation set's unlabelled share (`draw_for_labelled`).
+    // Aim at `statistical` hard-feasible states (the conditional bound counts those): the
+    // draw is sized from the validation set's share of states where the hard OCP has no
+    // solution, unlabelled or soft-labelled (`draw_for_labelled`).
     let (vn, vu) = crate::data::dataset::Dataset::load(&d.validation())
         .map(|v| {
-            let u = crate::data::unlabelled::Unlabelled::of(&v);
-            (u.states as u64, u.unlabelled as u64)
+            let hard = crate::mpc::sqp::SqpStatus::Converged;
+            let out = v.records.iter().filter(|r| r.status != hard).count();
+            (v.records.len() as u64, out as u64)
         })
         .unwrap_or((0, 0));
     let samples =
@@ -526,12 +542,14 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
     let finite = |e: Option<f64>| e.filter(|v| v.is_finite());
     let (eps_p, conditional) = match finite(st.eps_at_p_target) {
         Some(e) => (Some(e), false),
+        // Conditional on the hard-feasible states (soft labels are not MPC-feasible).
         None => (
-            finite(st.given_labelled.as_ref().and_then(|g| g.eps_at_p_target)),
+            finite(st.given_feasible.as_ref().and_then(|g| g.eps_at_p_target)),
             true,
         ),
     };
     let share = st.unlabelled_share.as_ref();
+    let infeasible = st.infeasible_share.as_ref();
     let out = StatisticalOutcome {
         ran: true,
         reason: format!(
@@ -545,6 +563,9 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
         conditional: conditional && eps_p.is_some(),
         unlabelled_p_upper: share.map(|s| s.p_upper),
         unlabelled: st.unlabelled,
+        infeasible_p_upper: infeasible.map(|s| s.p_upper),
+        infeasible: infeasible.map_or(st.unlabelled, |s| s.unlabelled),
+        soft: st.soft_labelled.as_ref().map_or(0, |s| s.states),
         samples: st.samples,
         p_target: st.p_target,
         confidence: st.confidence,
@@ -553,16 +574,24 @@ pub(super) fn statistical(env: &Env, d: &RunDir) -> Result<String, PipelineError
     let level = match (eps_p, out.conditional) {
         (Some(e), false) => format!("ε_p = {e:.4}"),
         (Some(e), true) => format!(
-            "ε_p = {e:.4} given an MPC label ({} of {} states unlabelled: P(unlabelled) ≤ {:.3e})",
-            st.unlabelled,
+            "ε_p = {e:.4} given a hard-feasible MPC state ({} of {} states infeasible: {} \
+             unlabelled, {} soft-labelled{}; P(infeasible) ≤ {:.3e})",
+            out.infeasible,
             st.samples,
-            out.unlabelled_p_upper.unwrap_or(f64::NAN)
+            st.unlabelled,
+            out.soft,
+            st.soft_labelled.as_ref().map_or(String::new(), |s| format!(
+                ", max error there {:.4}, no bound rests on it",
+                s.max_error
+            )),
+            out.infeasible_p_upper.unwrap_or(f64::NAN)
         ),
         (None, _) => "no finite level (too few states or every one exceeding)".into(),
     };
     let drawn = if samples > set.statistical {
         format!(
-            " (drawn for {} labelled: {vu} of {vn} validation states unlabelled)",
+            " (drawn for {} hard-feasible: {vu} of {vn} validation states infeasible or \
+             unlabelled)",
             set.statistical
         )
     } else {

@@ -38,6 +38,21 @@ fn from_level<E: serde::de::Error>(l: Level) -> Result<f64, E> {
     }
 }
 
+/// `f64` with +∞ as `"inf"` (module doc).
+pub mod value {
+    use super::*;
+
+    /// Writes +∞ as `"inf"`, else the number.
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        to_level(*v).serialize(s)
+    }
+
+    /// Reads a number or `"inf"`.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        from_level(Level::deserialize(d)?)
+    }
+}
+
 /// `Option<f64>` with +∞ as `"inf"` (module doc).
 pub mod option {
     use super::*;

@@ -151,6 +151,49 @@ fn conditional_on_labelled_states_and_the_unlabelled_share() {
     assert!(json.contains("\"given_labelled\"") && json.contains("\"unlabelled_share\""));
 }
 
+/// Soft labels are labelled but not MPC-feasible: the block given feasible states leaves
+/// them out (with the unlabelled ones) and counts both in the infeasible share, whose bound
+/// is the same p̄(250, 50) as above when 20 unlabelled and 30 soft-labelled states make the
+/// 50; the soft states' largest error is reported, and it sets neither the conditional
+/// level nor its exceedances. The feasible block's level is the largest feasible error
+/// here (k* = 0 with 200 states at p = 0.025: p̄(200, 0) = 0.0228, p̄(200, 1) = 0.0327).
+#[test]
+fn given_feasible_states_soft_labels_are_infeasible() {
+    let mut errors: Vec<f64> = (0..200).map(|i| 0.001 * i as f64 / 200.0).collect();
+    errors[9] = 0.08; // the largest feasible error
+    errors.extend(std::iter::repeat_n(f64::NAN, 20)); // unlabelled
+    let soft: Vec<f64> = (0..30).map(|i| if i == 4 { 0.9 } else { 0.01 }).collect();
+    errors.extend(&soft); // soft-labelled, one far off
+    let feasible: Vec<bool> = (0..errors.len()).map(|i| i < 200).collect();
+    let s = from_errors(&errors, 0.1, 0.99, 0, 0.025).with_feasibility(&errors, &feasible);
+    assert!(clopper_pearson_upper(200, 1, 0.99) > 0.025);
+    // The labelled block still counts the soft state's 0.9 as an exceedance.
+    assert_eq!(s.given_labelled.as_ref().unwrap().exceedances, 1);
+    let g = s.given_feasible.clone().expect("the feasible block");
+    assert_eq!((g.samples, g.exceedances), (200, 0));
+    assert_eq!(g.p_exceed_upper, clopper_pearson_upper(200, 0, 0.99));
+    assert_eq!(g.eps_at_p_target, Some(0.08));
+    let u = s.infeasible_share.clone().expect("the infeasible share");
+    assert_eq!((u.unlabelled, u.samples), (50, 250));
+    let want = 0.265_458_008_567_424_9;
+    assert!((u.p_upper - want).abs() <= 1e-9 * want, "{u:?}");
+    let soft = s.soft_labelled.clone().expect("the soft states");
+    assert_eq!((soft.states, soft.max_error), (30, 0.9));
+    // A non-finite output at a feasible state is an exceedance there.
+    let mut bad = errors.clone();
+    bad[3] = f64::INFINITY;
+    let s = from_errors(&bad, 0.1, 0.99, 0, 0.025).with_feasibility(&bad, &feasible);
+    assert_eq!(s.given_feasible.as_ref().unwrap().exceedances, 1);
+    // Round trip through JSON, the soft block's +∞ included.
+    let mut t = s.clone();
+    t.soft_labelled.as_mut().unwrap().max_error = f64::INFINITY;
+    let json = serde_json::to_string(&t).unwrap();
+    assert!(json.contains("\"given_feasible\"") && json.contains("\"infeasible_share\""));
+    let back: Statistical = serde_json::from_str(&json).unwrap();
+    assert_eq!(back.soft_labelled.unwrap().max_error, f64::INFINITY);
+    assert_eq!(back.given_feasible, t.given_feasible);
+}
+
 /// The bounding box of the unlabelled states: the smallest box holding them.
 #[test]
 fn bounding_box_of_states() {

@@ -75,10 +75,11 @@ pub struct StatisticalClaim {
     pub confidence: f64,
     /// n: the i.i.d. uniform states.
     pub samples: u64,
-    /// Set when the claim is conditional on MPC-feasible states (the draw had states the
-    /// MPC left unlabelled; `samples` then counts the labelled ones): P(the MPC leaves a
-    /// uniform state of X unlabelled) ≤ this, its own Clopper–Pearson bound at the same
-    /// confidence. `None`: the claim is over every state of X.
+    /// Set when the claim is conditional on MPC-feasible states (the draw had states where
+    /// the MPC's hard problem has no solution — unlabelled, or labelled only by the soft
+    /// problem; `samples` then counts the feasible ones): P(a uniform state of X is not
+    /// MPC-feasible) ≤ this, its own Clopper–Pearson bound at the same confidence (the name
+    /// is kept from the format's first version). `None`: the claim is over every state of X.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unlabelled_p_upper: Option<f64>,
 }
@@ -122,10 +123,10 @@ impl StatisticalClaim {
             ),
             Some(q) => format!(
                 "P(‖κ − u‖ > ε | the MPC has a solution at x) ≤ {:.3e} with confidence {} \
-                 (Clopper–Pearson, {} i.i.d. uniform states of X that the MPC labelled): \
-                 conditional on MPC-feasible states; the MPC leaves a uniform state of X \
-                 unlabelled with P ≤ {:.3e} (its own Clopper–Pearson bound), where the claim \
-                 says nothing",
+                 (Clopper–Pearson, {} i.i.d. uniform states of X where the MPC's hard problem \
+                 is feasible): conditional on MPC-feasible states; a uniform state of X is not \
+                 MPC-feasible (unlabelled, or only the soft problem solved) with P ≤ {:.3e} \
+                 (its own Clopper–Pearson bound), where the claim says nothing",
                 self.p_exceed_upper, self.confidence, self.samples, q
             ),
         }
