@@ -49,21 +49,9 @@ pub fn scattered_covering_radius(points: &[f64], lo: &[f64], hi: &[f64], tol: f6
             .sqrt();
         return (diag, diag);
     }
-    let dist = |c: &[f64]| -> f64 {
-        let mut best = f64::INFINITY;
-        for i in 0..n {
-            let mut s = 0.0;
-            for k in 0..d {
-                let t = c[k] - points[i * d + k];
-                s += t * t;
-                if s >= best {
-                    break;
-                }
-            }
-            best = best.min(s);
-        }
-        best.sqrt()
-    };
+    // The exact nearest-point distance (a k-d tree: the same bits as the brute minimum).
+    let tree = super::nearest::KdTree::new(points, d);
+    let dist = |c: &[f64]| -> f64 { tree.nearest_sq(c).sqrt() };
     struct Cell {
         lo: Vec<f64>,
         hi: Vec<f64>,

@@ -9,6 +9,7 @@
 //! - [`netbounds`]: sound interval enclosures of κ_NN, ∂κ_NN/∂x, ∂²κ_NN/∂x² over a box.
 //! - [`norm`]: the scaled norm ‖S_u⁻¹Δu‖₂, ‖S_x⁻¹Δx‖₂ every bound is stated in.
 //! - [`certificate`]: Theorem 1 and its inverse (what a target ε requires).
+//! - [`nearest`]: the k-d tree behind the covering radius's nearest-point distances.
 //! - [`local`]: the cell bound ε_C from corner labels, enclosures and a remainder.
 //! - [`critical`]: where the MPC is a QP, the proof that κ is affine on a cell (exact MPC part).
 //! - [`refine`]: adaptive refinement of the cells until the target ε is met.
@@ -26,6 +27,7 @@ pub mod file;
 pub mod lipschitz;
 pub(crate) mod local;
 pub(crate) mod local_summary;
+pub(crate) mod nearest;
 pub(crate) mod netbounds;
 pub mod norm;
 pub mod refine;
