@@ -348,8 +348,18 @@ pub(super) fn closed_loop_statistical(
         ),
         _ => String::new(),
     };
+    let left = match (s.failing_left_domain, &s.reach) {
+        (Some(k), Some((lo, hi))) if k > 0 => format!(
+            "; {k} of the {} failing runs left X (the device projects such states onto X), \
+             the runs reached [{}] … [{}]",
+            f.violating,
+            crate::study::statistical_loop::short(lo),
+            crate::study::statistical_loop::short(hi)
+        ),
+        _ => String::new(),
+    };
     Ok(format!(
-        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}, {} steps{mpc}{offset}",
+        "closed-loop statistical: P(run violates or does not converge) ≤ {:.3e} from MPC-feasible starts ({} of {}), ≤ {:.3e} from all ({} of {}), confidence {}, {} steps{mpc}{offset}{left}",
         ff.p_violation_upper, ff.violating, ff.trajectories, f.p_violation_upper, f.violating, f.trajectories, s.confidence, s.steps
     ))
 }

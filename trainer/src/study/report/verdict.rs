@@ -178,7 +178,35 @@ fn closed_loop_statement(cl: &serde_json::Value) -> String {
         cl["steps"].as_u64().unwrap_or(0),
         cl["not_converged"].as_u64().unwrap_or(0),
     ) + &mpc_beside(cl)
+        + &left_domain(cl)
         + &convergence_rule(cl)
+}
+
+/// How many failing runs left X, where the device projects the state onto X, and where the
+/// runs went (empty when none did, or in files written before it was counted).
+fn left_domain(cl: &serde_json::Value) -> String {
+    let k = cl["failing_left_domain"].as_u64().unwrap_or(0);
+    let corner = |i: usize| -> Option<String> {
+        let v: Option<Vec<f64>> = cl["reach"][i]
+            .as_array()?
+            .iter()
+            .map(|x| x.as_f64())
+            .collect();
+        Some(crate::study::statistical_loop::short(&v?))
+    };
+    let (Some(lo), Some(hi)) = (corner(0), corner(1)) else {
+        return String::new();
+    };
+    if k == 0 {
+        return String::new();
+    }
+    format!(
+        " {k} of the failing runs evaluated the controller at states outside X, where the \
+         device projects the state onto X before the network (the band holds on X only): \
+         the runs reached [{lo}] … [{hi}]. A `[domain]` that covers where the closed loop goes \
+         (then `trainer run` again: new data, training and bounds) tests the network there \
+         instead of its projection."
+    )
 }
 
 /// The convergence rule, the run length's origin and a steady offset at the setpoint
