@@ -434,7 +434,9 @@ pub fn closed_loop_statistical(
     };
     // The starts' feasibility only counts: no retry ladder.
     let counting = crate::mpc::law::ladder::counting_problem(cfg);
-    let runs: Vec<(bool, ((f64, f64), Reach))> = (0..n as u64)
+    // (MPC-feasible start, ((violation, distance), where the controller was evaluated)).
+    type Run = (bool, ((f64, f64), Reach));
+    let runs: Vec<Run> = (0..n as u64)
         .into_par_iter()
         .map_init(
             || MpcLaw::new(&counting),
