@@ -111,6 +111,25 @@ fn the_run_exports_the_strongest_non_vacuous_band_and_says_which() {
         cl["failing"]["violating"].as_u64().unwrap() >= cl["all"]["violating"].as_u64().unwrap(),
         "{cl}"
     );
+    // Where the runs went: the failing ones that left X among them, the box of the states
+    // the controller was evaluated at (every start lies in X, so the box meets X).
+    let left = cl["left_domain"].as_u64().expect("left_domain");
+    let failing_left = cl["failing_left_domain"]
+        .as_u64()
+        .expect("failing_left_domain");
+    assert!(
+        failing_left <= left.min(cl["failing"]["violating"].as_u64().unwrap()),
+        "{cl}"
+    );
+    let (lo, hi) = (&cl["reach"][0], &cl["reach"][1]);
+    for j in 0..2 {
+        let (l, h) = (lo[j].as_f64().unwrap(), hi[j].as_f64().unwrap());
+        assert!(l <= h, "{cl}");
+    }
+    assert!(
+        lo[1].as_f64().unwrap() <= 1.0 && hi[1].as_f64().unwrap() >= -1.0,
+        "{cl}"
+    );
     // The report's verdict names the guarantee and the closed-loop statement.
     let md = std::fs::read_to_string(run.join("report.md")).unwrap();
     assert!(md.contains("**Guarantee reached — statistical"), "{md}");
