@@ -391,58 +391,32 @@ pub(super) fn print_statistical(s: &Statistical) {
         ),
     }
     if let (Some(g), Some(u)) = (&s.given_labelled, &s.unlabelled_share) {
-        if u.unlabelled > 0 {
-            println!(
-                "    given labelled   P(error > eps | MPC labels x) ≤ {:.3e} ({} exceedances in \
-                 {} labelled states; unlabelled states are not exceedances here)",
-                g.p_exceed_upper, g.exceedances, g.samples
-            );
-            match g.eps_at_p_target {
-                Some(e) => println!(
-                    "    eps at P ≤ {:.1e} given labelled  {e:.6}   (statistical, confidence {})",
-                    s.p_target, s.confidence
-                ),
-                None => println!(
-                    "    eps at P ≤ {:.1e} given labelled  not reachable with {} states",
-                    s.p_target, g.samples
-                ),
-            }
-            let place = u.bounding_box.as_ref().map_or(String::new(), |(lo, hi)| {
-                format!(", all inside the box {lo:?} … {hi:?}")
-            });
-            println!(
-                "    unlabelled       P(MPC leaves x unlabelled) ≤ {:.3e} ({} of {} states{place}; \
-                 Clopper–Pearson, confidence {})",
-                u.p_upper, u.unlabelled, u.samples, s.confidence
-            );
-        }
+        print_conditional(
+            s,
+            (g, u),
+            ("labelled", "MPC labels x", "labelled"),
+            (
+                "unlabelled       P(MPC leaves x unlabelled)",
+                "",
+                "unlabelled states are not exceedances here",
+            ),
+        );
     }
     if let (Some(g), Some(u)) = (&s.given_feasible, &s.infeasible_share) {
-        if u.unlabelled > 0 {
-            println!(
-                "    given feasible   P(error > eps | the MPC's hard problem is feasible at x) ≤ \
-                 {:.3e} ({} exceedances in {} feasible states)",
-                g.p_exceed_upper, g.exceedances, g.samples
-            );
-            match g.eps_at_p_target {
-                Some(e) => println!(
-                    "    eps at P ≤ {:.1e} given feasible  {e:.6}   (statistical, confidence {})",
-                    s.p_target, s.confidence
-                ),
-                None => println!(
-                    "    eps at P ≤ {:.1e} given feasible  not reachable with {} states",
-                    s.p_target, g.samples
-                ),
-            }
-            let place = u.bounding_box.as_ref().map_or(String::new(), |(lo, hi)| {
-                format!(", all inside the box {lo:?} … {hi:?}")
-            });
-            println!(
-                "    infeasible       P(the hard problem has no solution at x) ≤ {:.3e} ({} of {} \
-                 states{place}: unlabelled or soft-labelled; Clopper–Pearson, confidence {})",
-                u.p_upper, u.unlabelled, u.samples, s.confidence
-            );
-        }
+        print_conditional(
+            s,
+            (g, u),
+            (
+                "feasible",
+                "the MPC's hard problem is feasible at x",
+                "feasible",
+            ),
+            (
+                "infeasible       P(the hard problem has no solution at x)",
+                ": unlabelled or soft-labelled",
+                "unlabelled and soft-labelled states are left out",
+            ),
+        );
     }
     if let Some(soft) = &s.soft_labelled {
         println!(
@@ -451,4 +425,44 @@ pub(super) fn print_statistical(s: &Statistical) {
             soft.states, soft.max_error
         );
     }
+}
+
+/// The statement given a subset of the states (`given`: its name, the condition in words,
+/// what its states are called) and the bound on the share outside it (`share`: its line's
+/// head, what its states are, what the conditional block leaves out), when that share is
+/// not empty.
+fn print_conditional(
+    s: &trainer::certify::statistical::Statistical,
+    (g, u): (
+        &trainer::certify::statistical::GivenLabelled,
+        &trainer::certify::statistical::UnlabelledShare,
+    ),
+    (name, condition, states): (&str, &str, &str),
+    (head, which, left_out): (&str, &str, &str),
+) {
+    if u.unlabelled == 0 {
+        return;
+    }
+    println!(
+        "    given {name:<10} P(error > eps | {condition}) ≤ {:.3e} ({} exceedances in {} \
+         {states} states; {left_out})",
+        g.p_exceed_upper, g.exceedances, g.samples
+    );
+    match g.eps_at_p_target {
+        Some(e) => println!(
+            "    eps at P ≤ {:.1e} given {name}  {e:.6}   (statistical, confidence {})",
+            s.p_target, s.confidence
+        ),
+        None => println!(
+            "    eps at P ≤ {:.1e} given {name}  not reachable with {} states",
+            s.p_target, g.samples
+        ),
+    }
+    let place = u.bounding_box.as_ref().map_or(String::new(), |(lo, hi)| {
+        format!(", all inside the box {lo:?} … {hi:?}")
+    });
+    println!(
+        "    {head} ≤ {:.3e} ({} of {} states{place}{which}; Clopper–Pearson, confidence {})",
+        u.p_upper, u.unlabelled, u.samples, s.confidence
+    );
 }
