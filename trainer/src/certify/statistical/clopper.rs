@@ -55,16 +55,18 @@ pub fn clopper_pearson_upper(n: u64, k: u64, confidence: f64) -> f64 {
     hi
 }
 
-/// The draw that aims at `target` **labelled** states when an independent, earlier sample
-/// (the validation set: `u` unlabelled of `n`) shows part of X unlabelled:
+/// The draw that aims at `target` states of the conditioning set (labelled; in the
+/// pipeline, hard-feasible) when an independent, earlier sample (the validation set: `u`
+/// of `n` outside the set — unlabelled, or in the pipeline unlabelled or soft-labelled)
+/// shows part of X outside it:
 /// ```text
 /// ū = clopper_pearson_upper(n, u, confidence),  draw = ⌈target / (1 − ū)⌉,  target ≤ draw ≤ 4·target
 /// ```
-/// The conditional bound ([`GivenLabelled`]) counts only the labelled states, so a default
-/// sized for P ≤ p with zero exceedances (4603 for 1e-3 at 99 %) needs that many labelled
-/// ones. The size is fixed before the statistical states are drawn and from other states, so
-/// the bounds keep their meaning (they are computed from whatever n and n_L result). `target`
-/// when the earlier sample is empty or fully labelled.
+/// The conditional bound (`GivenLabelled`) counts only the states of the set, so a default
+/// sized for P ≤ p with zero exceedances (4603 for 1e-3 at 99 %) needs that many of them.
+/// The size is fixed before the statistical states are drawn and from other states, so the
+/// bounds keep their meaning (they are computed from whatever n and n_L result). `target`
+/// when the earlier sample is empty or has no state outside the set.
 pub fn draw_for_labelled(target: usize, n: u64, u: u64, confidence: f64) -> usize {
     if target == 0 || n == 0 || u == 0 {
         return target;
