@@ -7,7 +7,16 @@
 //! 2. Keep the exact Hessian if the QP is strictly convex with it on the null space of the
 //!    linearised dynamics (`convexity` module: a Riccati recursion, O(N)); otherwise
 //!    convexify block by block: keep the exact block where it is positive semidefinite, use
-//!    the Gauss–Newton block (the objective's Hessian 2·diag(Q, R)) where it is not. Solve
+//!    the Gauss–Newton block (the objective's Hessian 2·diag(Q, R)) where it is not. Between
+//!    the two, where the exact test fails: the exact Hessian plus the curvature of the bounds
+//!    the iterate holds active, `M·e_i e_iᵀ` on each variable z_i at a bound with ν_r > slack_r
+//!    (`M = max(1, max|∇²L_ii|)`), kept if the test passes with it (on the hard problem, at
+//!    iterates with KKT residual r < 1: near a solution). The term vanishes on a
+//!    step that keeps those bounds active, so there it is the exact Newton step; without it
+//!    the test fails at every iterate near an optimum whose indefinite directions are closed
+//!    by active input bounds (the acados swing-up: 13 active bounds), and the Gauss–Newton
+//!    blocks then crawl at step lengths 1/8–1/4 to the iteration limit (BENCHMARKS.md,
+//!    "Bound curvature"). The line search's penalty rule uses the exact Hessian then. Solve
 //!    the QP subproblem (`qp` module: structured interior point, or clarabel) for the step d
 //!    and multipliers (λ⁺, ν⁺). The exact Hessian gives Newton steps where the blockwise test
 //!    would discard curvature the constraints make harmless (the cart-pole's blocks are
