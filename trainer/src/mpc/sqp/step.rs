@@ -224,20 +224,18 @@ impl SqpSolver {
     fn add_bound_curvature(&self, w: &mut Work) -> bool {
         w.hreg.copy_from_slice(&w.ev.hess);
         let nz = self.ocp.nx + self.ocp.nu;
+        // The entry (i, i) of the stage blocks (`Ocp::hessian_blocks` layout) for variable
+        // z_i of the plant (the caller's problem has no slacks).
         let n_plant = self.ocp.is();
+        let diag = |i: usize| (i / nz) * nz * nz + (i % nz) * (nz + 1);
         let m = (0..n_plant)
-            .map(|i| w.ev.hess[(i / nz) * nz * nz + (i % nz) * (nz + 1)].abs())
+            .map(|i| w.ev.hess[diag(i)].abs())
             .fold(1.0f64, f64::max);
         let mut any = false;
         for (r, row) in self.ocp.rows.iter().enumerate() {
-            let i = row.idx[0];
-            let a = row.coef[0];
-            // (Rows on slacks are the soft problem's; their curvature is its own.)
-            if row.len != 1 || i >= n_plant || a == 0.0 {
-                continue;
-            }
-            if w.p.nu[r] > row.slack(&w.p.z).max(0.0) {
-                w.hreg[(i / nz) * nz * nz + (i % nz) * (nz + 1)] += m / (a * a);
+            let (i, a) = (row.idx[0], row.coef[0]);
+            if row.len == 1 && i < n_plant && a != 0.0 && w.p.nu[r] > row.slack(&w.p.z).max(0.0) {
+                w.hreg[diag(i)] += m / (a * a);
                 any = true;
             }
         }
