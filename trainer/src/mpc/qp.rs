@@ -36,6 +36,7 @@ pub(crate) use by_nx;
 
 pub(crate) mod ipm;
 pub mod riccati;
+mod slacks;
 
 use crate::mpc::ocp::Ocp;
 pub use crate::problem::QpSolverKind;

@@ -18,10 +18,10 @@
 //! ⎣ E            0  ⎦ ⎣Δλ⎦ = ⎣ −r_e                        ⎦ ,    W = diag(ν/t),
 //! ```
 //! which has the OCP's stage structure: it is factorised once per iteration and solved twice
-//! (predictor, corrector). The hard problem uses the Riccati recursion of the [`riccati`]
-//! module (O(N(nx + nu)³)); the soft problem (slacks couple the rows), and any QP whose
-//! R̃_k is not positive definite, the banded LU of the `kkt` module (O(N·b²), b the
-//! half-bandwidth).
+//! (predictor, corrector). It is factorised by the Riccati recursion of the [`riccati`]
+//! module (O(N(nx + nu)³); the soft problem's slacks eliminated stage by stage first); any
+//! QP whose R̃_k is not positive definite by the banded LU of the `kkt` module (O(N·b²), b
+//! the half-bandwidth).
 //!
 //! [`riccati`]: super::riccati
 //! Both steps use one step length (a QP's dual residual couples d and ν), 99% of the way to

@@ -1,4 +1,5 @@
-//! The interior-point Newton system of the hard OCP's QP, factorised by a Riccati recursion.
+//! The interior-point Newton system of the OCP's QP, factorised by a Riccati recursion (the
+//! soft problem's slacks eliminated first, stage by stage: [`super::slacks`]).
 //!
 //! Owns [`RiccatiKkt`], the solver of
 //! ```text
@@ -25,6 +26,7 @@
 //! passes that test or is convexified block by block; Gᵀ W G ⪰ 0 only adds). A pivot below
 //! `1e-13·max(1, max |R̃_k[i, i]|)` reports failure and the caller uses the band LU instead.
 
+use super::slacks::Slacks;
 use crate::mpc::ocp::Ocp;
 
 /// Relative size below which a Cholesky pivot of R̃_k counts as not positive.
@@ -36,8 +38,10 @@ pub struct RiccatiKkt {
     nx: usize,
     nu: usize,
     n: usize,
-    /// Rows of each stage (stage s: `rows_of[s]`).
+    /// Rows of each stage without a slack (stage s: `rows_of[s]`).
     rows_of: Vec<Vec<usize>>,
+    /// The soft problem's slacks, eliminated stage by stage (none for the hard problem).
+    slacks: Slacks,
     /// P_k, k = 0..=N (nx × nx each).
     p: Vec<f64>,
     /// Cholesky factor L_k of R̃_k (nu × nu, lower), k < N.
@@ -56,28 +60,19 @@ pub struct RiccatiKkt {
 }
 
 impl RiccatiKkt {
-    /// Workspace for `ocp`, or `None` when the recursion does not apply: slacks (the soft
-    /// problem) or a row whose variables lie in two stages.
+    /// Workspace for `ocp`, or `None` when the recursion does not apply: a row whose
+    /// variables lie in two stages, or a slack of the soft problem in two stages' rows
+    /// ([`super::slacks::split`]).
     pub fn new(ocp: &Ocp) -> Option<Self> {
-        if ocp.n_slack > 0 {
-            return None;
-        }
         let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
         let nz = nx + nu;
-        let mut rows_of = vec![Vec::new(); n + 1];
-        for (r, row) in ocp.rows.iter().enumerate() {
-            let idx = &row.idx[..row.len];
-            let s = idx.first().map_or(0, |v| v / nz);
-            if idx.iter().any(|v| v / nz != s || *v >= ocp.n_var) {
-                return None;
-            }
-            rows_of[s].push(r);
-        }
+        let (rows_of, slacks) = super::slacks::split(ocp)?;
         Some(RiccatiKkt {
             nx,
             nu,
             n,
             rows_of,
+            slacks,
             p: vec![0.0; (n + 1) * nx * nx],
             l: vec![0.0; n * nu * nu],
             st: vec![0.0; n * nu * nx],
@@ -105,6 +100,9 @@ impl RiccatiKkt {
                     self.h[ia * nz + row.idx[b] - off] += ca * row.coef[b];
                 }
             }
+        }
+        if !self.slacks.is_empty() {
+            self.slacks.add_to_stage(ocp, w, s, &mut self.h);
         }
     }
 
@@ -311,6 +309,7 @@ impl RiccatiKkt {
         let n = self.n;
         let nz = nx + nu;
         let nv = ocp.n_var;
+        self.slacks.reduce(rhs);
         // Backward: p_N = q_N.
         self.pv[n * nx..(n + 1) * nx].copy_from_slice(&rhs[n * nz..n * nz + nx]);
         for k in (0..n).rev() {
@@ -405,6 +404,7 @@ impl RiccatiKkt {
                 rhs[nv + (k + 1) * nx + i] = acc;
             }
         }
+        self.slacks.recover(rhs);
     }
 }
 
@@ -422,17 +422,27 @@ mod tests {
     }
 
     /// The Riccati solve equals the band LU's on random convex data with random row weights,
-    /// on the layouts of the cart-pole (nu = 1), the planar quadrotor (nu = 2) and the
-    /// 12-state chain (nu = 4).
+    /// on the hard and the soft problems (slacks eliminated, [`super::super::slacks`]) of the
+    /// cart-pole (nu = 1), the planar quadrotor (nu = 2; θ's slack in two rows), the
+    /// 12-state chain (nu = 4) and the DC motor and the spring (path constraints in states,
+    /// and in states and inputs, with their slacks; a terminal constraint).
     #[test]
     fn riccati_solve_matches_the_band_lu() {
-        for name in [
+        for (name, soft) in [
             "cartpole.toml",
             "planar_quadrotor.toml",
             "mass_chain12.toml",
-        ] {
+            "dc_motor.toml",
+            "stiff_spring_setpoint.toml",
+        ]
+        .into_iter()
+        .flat_map(|n| [(n, false), (n, true)])
+        {
             let cfg = load(name);
-            let ocp = Ocp::new(&cfg, false);
+            let ocp = Ocp::new(&cfg, soft);
+            if soft {
+                assert!(ocp.n_slack > 0, "{name}");
+            }
             let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
             let nz = nx + nu;
             let mut seed = 0u64;
@@ -466,7 +476,8 @@ mod tests {
             let rhs: Vec<f64> = (0..ocp.n_var + ocp.n_eq).map(|_| rnd(-1.0, 1.0)).collect();
             let mut band = BandedKkt::new(KktLayout::new(&ocp, Vec::new()));
             assert!(band.set_base(&ocp, &hess, &jx, &ju));
-            assert!(band.factor_weighted(&w) > 1e-14);
+            let ratio = band.factor_weighted(&w);
+            assert!(ratio > 1e-14, "{name} {soft}: {ratio}");
             let mut want = rhs.clone();
             assert!(band.solve_in_place(&mut want, &mut Vec::new()));
             let mut ric = RiccatiKkt::new(&ocp).unwrap();
@@ -478,7 +489,7 @@ mod tests {
                 .iter()
                 .zip(&got)
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-            assert!(err <= 1e-9 * scale, "{name}: {err} (scale {scale})");
+            assert!(err <= 1e-9 * scale, "{name} {soft}: {err} (scale {scale})");
         }
     }
 
@@ -503,7 +514,8 @@ mod tests {
     /// The SQP with the Riccati factorisation reaches the same solutions as with the band
     /// LU: the optimal u₀ of cold solves of random cart-pole and quadrotor states agree to
     /// 1e-9, and a Gymnasium cart-pole state whose hard solve is infeasible from the cold
-    /// start, then re-solved from the soft optimum (as `MpcLaw` does), converges with both.
+    /// start, then re-solved from the soft optimum (as `MpcLaw` does), converges with both;
+    /// the soft optimum itself is the same with both (to 1e-7).
     #[test]
     fn sqp_with_riccati_matches_sqp_with_band_lu() {
         use crate::mpc::sqp::{PrimalDual, SqpSolver, SqpStatus};
@@ -541,6 +553,19 @@ mod tests {
         let mut soft = SqpSolver::new(&cfg, true);
         let s = soft.solve(&x, soft.cold_start(&x));
         assert_eq!(s.status, SqpStatus::Converged);
+        // The soft problem's QPs by Riccati (slacks eliminated) and by the band LU reach
+        // the same soft optimum.
+        let mut band = SqpSolver::new(&cfg, true);
+        band.without_riccati();
+        let sb = band.solve(&x, band.cold_start(&x));
+        assert_eq!(sb.status, SqpStatus::Converged);
+        let d = s
+            .point
+            .z
+            .iter()
+            .zip(&sb.point.z)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / (1.0 + b.abs())));
+        assert!(d <= 1e-7, "soft optima differ by {d}");
         for riccati in [true, false] {
             let mut h = SqpSolver::new(&cfg, false);
             if !riccati {
