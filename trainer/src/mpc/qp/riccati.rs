@@ -24,7 +24,8 @@
 //! LU's half-bandwidth b ≈ 2nx + nu. The recursion needs every R̃_k positive definite, which
 //! holds when the QP is strictly convex on the dynamics' null space (the SQP's Hessian
 //! passes that test or is convexified block by block; Gᵀ W G ⪰ 0 only adds). A pivot below
-//! `1e-13·max(1, max |R̃_k[i, i]|)` reports failure and the caller uses the band LU instead.
+//! `1e-13·max(1, |R̃_k[j, j]|)` (its own diagonal entry: an active bound weights one input's
+//! entry by up to 1e14) reports failure and the caller uses the band LU instead.
 
 use super::slacks::Slacks;
 use crate::mpc::ocp::Ocp;
@@ -211,13 +212,12 @@ impl RiccatiKkt {
                     }
                 }
             }
-            let mut scale = 1.0f64;
-            for i in 0..nu {
-                scale = scale.max(lk[i * nu + i].abs());
-            }
-            // Cholesky R̃ = L Lᵀ in place.
+            // Cholesky R̃ = L Lᵀ in place; pivot j is judged against its own diagonal entry
+            // (an active bound on one input weights its entry by up to 1e14, and must not
+            // make a well-scaled pivot of another input count as zero).
             for j in 0..nu {
                 let mut d = lk[j * nu + j];
+                let scale = d.abs().max(1.0);
                 for l in 0..j {
                     d -= lk[j * nu + l] * lk[j * nu + l];
                 }
@@ -491,6 +491,50 @@ mod tests {
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
             assert!(err <= 1e-9 * scale, "{name} {soft}: {err} (scale {scale})");
         }
+    }
+
+    /// A heavily weighted input (an active bound's barrier weight, 1e15) beside a
+    /// well-scaled one: each Cholesky pivot is judged against its own diagonal entry, so the
+    /// factorisation is accepted (it was refused when the pivots were judged against the
+    /// largest diagonal entry of R̃_k) and its solve matches the band LU's.
+    #[test]
+    fn riccati_accepts_a_well_scaled_pivot_beside_a_heavily_weighted_input() {
+        let cfg = load("planar_quadrotor.toml");
+        let ocp = Ocp::new(&cfg, false);
+        let (nx, nu, n) = (ocp.nx, ocp.nu, ocp.horizon);
+        let nz = nx + nu;
+        let mut hess = vec![0.0; (n + 1) * nz * nz];
+        for s in 0..=n {
+            for i in 0..if s < n { nz } else { nx } {
+                hess[s * nz * nz + i * nz + i] = 1.0;
+            }
+        }
+        let jx = vec![0.0; n * nx * nx];
+        let ju = vec![0.0; n * nx * nu];
+        let mut w = vec![0.0; ocp.rows.len()];
+        let row = ocp
+            .rows
+            .iter()
+            .position(|r| r.len == 1 && r.idx[0] == ocp.iu(0))
+            .unwrap();
+        w[row] = 1e15;
+        let mut ric = RiccatiKkt::new(&ocp).unwrap();
+        assert!(ric.factor(&ocp, &hess, &jx, &ju, &w));
+        let rhs: Vec<f64> = (0..ocp.n_var + ocp.n_eq)
+            .map(|i| uniform(3, i as u64, 0) - 0.5)
+            .collect();
+        let mut got = rhs.clone();
+        ric.solve_in_place(&ocp, &jx, &ju, &mut got);
+        let mut band = BandedKkt::new(KktLayout::new(&ocp, Vec::new()));
+        assert!(band.set_base(&ocp, &hess, &jx, &ju));
+        assert!(band.factor_weighted(&w) > 0.0);
+        let mut want = rhs;
+        assert!(band.solve_in_place(&mut want, &mut Vec::new()));
+        let err = want
+            .iter()
+            .zip(&got)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(err <= 1e-12, "{err}");
     }
 
     /// An indefinite input block is refused (the caller then uses the band LU).
