@@ -28,6 +28,7 @@
 //! Both are stated in the certificate's norm ‖S_u⁻¹·‖₂ (`ExportModel::u_scale`): each
 //! output's bound divided by s_u,o (rounded up), exactly the unscaled numbers when s_u = 1.
 
+use super::boxes::{max_or_nan, Grid};
 use super::lanes::{eval_f32_lanes, Lane, LANES};
 use super::{DenseF64, ExportError, ExportModel, ExportReport, Folded, LayerF32, Tanh};
 
@@ -362,61 +363,73 @@ fn allowance_key(model: &ExportModel, folded: &Folded, tanh: Tanh) -> [u8; 32] {
     h.finalize().into()
 }
 
-/// [`f32_allowance`] computed (not looked up).
+/// [`f32_allowance`] computed (not looked up): the maximum of the per-box bound over the
+/// grid of [`splits`] boxes per axis, pruned through coarse boxes ([`Grid::max_of`]).
 fn f32_allowance_of(model: &ExportModel, folded: &Folded, tanh: Tanh) -> (f64, usize) {
-    use rayon::prelude::*;
     let exact = model_unfolded_as_exact(folded);
-    let nx = model.nx();
-    let k = splits(nx);
-    let boxes = k.pow(nx as u32);
-    let worst = (0..boxes)
-        .into_par_iter()
-        .map_init(
-            || {
-                let bufs: (Vec<f64>, Vec<f64>) = Default::default();
-                (vec![0.0; nx], vec![0.0; nx], Enclosure::default(), bufs)
-            },
-            |(a, b, enc, bufs), n| {
-                // Box n: index (n / kⁱ) mod k along axis i.
-                let mut rest = n;
-                for i in 0..nx {
-                    let idx = rest % k;
-                    rest /= k;
-                    let (l, h) = (model.domain_lo[i], model.domain_hi[i]);
-                    let step = (h - l) / k as f64;
-                    a[i] = if idx == 0 { l } else { l + step * idx as f64 };
-                    b[i] = if idx + 1 == k {
-                        h
-                    } else {
-                        l + step * (idx + 1) as f64
-                    };
-                    // Adjacent boxes share the computed end point, so the union covers X.
-                }
-                // One enclosure for both analyses (the exact layers are the same).
-                enc.of(&folded.layers, a, b);
-                let e32 = box_error(
-                    &folded.layers,
-                    Some(&folded.f32_layers),
-                    enc,
-                    (2f64.powi(-24), 2f64.powi(-23)),
-                    &|lo, hi| tanh.max_abs_err_on(lo, hi),
-                    &model.u_scale,
-                    bufs,
-                );
-                let e64 = box_error(
-                    &exact,
-                    None,
-                    enc,
-                    (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
-                    &|_, _| 1e-15,
-                    &model.u_scale,
-                    bufs,
-                );
-                e32 + e64
-            },
-        )
-        .reduce(|| 0.0, max_or_nan);
-    (worst * (1.0 + 1e-9), boxes)
+    let grid = Grid::new(&model.domain_lo, &model.domain_hi, splits(model.nx()));
+    let worst = grid.max_of(
+        <(Enclosure, (Vec<f64>, Vec<f64>))>::default,
+        |(enc, bufs), a, b| {
+            // One enclosure for both analyses (the exact layers are the same).
+            enc.of(&folded.layers, a, b);
+            let e32 = box_error(
+                &folded.layers,
+                Some(&folded.f32_layers),
+                enc,
+                (2f64.powi(-24), 2f64.powi(-23)),
+                &|lo, hi| tanh.max_abs_err_on(lo, hi),
+                &model.u_scale,
+                bufs,
+            );
+            let e64 = box_error(
+                &exact,
+                None,
+                enc,
+                (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
+                &|_, _| 1e-15,
+                &model.u_scale,
+                bufs,
+            );
+            e32 + e64
+        },
+    );
+    (worst * (1.0 + 1e-9), grid.boxes())
+}
+
+/// [`f32_allowance_of`] without the pruning: the maximum over every box.
+#[cfg(test)]
+fn f32_allowance_every_box(model: &ExportModel, tanh: Tanh) -> f64 {
+    let folded = model.folded();
+    let exact = model_unfolded_as_exact(&folded);
+    let grid = Grid::new(&model.domain_lo, &model.domain_hi, splits(model.nx()));
+    let (mut a, mut b) = (vec![0.0; model.nx()], vec![0.0; model.nx()]);
+    let (mut enc, mut bufs) = (Enclosure::default(), Default::default());
+    let mut worst = 0.0f64;
+    for n in 0..grid.boxes() {
+        grid.fine_box(n, &mut a, &mut b);
+        enc.of(&folded.layers, &a, &b);
+        let e32 = box_error(
+            &folded.layers,
+            Some(&folded.f32_layers),
+            &enc,
+            (2f64.powi(-24), 2f64.powi(-23)),
+            &|lo, hi| tanh.max_abs_err_on(lo, hi),
+            &model.u_scale,
+            &mut bufs,
+        );
+        let e64 = box_error(
+            &exact,
+            None,
+            &enc,
+            (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
+            &|_, _| 1e-15,
+            &model.u_scale,
+            &mut bufs,
+        );
+        worst = max_or_nan(worst, e32 + e64);
+    }
+    worst * (1.0 + 1e-9)
 }
 
 fn model_unfolded_as_exact(folded: &Folded) -> Vec<DenseF64> {
@@ -514,16 +527,6 @@ pub fn sampled_max_diffs(model: &ExportModel, tanhs: &[Tanh], n: usize, seed: u6
         done += m;
     }
     worst
-}
-
-/// The larger of two values, NaN when either is (`f64::max` drops a NaN, which would hide a
-/// non-finite bound or output).
-fn max_or_nan(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() {
-        f64::NAN
-    } else {
-        a.max(b)
-    }
 }
 
 /// ‖d‖₂ of an observed difference (plain f64; |d₀| for one output; NaN propagates so that a
@@ -665,6 +668,28 @@ mod tests {
             assert!(worst > 0.0, "{}", t.name());
             assert_eq!(both[k], worst, "{}", t.name());
             assert_eq!(both[k], sampled_max_diff(&m, *t, n, seed), "{}", t.name());
+        }
+    }
+
+    /// The allowance pruned through coarse boxes is the maximum over every box, bit for bit,
+    /// for one and two outputs, both tanh, and a net whose weights are perturbed (so its
+    /// largest box is somewhere else).
+    #[test]
+    fn pruned_allowance_is_the_maximum_over_every_box() {
+        let mut bent = placeholder_pendulum();
+        for (k, l) in bent.layers.iter_mut().enumerate() {
+            for (o, row) in l.w.iter_mut().enumerate() {
+                for (i, w) in row.iter_mut().enumerate() {
+                    *w *= 1.0 + 0.3 * crate::rng::uniform(7, (k * 1000 + o) as u64, i as u64);
+                }
+            }
+        }
+        for m in [placeholder_pendulum(), two_equal_outputs(), bent] {
+            for t in Tanh::ALL {
+                let folded = m.folded();
+                let (pruned, _) = f32_allowance_of(&m, &folded, t);
+                assert_eq!(pruned, f32_allowance_every_box(&m, t), "{}", t.name());
+            }
         }
     }
 

@@ -25,6 +25,8 @@
 //! - `tanh`: the device tanh implementations and their error bounds ([`Tanh`]);
 //! - `allowance`: the f32 error analysis ([`f32_allowance`], [`sampled_max_diff`],
 //!   [`certify_f32`]);
+//! - `boxes`: the grid of sub-boxes of X the allowance is a maximum over, pruned through
+//!   coarse boxes;
 //! - `rust`: the generated Rust file ([`render_rust`]);
 //! - `device`: the exported controller evaluated as `controller-core` does ([`device::Device`]);
 //! - `tested`: that controller as the function the statistical tiers test ([`Deployed`]);
@@ -38,6 +40,7 @@
 
 mod allowance;
 mod blob;
+mod boxes;
 mod c_header;
 mod c_lib;
 pub mod device;
