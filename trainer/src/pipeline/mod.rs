@@ -281,6 +281,7 @@ pub fn run(
             cfg,
             progress: opts.progress,
             seeds: std::cell::RefCell::new(seeds),
+            beside: beside.as_ref().map(beside::Beside::idler),
             timings: cx
                 .reports
                 .iter()
@@ -420,6 +421,9 @@ pub(super) struct Env<'a> {
     /// the stage's inputs, to be joined inside the stage (its wait counts in the stage's
     /// seconds) and taken if it started from those inputs.
     pub(super) seeds: std::cell::RefCell<Option<(beside::Beside, beside::Inputs)>>,
+    /// The seed study's thread, to be lowered to idle priority by a stage that leaves a
+    /// core idle for long stretches ([`beside::Idler`]).
+    pub(super) beside: Option<beside::Idler>,
 }
 
 #[cfg(test)]
