@@ -267,12 +267,22 @@ pub fn run(
         opts,
         reports: Vec::new(),
     };
-    // The seed study, started beside the later stages once `train` is done (`beside`).
+    // The seed study, started beside `train` (or once it is done) and joined in `seeds`
+    // (`beside`).
     let mut beside: Option<beside::Beside> = None;
     for stage in &stages::ALL {
         let inputs = (stage.inputs)(&cx, cfg)?;
         let outputs = (stage.outputs)();
         let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
+        let study_after = opts.until.is_none_or(|u| u >= Stage::Seeds);
+        if stage.stage == Stage::Train
+            && study_after
+            && cx.will_run(Stage::Train, &inputs, &outputs)
+        {
+            // New nets, so a new study: its trainings start beside `train` itself, whose
+            // two nets rarely take the same time (the faster one's core would idle).
+            beside = Some(beside::Beside::start_early(cfg, &cx.dir));
+        }
         let seeds = match stage.stage {
             Stage::Seeds => beside.take().map(|b| (b, inputs.clone())),
             _ => None,
@@ -296,25 +306,36 @@ pub fn run(
         if opts.until == Some(stage.stage) {
             break;
         }
-        if stage.stage == Stage::Train && opts.until.is_none_or(|u| u >= Stage::Seeds) {
-            beside = start_seeds(&cx, cfg)?;
+        if stage.stage == Stage::Train && study_after {
+            beside = start_seeds(&cx, cfg, beside.take())?;
         }
     }
     Ok(cx.reports)
 }
 
 /// The seed study on its own thread ([`beside`]) when the `seeds` stage will run (forced,
-/// or its inputs changed), else `None`.
-fn start_seeds(cx: &Ctx, cfg: &ProblemConfig) -> Result<Option<beside::Beside>, PipelineError> {
+/// or its inputs changed), else `None`: `early` (started beside `train`) handed the
+/// stage's inputs, or a study started now. An early study that is not needed is cancelled.
+fn start_seeds(
+    cx: &Ctx,
+    cfg: &ProblemConfig,
+    early: Option<beside::Beside>,
+) -> Result<Option<beside::Beside>, PipelineError> {
     let Some(step) = stages::ALL.iter().find(|s| s.stage == Stage::Seeds) else {
         return Ok(None);
     };
     let inputs = (step.inputs)(cx, cfg)?;
     let outputs = (step.outputs)();
     let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
-    Ok(cx
-        .will_run(Stage::Seeds, &inputs, &outputs)
-        .then(|| beside::Beside::start(cfg, &cx.dir, inputs)))
+    if !cx.will_run(Stage::Seeds, &inputs, &outputs) {
+        // An early study is dropped unsent: its thread stops after its first half.
+        drop(early);
+        return Ok(None);
+    }
+    Ok(Some(match early {
+        Some(b) => b.go(inputs),
+        None => beside::Beside::start(cfg, &cx.dir, inputs),
+    }))
 }
 
 /// Removes the temporary files (`.<name>.<pid>.tmp`, see `io::write_atomic`) that a run

@@ -558,7 +558,7 @@ fn seeds(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     let (study, note) = match pre {
         Some((r, secs)) => (
             r?,
-            format!(" (computed beside certify … closed_loop: {secs:.2} s of its own)"),
+            format!(" (computed beside the stages before it: {secs:.2} s of its own)"),
         ),
         None => (
             super::beside::seed_study_of(env.cfg, d, env.progress)?,

@@ -32,7 +32,8 @@ pub struct SeedRun {
 /// (the run's own models for the first seed, freshly trained ones otherwise) simulated from
 /// the reference initial state. Returned per seed: [nominal, regularized]. `hold` is the
 /// setpoint hold of the run's nets (`training.hold_setpoint`), applied to the other seeds'
-/// nets too. `progress` draws a bar over the (seed, net) jobs.
+/// nets too. `progress` draws a bar over the trainings and runs. The same as
+/// [`simulate_seeds`] of [`retrain_seeds`] (the two halves, which the pipeline runs apart).
 pub fn seed_study(
     cfg: &ProblemConfig,
     data: &Dataset,
@@ -42,47 +43,60 @@ pub fn seed_study(
     hold: Option<&Hold>,
     progress: bool,
 ) -> Vec<[SeedRun; 2]> {
+    let bar = bar(cfg, progress);
+    let nets = retrain_seeds(cfg, (data, validation), dataset_hash, hold, &bar);
+    let out = simulate_seeds(cfg, own, &nets, &bar);
+    bar.finish_and_clear();
+    out
+}
+
+/// The (seed, nominal) jobs of the study, in order: per seed, nominal then regularized.
+fn jobs(cfg: &ProblemConfig) -> Vec<(u64, bool)> {
     let n = cfg.closed_loop.seeds.max(1) as u64;
+    let base = cfg.training.seed;
+    (0..n)
+        .flat_map(|k| [(base + k, true), (base + k, false)])
+        .collect()
+}
+
+/// The progress bar over the study's trainings and runs (hidden unless `progress`).
+pub fn bar(cfg: &ProblemConfig, progress: bool) -> indicatif::ProgressBar {
+    if !progress {
+        return indicatif::ProgressBar::hidden();
+    }
+    let b = indicatif::ProgressBar::new(2 * jobs(cfg).len() as u64);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    b
+}
+
+/// The study's first half, which needs only the dataset and the validation set (`data`):
+/// per job, the net of that seed trained afresh — `None` for the first seed, whose nets are
+/// the run's own.
+pub fn retrain_seeds(
+    cfg: &ProblemConfig,
+    (data, validation): (&Dataset, &Dataset),
+    dataset_hash: &str,
+    hold: Option<&Hold>,
+    bar: &indicatif::ProgressBar,
+) -> Vec<Option<Model>> {
     let base = cfg.training.seed;
     let (set, vset) = (
         TrainSet::from_dataset(data),
         TrainSet::from_dataset(validation),
     );
-    let jobs: Vec<(u64, bool)> = (0..n)
-        .flat_map(|k| [(base + k, true), (base + k, false)])
-        .collect();
-    let x0 = initial_states(cfg).swap_remove(0);
-    let s = SimSettings {
-        steps: cfg.closed_loop.steps,
-        noise: vec![],
-        seed: 0,
-        mass_mismatch: 0.0,
-        mismatch_parameter: None,
-        disturbance: Default::default(),
-    };
-    let bar = if progress {
-        let b = indicatif::ProgressBar::new(jobs.len() as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [      seeds] [{bar:30}] {pos}/{len} nets trained and simulated  ETA {eta}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let runs: Vec<SeedRun> = jobs
+    jobs(cfg)
         .par_iter()
         .map(|&(seed, nominal)| {
-            let trained;
-            let m = if seed == base {
-                &own[usize::from(!nominal)]
-            } else {
+            let trained = (seed != base).then(|| {
                 let mut st = cfg.training.clone();
                 st.seed = seed;
-                trained = train(
+                train(
                     &st,
                     &TrainOptions {
                         nominal,
@@ -96,9 +110,37 @@ pub fn seed_study(
                     (&cfg.ocp.u_lo, &cfg.ocp.u_hi),
                     &data.header.problem_hash,
                     dataset_hash,
-                );
-                &trained
-            };
+                )
+            });
+            bar.inc(1);
+            trained
+        })
+        .collect()
+}
+
+/// The study's second half: every job's net ([`retrain_seeds`]'s, or `own` for the first
+/// seed) simulated from the reference initial state.
+pub fn simulate_seeds(
+    cfg: &ProblemConfig,
+    own: &[Model; 2],
+    nets: &[Option<Model>],
+    bar: &indicatif::ProgressBar,
+) -> Vec<[SeedRun; 2]> {
+    let x0 = initial_states(cfg).swap_remove(0);
+    let s = SimSettings {
+        steps: cfg.closed_loop.steps,
+        noise: vec![],
+        seed: 0,
+        mass_mismatch: 0.0,
+        mismatch_parameter: None,
+        disturbance: Default::default(),
+    };
+    let jobs = jobs(cfg);
+    let runs: Vec<SeedRun> = jobs
+        .par_iter()
+        .zip(nets)
+        .map(|(&(seed, nominal), trained)| {
+            let m = trained.as_ref().unwrap_or(&own[usize::from(!nominal)]);
             let mut law = MpcLaw::new(cfg);
             // No certificate for the extra seeds: the band check is off (ε = ∞) for all.
             let run = simulate(
@@ -118,7 +160,6 @@ pub fn seed_study(
             }
         })
         .collect();
-    bar.finish_and_clear();
     let mut it = runs.into_iter();
     let mut out = Vec::new();
     while let (Some(a), Some(b)) = (it.next(), it.next()) {

@@ -363,38 +363,50 @@ fn allowance_key(model: &ExportModel, folded: &Folded, tanh: Tanh) -> [u8; 32] {
     h.finalize().into()
 }
 
-/// [`f32_allowance`] computed (not looked up): the maximum of the per-box bound over the
-/// grid of [`splits`] boxes per axis, pruned through coarse boxes ([`Grid::max_of`]).
+/// [`f32_allowance`] computed (not looked up): the maximum of the per-box bound
+/// ([`box_bound`]) over the grid of [`splits`] boxes per axis, pruned through coarse boxes
+/// ([`Grid::max_of`]).
 fn f32_allowance_of(model: &ExportModel, folded: &Folded, tanh: Tanh) -> (f64, usize) {
     let exact = model_unfolded_as_exact(folded);
     let grid = Grid::new(&model.domain_lo, &model.domain_hi, splits(model.nx()));
-    let worst = grid.max_of(
-        <(Enclosure, (Vec<f64>, Vec<f64>))>::default,
-        |(enc, bufs), a, b| {
-            // One enclosure for both analyses (the exact layers are the same).
-            enc.of(&folded.layers, a, b);
-            let e32 = box_error(
-                &folded.layers,
-                Some(&folded.f32_layers),
-                enc,
-                (2f64.powi(-24), 2f64.powi(-23)),
-                &|lo, hi| tanh.max_abs_err_on(lo, hi),
-                &model.u_scale,
-                bufs,
-            );
-            let e64 = box_error(
-                &exact,
-                None,
-                enc,
-                (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
-                &|_, _| 1e-15,
-                &model.u_scale,
-                bufs,
-            );
-            e32 + e64
-        },
-    );
+    let worst = grid.max_of(Scratch::default, |sc, a, b| {
+        box_bound((model, folded, &exact), tanh, sc, a, b)
+    });
     (worst * (1.0 + 1e-9), grid.boxes())
+}
+
+/// A box's enclosure and error buffers, reused from box to box.
+type Scratch = (Enclosure, (Vec<f64>, Vec<f64>));
+
+/// The allowance's bound on the box `[a, b]`: the f32 analysis plus the f64 reference's
+/// own (module doc), on one enclosure (the exact layers are the same).
+fn box_bound(
+    (model, folded, exact): (&ExportModel, &Folded, &[DenseF64]),
+    tanh: Tanh,
+    (enc, bufs): &mut Scratch,
+    a: &[f64],
+    b: &[f64],
+) -> f64 {
+    enc.of(&folded.layers, a, b);
+    let e32 = box_error(
+        &folded.layers,
+        Some(&folded.f32_layers),
+        enc,
+        (2f64.powi(-24), 2f64.powi(-23)),
+        &|lo, hi| tanh.max_abs_err_on(lo, hi),
+        &model.u_scale,
+        bufs,
+    );
+    let e64 = box_error(
+        exact,
+        None,
+        enc,
+        (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
+        &|_, _| 1e-15,
+        &model.u_scale,
+        bufs,
+    );
+    e32 + e64
 }
 
 /// [`f32_allowance_of`] without the pruning: the maximum over every box.
@@ -404,30 +416,12 @@ fn f32_allowance_every_box(model: &ExportModel, tanh: Tanh) -> f64 {
     let exact = model_unfolded_as_exact(&folded);
     let grid = Grid::new(&model.domain_lo, &model.domain_hi, splits(model.nx()));
     let (mut a, mut b) = (vec![0.0; model.nx()], vec![0.0; model.nx()]);
-    let (mut enc, mut bufs) = (Enclosure::default(), Default::default());
+    let mut sc = Scratch::default();
     let mut worst = 0.0f64;
     for n in 0..grid.boxes() {
         grid.fine_box(n, &mut a, &mut b);
-        enc.of(&folded.layers, &a, &b);
-        let e32 = box_error(
-            &folded.layers,
-            Some(&folded.f32_layers),
-            &enc,
-            (2f64.powi(-24), 2f64.powi(-23)),
-            &|lo, hi| tanh.max_abs_err_on(lo, hi),
-            &model.u_scale,
-            &mut bufs,
-        );
-        let e64 = box_error(
-            &exact,
-            None,
-            &enc,
-            (8.0 * 2f64.powi(-53), 8.0 * 2f64.powi(-53)),
-            &|_, _| 1e-15,
-            &model.u_scale,
-            &mut bufs,
-        );
-        worst = max_or_nan(worst, e32 + e64);
+        let e = box_bound((model, &folded, &exact), tanh, &mut sc, &a, &b);
+        worst = max_or_nan(worst, e);
     }
     worst * (1.0 + 1e-9)
 }
