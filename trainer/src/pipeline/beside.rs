@@ -20,8 +20,7 @@
 //! those files and the settings) are the ones handed over; otherwise it computes the study
 //! itself. Each seed's nets and runs are pure functions of their inputs, so the file is the
 //! same bytes either way. A run that fails in between leaves the thread to finish on its
-//! own (it writes nothing). While the refinement runs, the thread is at idle priority
-//! ([`Idler`]).
+//! own (it writes nothing).
 
 use super::manifest::sha_file;
 use super::{fail, PipelineError, Stage};
@@ -43,10 +42,21 @@ pub(super) type Study = Vec<[SeedRun; 2]>;
 pub(crate) struct Beside {
     /// The `seeds` stage's inputs, once handed over ([`Beside::go`]).
     inputs: Option<Inputs>,
-    idler: Idler,
     /// Lets the second half start; dropped unsent, it cancels the study.
     go: Option<std::sync::mpsc::Sender<()>>,
-    handle: std::thread::JoinHandle<(Result<Study, PipelineError>, f64)>,
+    /// Set when the study is cancelled: the first half skips its remaining trainings.
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    handle: Option<std::thread::JoinHandle<(Result<Study, PipelineError>, f64)>>,
+}
+
+impl Drop for Beside {
+    /// A study dropped before it was handed over is cancelled (its thread ends after the
+    /// training in progress; it writes nothing).
+    fn drop(&mut self) {
+        if self.go.is_some() {
+            self.stop.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
 }
 
 impl Beside {
@@ -55,13 +65,13 @@ impl Beside {
     /// which need the run's own nets) waits for [`go`](Self::go).
     pub(super) fn start_early(cfg: &ProblemConfig, dir: &RunDir) -> Beside {
         let (cfg, dir) = (cfg.clone(), RunDir::new(dir.path().to_path_buf()));
-        let idler = Idler::default();
-        let tid = idler.clone();
         let (go, wait) = std::sync::mpsc::channel::<()>();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let stopped = stop.clone();
         let handle = std::thread::spawn(move || {
             let body = move || {
                 let t = Instant::now();
-                let first = first_half(&cfg, &dir);
+                let first = first_half(&cfg, &dir, &stopped);
                 let worked = t.elapsed();
                 if wait.recv().is_err() {
                     return (Err(fail(Stage::Seeds, "the seed study was cancelled")), 0.0);
@@ -72,20 +82,16 @@ impl Beside {
             };
             // One thread of its own: on the shared pool its long jobs (a seed's training)
             // would hold the workers that the stages' short parallel jobs wait for.
-            match rayon::ThreadPoolBuilder::new()
-                .num_threads(1)
-                .start_handler(move |_| tid.record())
-                .build()
-            {
+            match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
                 Ok(pool) => pool.install(body),
                 Err(_) => body(),
             }
         });
         Beside {
             inputs: None,
-            idler,
             go: Some(go),
-            handle,
+            stop,
+            handle: Some(handle),
         }
     }
 
@@ -105,24 +111,21 @@ impl Beside {
         self
     }
 
-    /// The handle that moves the study's thread to idle priority ([`Idler`]).
-    pub(super) fn idler(&self) -> Idler {
-        self.idler.clone()
-    }
-
     /// The study and its own seconds (its computing, not its wait for [`go`](Self::go)) if
     /// it was handed `inputs`, else `None` (after the thread ends: no second study
     /// competes with it).
     pub(super) fn take(mut self, inputs: &Inputs) -> Option<(Result<Study, PipelineError>, f64)> {
         // Never handed over: cancel (the sender dropped), then wait for the thread.
-        drop(self.go.take());
-        let joined = self.handle.join();
+        if self.go.take().is_some() {
+            self.stop.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+        let joined = self.handle.take().map(std::thread::JoinHandle::join);
         if self.inputs.as_ref() != Some(inputs) {
             return None;
         }
         Some(match joined {
-            Ok(r) => r,
-            Err(_) => (
+            Some(Ok(r)) => r,
+            _ => (
                 Err(fail(
                     Stage::Seeds.name(),
                     "the seed study's thread panicked",
@@ -140,14 +143,19 @@ struct FirstHalf {
     validation: String,
 }
 
-/// The other seeds' nets ([`retrain_seeds`]) on the dataset and validation set of `d`.
-fn first_half(cfg: &ProblemConfig, d: &RunDir) -> Result<FirstHalf, PipelineError> {
+/// The other seeds' nets ([`retrain_seeds`]) on the dataset and validation set of `d`;
+/// once `stop` is set, the trainings not begun are skipped (the study is cancelled).
+fn first_half(
+    cfg: &ProblemConfig,
+    d: &RunDir,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<FirstHalf, PipelineError> {
     let (data, val, dh, vh) = read_sets(d)?;
     let hold =
         Hold::if_enabled(cfg, cfg.training.hold_setpoint).map_err(|e| fail(Stage::Seeds, e))?;
     let bar = indicatif::ProgressBar::hidden();
     Ok(FirstHalf {
-        nets: retrain_seeds(cfg, (&data, &val), &dh, hold.as_ref(), &bar),
+        nets: retrain_seeds(cfg, (&data, &val), &dh, hold.as_ref(), (&bar, Some(stop))),
         dataset: dh,
         validation: vh,
     })
@@ -186,59 +194,6 @@ fn own_nets(d: &RunDir) -> Result<[Model; 2], PipelineError> {
     Ok([model(d.model_nominal())?, model(d.model_regularized())?])
 }
 
-/// The study's worker thread, to be moved to idle priority while a stage leaves a core idle
-/// for long stretches (the refinement's serial retrainings, `tiers::refine`): it then runs
-/// only on a core nothing else wants, and the refinement's parallel labelling and bounding
-/// get both cores. Elsewhere (no refinement: the quadrotor) it keeps its share, so it is
-/// done before the stages reach `seeds`. Lowering is one-way (an unprivileged thread cannot
-/// raise it back); the results are the same bytes at any priority.
-#[derive(Clone, Default)]
-pub(crate) struct Idler(std::sync::Arc<std::sync::atomic::AtomicI64>);
-
-impl Idler {
-    /// Records the calling thread (the study's worker) as the one to lower.
-    fn record(&self) {
-        self.0
-            .store(this_thread(), std::sync::atomic::Ordering::SeqCst);
-    }
-
-    /// Moves the recorded thread to idle priority (Linux `SCHED_IDLE`; elsewhere, or before
-    /// the thread is recorded, nothing).
-    pub(super) fn lower(&self) {
-        set_idle(self.0.load(std::sync::atomic::Ordering::SeqCst));
-    }
-}
-
-/// The calling thread's id (0 where there is none to lower).
-#[cfg(target_os = "linux")]
-fn this_thread() -> i64 {
-    // SAFETY: gettid has no preconditions.
-    i64::from(unsafe { libc::gettid() })
-}
-
-#[cfg(not(target_os = "linux"))]
-fn this_thread() -> i64 {
-    0
-}
-
-/// Puts thread `tid` in the `SCHED_IDLE` class (0: nothing). A failure leaves it as it
-/// was, which costs only time.
-#[cfg(target_os = "linux")]
-fn set_idle(tid: i64) {
-    let Ok(tid) = libc::pid_t::try_from(tid) else {
-        return;
-    };
-    if tid <= 0 {
-        return;
-    }
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: sched_setscheduler only reads `param`, a valid sched_param.
-    let _ = unsafe { libc::sched_setscheduler(tid, libc::SCHED_IDLE, &param) };
-}
-
-#[cfg(not(target_os = "linux"))]
-fn set_idle(_tid: i64) {}
-
 /// The seed study on the files of `d` (dataset, validation set, both nets), as the `seeds`
 /// stage computes it in place.
 pub(super) fn seed_study_of(
@@ -264,43 +219,6 @@ pub(super) fn seed_study_of(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The policy line of the calling thread's scheduler statistics (Linux).
-    #[cfg(target_os = "linux")]
-    fn policy() -> String {
-        std::fs::read_to_string("/proc/thread-self/sched")
-            .unwrap()
-            .lines()
-            .find(|l| l.starts_with("policy"))
-            .and_then(|l| l.split(':').nth(1))
-            .unwrap()
-            .trim()
-            .to_string()
-    }
-
-    /// `lower` moves the recorded thread, and only it, to `SCHED_IDLE` (policy 5); before a
-    /// thread is recorded it does nothing.
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn the_idler_lowers_the_recorded_thread_only() {
-        let idler = Idler::default();
-        idler.lower();
-        assert_eq!(policy(), "0");
-        let (tx, rx) = std::sync::mpsc::channel();
-        let (go, wait) = std::sync::mpsc::channel::<()>();
-        let recorded = idler.clone();
-        let t = std::thread::spawn(move || {
-            recorded.record();
-            tx.send(policy()).unwrap();
-            wait.recv().unwrap();
-            policy()
-        });
-        assert_eq!(rx.recv().unwrap(), "0");
-        idler.lower();
-        go.send(()).unwrap();
-        assert_eq!(t.join().unwrap(), "5");
-        assert_eq!(policy(), "0", "the caller keeps its class");
-    }
 
     /// The study on its own one-thread pool (`Beside`) is the same bytes as the study on the
     /// shared pool, and it is handed over only for the inputs it started from.
@@ -353,12 +271,16 @@ mod tests {
             .take(&inputs)
             .expect("the same inputs");
         assert_eq!(json(&early.unwrap()), json(&here));
-        // Never handed over: cancelled, nothing taken.
+        // Never handed over: cancelled, nothing taken; a cancelled first half trains nothing.
         assert!(Beside::start_early(&cfg, &dir).take(&inputs).is_none());
+        let stopped = std::sync::atomic::AtomicBool::new(true);
+        let none = first_half(&cfg, &dir, &stopped).unwrap();
+        assert_eq!(none.nets.len(), 6);
+        assert!(none.nets.iter().all(Option::is_none));
         // A dataset changed between the halves: the study is computed afresh on the new
         // one (here the validation set's file in its place), not from the first half.
         let data = std::fs::read(dir.dataset()).unwrap();
-        let first = first_half(&cfg, &dir).unwrap();
+        let first = first_half(&cfg, &dir, &Default::default()).unwrap();
         std::fs::copy(dir.validation(), dir.dataset()).unwrap();
         let afresh = json(&seed_study_of(&cfg, &dir, false).unwrap());
         assert_ne!(afresh, json(&here));

@@ -291,7 +291,6 @@ pub fn run(
             cfg,
             progress: opts.progress,
             seeds: std::cell::RefCell::new(seeds),
-            beside: beside.as_ref().map(beside::Beside::idler),
             timings: cx
                 .reports
                 .iter()
@@ -328,7 +327,8 @@ fn start_seeds(
     let outputs = (step.outputs)();
     let outputs: Vec<&str> = outputs.iter().map(String::as_str).collect();
     if !cx.will_run(Stage::Seeds, &inputs, &outputs) {
-        // An early study is dropped unsent: its thread stops after its first half.
+        // An early study dropped unsent is cancelled: its thread ends after the training
+        // in progress.
         drop(early);
         return Ok(None);
     }
@@ -442,9 +442,6 @@ pub(super) struct Env<'a> {
     /// the stage's inputs, to be joined inside the stage (its wait counts in the stage's
     /// seconds) and taken if it started from those inputs.
     pub(super) seeds: std::cell::RefCell<Option<(beside::Beside, beside::Inputs)>>,
-    /// The seed study's thread, to be lowered to idle priority by a stage that leaves a
-    /// core idle for long stretches ([`beside::Idler`]).
-    pub(super) beside: Option<beside::Idler>,
 }
 
 #[cfg(test)]

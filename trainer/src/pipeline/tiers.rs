@@ -350,10 +350,6 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
         write_json(Stage::Refine, &d.join(REFINE_JSON), &out)?;
         return Ok(format!("skipped: {why}"));
     }
-    // Its serial retrainings leave a core idle: the seed study beside takes it, and only it.
-    if let Some(idler) = &env.beside {
-        idler.lower();
-    }
     let rdir = d.join("refine");
     std::fs::create_dir_all(&rdir).map_err(|e| fail_at(Stage::Refine, &rdir, e))?;
     let mut rs = cfg.refine.clone();

@@ -44,7 +44,7 @@ pub fn seed_study(
     progress: bool,
 ) -> Vec<[SeedRun; 2]> {
     let bar = bar(cfg, progress);
-    let nets = retrain_seeds(cfg, (data, validation), dataset_hash, hold, &bar);
+    let nets = retrain_seeds(cfg, (data, validation), dataset_hash, hold, (&bar, None));
     let out = simulate_seeds(cfg, own, &nets, &bar);
     bar.finish_and_clear();
     out
@@ -77,14 +77,19 @@ pub fn bar(cfg: &ProblemConfig, progress: bool) -> indicatif::ProgressBar {
 
 /// The study's first half, which needs only the dataset and the validation set (`data`):
 /// per job, the net of that seed trained afresh — `None` for the first seed, whose nets are
-/// the run's own.
+/// the run's own. Once `stop` (if given) is set, the trainings not yet begun are skipped
+/// (`None`): the caller has cancelled the study and discards the result.
 pub fn retrain_seeds(
     cfg: &ProblemConfig,
     (data, validation): (&Dataset, &Dataset),
     dataset_hash: &str,
     hold: Option<&Hold>,
-    bar: &indicatif::ProgressBar,
+    (bar, stop): (
+        &indicatif::ProgressBar,
+        Option<&std::sync::atomic::AtomicBool>,
+    ),
 ) -> Vec<Option<Model>> {
+    let stopped = || stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst));
     let base = cfg.training.seed;
     let (set, vset) = (
         TrainSet::from_dataset(data),
@@ -93,7 +98,7 @@ pub fn retrain_seeds(
     jobs(cfg)
         .par_iter()
         .map(|&(seed, nominal)| {
-            let trained = (seed != base).then(|| {
+            let trained = (seed != base && !stopped()).then(|| {
                 let mut st = cfg.training.clone();
                 st.seed = seed;
                 train(

@@ -12,9 +12,10 @@
 //!
 //! A bound that is sound on a box is sound on every part of it, so a coarse box with
 //! b(C) ≤ M needs no finer look: M already covers it, and the result is a sound bound over
-//! X. For a bound that grows with the box (interval arithmetic evaluated in one fixed
-//! order does, every f64 operation being monotone) it is exactly the maximum over all fine
-//! boxes; the tests compare the two. The order of the coarse boxes and the batches they
+//! X. For a bound that grows with the box it is exactly the maximum over all fine boxes:
+//! interval arithmetic evaluated in one fixed order does grow (every rounded f64 operation
+//! is monotone), given monotone `tanh` and error tables, which the allowance's analysis
+//! uses; the tests compare the two on several nets. The order of the coarse boxes and the batches they
 //! are bounded in do not depend on the thread count, so neither does the result.
 
 use rayon::prelude::*;
@@ -107,8 +108,10 @@ impl<'a> Grid<'a> {
         out
     }
 
-    /// The maximum of `bound` over the fine boxes (NaN if any bound is NaN), with the coarse
-    /// pruning of the module doc. `bound(scratch, a, b)` bounds the box `[a, b]`;
+    /// The maximum of `bound` over the fine boxes, with the coarse pruning of the module
+    /// doc: NaN if a bound it evaluates is NaN (a NaN coarse bound makes it evaluate every
+    /// fine box; a fine box inside a pruned coarse box is covered by that box's finite
+    /// bound and not evaluated). `bound(scratch, a, b)` bounds the box `[a, b]`;
     /// `scratch` is made once per worker by `init`.
     pub(super) fn max_of<S, I, F>(&self, init: I, bound: F) -> f64
     where
