@@ -125,6 +125,9 @@ pub(super) fn execute(
                 trainer::deploy::export::deployed_allowance(&name, m, c)
             }),
         )),
+        // The check's solves beside the retrainings.
+        ahead: check
+            .map(|(n, seed)| std::sync::Arc::new(refine::CheckAhead::start(&cfg, &rs, n, seed))),
     };
     let (r, checked) = refine_and_check(&cfg, &opts, &dir.join("refine_state.bin"), check, quiet)?;
     let mut cert = refine::write_outputs(&cfg, &rs, &r, &dir, checked.as_ref(), &|c| {
@@ -270,7 +273,10 @@ fn refine_and_check(
         return Ok((r, None));
     };
     for pass in 0.. {
-        let c = refine::check(cfg, rs, &r, n, check_seed);
+        let c = match (&opts.ahead, pass) {
+            (Some(a), 0) => refine::check_ahead(cfg, rs, &r, (n, check_seed), a),
+            _ => refine::check(cfg, rs, &r, n, check_seed),
+        };
         let p = &c.per_cell;
         // Offending cells, and excluded cells where a feasible state was found: split
         // both (an excluded cell's feasible part becomes cells of the domain).

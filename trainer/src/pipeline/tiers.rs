@@ -370,6 +370,10 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
             (BEST_AFTER_SECONDS, !env.progress),
             std::sync::Arc::new(move |m, c| crate::deploy::export::deployed_allowance(&name, m, c)),
         )),
+        // The check's solves beside the retrainings.
+        ahead: Some(std::sync::Arc::new(
+            crate::certify::refine::CheckAhead::start(cfg, rs, CHECK_STATES, cfg.certify.seed),
+        )),
         ..Default::default()
     };
     let r = crate::certify::refine::refine(cfg, rs, Some(&rdir.join("refine_state.bin")), &opts)
@@ -380,8 +384,16 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     // the retry ladder — took 20 min of the CSTR's run for nothing.
     let finite =
         !r.state.bounds.is_empty() && r.state.bounds.iter().all(|(_, b)| b.eps.is_finite());
-    let checked =
-        finite.then(|| crate::certify::refine::check(cfg, rs, &r, CHECK_STATES, cfg.certify.seed));
+    let checked = match (&opts.ahead, finite) {
+        (Some(a), true) => Some(crate::certify::refine::check_ahead(
+            cfg,
+            rs,
+            &r,
+            (CHECK_STATES, cfg.certify.seed),
+            a,
+        )),
+        _ => None,
+    };
     if let Some(c) = &checked {
         write_atomic(
             &rdir.join("check.json"),

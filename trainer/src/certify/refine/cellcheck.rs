@@ -1,6 +1,7 @@
 //! The per-cell (stratified) check of the local certificate: every leaf cell C gets
-//! 1 + `extra` (where ε_C ≥ `near` × target) fresh MPC solves at seeded uniform states inside
-//! it. At each state x with a regular label it records whether ∂κ(x)/∂x lies in C's
+//! 1 + `extra` (where ε_C ≥ `near` × target) fresh MPC solves at uniform states inside it,
+//! keyed by the check's seed and the cell itself (so they can be solved ahead, while the
+//! refinement retrains: [`super::ahead`]). At each state x with a regular label it records whether ∂κ(x)/∂x lies in C's
 //! estimated range ([`crate::certify::local::mpc_slope_estimate`], the one the certificate
 //! uses) and whether |κ(x) − sat(κ_NN(x))| ≤ ε_C; at each converged state it also solves
 //! again warm-started from C's nearest corner: two converged solves more than
@@ -104,6 +105,45 @@ pub(super) struct Setup<'a> {
     pub seed: u64,
     /// S_u of the certificate's norm (empty: unscaled): sampled errors are ‖S_u⁻¹·‖₂.
     pub u_scale: &'a [f64],
+    /// Samples solved ahead, during the refinement ([`super::ahead`]).
+    pub ahead: Option<&'a super::ahead::Ready>,
+}
+
+/// The stream of the cells' states for the check seed `seed`.
+pub(super) fn cell_stream(seed: u64) -> u64 {
+    seed ^ 0x00ce_11c4_ec00_0000
+}
+
+/// The key of a cell's states: its lattice corner and size, mixed (a cell's states do not
+/// depend on where it sits in the tree's order, so they can be solved before the tree is
+/// final).
+fn cell_key(node: &Node) -> u64 {
+    node.lo
+        .iter()
+        .chain(&node.size)
+        .fold(0x5ce1_1ce1_15ce_11ce, |h, &v| crate::rng::splitmix64(h ^ v))
+}
+
+/// State `q` of the cell `node` with corners `lo`, `hi`: uniform in it, keyed by the
+/// stream `seed` and the cell.
+pub(super) fn cell_state(seed: u64, node: &Node, (lo, hi): (&[f64], &[f64]), q: usize) -> Vec<f64> {
+    let (nx, key) = (lo.len(), cell_key(node));
+    (0..nx)
+        .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(seed, key, (q * nx + k) as u64))
+        .collect()
+}
+
+/// The corner of `corners` nearest to `x`, relative to the cell `lo`, `hi` (ties: the
+/// lower index).
+pub(super) fn nearest_corner(corners: &[&Point], x: &[f64], (lo, hi): (&[f64], &[f64])) -> usize {
+    let d = |c: usize| -> f64 {
+        (0..x.len())
+            .map(|k| ((corners[c].x[k] - x[k]) / (hi[k] - lo[k]).max(f64::MIN_POSITIVE)).powi(2))
+            .sum()
+    };
+    (0..corners.len())
+        .min_by(|&c1, &c2| d(c1).total_cmp(&d(c2)).then(c1.cmp(&c2)))
+        .unwrap_or(0)
 }
 
 #[derive(Default, Clone)]
@@ -129,14 +169,13 @@ pub(super) fn per_cell<W>(
     let idx = region::index(st);
     let nu = s.mlp.nu();
     let bounds: Vec<&(usize, CellBound)> = st.bounds.iter().collect();
-    // Stream of the states: the leaf's position j and the state's number in it.
-    let seed = s.seed ^ 0x00ce_11c4_ec00_0000;
+    // Stream of the states: the cell (its lattice corner and size) and the state's number.
+    let seed = cell_stream(s.seed);
     let per: Vec<PerLeaf> = bounds
         .par_iter()
-        .enumerate()
         .map_init(
             || (init(), Workspace::default()),
-            |(w, ws), (j, (leaf, b))| {
+            |(w, ws), (leaf, b)| {
                 let node = &st.nodes[*leaf];
                 let nx = node.lo.len();
                 let lo = s.lat.x(&node.lo);
@@ -151,28 +190,13 @@ pub(super) fn per_cell<W>(
                 let reg = region::regional(st, &idx, s.lat, node, s.ls.floor);
                 let mut a = PerLeaf::default();
                 for q in 0..m {
-                    let x: Vec<f64> = (0..nx)
-                        .map(|k| {
-                            let t = crate::rng::uniform(seed, j as u64, (q * nx + k) as u64);
-                            lo[k] + (hi[k] - lo[k]) * t
-                        })
-                        .collect();
-                    // The nearest corner (relative to the cell; ties: the lower index).
-                    let nearest = (0..corners.len())
-                        .min_by(|&c1, &c2| {
-                            let d = |c: usize| -> f64 {
-                                (0..nx)
-                                    .map(|k| {
-                                        ((corners[c].x[k] - x[k])
-                                            / (hi[k] - lo[k]).max(f64::MIN_POSITIVE))
-                                        .powi(2)
-                                    })
-                                    .sum()
-                            };
-                            d(c1).total_cmp(&d(c2)).then(c1.cmp(&c2))
-                        })
-                        .unwrap_or(0);
-                    let smp = solve(w, &x, &corners[nearest].x);
+                    let x = cell_state(seed, node, (&lo, &hi), q);
+                    let nearest = nearest_corner(&corners, &x, (&lo, &hi));
+                    // Solved ahead (the same state, bit for bit), or here.
+                    let smp = s
+                        .ahead
+                        .and_then(|a| a.sample(node, q, &x))
+                        .unwrap_or_else(|| solve(w, &x, &corners[nearest].x));
                     a.states += 1;
                     let Some(u) = smp.u else { continue };
                     a.labelled += 1;

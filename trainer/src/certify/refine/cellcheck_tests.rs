@@ -95,6 +95,7 @@ fn run(
             target: rs.target_eps,
             seed: 11,
             u_scale: &[],
+            ahead: None,
         },
         || (),
         |_, x, near| {

@@ -105,8 +105,48 @@ pub struct Check {
     pub seconds: f64,
 }
 
+/// Uniform state `i` of the check with `seed`: uniform on X.
+pub(super) fn uniform_state(cfg: &ProblemConfig, seed: u64, i: usize) -> Vec<f64> {
+    (0..cfg.system.nx())
+        .map(|k| {
+            cfg.domain.lo[k]
+                + (cfg.domain.hi[k] - cfg.domain.lo[k])
+                    * crate::rng::uniform(seed, i as u64, k as u64)
+        })
+        .collect()
+}
+
 /// Solves the MPC at `n` random states and compares with the certificate of `r`.
 pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, seed: u64) -> Check {
+    check_with(cfg, rs, r, (n, seed), None)
+}
+
+/// [`check`], taking the solves that `ahead` finished during the refinement (the same
+/// result, bit for bit: [`super::ahead`]).
+pub fn check_ahead(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    r: &Refined,
+    (n, seed): (usize, u64),
+    ahead: &super::CheckAhead,
+) -> Check {
+    let ready = ahead.finish();
+    check_with(
+        cfg,
+        rs,
+        r,
+        (n, seed),
+        Some(&ready).filter(|a| a.of(cfg, seed)),
+    )
+}
+
+pub(super) fn check_with(
+    cfg: &ProblemConfig,
+    rs: &RefineSettings,
+    r: &Refined,
+    (n, seed): (usize, u64),
+    ahead: Option<&super::ahead::Ready>,
+) -> Check {
     let t0 = Instant::now();
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
     let counts = rs.initial_counts(nx);
@@ -131,14 +171,10 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             |(law, mut ws, mut a), i| {
                 let law = law.unwrap_or_else(|| MpcLaw::new(cfg));
                 let mut law = law;
-                let x: Vec<f64> = (0..nx)
-                    .map(|k| {
-                        cfg.domain.lo[k]
-                            + (cfg.domain.hi[k] - cfg.domain.lo[k])
-                                * crate::rng::uniform(seed, i as u64, k as u64)
-                    })
-                    .collect();
-                let (l, _) = law.solve(&x, None);
+                let x = uniform_state(cfg, seed, i);
+                let l = ahead
+                    .and_then(|a| a.label(i, &x))
+                    .unwrap_or_else(|| law.solve(&x, None).0);
                 let leaf = leaf_of(st, &lat, &counts, &x);
                 if st.excluded_by(leaf, &ex) {
                     a.excluded += 1;
@@ -189,6 +225,7 @@ pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, se
             target: rs.target_eps,
             seed,
             u_scale: &u_scale,
+            ahead,
         },
         || (MpcLaw::new(cfg), NeighbourCache::default()),
         mpc_sample,
@@ -346,7 +383,7 @@ impl NeighbourCache {
 /// A check state solved by the MPC: cold, and (converged) warm-started from `near`'s
 /// solution (the same label as [`MpcLaw::solve_from_neighbour`], the neighbour solved once
 /// per worker: [`NeighbourCache`]).
-fn mpc_sample(
+pub(super) fn mpc_sample(
     (law, cache): &mut (MpcLaw, NeighbourCache),
     x: &[f64],
     near: &[f64],

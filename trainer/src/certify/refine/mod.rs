@@ -24,6 +24,7 @@
 //! `rounds` the refinement loop ([`refine`]); `outputs` the local certificate and the
 //! files of a run; `check` the certificate against fresh MPC solves.
 
+mod ahead;
 mod cellcheck;
 mod check;
 mod feedback;
@@ -37,8 +38,9 @@ mod stale;
 mod start;
 
 pub use crate::certify::local_summary::{Excluded, LocalSummary};
+pub use ahead::CheckAhead;
 pub use cellcheck::{CellCheck, OffendingCell};
-pub use check::{check, Check, Offender};
+pub use check::{check, check_ahead, Check, Offender};
 pub use feedback::reopen;
 pub use outputs::{
     cell_views, certificate, check_summary, dataset, pretty, sensitivity_spread, write_outputs,

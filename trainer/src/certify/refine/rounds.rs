@@ -38,6 +38,10 @@ pub struct RefineOptions {
     /// Given each round's result and whether it is the best so far ([`RoundSink`]): the
     /// caller writes the best out, so a stopped run leaves its best certificate.
     pub on_result: Option<RoundSink>,
+    /// The check's solves, computed ahead on the core a retraining leaves idle
+    /// ([`CheckAhead`](super::CheckAhead)); the caller hands it to
+    /// [`check_ahead`](super::check_ahead).
+    pub ahead: Option<std::sync::Arc<super::CheckAhead>>,
 }
 
 /// The result of a refinement run.
@@ -369,7 +373,10 @@ pub fn refine(
             fill_active(cfg, &mut st.points);
         }
         if needs_retrain(&st, rs, opts) && !stale.skips(&st) {
+            // The check's solves run beside the (serial) retraining.
+            let gate = opts.ahead.as_ref().map(|a| a.open(&st, &lat));
             let m = retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash);
+            drop(gate);
             st.model = Some(stale.record(st.model.take(), m, &st));
         }
         let model = st.model.clone().expect("trained above");

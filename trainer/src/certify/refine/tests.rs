@@ -239,7 +239,7 @@ fn cells_with_a_failed_corner_are_split_around_it() {
 
 /// `configs/stiff_spring_setpoint.toml`: its path and terminal constraints make part of X
 /// infeasible.
-fn stiff_spring() -> ProblemConfig {
+pub(super) fn stiff_spring() -> ProblemConfig {
     let path = std::path::PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../configs/stiff_spring_setpoint.toml"
@@ -248,7 +248,7 @@ fn stiff_spring() -> ProblemConfig {
 }
 
 /// A small, fast refinement: an `initial` grid, `budget` solves, `rounds`, a 2-8-1 net.
-fn quick_refine(
+pub(super) fn quick_refine(
     initial: [usize; 2],
     budget: usize,
     rounds: usize,

@@ -1,0 +1,75 @@
+//! The check's solves ahead give the check of the solves made in it, bit for bit.
+
+use super::super::check::check_with;
+use super::super::tests::{quick_refine, stiff_spring};
+use super::super::*;
+use super::*;
+
+/// A check with seconds zeroed (the one field that is not a function of the inputs).
+fn timeless(mut c: Check) -> Check {
+    c.seconds = 0.0;
+    c
+}
+
+/// A refinement with the solves ahead on a problem with an infeasible part of X: every
+/// queued state solved ahead (the gate held open on the final tree), the check that takes
+/// them is the check that solves them itself, field for field.
+#[test]
+fn the_check_with_solves_ahead_is_the_check_without() {
+    let cfg = stiff_spring();
+    let rs = quick_refine([5, 5], 300, 5, 0.5);
+    let (n, seed) = (60, 7);
+    let ahead = std::sync::Arc::new(CheckAhead::start(&cfg, &rs, n, seed));
+    let opts = RefineOptions {
+        ahead: Some(ahead.clone()),
+        ..Default::default()
+    };
+    let r = refine(&cfg, &rs, None, &opts).unwrap();
+    let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(2));
+    let gate = ahead.open(&r.state, &lat);
+    ahead.drain();
+    drop(gate);
+    let ready = ahead.finish();
+    let (uniform, cells) = ready.counts();
+    assert_eq!(uniform, n);
+    assert!(
+        cells >= r.state.bounds.len(),
+        "{cells} cell states for {} cells",
+        r.state.bounds.len()
+    );
+    assert!(ready.of(&cfg, seed) && !ready.of(&cfg, seed + 1));
+    let with = timeless(check_with(&cfg, &rs, &r, (n, seed), Some(&ready)));
+    let without = timeless(check(&cfg, &rs, &r, n, seed));
+    assert_eq!(with, without);
+    assert!(with.per_cell.states > 0 && with.labelled > 0);
+}
+
+/// A result solved at another state is never taken: the check solves that state itself.
+#[test]
+fn a_result_at_another_state_is_not_taken() {
+    let cfg = stiff_spring();
+    let rs = quick_refine([3, 3], 20, 1, 0.5);
+    let ahead = CheckAhead::start(&cfg, &rs, 3, 1);
+    let (st, lat) = {
+        let (_, st, lat) = super::super::tests::grid(&cfg, [3, 3]);
+        (st, lat)
+    };
+    let gate = ahead.open(&st, &lat);
+    ahead.drain();
+    drop(gate);
+    let ready = ahead.finish();
+    let x = uniform_state(&cfg, 1, 0);
+    assert!(ready.label(0, &x).is_some());
+    let mut y = x.clone();
+    y[0] = f64::from_bits(y[0].to_bits() ^ 1);
+    assert!(ready.label(0, &y).is_none());
+    assert!(ready.label(3, &x).is_none());
+    let leaf = (0..st.nodes.len())
+        .find(|&n| st.nodes[n].split.is_none())
+        .unwrap();
+    let node = &st.nodes[leaf];
+    let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
+    let at = cell_state(cell_stream(1), node, (&lat.x(&node.lo), &lat.x(&hi)), 0);
+    assert!(ready.sample(node, 0, &at).is_some());
+    assert!(ready.sample(node, 0, &y).is_none());
+}
