@@ -24,7 +24,7 @@
 //! ReLU has no second derivative at its kink: for a box on which a ReLU pre-activation
 //! changes sign the Hessian enclosure is `None`.
 
-use crate::learn::mlp::{Activation, Layer, Mlp, Workspace};
+use crate::learn::mlp::{Activation, Layer, Mlp};
 
 /// A closed interval [lo, hi].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -317,8 +317,9 @@ impl NetBounder {
         let mid: Vec<f64> = lo.iter().zip(hi).map(|(l, h)| 0.5 * (l + h)).collect();
         let mut u = vec![0.0; nu];
         let mut jm = vec![0.0; nu * nx];
-        self.mlp
-            .eval(&mid, &mut u, &mut jm, &mut Workspace::default());
+        // The thread's workspace: a fresh one zero-fills its block buffers (tens of KiB), more
+        // than the interval passes above cost.
+        crate::learn::mlp::with_workspace(|ws| self.mlp.eval(&mid, &mut u, &mut jm, ws));
         let value = (0..nu)
             .map(|i| {
                 let mut v = Iv::new(
@@ -343,6 +344,7 @@ impl NetBounder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::learn::mlp::Workspace;
     use crate::rng::uniform;
 
     fn net(act: Activation, seed: u64, widths: &[usize]) -> Mlp {

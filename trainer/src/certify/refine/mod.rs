@@ -22,7 +22,8 @@
 //!
 //! Files: this one owns the lattice, the points and cells and the checkpointed state;
 //! `rounds` the refinement loop ([`refine`]); `outputs` the local certificate and the
-//! files of a run; `check` the certificate against fresh MPC solves.
+//! files of a run; `check` the certificate against fresh MPC solves, and `ahead` those
+//! solves computed during the rounds, on the core a retraining leaves idle.
 
 mod ahead;
 mod cellcheck;

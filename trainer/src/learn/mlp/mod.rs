@@ -369,11 +369,23 @@ impl Mlp {
         }
     }
 
-    /// κ_NN(x) only (allocating convenience).
+    /// κ_NN(x) only (allocating convenience; the thread's workspace).
     pub fn predict(&self, x: &[f64]) -> Vec<f64> {
-        let mut ws = Workspace::default();
         let mut u = vec![0.0; self.nu()];
-        self.eval_batch(x, &mut u, None, &mut ws);
+        with_workspace(|ws| self.eval_batch(x, &mut u, None, ws));
         u
     }
+}
+
+/// `f` with this thread's [`Workspace`] (a fresh one if it is in use further up the stack):
+/// for single evaluations, where a fresh workspace's zero-filled block buffers (tens of
+/// KiB) cost more than the pass. A workspace's contents never change a result.
+pub fn with_workspace<R>(f: impl FnOnce(&mut Workspace) -> R) -> R {
+    thread_local! {
+        static WS: std::cell::RefCell<Workspace> = std::cell::RefCell::new(Workspace::default());
+    }
+    WS.with(|ws| match ws.try_borrow_mut() {
+        Ok(mut ws) => f(&mut ws),
+        Err(_) => f(&mut Workspace::default()),
+    })
 }
