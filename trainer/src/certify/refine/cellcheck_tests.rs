@@ -70,6 +70,7 @@ fn bound(st: &mut RefineState, lat: &Lattice, rs: &RefineSettings, m: &Mlp) {
             min_size: vec![0; 2],
         },
         &[],
+        &Default::default(),
     );
 }
 
