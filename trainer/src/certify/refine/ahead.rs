@@ -20,17 +20,16 @@
 //! function of its state (and nearest corner), so the check is the same bits with or
 //! without the solves ahead.
 
-use super::cellcheck::{cell_state, cell_stream, nearest_corner, Sample};
-use super::check::{mpc_sample, uniform_state, NeighbourCache};
+use super::solves::{
+    cell_state, cell_stream, mpc_sample, nearest_corner, uniform_state, CellKey, NeighbourCache,
+    Ready, Sample,
+};
 use super::{Lattice, Node, RefineState};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::problem::ProblemConfig;
 use std::collections::HashMap;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
-
-/// A cell state's key: the cell's lattice corner and size, and the state's number in it.
-type CellKey = (Vec<u64>, Vec<u64>, usize);
 
 /// A cell state to solve: its key, the state and the cell's nearest corner.
 struct CellTask {
@@ -263,38 +262,6 @@ fn work(shared: &Shared, cfg: &ProblemConfig) {
     }
 }
 
-/// The solves a [`CheckAhead`] finished, for the check.
-#[derive(Default)]
-pub struct Ready {
-    problem: String,
-    seed: u64,
-    labels: Vec<Option<Label>>,
-    samples: HashMap<CellKey, (Vec<f64>, Sample)>,
-}
-
-impl Ready {
-    /// Whether these solves are of the problem `cfg` and the check seed `seed`.
-    pub(super) fn of(&self, cfg: &ProblemConfig, seed: u64) -> bool {
-        self.seed == seed && self.problem == cfg.problem_hash()
-    }
-
-    /// Uniform state i's label, if solved at `x` (bit for bit).
-    pub(super) fn label(&self, i: usize, x: &[f64]) -> Option<Label> {
-        self.labels
-            .get(i)?
-            .as_ref()
-            .filter(|l| same(&l.x, x))
-            .cloned()
-    }
-
-    /// State q of the cell `node`, if solved at `x` (bit for bit).
-    pub(super) fn sample(&self, node: &Node, q: usize, x: &[f64]) -> Option<Sample> {
-        let key = (node.lo.clone(), node.size.clone(), q);
-        let (at, s) = self.samples.get(&key)?;
-        same(at, x).then(|| s.clone())
-    }
-}
-
 #[cfg(test)]
 impl CheckAhead {
     /// Waits until the worker has solved every queued state (with the gate open).
@@ -310,19 +277,6 @@ impl CheckAhead {
             std::thread::sleep(std::time::Duration::from_millis(2));
         }
     }
-}
-
-#[cfg(test)]
-impl Ready {
-    /// The uniform states and cell states solved.
-    pub(super) fn counts(&self) -> (usize, usize) {
-        (self.labels.iter().flatten().count(), self.samples.len())
-    }
-}
-
-/// Whether `a` and `b` are the same numbers, bit for bit.
-fn same(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(u, v)| u.to_bits() == v.to_bits())
 }
 
 #[cfg(test)]

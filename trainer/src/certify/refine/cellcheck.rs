@@ -11,6 +11,8 @@
 //! most `tolerance`; the offending cells (a miss, an excess or a jump) are listed, for the
 //! refinement to split ([`super::reopen`]).
 
+pub use super::solves::Sample;
+use super::solves::{cell_state, cell_stream, nearest_corner, Ready};
 use super::*;
 use crate::certify::local::{mpc_slope_estimate, CellBound, LocalSettings};
 use crate::learn::mlp::{Mlp, Workspace};
@@ -79,19 +81,6 @@ pub struct CellCheck {
     pub jump_states: Vec<Vec<f64>>,
 }
 
-/// One check state as the law reports it: κ(x) if labelled, ∂κ/∂x if a regular hard
-/// solution, whether the hard problem converged, and the warm-started solve's κ if that
-/// converged too.
-#[derive(Debug, Clone, Default)]
-pub struct Sample {
-    /// κ(x) (`None`: unlabelled).
-    pub u: Option<Vec<f64>>,
-    /// ∂κ/∂x (row-major nu × nx) of a regular hard solution.
-    pub du: Option<Vec<f64>>,
-    /// κ from the solve warm-started at the cell's nearest corner (both converged).
-    pub warm: Option<Vec<f64>>,
-}
-
 /// What the per-cell check needs of a refinement.
 pub(super) struct Setup<'a> {
     pub st: &'a RefineState,
@@ -106,44 +95,7 @@ pub(super) struct Setup<'a> {
     /// S_u of the certificate's norm (empty: unscaled): sampled errors are ‖S_u⁻¹·‖₂.
     pub u_scale: &'a [f64],
     /// Samples solved ahead, during the refinement ([`super::ahead`]).
-    pub ahead: Option<&'a super::ahead::Ready>,
-}
-
-/// The stream of the cells' states for the check seed `seed`.
-pub(super) fn cell_stream(seed: u64) -> u64 {
-    seed ^ 0x00ce_11c4_ec00_0000
-}
-
-/// The key of a cell's states: its lattice corner and size, mixed (a cell's states do not
-/// depend on where it sits in the tree's order, so they can be solved before the tree is
-/// final).
-fn cell_key(node: &Node) -> u64 {
-    node.lo
-        .iter()
-        .chain(&node.size)
-        .fold(0x5ce1_1ce1_15ce_11ce, |h, &v| crate::rng::splitmix64(h ^ v))
-}
-
-/// State `q` of the cell `node` with corners `lo`, `hi`: uniform in it, keyed by the
-/// stream `seed` and the cell.
-pub(super) fn cell_state(seed: u64, node: &Node, (lo, hi): (&[f64], &[f64]), q: usize) -> Vec<f64> {
-    let (nx, key) = (lo.len(), cell_key(node));
-    (0..nx)
-        .map(|k| lo[k] + (hi[k] - lo[k]) * crate::rng::uniform(seed, key, (q * nx + k) as u64))
-        .collect()
-}
-
-/// The corner of `corners` nearest to `x`, relative to the cell `lo`, `hi` (ties: the
-/// lower index).
-pub(super) fn nearest_corner(corners: &[&Point], x: &[f64], (lo, hi): (&[f64], &[f64])) -> usize {
-    let d = |c: usize| -> f64 {
-        (0..x.len())
-            .map(|k| ((corners[c].x[k] - x[k]) / (hi[k] - lo[k]).max(f64::MIN_POSITIVE)).powi(2))
-            .sum()
-    };
-    (0..corners.len())
-        .min_by(|&c1, &c2| d(c1).total_cmp(&d(c2)).then(c1.cmp(&c2)))
-        .unwrap_or(0)
+    pub ahead: Option<&'a Ready>,
 }
 
 #[derive(Default, Clone)]

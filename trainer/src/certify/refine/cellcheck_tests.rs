@@ -2,8 +2,9 @@
 //! cell is caught (and the cell split by the feedback), and a jump of κ (two local optima:
 //! the warm-started solve stays on its neighbour's branch) is flagged and never certified.
 
+use super::bounds::bound_leaves;
 use super::cellcheck::{per_cell, Sample, Setup};
-use super::rounds::{bound_leaves, local_settings};
+use super::rounds::local_settings;
 use super::*;
 use crate::learn::mlp::{Activation, Mlp};
 use crate::problem::{CheckSettings, RefineSettings};

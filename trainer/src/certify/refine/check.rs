@@ -2,6 +2,7 @@
 //! the clamped net against its cell's ε_C, and how much of each cell's remainder is used —
 //! uniformly over X, and per cell ([`super::cellcheck`]: every cell visited, the verdict).
 
+use super::solves::{mpc_sample, uniform_state, NeighbourCache, Ready};
 use super::*;
 use crate::certify::local::{CellBound, Corner};
 use crate::learn::mlp::Workspace;
@@ -105,17 +106,6 @@ pub struct Check {
     pub seconds: f64,
 }
 
-/// Uniform state `i` of the check with `seed`: uniform on X.
-pub(super) fn uniform_state(cfg: &ProblemConfig, seed: u64, i: usize) -> Vec<f64> {
-    (0..cfg.system.nx())
-        .map(|k| {
-            cfg.domain.lo[k]
-                + (cfg.domain.hi[k] - cfg.domain.lo[k])
-                    * crate::rng::uniform(seed, i as u64, k as u64)
-        })
-        .collect()
-}
-
 /// Solves the MPC at `n` random states and compares with the certificate of `r`.
 pub fn check(cfg: &ProblemConfig, rs: &RefineSettings, r: &Refined, n: usize, seed: u64) -> Check {
     check_with(cfg, rs, r, (n, seed), None)
@@ -145,7 +135,7 @@ pub(super) fn check_with(
     rs: &RefineSettings,
     r: &Refined,
     (n, seed): (usize, u64),
-    ahead: Option<&super::ahead::Ready>,
+    ahead: Option<&Ready>,
 ) -> Check {
     let t0 = Instant::now();
     let (nx, nu) = (cfg.system.nx(), cfg.system.nu());
@@ -364,54 +354,4 @@ fn slope_check(
             }
         }
     }
-}
-
-/// The neighbours' solutions one worker of the per-cell check has solved
-/// ([`MpcLaw::neighbour_solution`], keyed by the corner's bits; `None`: not converged): a
-/// corner is the nearest corner of several check states (the extra states of a cell, the
-/// cells around it), and its cold solve is a pure function of the corner, so it is solved
-/// once per worker. Cleared when it holds [`NeighbourCache::CAP`] corners (memory stays
-/// bounded; the results never depend on it).
-#[derive(Default)]
-pub(super) struct NeighbourCache(HashMap<Vec<u64>, Option<(crate::mpc::sqp::PrimalDual, usize)>>);
-
-impl NeighbourCache {
-    /// Largest number of corners kept.
-    const CAP: usize = 4096;
-}
-
-/// A check state solved by the MPC: cold, and (converged) warm-started from `near`'s
-/// solution (the same label as [`MpcLaw::solve_from_neighbour`], the neighbour solved once
-/// per worker: [`NeighbourCache`]).
-pub(super) fn mpc_sample(
-    (law, cache): &mut (MpcLaw, NeighbourCache),
-    x: &[f64],
-    near: &[f64],
-) -> super::cellcheck::Sample {
-    let (l, _) = law.solve(x, None);
-    let mut s = super::cellcheck::Sample::default();
-    if !l.u.iter().all(|v| v.is_finite()) {
-        return s;
-    }
-    let hard = l.status == SqpStatus::Converged;
-    if hard && l.degeneracy.is_none() && l.du_dx.iter().all(|v| v.is_finite()) {
-        s.du = Some(l.du_dx.clone());
-    }
-    if hard {
-        let key: Vec<u64> = near.iter().map(|v| v.to_bits()).collect();
-        if !cache.0.contains_key(&key) {
-            if cache.0.len() >= NeighbourCache::CAP {
-                cache.0.clear();
-            }
-            let n = law.neighbour_solution(near);
-            cache.0.insert(key.clone(), n);
-        }
-        s.warm = cache.0[&key]
-            .as_ref()
-            .and_then(|n| law.solve_from_solution(x, n))
-            .filter(|w| w.status == SqpStatus::Converged)
-            .map(|w| w.u);
-    }
-    s.u = Some(l.u);
-    s
 }

@@ -26,6 +26,7 @@
 //! solves computed during the rounds, on the core a retraining leaves idle.
 
 mod ahead;
+mod bounds;
 mod cellcheck;
 mod check;
 mod feedback;
@@ -34,6 +35,7 @@ mod outputs;
 mod progress;
 mod region;
 mod rounds;
+mod solves;
 mod split;
 mod stale;
 mod start;

@@ -3,6 +3,7 @@
 //! budget of solves is spent. With [`RefineOptions::fixed`] (`refine --certify-only`) the net
 //! is given and never retrained: only the cells are split (their corners solved).
 
+use super::bounds::{bound_leaves, NetBoxes};
 use super::labels::{label, Deadline};
 use super::progress::{RoundSink, StopReason};
 use super::split::split_or_stop;
@@ -10,15 +11,13 @@ use super::stale::Stale;
 use super::start::{initial_grid, reindex, resume, run_hash};
 use super::*;
 use crate::certify::critical::QpCertifier;
-use crate::certify::local::{cell_bound, CellBound, Corner, Form, LocalSettings};
-use crate::certify::netbounds::{BoxBounds, NetBounder};
+use crate::certify::local::{CellBound, Form, LocalSettings};
 use crate::certify::Model;
 use crate::io::write_atomic;
 use crate::learn::mlp::{Mlp, Workspace};
 use crate::learn::setpoint::Hold;
 use crate::learn::train::{train_from, KeepBest, TrainOptions, TrainSet};
 use crate::problem::{ProblemConfig, RefineSettings, TrainSettings};
-use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
@@ -157,168 +156,6 @@ pub(super) fn kept_points(st: &RefineState, ex: &Exclusion) -> Vec<bool> {
     keep
 }
 
-/// Bounds every leaf; returns (leaf, bound) in leaf order. Where the MPC is a QP (`qp`: the
-/// certifier and the target ε), a cell whose critical-region proof succeeds gets the exact
-/// bound ([`exact_cell_bound`]) if it meets the target or beats the estimate, the others
-/// the estimate ([`cell_bound`]). The excluded leaves ([`RefineState::excluded_by`]: all
-/// corners hard-infeasible with `refine.exclude_infeasible`, an unlabelled corner at the
-/// smallest size `refine.min_cell`) are left out: they are not part of the certified
-/// domain.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn bound_leaves(
-    st: &RefineState,
-    lat: &Lattice,
-    mlp: &Mlp,
-    band: (&[f64], &[f64]),
-    ls: &LocalSettings,
-    centre_check: bool,
-    qp: Option<(&QpCertifier, f64)>,
-    ex: &Exclusion,
-    u_scale: &[f64],
-    boxes: &NetBoxes,
-) -> Vec<(usize, CellBound)> {
-    let idx = region::index(st);
-    let target = qp.map_or(f64::INFINITY, |(_, t)| t);
-    let qp = qp.map(|(q, _)| q);
-    let nb = NetBounder::new(mlp);
-    let nu = mlp.nu();
-    // Network at every point once.
-    let net_u: Vec<f64> = st
-        .points
-        .par_chunks(256)
-        .flat_map_iter(|ch| {
-            let mut ws = Workspace::default();
-            let mut out = Vec::with_capacity(ch.len() * nu);
-            let mut u = vec![0.0; nu];
-            let mut j = vec![0.0; nu * mlp.nx()];
-            for p in ch {
-                mlp.eval(&p.x, &mut u, &mut j, &mut ws);
-                out.extend_from_slice(&u);
-            }
-            out
-        })
-        .collect();
-    let leaves: Vec<usize> = (0..st.nodes.len())
-        .filter(|&i| st.nodes[i].split.is_none() && !st.excluded_by(i, ex))
-        .collect();
-    // The net's enclosures over cells it bounded before (the same net: a round without a
-    // retraining), or fresh ones, kept for the next call.
-    let mut kept = boxes
-        .0
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if kept.0.as_ref() != Some(mlp) {
-        *kept = (Some(mlp.clone()), HashMap::new());
-    }
-    let known = &kept.1;
-    let net_box = |node: &Node, (lo, hi): (&[f64], &[f64]), fresh: &mut Fresh| {
-        let key = (node.lo.clone(), node.size.clone());
-        if let Some(b) = known.get(&key) {
-            return b.clone();
-        }
-        let b = nb.bounds(lo, hi);
-        *fresh = Some((key, b.clone()));
-        b
-    };
-    let leaf_bound = |n: usize, fresh: &mut Fresh| -> (usize, CellBound) {
-        let node = &st.nodes[n];
-        let lo = lat.x(&node.lo);
-        let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
-        let hi = lat.x(&hi_key);
-        let pts: Vec<&Point> = node.corners.iter().map(|&c| &st.points[c]).collect();
-        let nu_c: Vec<f64> = node
-            .corners
-            .iter()
-            .flat_map(|&c| net_u[c * nu..(c + 1) * nu].iter().copied())
-            .collect();
-        // Where the MPC is a QP: the exact bound if the cell's proof succeeds (it needs
-        // no labels, only candidate active sets from some corners).
-        let exact = qp.and_then(|q| {
-            let sets: Vec<Option<&[usize]>> = pts.iter().map(|p| p.active.as_deref()).collect();
-            let laws = q.prove_from_corners(&lo, &hi, &sets)?;
-            // Each law bounded only where it can be the solution (bisected towards
-            // the target).
-            let b = q.restricted_bound(&lo, &hi, &laws, mlp, &nb, band, target);
-            b.exact.then_some(b)
-        });
-        if !pts.iter().all(|p| p.labelled()) {
-            if let Some(b) = exact {
-                return (n, b);
-            }
-            let b = CellBound {
-                eps: f64::INFINITY,
-                corner: f64::INFINITY,
-                remainder: f64::INFINITY,
-                form: Form::FirstOrder,
-                axis_terms: vec![f64::INFINITY; lo.len()],
-                exact: false,
-            };
-            return (n, b);
-        }
-        let corners: Vec<Corner> = pts.iter().map(|p| region::corner(p)).collect();
-        let centre = region::centre(st, &idx, node, centre_check);
-        let reg = region::regional(st, &idx, lat, node, ls.floor);
-        let mut estimated = cell_bound(
-            &lo,
-            &hi,
-            &corners,
-            centre.as_ref(),
-            &reg,
-            &nu_c,
-            &net_box(node, (&lo, &hi), fresh),
-            band,
-            ls,
-            u_scale,
-        );
-        // A jump of κ found inside the cell: the continuity the estimate assumes fails.
-        if st.jumps.iter().any(|x| region::contains(&lo, &hi, x)) {
-            estimated = CellBound {
-                eps: f64::INFINITY,
-                remainder: f64::INFINITY,
-                axis_terms: vec![f64::INFINITY; lo.len()],
-                ..estimated
-            };
-        }
-        // The exact bound bounds each candidate law on outer boxes of its region (a
-        // superset of where it holds): at a steep region boundary it can still be
-        // looser than the estimate. It is kept when it meets the target (`target`) or beats
-        // the estimate; otherwise the estimate is (the cell counts as not exact, so
-        // the tier says "estimated" and refinement splits it further): the proof never
-        // makes a QP's ε miss a target the estimate meets.
-        match exact {
-            Some(b) if b.eps <= estimated.eps.max(target) => (n, b),
-            _ => (n, estimated),
-        }
-    };
-    let bounded: Vec<((usize, CellBound), Fresh)> = leaves
-        .par_iter()
-        .map(|&n| {
-            let mut fresh = None;
-            (leaf_bound(n, &mut fresh), fresh)
-        })
-        .collect();
-    let mut out = Vec::with_capacity(bounded.len());
-    for (b, fresh) in bounded {
-        if let Some((k, v)) = fresh {
-            kept.1.insert(k, v);
-        }
-        out.push(b);
-    }
-    out
-}
-
-/// The key of a cell's net enclosure: its lattice corner and size.
-type BoxKey = (Vec<u64>, Vec<u64>);
-
-/// A net enclosure computed by this call of [`bound_leaves`], to keep.
-type Fresh = Option<(BoxKey, BoxBounds)>;
-
-/// The net's enclosures over cells ([`NetBounder::bounds`]) under the last net
-/// [`bound_leaves`] bounded with: a pure function of the net and the cell, so a round that
-/// keeps its net (no retraining) bounds its unchanged cells without computing them again.
-#[derive(Default)]
-pub(super) struct NetBoxes(std::sync::Mutex<(Option<Mlp>, HashMap<BoxKey, BoxBounds>)>);
-
 /// Runs (or resumes from `checkpoint`) the refinement of `cfg` to `rs.target_eps`.
 pub fn refine(
     cfg: &ProblemConfig,
@@ -368,26 +205,11 @@ pub fn refine(
     };
     let resumed = resume(checkpoint, &hash, &counts, &lat, cfg.system.nu())?;
     let mut pending = Vec::new();
-    if let Some(st) = resumed.as_ref().filter(|st| st.finished) {
-        // A finished run: return its result unless the settings now allow more (a lower
-        // target, a larger budget or more rounds).
-        let met = certified_all(&st.bounds, rs.target_eps);
-        let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
-        if let (false, Some(model)) = (more, opts.fixed.clone().or(st.model.clone())) {
-            let mut state = st.clone();
-            if qp.is_some() {
-                // Which cells are exact is not stored: prove them again.
-                fill_active(cfg, &mut state.points);
-                state.bounds = bound(&state, &model.mlp);
-            }
-            let stopped = finished_reason(&state, rs, met);
-            return Ok(Refined {
-                met,
-                state,
-                model,
-                stopped,
-            });
-        }
+    let finished = resumed.as_ref().filter(|st| st.finished);
+    if let Some(r) =
+        finished.and_then(|st| finished_result((cfg, rs, opts), st, qp.is_some(), &bound))
+    {
+        return Ok(r);
     }
     let mut st = match resumed {
         Some(st) => reindex(&mut ctx, st, &mut pending),
@@ -503,6 +325,32 @@ fn label_round(
     }
     let new = region::add_centres(ctx, st, rs.budget);
     label(ctx.cfg, &mut st.points, &new, dl)
+}
+
+/// A finished run's result (`st`), unless the settings now allow more: a lower target, a
+/// larger budget or more rounds. Where the MPC is a QP (`qp`) its cells are proved again
+/// (which are exact is not stored).
+fn finished_result(
+    (cfg, rs, opts): (&ProblemConfig, &RefineSettings, &RefineOptions),
+    st: &RefineState,
+    qp: bool,
+    bound: &BoundFn,
+) -> Option<Refined> {
+    let met = certified_all(&st.bounds, rs.target_eps);
+    let more = !met && st.points.len() < rs.budget && st.log.len() < rs.max_rounds;
+    let model = opts.fixed.clone().or(st.model.clone()).filter(|_| !more)?;
+    let mut state = st.clone();
+    if qp {
+        fill_active(cfg, &mut state.points);
+        state.bounds = bound(&state, &model.mlp);
+    }
+    let stopped = finished_reason(&state, rs, met);
+    Some(Refined {
+        met,
+        state,
+        model,
+        stopped,
+    })
 }
 
 /// Writes the checkpoint `p` of `st` (sealed, atomically).
