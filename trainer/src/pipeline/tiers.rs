@@ -384,16 +384,13 @@ pub(super) fn refine(env: &Env, d: &RunDir) -> Result<String, PipelineError> {
     // the retry ladder — took 20 min of the CSTR's run for nothing.
     let finite =
         !r.state.bounds.is_empty() && r.state.bounds.iter().all(|(_, b)| b.eps.is_finite());
-    let checked = match (&opts.ahead, finite) {
-        (Some(a), true) => Some(crate::certify::refine::check_ahead(
-            cfg,
-            rs,
-            &r,
-            (CHECK_STATES, cfg.certify.seed),
-            a,
-        )),
-        _ => None,
-    };
+    let checked = finite.then(|| {
+        let (n, seed) = (CHECK_STATES, cfg.certify.seed);
+        match &opts.ahead {
+            Some(a) => crate::certify::refine::check_ahead(cfg, rs, &r, (n, seed), a),
+            None => crate::certify::refine::check(cfg, rs, &r, n, seed),
+        }
+    });
     if let Some(c) = &checked {
         write_atomic(
             &rdir.join("check.json"),

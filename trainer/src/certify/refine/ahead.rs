@@ -12,8 +12,12 @@
 //! to its end ([`CheckAhead::open`]) — and waits while it is shut: the uniform states first
 //! (every one is used), then one state of each leaf of the tree as it is then (the leaves
 //! that met the target last round first: they are the likeliest to stay leaves), then the
-//! extra states of the leaves near the target. A leaf split later wastes its solve, but only
-//! on a core that would have idled.
+//! extra states of the leaves near the target (never an excluded leaf: the check skips
+//! those). A leaf split later wastes its solve, mostly on a core that would have idled: the
+//! gate only stops new solves, so the one under way when a retraining ends runs on into the
+//! next round, and while the seed study runs beside the rounds the three threads share the
+//! two cores. With `refine.max_seconds` the round a budget cuts can therefore move, as it
+//! moves with the machine's load.
 //!
 //! [`CheckAhead::finish`] stops the worker and hands its results over ([`Ready`]); the check
 //! takes one only for the same problem, seed and state (bit for bit). Every solve is a pure
@@ -24,7 +28,7 @@ use super::solves::{
     cell_state, cell_stream, mpc_sample, nearest_corner, uniform_state, CellKey, NeighbourCache,
     Ready, Sample,
 };
-use super::{Lattice, Node, RefineState};
+use super::{Exclusion, Lattice, Node, RefineState};
 use crate::mpc::law::{Label, MpcLaw};
 use crate::problem::ProblemConfig;
 use std::collections::HashMap;
@@ -50,9 +54,9 @@ struct Queue {
     next_uniform: usize,
     /// The cell states of the last [`CheckAhead::open`], the next one last.
     cells: Vec<CellTask>,
-    /// Results: uniform state i's label, and each solved cell state with its state.
+    /// Results: uniform state i's label, and each solved cell state with its state and corner.
     labels: Vec<Option<Label>>,
-    samples: HashMap<CellKey, (Vec<f64>, Sample)>,
+    samples: HashMap<CellKey, (Vec<f64>, Vec<f64>, Sample)>,
 }
 
 struct Shared {
@@ -122,8 +126,12 @@ impl CheckAhead {
 
     /// Opens the gate for the leaves of `st` (on the lattice `lat`), replacing the cell
     /// states queued before; the gate shuts when the returned guard is dropped.
-    pub(super) fn open(&self, st: &RefineState, lat: &Lattice) -> Open<'_> {
-        let tasks = self.tasks(st, lat);
+    pub(super) fn open(&self, st: &RefineState, lat: &Lattice, ex: &Exclusion) -> Open<'_> {
+        if self.shared.lock().stop {
+            // Finished: no worker to feed.
+            return Open(self);
+        }
+        let tasks = self.tasks(st, lat, ex);
         let mut q = self.shared.lock();
         q.cells = tasks
             .into_iter()
@@ -138,9 +146,12 @@ impl CheckAhead {
     /// The cell states of the leaves of `st`, the next one last: one state of each leaf
     /// that met the target last round, of each other leaf, then the extra states of the
     /// leaves near the target.
-    fn tasks(&self, st: &RefineState, lat: &Lattice) -> Vec<CellTask> {
+    fn tasks(&self, st: &RefineState, lat: &Lattice, ex: &Exclusion) -> Vec<CellTask> {
         let eps: HashMap<usize, f64> = st.bounds.iter().map(|(n, b)| (*n, b.eps)).collect();
-        let leaves = (0..st.nodes.len()).filter(|&n| st.nodes[n].split.is_none());
+        // The excluded leaves are not checked (nor bounded): their solves would only climb
+        // the retry ladder where the MPC has no solution.
+        let leaves =
+            (0..st.nodes.len()).filter(|&n| st.nodes[n].split.is_none() && !st.excluded_by(n, ex));
         let (mut met, mut other, mut extra) = (Vec::new(), Vec::new(), Vec::new());
         for n in leaves {
             match eps.get(&n) {
@@ -252,11 +263,13 @@ fn work(shared: &Shared, cfg: &ProblemConfig) {
         match job {
             Job::Uniform(i, x) => {
                 let l = w.0.solve(&x, None).0;
-                shared.lock().labels[i] = Some(l);
+                if let Some(slot) = shared.lock().labels.get_mut(i) {
+                    *slot = Some(l);
+                }
             }
             Job::Cell(t) => {
                 let s = mpc_sample(w, &t.x, &t.near);
-                shared.lock().samples.insert(t.key, (t.x, s));
+                shared.lock().samples.insert(t.key, (t.x, t.near, s));
             }
         }
     }
@@ -266,7 +279,12 @@ fn work(shared: &Shared, cfg: &ProblemConfig) {
 impl CheckAhead {
     /// Waits until the worker has solved every queued state (with the gate open).
     pub(super) fn drain(&self) {
+        let t0 = std::time::Instant::now();
         loop {
+            assert!(
+                t0.elapsed().as_secs() < 300,
+                "the worker did not drain its queue"
+            );
             let q = self.shared.lock();
             let queued = q.next_uniform < q.uniform.len() || !q.cells.is_empty();
             let busy = q.labels.iter().take(q.next_uniform).any(Option::is_none);

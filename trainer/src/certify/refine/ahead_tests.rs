@@ -26,7 +26,7 @@ fn the_check_with_solves_ahead_is_the_check_without() {
     };
     let r = refine(&cfg, &rs, None, &opts).unwrap();
     let lat = Lattice::new(&cfg.domain.lo, &cfg.domain.hi, &rs.initial_counts(2));
-    let gate = ahead.open(&r.state, &lat);
+    let gate = ahead.open(&r.state, &lat, &Exclusion::new(&rs, &lat.max));
     ahead.drain();
     drop(gate);
     let ready = ahead.finish();
@@ -42,6 +42,22 @@ fn the_check_with_solves_ahead_is_the_check_without() {
     let without = timeless(check(&cfg, &rs, &r, n, seed));
     assert_eq!(with, without);
     assert!(with.per_cell.states > 0 && with.labelled > 0);
+    // The check does take them: a result altered ahead shows in the check.
+    let mut altered = ready;
+    for (_, _, s) in altered.samples.values_mut() {
+        if let Some(u) = s.u.as_mut() {
+            u[0] += 1e3;
+        }
+    }
+    for l in altered.labels.iter_mut().flatten() {
+        l.u[0] += 1e3;
+    }
+    let taken = timeless(check_with(&cfg, &rs, &r, (n, seed), Some(&altered)));
+    assert!(
+        taken.max_observed > without.max_observed + 100.0,
+        "{taken:?}"
+    );
+    assert!(taken.per_cell.over_cell > without.per_cell.over_cell);
 }
 
 /// A result solved at another state is never taken: the check solves that state itself.
@@ -54,7 +70,7 @@ fn a_result_at_another_state_is_not_taken() {
         let (_, st, lat) = super::super::tests::grid(&cfg, [3, 3]);
         (st, lat)
     };
-    let gate = ahead.open(&st, &lat);
+    let gate = ahead.open(&st, &lat, &Exclusion::new(&rs, &lat.max));
     ahead.drain();
     drop(gate);
     let ready = ahead.finish();
@@ -69,7 +85,14 @@ fn a_result_at_another_state_is_not_taken() {
         .unwrap();
     let node = &st.nodes[leaf];
     let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
-    let at = cell_state(cell_stream(1), node, (&lat.x(&node.lo), &lat.x(&hi)), 0);
-    assert!(ready.sample(node, 0, &at).is_some());
-    assert!(ready.sample(node, 0, &y).is_none());
+    let (lo, hi) = (lat.x(&node.lo), lat.x(&hi));
+    let at = cell_state(cell_stream(1), node, (&lo, &hi), 0);
+    let corners: Vec<_> = node.corners.iter().map(|&c| &st.points[c]).collect();
+    let near = corners[nearest_corner(&corners, &at, (&lo, &hi))].x.clone();
+    assert!(ready.sample(node, 0, &at, &near).is_some());
+    let mut moved = at.clone();
+    moved[1] = f64::from_bits(moved[1].to_bits() ^ 1);
+    assert!(ready.sample(node, 0, &moved, &near).is_none());
+    let other = corners.iter().map(|c| &c.x).find(|x| **x != near).unwrap();
+    assert!(ready.sample(node, 0, &at, other).is_none());
 }

@@ -56,17 +56,22 @@ pub(super) fn bound_leaves(
         .collect();
     // The net's enclosures over cells it bounded before (the same net: a round without a
     // retraining), or fresh ones, kept for the next call.
-    let mut kept = boxes
-        .0
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if kept.0.as_ref() != Some(mlp) {
-        *kept = (Some(mlp.clone()), HashMap::new());
+    // The net by its bits (`==` on f64 would take −0.0 for 0.0); the map is taken out of
+    // the lock for the bounding, so that no lock is held across the parallel work.
+    let bits = postcard::to_allocvec(mlp).unwrap_or_default();
+    let (net, mut known) = std::mem::take(
+        &mut *boxes
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner),
+    );
+    if net.as_deref() != Some(bits.as_slice()) || bits.is_empty() {
+        known.clear();
     }
-    let known = &kept.1;
+    let known_ref = &known;
     let net_box = |node: &Node, (lo, hi): (&[f64], &[f64]), fresh: &mut Fresh| {
         let key = (node.lo.clone(), node.size.clone());
-        if let Some(b) = known.get(&key) {
+        if let Some(b) = known_ref.get(&key) {
             return b.clone();
         }
         let b = nb.bounds(lo, hi);
@@ -153,10 +158,14 @@ pub(super) fn bound_leaves(
     let mut out = Vec::with_capacity(bounded.len());
     for (b, fresh) in bounded {
         if let Some((k, v)) = fresh {
-            kept.1.insert(k, v);
+            known.insert(k, v);
         }
         out.push(b);
     }
+    *boxes
+        .0
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner) = (Some(bits), known);
     out
 }
 
@@ -169,5 +178,9 @@ type Fresh = Option<(BoxKey, BoxBounds)>;
 /// The net's enclosures over cells ([`NetBounder::bounds`]) under the last net
 /// [`bound_leaves`] bounded with: a pure function of the net and the cell, so a round that
 /// keeps its net (no retraining) bounds its unchanged cells without computing them again.
+/// The net is kept as its serialised bytes (postcard: every weight bit for bit).
 #[derive(Default)]
-pub(super) struct NetBoxes(std::sync::Mutex<(Option<Mlp>, HashMap<BoxKey, BoxBounds>)>);
+pub(super) struct NetBoxes(std::sync::Mutex<Kept>);
+
+/// The last net's bytes and its enclosures by cell.
+type Kept = (Option<Vec<u8>>, HashMap<BoxKey, BoxBounds>);

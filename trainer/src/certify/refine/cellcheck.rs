@@ -147,7 +147,7 @@ pub(super) fn per_cell<W>(
                     // Solved ahead (the same state, bit for bit), or here.
                     let smp = s
                         .ahead
-                        .and_then(|a| a.sample(node, q, &x))
+                        .and_then(|a| a.sample(node, q, &x, &corners[nearest].x))
                         .unwrap_or_else(|| solve(w, &x, &corners[nearest].x));
                     a.states += 1;
                     let Some(u) = smp.u else { continue };

@@ -22,8 +22,10 @@
 //!
 //! Files: this one owns the lattice, the points and cells and the checkpointed state;
 //! `rounds` the refinement loop ([`refine`]); `outputs` the local certificate and the
-//! files of a run; `check` the certificate against fresh MPC solves, and `ahead` those
-//! solves computed during the rounds, on the core a retraining leaves idle.
+//! files of a run; `bounds` the leaves' ε_C under a net; `check` and `cellcheck` the
+//! certificate against fresh MPC solves, `solves` those solves (pure functions of the problem,
+//! the seed and the cells) and `ahead` the worker that computes them during the rounds, on the
+//! core a retraining leaves idle.
 
 mod ahead;
 mod bounds;

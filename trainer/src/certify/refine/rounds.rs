@@ -252,7 +252,7 @@ pub fn refine(
         }
         if needs_retrain(&st, rs, opts) && !stale.skips(&st) {
             // The check's solves run beside the (serial) retraining.
-            let gate = opts.ahead.as_ref().map(|a| a.open(&st, &lat));
+            let gate = opts.ahead.as_ref().map(|a| a.open(&st, &lat, &ex));
             let m = retrain_net(cfg, rs, &st, (&lat, &ex), band, &hold, &hash);
             drop(gate);
             st.model = Some(stale.record(st.model.take(), m, &st));

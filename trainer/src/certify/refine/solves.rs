@@ -135,7 +135,7 @@ pub struct Ready {
     pub(super) problem: String,
     pub(super) seed: u64,
     pub(super) labels: Vec<Option<Label>>,
-    pub(super) samples: HashMap<CellKey, (Vec<f64>, Sample)>,
+    pub(super) samples: HashMap<CellKey, (Vec<f64>, Vec<f64>, Sample)>,
 }
 
 impl Ready {
@@ -153,11 +153,12 @@ impl Ready {
             .cloned()
     }
 
-    /// State q of the cell `node`, if solved at `x` (bit for bit).
-    pub(super) fn sample(&self, node: &Node, q: usize, x: &[f64]) -> Option<Sample> {
+    /// State q of the cell `node`, if solved at `x` warm-started from `near` (both bit for
+    /// bit).
+    pub(super) fn sample(&self, node: &Node, q: usize, x: &[f64], near: &[f64]) -> Option<Sample> {
         let key = (node.lo.clone(), node.size.clone(), q);
-        let (at, s) = self.samples.get(&key)?;
-        same(at, x).then(|| s.clone())
+        let (at, from, s) = self.samples.get(&key)?;
+        (same(at, x) && same(from, near)).then(|| s.clone())
     }
 }
 
