@@ -167,8 +167,7 @@ impl CheckAhead {
         let seed = cell_stream(self.seed);
         let task = |&(n, q): &(usize, usize)| {
             let node: &Node = &st.nodes[n];
-            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
-            let (lo, hi) = (lat.x(&node.lo), lat.x(&hi_key));
+            let (lo, hi) = lat.cell(node);
             let x = cell_state(seed, node, (&lo, &hi), q);
             let corners: Vec<_> = node.corners.iter().map(|&c| &st.points[c]).collect();
             let near = corners[nearest_corner(&corners, &x, (&lo, &hi))].x.clone();

@@ -80,9 +80,7 @@ pub(super) fn bound_leaves(
     };
     let leaf_bound = |n: usize, fresh: &mut Fresh| -> (usize, CellBound) {
         let node = &st.nodes[n];
-        let lo = lat.x(&node.lo);
-        let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
-        let hi = lat.x(&hi_key);
+        let (lo, hi) = lat.cell(node);
         let pts: Vec<&Point> = node.corners.iter().map(|&c| &st.points[c]).collect();
         let nu_c: Vec<f64> = node
             .corners

@@ -130,9 +130,7 @@ pub(super) fn per_cell<W>(
             |(w, ws), (leaf, b)| {
                 let node = &st.nodes[*leaf];
                 let nx = node.lo.len();
-                let lo = s.lat.x(&node.lo);
-                let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
-                let hi = s.lat.x(&hi_key);
+                let (lo, hi) = s.lat.cell(node);
                 let near = b.eps >= s.settings.near * s.target;
                 let m = 1 + if near { s.settings.extra } else { 0 };
                 let corners: Vec<_> = node.corners.iter().map(|&c| &st.points[c]).collect();
@@ -211,11 +209,11 @@ pub(super) fn per_cell<W>(
         c.jump_states.extend(a.jumps.iter().cloned());
         if a.misses > 0 || a.over > 0 || !a.jumps.is_empty() {
             let node = &st.nodes[leaf];
-            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, b)| a + b).collect();
+            let (lo, hi) = s.lat.cell(node);
             offending.push(OffendingCell {
                 leaf,
-                lo: s.lat.x(&node.lo),
-                hi: s.lat.x(&hi_key),
+                lo,
+                hi,
                 eps_cell: b.eps,
                 states: a.states,
                 range_misses: a.misses,

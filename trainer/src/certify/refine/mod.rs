@@ -416,6 +416,12 @@ impl Lattice {
             max,
         }
     }
+    /// The box [lo, hi] of the cell `node`.
+    fn cell(&self, node: &Node) -> (Vec<f64>, Vec<f64>) {
+        let hi: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
+        (self.x(&node.lo), self.x(&hi))
+    }
+
     fn x(&self, key: &[u64]) -> Vec<f64> {
         key.iter()
             .enumerate()

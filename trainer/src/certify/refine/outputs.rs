@@ -262,7 +262,6 @@ fn binding_cell(st: &RefineState, lat: &Lattice) -> (String, (Vec<f64>, Vec<f64>
     match worst {
         Some((n, b)) => {
             let node = &st.nodes[*n];
-            let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
             let what = if b.corner >= b.remainder {
                 "corner"
             } else if b.form == Form::SecondOrder {
@@ -270,7 +269,7 @@ fn binding_cell(st: &RefineState, lat: &Lattice) -> (String, (Vec<f64>, Vec<f64>
             } else {
                 "first_order"
             };
-            (what.to_string(), (lat.x(&node.lo), lat.x(&hi_key)))
+            (what.to_string(), lat.cell(node))
         }
         None => (String::new(), (vec![], vec![])),
     }

@@ -105,8 +105,7 @@ pub fn infinite_causes(
             break;
         }
         let node = &st.nodes[*n];
-        let hi_key: Vec<u64> = node.lo.iter().zip(&node.size).map(|(a, s)| a + s).collect();
-        let (lo, hi) = (lat.x(&node.lo), lat.x(&hi_key));
+        let (lo, hi) = lat.cell(node);
         let unlabelled: Vec<(Vec<f64>, String)> = node
             .corners
             .iter()
